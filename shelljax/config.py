@@ -1,0 +1,153 @@
+"""Experiment configs: which sessions, which estimators, which outputs (TOML, validated).
+
+Paths in a config are relative to the config file, or start with ``bundled:`` to name files
+shipped inside the package (``bundled:sessions/pezzi.toml``); both may contain glob patterns.
+See docs/configs.md for the format.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from ._errors import InvalidInputError
+
+METHODS = ("closed-form",)
+_TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
+_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin"}
+_CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
+_SESSION_KEYS = {"paths"}
+_OUTPUT_KEYS = {"figures"}
+
+
+def bundled_data_dir() -> Path:
+    """Directory of the data shipped inside the installed package."""
+    return Path(str(resources.files("shelljax") / "data"))
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentConfig:
+    """A validated experiment config.
+
+    ``calibration_sessions`` (k_s from Procedure 1) or ``k_s``/``k_s_std`` [-] (None: the
+    paper's 0.64); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
+    ``figures`` (write PNGs); ``output_dir`` where run directories are created.
+    """
+
+    source: Path
+    name: str
+    description: str
+    output_dir: Path
+    seed: int
+    methods: tuple[str, ...]
+    bootstrap_samples: int
+    through_origin: bool
+    calibration_sessions: tuple[Path, ...]
+    k_s: float | None
+    k_s_std: float | None
+    sessions: tuple[Path, ...]
+    figures: bool
+
+
+def _fail(path: Path, field: str, problem: str, fix: str) -> InvalidInputError:
+    return InvalidInputError(f"{path}: field '{field}': {problem}. Fix: {fix}")
+
+
+def _check_keys(path: Path, table: dict, allowed: set[str], prefix: str = "") -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise _fail(path, prefix + unknown[0], "unknown key",
+                    f"remove it or fix its spelling; allowed keys here: {', '.join(sorted(allowed))}")  # fmt: skip
+
+
+def _table(path: Path, data: dict, name: str, allowed: set[str]) -> dict:
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise _fail(path, name, f"expected a table, got {table!r}", f"write it as [{name}]")
+    _check_keys(path, table, allowed, f"{name}.")
+    return table
+
+
+def resolve_paths(path: Path, field: str, patterns) -> tuple[Path, ...]:
+    """Expand a list of path patterns (relative or ``bundled:``) into existing files, in order."""
+    if not isinstance(patterns, list) or not all(isinstance(p, str) for p in patterns):
+        raise _fail(path, field, f"expected a list of paths, got {patterns!r}", 'write ["a.toml", "dir/*.toml"]')
+    out: list[Path] = []
+    for pattern in patterns:
+        if pattern.startswith("bundled:"):
+            full = bundled_data_dir() / pattern.removeprefix("bundled:")
+        else:
+            full = path.parent / pattern
+        matches = sorted(Path(m) for m in glob.glob(str(full)))
+        if not matches:
+            raise _fail(path, field, f"{pattern!r} matches no file (looked for {full})",
+                        "fix the path: relative to the config file, or 'bundled:sessions/...'")  # fmt: skip
+        out.extend(m for m in matches if m not in out)
+    return tuple(out)
+
+
+def load_config(path: str | Path) -> ExperimentConfig:
+    """Read and validate an experiment config TOML; raise InvalidInputError naming the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: config file does not exist. Fix: check the path (e.g. configs/paper.toml)")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
+    _check_keys(path, data, _TOP_KEYS)
+    name = data.get("name", path.stem)
+    if not isinstance(name, str) or not name or any(c in name for c in "/\\ "):
+        raise _fail(path, "name", f"{name!r} is not a usable run name", "use letters, digits, '-' and '_'")
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise _fail(path, "seed", f"{seed!r} is not a non-negative integer", "write seed = 0")
+
+    estimators = _table(path, data, "estimators", _ESTIMATOR_KEYS)
+    methods = estimators.get("methods", ["closed-form"])
+    if not isinstance(methods, list) or not methods:
+        raise _fail(path, "estimators.methods", f"expected a non-empty list, got {methods!r}", 'write methods = ["closed-form"]')
+    for m in methods:
+        if m not in METHODS:
+            raise _fail(path, "estimators.methods", f"unknown method {m!r}", f"available: {', '.join(METHODS)}")
+    boot = estimators.get("bootstrap_samples", 2000)
+    if isinstance(boot, bool) or not isinstance(boot, int) or boot < 0:
+        raise _fail(path, "estimators.bootstrap_samples", f"{boot!r} is not a non-negative integer", "e.g. 2000 (0 disables)")
+    through_origin = estimators.get("through_origin", False)
+    if not isinstance(through_origin, bool):
+        raise _fail(path, "estimators.through_origin", f"{through_origin!r} is not true/false", "write true or false")
+
+    calibration = _table(path, data, "calibration", _CALIBRATION_KEYS)
+    calibration_sessions = resolve_paths(path, "calibration.sessions", calibration["sessions"]) if "sessions" in calibration else ()
+    k_s = calibration.get("k_s")
+    k_s_std = calibration.get("k_s_std")
+    if calibration_sessions and k_s is not None:
+        raise _fail(path, "calibration.k_s", "given together with calibration sessions", "use one of them")
+    for field, value in (("k_s", k_s), ("k_s_std", k_s_std)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0
+                                  or value == float("inf")):  # fmt: skip
+            raise _fail(path, f"calibration.{field}", f"{value!r} is not a finite non-negative number", "e.g. k_s = 0.64")
+    if k_s is not None and k_s == 0:
+        raise _fail(path, "calibration.k_s", "k_s = 0 divides by zero", "the paper's value is 0.64")
+
+    sessions_table = _table(path, data, "sessions", _SESSION_KEYS)
+    if "paths" not in sessions_table:
+        raise _fail(path, "sessions.paths", "missing", 'add [sessions] paths = ["bundled:sessions/pezzi.toml"]')
+    sessions = resolve_paths(path, "sessions.paths", sessions_table["paths"])
+    outputs = _table(path, data, "outputs", _OUTPUT_KEYS)
+    figures = outputs.get("figures", True)
+    if not isinstance(figures, bool):
+        raise _fail(path, "outputs.figures", f"{figures!r} is not true/false", "write true or false")
+    output_dir = data.get("output_dir", "runs")
+    if not isinstance(output_dir, str):
+        raise _fail(path, "output_dir", f"{output_dir!r} is not a path", 'write output_dir = "runs"')
+    return ExperimentConfig(
+        source=path, name=name, description=str(data.get("description", "")),
+        output_dir=Path(output_dir), seed=seed, methods=tuple(methods), bootstrap_samples=boot,
+        through_origin=through_origin, calibration_sessions=calibration_sessions,
+        k_s=None if k_s is None else float(k_s), k_s_std=None if k_s_std is None else float(k_s_std),
+        sessions=sessions, figures=figures,
+    )  # fmt: skip

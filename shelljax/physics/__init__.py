@@ -1,0 +1,20 @@
+"""Physics layer: material, gas and contact energies as pure JAX functions (SI units)."""
+
+from ._contact import barrier_energy, penalty_energy, plane_gap, sphere_gap
+from ._gas import (
+    AIR_HEAT_CAPACITY_RATIO,
+    ATMOSPHERIC_PRESSURE,
+    adiabatic_gas_energy,
+    adiabatic_gauge_pressure,
+    isothermal_gas_energy,
+    isothermal_gauge_pressure,
+    prescribed_pressure_energy,
+)
+from ._material import (
+    bending_density,
+    bending_density_invariants,
+    bending_stiffness,
+    lame_constants_2d,
+    neo_hookean_membrane_density,
+    neo_hookean_membrane_invariants,
+)

@@ -1,0 +1,355 @@
+"""Reading and validating session TOML files (format: docs/session-format.md).
+
+Every check raises :class:`InvalidInputError` naming the file, the field, the value and the fix.
+Nothing is dropped or reordered: samples keep the order in which they were written.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._schema import DEFAULT_POISSON_RATIO, Session
+from ._units import QUANTITY_UNITS
+
+SCHEMA_VERSION = 1
+
+_TOP_KEYS = {
+    "schema_version", "object", "notes", "poisson_ratio", "mass", "mass_unit",
+    "manometer_gauge_pressure", "pressure_unit", "geometry", "wall", "indentation", "wrinkles",
+}  # fmt: skip
+_GEOMETRY_KEYS = {"radius", "radius_std", "mesh", "poke_point", "fit_radius", "length_unit"}
+_WALL_KEYS = {"thickness", "thickness_std", "thickness_unit"}
+_INDENTATION_KEYS = {"force_unit", "depth_unit", "trials_csv", "trial", "force", "depth"}
+_WRINKLE_KEYS = {"counts", "onset_depth"}
+_CSV_COLUMNS = ("trial", "force", "depth")
+MIN_FORCE_LEVELS = 3
+
+
+def file_sha256(path: Path) -> str:
+    """Hex sha256 of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+class _Reader:
+    """Field access that knows which file and table it reads from, for error messages."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, field: str, problem: str, fix: str) -> InvalidInputError:
+        return InvalidInputError(f"{self.path}: field '{field}': {problem}. Fix: {fix}")
+
+    def table(self, data: dict, name: str, keys: set[str], *, required: bool) -> dict | None:
+        if name not in data:
+            if required:
+                raise self.fail(name, "missing table", f"add a [{name}] table (see docs/session-format.md)")
+            return None
+        table = data[name]
+        if not isinstance(table, dict):
+            raise self.fail(name, f"expected a table, got {table!r}", f"write it as [{name}]")
+        self.no_unknown_keys(table, keys, prefix=f"{name}.")
+        return table
+
+    def no_unknown_keys(self, table: dict, allowed: set[str], prefix: str = "") -> None:
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise self.fail(
+                prefix + unknown[0],
+                f"unknown key (unknown keys: {', '.join(prefix + k for k in unknown)})",
+                f"remove it or fix its spelling; allowed keys here: {', '.join(sorted(allowed))}",
+            )
+
+    def unit(self, table: dict, key: str, quantity: str, default: str, prefix: str = "") -> float:
+        name = table.get(key, default)
+        units = QUANTITY_UNITS[quantity]
+        if name not in units:
+            raise self.fail(prefix + key, f"unknown {quantity} unit {name!r}", f"use one of {', '.join(units)}")
+        return units[name]
+
+    def number(self, table: dict, key: str, prefix: str = "", *, required: bool = True,
+               positive: bool = True) -> float | None:  # fmt: skip
+        field = prefix + key
+        if key not in table:
+            if required:
+                raise self.fail(field, "missing", f"add '{key} = <value>'")
+            return None
+        value = table[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(field, f"expected a number, got {value!r}", "write a plain number")
+        if not math.isfinite(value):
+            raise self.fail(field, f"value {value!r} is not finite", "write a finite number")
+        if positive and value <= 0:
+            raise self.fail(field, f"value {value!r} must be positive", "write a positive number")
+        return float(value)
+
+    def array(self, table: dict, key: str, prefix: str = "") -> np.ndarray:
+        field = prefix + key
+        values = table[key]
+        if not isinstance(values, list) or not values:
+            raise self.fail(field, f"expected a non-empty array, got {values!r}", f"write '{key} = [v1, v2, ...]'")
+        for i, v in enumerate(values):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise self.fail(f"{field}[{i}]", f"expected a number, got {v!r}", "write plain numbers")
+        return np.asarray(values, dtype=np.float64)
+
+
+def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str) -> None:
+    bad_finite = np.flatnonzero(~np.isfinite(values))
+    if bad_finite.size:
+        i = bad_finite[0]
+        raise reader.fail(
+            f"{field}[{i}]", f"{where}value {values[i]!r} is not finite",
+            "re-measure or delete that sample (the whole row, in every column)",
+        )  # fmt: skip
+    bad_sign = np.flatnonzero(values <= 0)
+    if bad_sign.size:
+        i = bad_sign[0]
+        raise reader.fail(
+            f"{field}[{i}]", f"{where}value {values[i]!r} must be positive "
+            f"({bad_sign.size} non-positive samples)",
+            f"{field} is a magnitude: write |value|; drop samples taken before contact",
+        )  # fmt: skip
+
+
+def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if not csv_path.is_file():
+        raise reader.fail(
+            "indentation.trials_csv", f"file {csv_path} does not exist",
+            "put the CSV beside the session file or fix the path (relative to the TOML)",
+        )  # fmt: skip
+    with csv_path.open(newline="") as handle:
+        rows = list(csv.reader(handle))
+    if not rows or [c.strip() for c in rows[0]] != list(_CSV_COLUMNS):
+        header = rows[0] if rows else []
+        raise InvalidInputError(
+            f"{csv_path}: header is {header!r}. Fix: the first line must be exactly "
+            f"'{','.join(_CSV_COLUMNS)}' (units are set in the session's [indentation] table)"
+        )
+    columns: list[list[float]] = [[], [], []]
+    for line_number, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != 3:
+            raise InvalidInputError(
+                f"{csv_path}, line {line_number}: expected 3 values (trial,force,depth), got "
+                f"{len(row)}: {row!r}. Fix: complete or delete the row"
+            )
+        for k, cell in enumerate(row):
+            try:
+                columns[k].append(float(cell))
+            except ValueError:
+                raise InvalidInputError(
+                    f"{csv_path}, line {line_number}, column '{_CSV_COLUMNS[k]}': {cell!r} is not "
+                    "a number. Fix: write a plain decimal number"
+                ) from None
+    trial, force, depth = (np.asarray(c, dtype=np.float64) for c in columns)
+    if trial.size == 0:
+        raise InvalidInputError(f"{csv_path}: no samples. Fix: add rows 'trial,force,depth'")
+    return trial, force, depth
+
+
+def _trial_ids(reader: _Reader, field: str, trial: np.ndarray) -> np.ndarray:
+    if not np.all(np.isfinite(trial)) or np.any(trial != np.round(trial)):
+        i = int(np.flatnonzero(~np.isfinite(trial) | (trial != np.round(trial)))[0])
+        raise reader.fail(f"{field}[{i}]", f"trial id {trial[i]!r} is not an integer", "number trials 1, 2, 3, ...")
+    return trial.astype(np.int64)
+
+
+def load_session(path: str | Path) -> Session:
+    """Read and validate a session TOML file; return a :class:`Session` in SI units.
+
+    Raises:
+        InvalidInputError: on any malformed, missing, non-finite or implausible field, with the
+            file, field, value and fix in the message.
+    """
+    path = Path(path)
+    reader = _Reader(path)
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: session file does not exist. Fix: check the path")
+    try:
+        data: dict[str, Any] = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
+    except UnicodeDecodeError:
+        raise InvalidInputError(f"{path}: not a UTF-8 text file. Fix: save it as UTF-8 TOML") from None
+    input_files = {str(path): file_sha256(path)}
+    reader.no_unknown_keys(data, _TOP_KEYS)
+
+    version = data.get("schema_version", SCHEMA_VERSION)
+    if version != SCHEMA_VERSION:
+        raise reader.fail("schema_version", f"unsupported version {version!r}", f"write schema_version = {SCHEMA_VERSION}")
+    object_name = data.get("object")
+    if not isinstance(object_name, str) or not object_name.strip():
+        raise reader.fail("object", f"missing or empty (got {object_name!r})", 'add object = "name of the object"')
+    notes = data.get("notes", "")
+    if not isinstance(notes, str):
+        raise reader.fail("notes", f"expected text, got {notes!r}", 'write notes = "..."')
+
+    poisson_ratio = reader.number(data, "poisson_ratio", required=False, positive=False)
+    poisson_ratio = DEFAULT_POISSON_RATIO if poisson_ratio is None else poisson_ratio
+    if not -1.0 < poisson_ratio < 0.5:
+        raise reader.fail("poisson_ratio", f"value {poisson_ratio} outside (-1, 0.5)", "rubbers sit at 0.3-0.5; the default is 0.4")
+    mass = reader.number(data, "mass", required=False)
+    if mass is not None:
+        mass *= reader.unit(data, "mass_unit", "mass", "kg")
+    manometer = reader.number(data, "manometer_gauge_pressure", required=False)
+    if manometer is not None:
+        manometer *= reader.unit(data, "pressure_unit", "pressure", "Pa")
+        if manometer > 1e6:
+            raise reader.fail(
+                "manometer_gauge_pressure", f"{manometer:g} Pa is above 10 bar",
+                "inflated toys hold 0.1-10 kPa: check pressure_unit (e.g. 'kPa')",
+            )  # fmt: skip
+
+    # Wall first: its thickness bounds the plausible radius.
+    wall = reader.table(data, "wall", _WALL_KEYS, required=True)
+    wall_scale = reader.unit(wall, "thickness_unit", "length", "m", "wall.")
+    thickness = reader.number(wall, "thickness", "wall.") * wall_scale
+    thickness_std = reader.number(wall, "thickness_std", "wall.", positive=False) * wall_scale
+    if thickness_std < 0:
+        raise reader.fail("wall.thickness_std", f"value {thickness_std} is negative", "write a standard deviation >= 0")
+    if thickness > 0.05:
+        raise reader.fail(
+            "wall.thickness", f"{thickness:g} m is a thick wall for an inflated shell",
+            "if you wrote millimetres, set thickness_unit = \"mm\"",
+        )  # fmt: skip
+
+    geometry = reader.table(data, "geometry", _GEOMETRY_KEYS, required=True)
+    length_scale = reader.unit(geometry, "length_unit", "length", "m", "geometry.")
+    mesh_path = poke_point = fit_radius = fit_rms = None
+    if ("radius" in geometry) == ("mesh" in geometry):
+        raise reader.fail(
+            "geometry", "give exactly one of 'radius' or 'mesh'",
+            "write radius = <R> for a measured radius of curvature, or mesh = \"file\" with poke_point",
+        )  # fmt: skip
+    if "radius" in geometry:
+        radius = reader.number(geometry, "radius", "geometry.") * length_scale
+        radius_std = (reader.number(geometry, "radius_std", "geometry.", required=False, positive=False) or 0.0) * length_scale
+        if radius > 50.0:
+            raise reader.fail(
+                "geometry.radius", f"{radius:g} m is implausibly large",
+                "if you wrote millimetres or centimetres, set length_unit in [geometry]",
+            )  # fmt: skip
+    else:
+        radius, radius_std, mesh_path, poke_point, fit_radius, fit_rms = _mesh_geometry(
+            reader, geometry, length_scale, input_files
+        )
+    if thickness >= 0.2 * radius:
+        raise reader.fail(
+            "wall.thickness", f"h = {thickness:g} m is not thin against R = {radius:g} m",
+            "check thickness_unit / length_unit; the shell model needs h << R",
+        )  # fmt: skip
+
+    indentation = reader.table(data, "indentation", _INDENTATION_KEYS, required=True)
+    force_scale = reader.unit(indentation, "force_unit", "force", "N", "indentation.")
+    depth_scale = reader.unit(indentation, "depth_unit", "length", "m", "indentation.")
+    inline = [k for k in ("trial", "force", "depth") if k in indentation]
+    if "trials_csv" in indentation:
+        if inline:
+            raise reader.fail(
+                "indentation.trials_csv", f"given together with inline '{inline[0]}'",
+                "use either trials_csv or inline arrays, not both",
+            )  # fmt: skip
+        csv_path = path.parent / str(indentation["trials_csv"])
+        trial, force, depth = _read_trials_csv(reader, csv_path)
+        input_files[str(csv_path)] = file_sha256(csv_path)
+        where = f"(in {csv_path.name}) "
+    else:
+        for key in ("force", "depth"):
+            if key not in indentation:
+                raise reader.fail(
+                    f"indentation.{key}", "missing",
+                    "give inline force/depth arrays (and optional trial) or trials_csv = \"file.csv\"",
+                )  # fmt: skip
+        force = reader.array(indentation, "force", "indentation.")
+        depth = reader.array(indentation, "depth", "indentation.")
+        trial = reader.array(indentation, "trial", "indentation.") if "trial" in indentation else np.ones_like(force)
+        if not (force.size == depth.size == trial.size):
+            raise reader.fail(
+                "indentation", f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
+                "give one trial id, force and depth per sample",
+            )  # fmt: skip
+        where = ""
+    _check_samples(reader, "indentation.force", force, where)
+    _check_samples(reader, "indentation.depth", depth, where)
+    trial = _trial_ids(reader, "indentation.trial", trial)
+    force = force * force_scale
+    depth = depth * depth_scale
+    if np.unique(force).size < MIN_FORCE_LEVELS:
+        raise reader.fail(
+            "indentation.force", f"only {np.unique(force).size} distinct force level(s) {np.unique(force).tolist()} N",
+            f"record at least {MIN_FORCE_LEVELS} levels (the paper uses 5-20 N in 2.5 N steps)",
+        )  # fmt: skip
+    deepest = float(depth.max())
+    if deepest >= radius:
+        raise reader.fail(
+            "indentation.depth", f"deepest indentation {deepest:g} m exceeds the radius {radius:g} m",
+            "depths look like millimetres written as metres: set depth_unit = \"mm\"",
+        )  # fmt: skip
+
+    wrinkle_counts = onset_depth = None
+    wrinkles = reader.table(data, "wrinkles", _WRINKLE_KEYS, required=False)
+    if wrinkles is not None:
+        n_trials = np.unique(trial).size
+        if "counts" in wrinkles:
+            counts = wrinkles["counts"]
+            if not isinstance(counts, list) or not counts:
+                raise reader.fail("wrinkles.counts", f"expected a non-empty array, got {counts!r}", "write counts = [n1, n2, ...]")
+            for i, c in enumerate(counts):
+                if isinstance(c, bool) or not isinstance(c, int) or c < 0:
+                    raise reader.fail(
+                        f"wrinkles.counts[{i}]", f"{c!r} is not a non-negative integer",
+                        "count whole wrinkles around the poke (0 if none)",
+                    )  # fmt: skip
+            if len(counts) != n_trials:
+                raise reader.fail(
+                    "wrinkles.counts", f"{len(counts)} counts for {n_trials} trials",
+                    "give exactly one wrinkle count per trial, in order of trial id",
+                )  # fmt: skip
+            wrinkle_counts = np.asarray(counts, dtype=np.int64)
+        if "onset_depth" in wrinkles:
+            onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
+            _check_samples(reader, "wrinkles.onset_depth", onset_depth, "")
+            onset_depth = onset_depth * depth_scale
+
+    return Session(
+        source=path, object_name=object_name.strip(), radius=float(radius),
+        radius_std=float(radius_std), thickness=float(thickness),
+        thickness_std=float(thickness_std), poisson_ratio=float(poisson_ratio), trial=trial,
+        force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
+        manometer_gauge_pressure=manometer, mass=mass, mesh_path=mesh_path, poke_point=poke_point,
+        fit_radius=fit_radius, fit_rms_residual=fit_rms, notes=notes, input_files=input_files,
+    )  # fmt: skip
+
+
+def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_files: dict):
+    from .. import geometry as geo  # trimesh is only needed for mesh sessions
+
+    mesh_path = reader.path.parent / str(geometry["mesh"])
+    if "poke_point" not in geometry:
+        raise reader.fail("geometry.poke_point", "missing (required with mesh)", "add poke_point = [x, y, z]")
+    raw_point = geometry["poke_point"]
+    if (not isinstance(raw_point, list) or len(raw_point) != 3
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in raw_point)):  # fmt: skip
+        raise reader.fail("geometry.poke_point", f"expected [x, y, z], got {raw_point!r}", "write three numbers")
+    poke_point = np.asarray(raw_point, dtype=np.float64) * length_scale
+    if not np.all(np.isfinite(poke_point)):
+        raise reader.fail("geometry.poke_point", f"{raw_point!r} is not finite", "write three finite numbers")
+    fit_radius = reader.number(geometry, "fit_radius", "geometry.", required=False)
+    fit_radius = None if fit_radius is None else fit_radius * length_scale
+    unit_name = geometry.get("length_unit", "m")
+    try:
+        mesh = geo.load_mesh(mesh_path, length_unit=unit_name)
+        local = geo.fit_local_sphere(mesh, poke_point, fit_radius)
+    except InvalidInputError as err:
+        raise InvalidInputError(f"{reader.path}: field 'geometry.mesh': {err}") from None
+    input_files[str(mesh_path)] = file_sha256(mesh_path)
+    return local.radius, local.radius_std, mesh_path, poke_point, fit_radius, local.rms_residual

@@ -1,0 +1,66 @@
+"""The measurement session: what one indentation experiment on one object recorded (SI units)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_POISSON_RATIO = 0.4  # the paper's assumption (Section 3.4): rubbers sit at 0.3-0.4
+
+
+@dataclasses.dataclass(frozen=True)
+class Session:
+    """One measurement session, every quantity in SI units.
+
+    Attributes:
+        source: the session TOML file.
+        object_name: free name of the object.
+        radius: local radius of curvature R at the poke point [m] (given, or fitted on the mesh).
+        radius_std: standard deviation of R [m] (0 when given without one).
+        thickness: wall thickness h [m]; ``thickness_std`` its standard deviation [m].
+        poisson_ratio: ν [-].
+        trial: trial id of each indentation sample (one trial = one sweep of force levels).
+        force: indenter force F of each sample [N].
+        depth: indentation depth |w(0)| of each sample [m] (positive).
+        wrinkle_counts: radial wrinkle count per trial, in order of ``trial_ids``; None if absent.
+        onset_depth: depths at which wrinkles were first seen [m], None if absent (unreliable).
+        manometer_gauge_pressure: manometer reading P_g [Pa] (calibration objects), else None.
+        mass: total mass [kg] or None.
+        mesh_path, poke_point [m], fit_radius [m]: mesh geometry, when R comes from a mesh.
+        fit_rms_residual: rms distance of mesh vertices to the fitted sphere [m] (mesh only).
+        input_files: sha256 of every file the session was read from, by path.
+    """
+
+    source: Path
+    object_name: str
+    radius: float
+    radius_std: float
+    thickness: float
+    thickness_std: float
+    poisson_ratio: float
+    trial: np.ndarray
+    force: np.ndarray
+    depth: np.ndarray
+    wrinkle_counts: np.ndarray | None = None
+    onset_depth: np.ndarray | None = None
+    manometer_gauge_pressure: float | None = None
+    mass: float | None = None
+    mesh_path: Path | None = None
+    poke_point: np.ndarray | None = None
+    fit_radius: float | None = None
+    fit_rms_residual: float | None = None
+    notes: str = ""
+    input_files: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    @property
+    def trial_ids(self) -> np.ndarray:
+        """Distinct trial ids in order of first appearance."""
+        _, first = np.unique(self.trial, return_index=True)
+        return self.trial[np.sort(first)]
+
+    @property
+    def force_levels(self) -> np.ndarray:
+        """Distinct force levels [N], ascending."""
+        return np.unique(self.force)
