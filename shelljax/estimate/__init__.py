@@ -16,4 +16,7 @@ from ._closed_form import (
     regress_force_on_depth,
     tau,
 )
+from ._bayes import ConvergenceWarning, PosteriorResult, sample_posterior
+from ._fit import FitResult, fit_session
+from ._forward import AbstractForwardModel, Prediction, ScalingLawModel
 from ._result import Estimate

@@ -1,0 +1,190 @@
+"""Posterior of P_g and E by MCMC (emcee's affine-invariant ensemble) through a forward model.
+
+The log posterior (priors and likelihoods: see ``_problem.py``) is jit-compiled and vmapped over
+the walkers (emcee's ``vectorize=True``), and the depth noise σ_w is sampled as an extra unknown.
+Sampling runs in chunks; after each, the integrated autocorrelation time τ of every parameter is
+estimated and sampling stops once the chain is longer than ``autocorr_factor`` (50) τ and τ
+changed by less than ``tau_tolerance`` (5 %) since the last check (emcee's documentation uses
+100 τ and 1 %; 50 τ already bounds the Monte-Carlo error of τ to ~10 %), and never before
+``min_steps`` (1000): on shorter chains τ itself is underestimated — otherwise a warning says the chain has not converged. Chains can live in an HDF5
+file (emcee's HDFBackend) and a later call with the same file resumes them. Forward solves that
+fail map to log p = −∞ and are counted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from pathlib import Path
+
+import emcee
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from .._errors import InvalidInputError
+from ..session import Session
+from ._closed_form import estimate_session
+from ._forward import AbstractForwardModel
+from ._problem import InverseProblem, build_problem
+from ._result import Estimate
+
+_UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
+          "depth_offset": "m", "force_gain": "1", "depth_noise": "m"}  # fmt: skip
+
+
+class ConvergenceWarning(UserWarning):
+    """An MCMC chain stopped before its autocorrelation-time criterion was met."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PosteriorResult:
+    """Result of :func:`sample_posterior`.
+
+    ``estimates``: posterior median with std, 95 % interval (and ``ci68`` in ``intervals68``) of
+    every unknown, in SI (gauge_pressure [Pa], young_modulus [Pa], depth_noise [m], nuisances);
+    ``samples``: flat physical samples per name after burn-in and thinning; ``autocorr_time``
+    τ [steps] per unknown; ``n_steps``; ``effective_samples`` = walkers · (steps − burn-in) / max τ;
+    ``converged``; ``failed_forward``: walker proposals whose forward solve failed;
+    ``acceptance_fraction``: mean over walkers; ``chain``: the raw chain (steps, walkers, dim).
+    """
+
+    estimates: dict[str, Estimate]
+    intervals68: dict[str, tuple[float, float]]
+    samples: dict[str, np.ndarray]
+    autocorr_time: dict[str, float]
+    n_steps: int
+    effective_samples: float
+    converged: bool
+    failed_forward: int
+    acceptance_fraction: float
+    chain: np.ndarray
+    names: tuple[str, ...]
+
+
+class _LogPosterior:
+    """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior."""
+
+    def __init__(self, problem: InverseProblem):
+        self._fn = jax.jit(jax.vmap(problem.log_posterior))
+        self.failed_forward = 0
+        self.evaluations = 0
+
+    def __call__(self, coords: np.ndarray) -> np.ndarray:
+        log_p, converged = self._fn(jnp.asarray(coords))
+        self.failed_forward += int(np.sum(~np.asarray(converged)))
+        self.evaluations += coords.shape[0]
+        return np.asarray(log_p)
+
+
+def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np.ndarray]:
+    phys = jax.vmap(problem.physical)(jnp.asarray(flat[:, :-1]))
+    out = {name: np.asarray(phys[name]) for name in problem.names}
+    out["depth_noise"] = np.exp(flat[:, -1])
+    return out
+
+
+def sample_posterior(
+    session: Session,
+    model: AbstractForwardModel,
+    *,
+    nuisance: tuple[str, ...] = (),
+    n_walkers: int = 32,
+    max_steps: int = 20_000,
+    check_every: int = 250,
+    autocorr_factor: float = 50.0,
+    tau_tolerance: float = 0.05,
+    min_steps: int = 1000,
+    backend_path: str | Path | None = None,
+    seed: int = 0,
+    progress: bool | None = None,
+) -> PosteriorResult:
+    """Sample the posterior of ``session``'s unknowns under ``model``.
+
+    ``backend_path``: HDF5 file for the chain; if it already holds a chain for this problem, it
+    is resumed. ``progress``: None shows a bar on terminals only. Warns with
+    :class:`ConvergenceWarning` when ``max_steps`` is reached before the τ criterion holds.
+    """
+    start = estimate_session(session, bootstrap_samples=0)
+    start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
+    problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
+                            start_modulus=start_modulus, nuisance=nuisance)  # fmt: skip
+    ndim = problem.ndim + 1  # + log σ_w
+    if n_walkers < 2 * ndim:
+        raise InvalidInputError(f"n_walkers = {n_walkers} is too few for {ndim} unknowns. Fix: use at least {2 * ndim}")
+    log_prob = _LogPosterior(problem)
+    backend = None
+    initial = None
+    if backend_path is not None:
+        backend = emcee.backends.HDFBackend(str(backend_path), name=f"shelljax-{session.source.stem}")
+        if Path(backend_path).is_file() and backend.initialized and backend.iteration > 0:
+            if backend.shape != (n_walkers, ndim):
+                raise InvalidInputError(
+                    f"{backend_path}: holds a chain of shape {backend.shape}, this problem needs "
+                    f"{(n_walkers, ndim)}. Fix: use a new file or the same n_walkers and nuisance"
+                )
+        else:
+            backend.reset(n_walkers, ndim)
+    rng = np.random.default_rng(seed)
+    if backend is None or backend.iteration == 0:  # a fresh chain
+        # Start in a small ball around the closed form (u = 0) and the scatter-based σ_w.
+        center = np.concatenate([np.zeros(problem.ndim), [math.log(problem.depth_noise)]])
+        initial = center + 1e-3 * rng.standard_normal((n_walkers, ndim))
+        if not np.all(np.isfinite(log_prob(initial))):
+            raise InvalidInputError(
+                f"{session.source}: the posterior is zero at the closed-form start; the forward "
+                f"model {type(model).__name__} fails there or the data are outside the priors"
+            )
+    else:
+        initial = backend.get_last_sample()
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
+    tau_old = np.full(ndim, np.inf)
+    converged = False
+    done = sampler.iteration
+    disable = None if progress is None else not progress
+    with tqdm(total=max_steps, initial=done, desc=f"bayes {session.source.stem}", disable=disable) as bar:
+        state = initial
+        while done < max_steps:
+            chunk = min(check_every, max_steps - done)
+            state = sampler.run_mcmc(state, chunk, progress=False)
+            done = sampler.iteration
+            bar.update(chunk)
+            tau = sampler.get_autocorr_time(tol=0)
+            converged = bool(done >= min_steps and np.all(autocorr_factor * tau < done) and np.all(np.abs(tau_old - tau) < tau_tolerance * tau))
+            bar.set_postfix(tau=f"{np.max(tau):.0f}")
+            if converged:
+                break
+            tau_old = tau
+    tau = sampler.get_autocorr_time(tol=0)
+    if not converged:
+        warnings.warn(
+            f"{session.source}: MCMC stopped at {done} steps before convergence (max τ = "
+            f"{np.max(tau):.0f} steps needs > {autocorr_factor * np.max(tau):.0f} steps and τ stable within {tau_tolerance:.0%}); "
+            "treat the intervals as rough or raise max_steps",
+            ConvergenceWarning, stacklevel=2,
+        )  # fmt: skip
+    burn = int(min(2 * np.max(tau), done // 2))
+    thin = max(1, int(0.5 * np.min(tau)))
+    flat = sampler.get_chain(discard=burn, thin=thin, flat=True)
+    samples = _physical_samples(problem, flat)
+    names = (*problem.names, "depth_noise")
+    method = f"bayes: emcee ({n_walkers} walkers, {done} steps) through {type(model).__name__}, posterior median"
+    estimates, intervals68 = {}, {}
+    for name in names:
+        x = samples[name]
+        q = np.percentile(x, [2.5, 16, 50, 84, 97.5])
+        estimates[name] = Estimate(float(q[2]), float(np.std(x, ddof=1)), (float(q[0]), float(q[4])), _UNITS[name], method)
+        intervals68[name] = (float(q[1]), float(q[3]))
+    return PosteriorResult(
+        estimates=estimates, intervals68=intervals68, samples=samples,
+        autocorr_time=dict(zip(names, map(float, tau))), n_steps=int(done),
+        effective_samples=float(n_walkers * (done - burn) / np.max(tau)), converged=converged,
+        failed_forward=log_prob.failed_forward, acceptance_fraction=float(np.mean(sampler.acceptance_fraction)),
+        chain=sampler.get_chain(), names=names,
+    )  # fmt: skip
+
+
+

@@ -1,0 +1,189 @@
+"""One session's inverse problem: unknowns, data, noise model and priors, shared by fit and bayes.
+
+Unknowns live in a well-scaled vector ``u`` (all O(1) near the start):
+
+| name | u | physical | prior |
+|---|---|---|---|
+| gauge_pressure | log(P_g / P_ref) | P_g [Pa] | log-uniform on [10 Pa, 100 kPa] |
+| young_modulus | log(E / E_ref) | E [Pa] | log-uniform on [10 kPa, 10 GPa] |
+| thickness | log(h / h_meas) | h [m] | normal(h_meas, σ_h), when σ_h > 0 |
+| radius | log(R / R_meas) | R [m] | normal(R_meas, σ_R), when σ_R > 0 |
+| depth_offset | δ / 1 mm | δ [m] added to every predicted depth | uniform on ±10 mm (optional) |
+| force_gain | log g | g [-] multiplies recorded forces | normal(1, 5 %) (optional) |
+
+P_ref and E_ref are the starting values (the closed-form estimate), so u = 0 at the start.
+
+Noise model: depths are independent normals with standard deviation σ_w [m] — from the sensor
+calibration when known, otherwise estimated from the scatter of depth about a straight line in
+force (model-free) and, in ``bayes``, sampled with a log-uniform prior on [10 µm, 10 mm].
+Wrinkle counts are integers: each is the model's continuous n plus a ±1 reading error, with
+likelihood P(k) = Φ((k + ½ − n)/σ_n) − Φ((k − ½ − n)/σ_n), σ_n = 1 (the fit uses the Gaussian
+residual (k − n)/σ_n).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import log_ndtr
+from jaxtyping import Array, Float
+
+from .._errors import InvalidInputError
+from ..session import Session
+from ._forward import AbstractForwardModel
+
+PRESSURE_BOUNDS = (10.0, 1e5)  # [Pa]
+MODULUS_BOUNDS = (1e4, 1e10)  # [Pa]
+DEPTH_NOISE_BOUNDS = (1e-5, 1e-2)  # [m]
+OFFSET_BOUND = 10e-3  # [m]
+GAIN_STD = 0.05  # [-]
+COUNT_NOISE = 1.0  # [wrinkles]
+OFFSET_SCALE = 1e-3  # [m] per unit of u
+OPTIONAL_PARAMETERS = ("depth_offset", "force_gain")
+
+
+def depth_noise_from_scatter(force: np.ndarray, depth: np.ndarray) -> float:
+    """σ_w [m]: residual standard deviation of depth regressed linearly on force (model-free)."""
+    design = np.stack([force, np.ones_like(force)], axis=1)
+    coef, *_ = np.linalg.lstsq(design, depth, rcond=None)
+    residual = depth - design @ coef
+    return float(max(np.sqrt(residual @ residual / max(depth.size - 2, 1)), DEPTH_NOISE_BOUNDS[0]))
+
+
+class InverseProblem(eqx.Module):
+    """Data, forward model and priors of one session (see the module docstring for the layout).
+
+    ``force`` [N], ``depth`` [m], ``counts`` [-] (may be empty), ``depth_noise`` σ_w [m],
+    ``thickness``/``thickness_std`` [m], ``radius``/``radius_std`` [m], ``reference_pressure`` [Pa],
+    ``reference_modulus`` [Pa]; ``names``: the free unknowns, in order.
+    """
+
+    model: AbstractForwardModel
+    force: Float[Array, " m"]
+    depth: Float[Array, " m"]
+    counts: Float[Array, " k"]
+    depth_noise: float
+    thickness: float
+    thickness_std: float
+    radius: float
+    radius_std: float
+    reference_pressure: float
+    reference_modulus: float
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    @property
+    def ndim(self) -> int:
+        return len(self.names)
+
+    def physical(self, u: Float[Array, " d"]) -> dict[str, Float[Array, ""]]:
+        """Physical values (SI) of every parameter, fixed ones included, for unknowns ``u``."""
+        get = {n: u[i] for i, n in enumerate(self.names)}
+        zero = jnp.zeros((), u.dtype)
+        return {
+            "gauge_pressure": self.reference_pressure * jnp.exp(get["gauge_pressure"]),
+            "young_modulus": self.reference_modulus * jnp.exp(get["young_modulus"]),
+            "thickness": self.thickness * jnp.exp(get.get("thickness", zero)),
+            "radius": self.radius * jnp.exp(get.get("radius", zero)),
+            "depth_offset": OFFSET_SCALE * get.get("depth_offset", zero),
+            "force_gain": jnp.exp(get.get("force_gain", zero)),
+        }
+
+    def predict(self, u):
+        """Predicted depths [m] at the recorded forces, wrinkle count [-], converged flag."""
+        p = self.physical(u)
+        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
+        return pred.depth + p["depth_offset"], pred.wrinkle_count, pred.converged
+
+    def _prior_residuals(self, u) -> list:
+        p = self.physical(u)
+        out = []
+        if "thickness" in self.names:
+            out.append((p["thickness"] - self.thickness) / self.thickness_std)
+        if "radius" in self.names:
+            out.append((p["radius"] - self.radius) / self.radius_std)
+        if "force_gain" in self.names:
+            out.append((p["force_gain"] - 1.0) / GAIN_STD)
+        return out
+
+    def residuals(self, u, args=None) -> Float[Array, " r"]:
+        """Whitened residuals (data and Gaussian priors) for least squares; NaN if not converged."""
+        depth, count, converged = self.predict(u)
+        parts = [(depth - self.depth) / self.depth_noise, (count - self.counts) / COUNT_NOISE]
+        parts += [jnp.atleast_1d(r) for r in self._prior_residuals(u)]
+        r = jnp.concatenate(parts)
+        return jnp.where(converged, r, jnp.nan)
+
+    def log_posterior(self, u_and_noise: Float[Array, " d1"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
+        """Log posterior (up to a constant) of (u, log σ_w); returns (log p, forward converged)."""
+        u, log_noise = u_and_noise[:-1], u_and_noise[-1]
+        p = self.physical(u)
+        in_bounds = (
+            (p["gauge_pressure"] > PRESSURE_BOUNDS[0]) & (p["gauge_pressure"] < PRESSURE_BOUNDS[1])
+            & (p["young_modulus"] > MODULUS_BOUNDS[0]) & (p["young_modulus"] < MODULUS_BOUNDS[1])
+            & (log_noise > math.log(DEPTH_NOISE_BOUNDS[0])) & (log_noise < math.log(DEPTH_NOISE_BOUNDS[1]))
+            & (jnp.abs(p["depth_offset"]) < OFFSET_BOUND) & (p["thickness"] > 0) & (p["radius"] > 0)
+        )  # fmt: skip
+        depth, count, converged = self.predict(u)
+        noise = jnp.exp(log_noise)
+        log_like = -0.5 * jnp.sum(((depth - self.depth) / noise) ** 2) - self.depth.size * log_noise
+        upper = (self.counts + 0.5 - count) / COUNT_NOISE
+        lower = (self.counts - 0.5 - count) / COUNT_NOISE
+        # log(Φ(a) − Φ(b)) = log Φ(a) + log(1 − exp(log Φ(b) − log Φ(a))); mirrored (Φ(−b) − Φ(−a))
+        # when both bounds are positive, so the subtraction never happens near Φ = 1
+        flip = lower > 0
+        log_a = log_ndtr(jnp.where(flip, -lower, upper))
+        log_b = log_ndtr(jnp.where(flip, -upper, lower))
+        log_like += jnp.sum(log_a + jnp.log1p(-jnp.exp(jnp.minimum(log_b - log_a, -1e-300))))
+        # uniform priors in log P, log E, log σ_w are log-uniform in the physical values
+        log_prior = -0.5 * sum((r**2 for r in self._prior_residuals(u)), jnp.zeros(()))
+        lp = log_like + log_prior
+        ok = in_bounds & converged & jnp.isfinite(lp)
+        return jnp.where(ok, lp, -jnp.inf), converged
+
+
+def build_problem(
+    session: Session,
+    model: AbstractForwardModel,
+    *,
+    start_pressure: float,
+    start_modulus: float,
+    depth_noise: float | None = None,
+    nuisance: tuple[str, ...] = (),
+) -> InverseProblem:
+    """The inverse problem of ``session`` under ``model``, started at P_g [Pa], E [Pa].
+
+    ``depth_noise`` σ_w [m] (None: from the data's scatter); ``nuisance``: any of
+    "depth_offset", "force_gain". Thickness and radius are free with normal priors when the
+    session gives them a standard deviation.
+    """
+    unknown = sorted(set(nuisance) - set(OPTIONAL_PARAMETERS))
+    if unknown:
+        raise InvalidInputError(f"unknown nuisance parameter(s) {unknown}. Fix: choose from {list(OPTIONAL_PARAMETERS)}")
+    if session.wrinkle_counts is None:
+        raise InvalidInputError(
+            f"{session.source}: no [wrinkles] counts: the fit needs them to separate E from P_g. "
+            "Fix: add one wrinkle count per trial"
+        )
+    names = ["gauge_pressure", "young_modulus"]
+    if session.thickness_std > 0:
+        names.append("thickness")
+    if session.radius_std > 0:
+        names.append("radius")
+    names += [n for n in OPTIONAL_PARAMETERS if n in nuisance]
+    noise = depth_noise if depth_noise is not None else depth_noise_from_scatter(session.force, session.depth)
+    return InverseProblem(
+        model=model, force=jnp.asarray(session.force), depth=jnp.asarray(session.depth),
+        counts=jnp.asarray(session.wrinkle_counts, dtype=jnp.float64), depth_noise=float(noise),
+        thickness=session.thickness, thickness_std=session.thickness_std, radius=session.radius,
+        radius_std=session.radius_std, reference_pressure=float(start_pressure),
+        reference_modulus=float(start_modulus), names=tuple(names),
+    )  # fmt: skip
+
+
+def jacobian(problem: InverseProblem, u) -> Float[Array, "r d"]:
+    """Jacobian of the whitened residuals with respect to u (forward mode)."""
+    return jax.jacfwd(problem.residuals)(u)
