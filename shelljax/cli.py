@@ -1,4 +1,5 @@
-"""Command line: ``shelljax run``, ``shelljax estimate``, ``shelljax validate``, ``shelljax acquire``."""
+"""Command line: ``shelljax run``, ``estimate``, ``validate``, and the sensor commands ``acquire``,
+``sensor-calibrate``, ``sensor-emulator`` (see docs/sensing.md)."""
 
 from __future__ import annotations
 
@@ -76,12 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("sessions", nargs="+")
     val.set_defaults(func=_cmd_validate)
 
-    try:
-        from .sensing import _cli as sensing_cli
-    except ImportError:  # sensing is optional at import time only while it is being built
-        sensing_cli = None
-    if sensing_cli is not None:
-        sensing_cli.register(sub)
+    from .sensing import _cli as sensing_cli
+
+    sensing_cli.register(sub)
     return parser
 
 
@@ -93,6 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     except ShelljaxError as err:
         print(f"shelljax: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`, which closed early
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -1,0 +1,525 @@
+"""The paper's indentation protocol as a resumable recording that ends in a session file.
+
+For each trial (one sweep through the force levels, default 5–20 N in 2.5 N steps, 3 trials):
+
+1. tare: the finger is lifted; a steady unloaded window re-measures the film's zero (the film
+   drifts and its preload changes with the fit on the finger); the shift since calibration is
+   reported in newtons;
+2. each level: the user presses until the reading holds within ``tolerance`` of the target for
+   ``hold`` seconds; the level's force is the mean of that window (the measured force is stored,
+   not the target); the depth comes from channel 2 or is typed in; the wrinkle count visible at
+   that level may be typed in (optional);
+3. end of the sweep: the trial's wrinkle count is required (default: the count typed at the last
+   level where one was given). One count per trial is what the session format stores; the
+   per-level counts stay in the event log.
+
+Files, for ``--out NAME.toml``:
+
+* ``NAME.samples.csv``: every received sample, appended and fsync-ed per batch (see
+  :mod:`._capture`), with the force and flags computed at the time;
+* ``NAME.events.jsonl``: append-only event log (start, tare, level, skip, trial, resume, done),
+  fsync-ed per event; the state a ``--resume`` continues from;
+* ``NAME_trials.csv`` and ``NAME.toml``: the session (format of :mod:`shelljax.session`),
+  rewritten atomically after every completed trial, so they always hold the completed trials.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import math
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from .._errors import InvalidInputError
+from ..session import LENGTH_UNITS
+from ._calibration import ADC_SATURATED, Calibration
+from ._capture import HumanOperator, Operator, Pump, Reading, SampleLog, accept_force
+from ._console import Console
+from ._driver import SerialSensor
+
+
+EVENTS_VERSION = 1
+
+
+class RecordingAborted(Exception):
+    """The user quit; everything received is on disk and ``--resume`` continues."""
+
+
+def paper_forces() -> tuple[float, ...]:
+    """The paper's force levels [N]: 5 to 20 in steps of 2.5."""
+    return tuple(float(f) for f in np.arange(5.0, 20.0 + 1e-9, 2.5))
+
+
+@dataclasses.dataclass(frozen=True)
+class AcquisitionPlan:
+    """What to record. Forces [N], times [s], ``depth_scale`` [m/count] for channel 2."""
+
+    forces: tuple[float, ...] = dataclasses.field(default_factory=paper_forces)
+    trials: int = 3
+    hold: float = 0.5
+    tolerance: float = 0.5
+    level_timeout: float = 60.0
+    tare_time: float = 1.0
+    tare_timeout: float = 30.0
+    depth_source: str = "prompt"  # or "channel"
+    depth_unit: str = "mm"
+    depth_scale: float | None = None
+    ask_level_wrinkles: bool = True
+
+    def check(self, calibration: Calibration) -> None:
+        """Raise :class:`InvalidInputError` if the plan cannot be recorded with ``calibration``."""
+        if len(self.forces) < 3 or any(not f > 0 for f in self.forces):
+            raise InvalidInputError(f"--forces {self.forces}: need at least 3 positive force levels [N]")
+        if self.trials < 1:
+            raise InvalidInputError(f"--trials {self.trials}: need at least one trial")
+        if self.depth_unit not in LENGTH_UNITS:
+            raise InvalidInputError(f"--depth-unit {self.depth_unit!r}: use one of {', '.join(LENGTH_UNITS)}")
+        if self.depth_source not in ("prompt", "channel"):
+            raise InvalidInputError(f"depth source {self.depth_source!r}: use 'prompt' or 'channel'")
+        if self.depth_source == "channel" and not (self.depth_scale and self.depth_scale > 0):
+            raise InvalidInputError(
+                "--depth-from-channel needs --depth-scale, the depth sensor's metres per count (> 0)"
+            )
+        if self.hold <= 0 or self.tolerance <= 0 or self.level_timeout <= self.hold:
+            raise InvalidInputError("--hold and --tolerance must be > 0 and --level-timeout longer than --hold")
+        low = min(self.forces) - self.tolerance
+        high = max(self.forces) + self.tolerance
+        if low < calibration.force_min or high > calibration.force_max:
+            raise InvalidInputError(
+                f"force levels {min(self.forces):g}–{max(self.forces):g} N (± tolerance {self.tolerance:g} N) "
+                f"leave the calibrated range {calibration.force_min:.3g}–{calibration.force_max:.3g} N "
+                f"of the calibration{' ' + repr(calibration.sensor) if calibration.sensor else ''}. "
+                "Readings there would be extrapolated. Fix: re-calibrate with known weights spanning "
+                f"the levels (e.g. up to {math.ceil(high / calibration.gravity * 1.1 * 10) / 10:g} kg) "
+                "or change --forces"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class RecordingPaths:
+    """The files of one recording, all beside the session TOML."""
+
+    session: Path
+    trials_csv: Path
+    samples: Path
+    events: Path
+
+    @classmethod
+    def for_session(cls, out: str | Path) -> "RecordingPaths":
+        out = Path(out)
+        if out.suffix != ".toml":
+            raise InvalidInputError(f"--out {out}: the session file must end in .toml")
+        stem = out.with_suffix("")
+        return cls(out, stem.parent / f"{stem.name}_trials.csv", stem.parent / f"{stem.name}.samples.csv",
+                   stem.parent / f"{stem.name}.events.jsonl")  # fmt: skip
+
+    def existing(self) -> list[Path]:
+        return [p for p in (self.session, self.trials_csv, self.samples, self.events) if p.exists()]
+
+
+class EventLog:
+    """Append-only JSON-lines file, fsync-ed per event. A torn last line is ignored on reading."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._file = open(path, "ab", buffering=0)
+        if path.stat().st_size and not path.read_bytes().endswith(b"\n"):
+            self._file.write(b"\n")
+
+    def append(self, event: dict) -> None:
+        self._file.write((json.dumps(event, sort_keys=True) + "\n").encode())
+        os.fsync(self._file.fileno())
+
+    def close(self) -> None:
+        self._file.close()
+
+    @staticmethod
+    def read(path: Path) -> list[dict]:
+        events = []
+        for line in path.read_text().splitlines():
+            if not line.strip():
+                continue
+            try:
+                events.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue  # torn by a crash in mid-write; the event after it was never acted on
+        return events
+
+
+@dataclasses.dataclass
+class _State:
+    """What the event log says has been recorded."""
+
+    start: dict
+    levels: dict[int, list[dict]] = dataclasses.field(default_factory=dict)
+    skipped: dict[int, set[float]] = dataclasses.field(default_factory=dict)
+    wrinkles: dict[int, int] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def from_events(cls, events: list[dict], path: Path) -> "_State":
+        if not events or events[0].get("event") != "start":
+            raise InvalidInputError(
+                f"{path}: no start event, so there is nothing to resume. Fix: start a new recording "
+                "without --resume (delete or move the old files first)"
+            )
+        if events[0].get("version") != EVENTS_VERSION:
+            raise InvalidInputError(f"{path}: event log version {events[0].get('version')!r} unknown")
+        state = cls(events[0])
+        for event in events[1:]:
+            kind, trial = event.get("event"), event.get("trial")
+            if kind == "level":
+                state.levels.setdefault(trial, []).append(event)
+            elif kind == "skip":
+                state.skipped.setdefault(trial, set()).add(event["target"])
+            elif kind == "trial":
+                state.wrinkles[trial] = event["wrinkles"]
+        return state
+
+    def done_targets(self, trial: int) -> set[float]:
+        return {e["target"] for e in self.levels.get(trial, [])} | self.skipped.get(trial, set())
+
+    def next_trial(self) -> int:
+        trial = 1
+        while trial in self.wrinkles:
+            trial += 1
+        return trial
+
+
+@dataclasses.dataclass(frozen=True)
+class AcquisitionResult:
+    """Where the recording went and what it holds."""
+
+    paths: RecordingPaths
+    completed_trials: int
+    levels: int
+    samples: int
+    malformed: int
+    reconnects: int
+
+
+def _plan_to_dict(plan: AcquisitionPlan) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(plan).items()}
+
+
+def _plan_from_dict(data: dict) -> AcquisitionPlan:
+    data = dict(data)
+    data["forces"] = tuple(data["forces"])
+    return AcquisitionPlan(**data)
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+
+
+def acquire(
+    driver: SerialSensor,
+    out: str | Path,
+    console: Console,
+    *,
+    calibration: Calibration | None = None,
+    plan: AcquisitionPlan | None = None,
+    meta: dict | None = None,
+    operator: Operator | None = None,
+    resume: bool = False,
+    on_batch: Callable[[Pump, list[Reading]], None] | None = None,
+    durable: bool = True,
+) -> AcquisitionResult:
+    """Walk the user through the indentation protocol and write the session.
+
+    Args:
+        driver: an open or openable :class:`SerialSensor`.
+        out: the session TOML to write; the other files go beside it (see module docstring).
+        console: prompts and live display (:class:`TerminalConsole` or a scripted one).
+        calibration, plan, meta: required for a new recording; on ``resume`` they come from the
+            event log (so the continuation uses the same calibration and protocol). ``meta`` holds
+            the session's non-indentation fields: ``object``, ``geometry``, ``wall``, and
+            optionally ``notes``, ``poisson_ratio``, ``mass``..., as in the session format.
+        operator: the simulated finger for the emulator; a person otherwise.
+        on_batch: called after every batch has been logged (tests check durability with it).
+
+    Raises :class:`RecordingAborted` when the user quits, :class:`~shelljax.DeviceError` when the
+    sensor is gone for good; in both cases everything received is on disk and ``resume=True``
+    continues.
+    """
+    paths = RecordingPaths.for_session(out)
+    operator = operator or HumanOperator()
+    if resume:
+        if not paths.events.exists():
+            raise InvalidInputError(
+                f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording"
+            )
+        state = _State.from_events(EventLog.read(paths.events), paths.events)
+        start = state.start
+        calibration = Calibration.from_dict(start["calibration"], source=str(paths.events))
+        plan = _plan_from_dict(start["plan"])
+        meta = start["meta"]
+    else:
+        if calibration is None or plan is None or meta is None:
+            raise ValueError("a new recording needs calibration, plan and meta")
+        clash = paths.existing()
+        if clash:
+            raise InvalidInputError(
+                f"--out {paths.session}: {', '.join(str(p) for p in clash)} already exist(s). Fix: add "
+                "--resume to continue that recording, or choose another --out"
+            )
+        plan.check(calibration)
+        for key in ("object", "geometry", "wall"):
+            if key not in meta:
+                raise InvalidInputError(f"session field '{key}' missing. Fix: pass it on the command line")
+        start = {"event": "start", "version": EVENTS_VERSION, "time": _now(), "session": paths.session.name,
+                 "calibration": calibration.to_dict(), "plan": _plan_to_dict(plan), "meta": meta}  # fmt: skip
+        state = _State(start)
+    paths.session.parent.mkdir(parents=True, exist_ok=True)
+    events = EventLog(paths.events)
+    log = SampleLog(paths.samples, durable=durable)
+    try:
+        if resume:
+            trial = state.next_trial()
+            events.append({"event": "resume", "time": _now(), "trial": trial, "log_row": log.n_rows})
+            console.say(f"Resuming {paths.session.name}: {len(state.wrinkles)} trial(s) complete, "
+                        f"continuing with trial {trial}.")  # fmt: skip
+        else:
+            events.append(start)
+        pump = Pump(driver, calibration, log, console, on_batch=on_batch)
+        if not driver.is_open:
+            driver.open()
+        walk = _Walk(pump, plan, meta, console, operator, events, state, paths, calibration)
+        for trial in range(state.next_trial(), plan.trials + 1):
+            walk.trial(trial)
+        events.append({"event": "done", "time": _now(), "samples": log.n_rows,
+                       "malformed": driver.stats.n_malformed, "reconnects": driver.stats.n_reconnects})  # fmt: skip
+        console.say(f"Done: {paths.session} ({len(state.wrinkles)} trials); raw samples in {paths.samples.name}.")
+        return AcquisitionResult(paths, len(state.wrinkles), sum(len(v) for v in state.levels.values()),
+                                 log.n_rows, driver.stats.n_malformed, driver.stats.n_reconnects)  # fmt: skip
+    finally:
+        operator.release()
+        log.close()
+        events.close()
+
+
+class _Walk:
+    """One recording's interactive steps (state lives in the event log)."""
+
+    def __init__(self, pump: Pump, plan: AcquisitionPlan, meta: dict, console: Console,
+                 operator: Operator, events: EventLog, state: _State, paths: RecordingPaths,
+                 calibration: Calibration):  # fmt: skip
+        self.pump, self.plan, self.meta, self.console = pump, plan, meta, console
+        self.operator, self.events, self.state, self.paths = operator, events, state, paths
+        self.calibration = calibration
+        self.zero_raw1 = 0.0
+        self.last_shift: float | None = None
+
+    # -- a trial ------------------------------------------------------------------------------
+    def trial(self, trial: int) -> None:
+        plan, pump = self.plan, self.pump
+        pump.trial = trial
+        self.tare(trial)
+        done = self.state.done_targets(trial)
+        level_counts: list[int] = [
+            e["wrinkles"] for e in self.state.levels.get(trial, []) if e.get("wrinkles") is not None
+        ]
+        for j, target in enumerate(plan.forces, start=1):
+            if target in done:
+                continue
+            count = self.level(trial, j, target)
+            if count is not None:
+                level_counts.append(count)
+        if not self.state.levels.get(trial):
+            raise RecordingAborted(f"trial {trial}: every level was skipped; nothing to save")
+        # Asked while the top force is still held: the paper counts the stabilised wrinkles there.
+        default = level_counts[-1] if level_counts else self.operator.suggest_wrinkles()
+        wrinkles = self.ask_int(f"Trial {trial}: number of radial wrinkles at the top force", default)
+        self.operator.release()
+        event = {"event": "trial", "time": _now(), "trial": trial, "wrinkles": wrinkles}
+        self.events.append(event)
+        self.state.wrinkles[trial] = wrinkles
+        self.write_session()
+        self.console.say(f"Trial {trial} saved: {len(self.state.levels[trial])} levels, {wrinkles} wrinkles.")
+
+    def tare(self, trial: int) -> None:
+        pump, plan, cal = self.pump, self.plan, self.calibration
+        self.operator.release()
+        pump.phase = "tare"
+        pump.headline = f"trial {trial}/{plan.trials}: lift the finger (tare)"
+        self.console.say(f"Trial {trial}/{plan.trials}: lift the finger off the object; taring the sensor.")
+        limit = max(0.25 * min(plan.forces), 3 * plan.tolerance)
+
+        def unloaded(r: Reading) -> bool:
+            # Against the calibration's zero: a film that drifted further than this needs a
+            # new calibration, not a bigger tare.
+            force = cal.force_from_conductance(r.c).force[0]
+            return not r.flags & ADC_SATURATED and force < limit
+
+        while True:
+            window = pump.wait_stable(unloaded, plan.tare_time, plan.tare_timeout)
+            if window is not None:
+                break
+            self.retry_or_quit(f"No steady unloaded reading (< {limit:.2g} N) within {plan.tare_timeout:g} s")
+        c = np.array([r.c for r in window])
+        zero = float(c.mean())
+        pump.zero = zero
+        if plan.depth_source == "channel":
+            self.zero_raw1 = float(np.mean([r.raw[1] for r in window if len(r.raw) > 1] or [np.nan]))
+            if not math.isfinite(self.zero_raw1):
+                raise InvalidInputError(
+                    "--depth-from-channel: the sensor sends one channel only. Fix: wire the depth "
+                    "sensor to the firmware's second channel, or drop --depth-from-channel"
+                )
+        shift = cal.zero_shift_force(zero, min(plan.forces))
+        event = {"event": "tare", "time": _now(), "trial": trial, "zero": zero,
+                 "zero_std": float(c.std(ddof=1) / math.sqrt(len(c))), "zero_raw1": self.zero_raw1,
+                 "shift_N_at_min_force": shift}  # fmt: skip
+        self.events.append(event)
+        at_min = cal.force_from_conductance(cal.conductance_at(min(plan.forces)))
+        message = f"Tare: zero moved by the equivalent of {shift:+.2f} N at {min(plan.forces):g} N since calibration"
+        if self.last_shift is not None:
+            message += f" ({shift - self.last_shift:+.2f} N since the last tare)"
+        if abs(shift) > 2 * float(at_min.std[0]):
+            message += ". That is more than twice the calibration uncertainty: the film drifts; consider re-calibrating"
+        self.console.say(message + ".")
+        self.last_shift = shift
+
+    def level(self, trial: int, j: int, target: float) -> int | None:
+        pump, plan = self.pump, self.plan
+        pump.phase = "level"
+        pump.headline = f"trial {trial}/{plan.trials} level {j}/{len(plan.forces)}: press to {target:g} N"
+        self.console.say(f"Press to {target:g} N and hold steady ({plan.hold:g} s within ±{plan.tolerance:g} N).")
+        self.operator.press(target)
+        while True:
+            window = pump.wait_stable(accept_force(target, plan.tolerance), plan.hold, plan.level_timeout,
+                                      watch=lambda r: self.operator.see(r.force))  # fmt: skip
+            if window is not None:
+                break
+            if self.retry_or_quit(f"No steady {target:g} N within {plan.level_timeout:g} s", allow_skip=True):
+                self.events.append({"event": "skip", "time": _now(), "trial": trial, "target": target})
+                self.state.skipped.setdefault(trial, set()).add(target)
+                return None
+        self.operator.hold()
+        force = np.array([r.force for r in window])
+        unit = LENGTH_UNITS[plan.depth_unit]
+        if plan.depth_source == "channel":
+            raw1 = np.mean([r.raw[1] for r in window])
+            depth_m = (raw1 - self.zero_raw1) * plan.depth_scale
+            depth = depth_m / unit
+            self.console.say(f"Captured {force.mean():.2f} N, depth {depth:.3g} {plan.depth_unit} (channel 2).")
+        else:
+            self.console.say(f"Captured {force.mean():.2f} N: keep still and read the depth.")
+            suggestion = self.operator.suggest_depth()
+            depth = self.ask_float(f"Indentation depth at {force.mean():.2f} N [{plan.depth_unit}]",
+                                   None if suggestion is None else suggestion / unit)  # fmt: skip
+        count = None
+        if plan.ask_level_wrinkles:
+            count = self.ask_int(f"Wrinkles visible at {target:g} N (Enter to skip)",
+                                 self.operator.suggest_wrinkles(), required=False)  # fmt: skip
+        event = {"event": "level", "time": _now(), "trial": trial, "target": target,
+                 "force": float(force.mean()), "force_std": float(force.std(ddof=1)), "depth": float(depth),
+                 "depth_unit": plan.depth_unit, "depth_source": plan.depth_source, "wrinkles": count,
+                 "t_device": [window[0].device_time, window[-1].device_time],
+                 "n_samples": len(window), "log_rows_to": pump.log.n_rows}  # fmt: skip
+        self.events.append(event)
+        self.state.levels.setdefault(trial, []).append(event)
+        return count
+
+    # -- prompts ------------------------------------------------------------------------------
+    def retry_or_quit(self, problem: str, allow_skip: bool = False) -> bool:
+        """Ask what to do; True means skip. Quitting raises :class:`RecordingAborted`."""
+        options = "[r]etry, [s]kip this level, [q]uit" if allow_skip else "[r]etry, [q]uit"
+        while True:
+            answer = self.console.ask(f"{problem}. {options}? ").strip().lower()
+            if answer in ("", "r", "retry"):
+                return False
+            if allow_skip and answer in ("s", "skip"):
+                return True
+            if answer in ("q", "quit"):
+                raise RecordingAborted(problem)
+
+    def ask_float(self, question: str, default: float | None) -> float:
+        hint = f" [{default:.3g}]" if default is not None else ""
+        while True:
+            answer = self.console.ask(f"{question}{hint}: ").strip()
+            if not answer and default is not None:
+                return float(default)
+            if not answer and not getattr(self.console, "interactive", True):
+                raise InvalidInputError(
+                    f"{question}: no answer and no default in non-interactive mode (--yes). Fix: run "
+                    "interactively, or use --depth-from-channel with a depth sensor"
+                )
+            try:
+                value = float(answer)
+            except ValueError:
+                self.console.say(f"  {answer!r} is not a number; type e.g. 4.5")
+                continue
+            if math.isfinite(value) and value >= 0:
+                return value
+            self.console.say("  the depth must be a non-negative number")
+
+    def ask_int(self, question: str, default: int | None, required: bool = True) -> int | None:
+        hint = f" [{default}]" if default is not None else ""
+        while True:
+            answer = self.console.ask(f"{question}{hint}: ").strip()
+            if not answer:
+                if default is not None:
+                    return int(default)
+                if not required:
+                    return None
+                if not getattr(self.console, "interactive", True):
+                    raise InvalidInputError(f"{question}: no answer and no default in non-interactive mode")
+                self.console.say("  an answer is required")
+                continue
+            if answer.isdigit():
+                return int(answer)
+            self.console.say(f"  {answer!r} is not a non-negative whole number")
+
+    # -- output -------------------------------------------------------------------------------
+    def write_session(self) -> None:
+        write_session_files(self.paths, self.meta, self.plan, self.state.levels, self.state.wrinkles,
+                            notes_extra=self._notes())  # fmt: skip
+
+    def _notes(self) -> str:
+        hello = self.pump.driver.hello
+        stats = self.pump.driver.stats
+        device = f"{hello.firmware} {hello.version} at {hello.rate_hz:g} Hz" if hello else "unknown firmware"
+        cal = self.calibration
+        return (f"Recorded with `shelljax acquire` ({device}); calibration {cal.sensor or '(unnamed)'} "
+                f"{cal.model} β={cal.exponent:.3f}, range {cal.force_min:.3g}–{cal.force_max:.3g} N; "
+                f"raw samples in {self.paths.samples.name} ({self.pump.log.n_rows} rows, "
+                f"{stats.n_malformed} malformed lines skipped, {stats.n_reconnects} reconnects).")  # fmt: skip
+
+
+def write_session_files(paths: RecordingPaths, meta: dict, plan: AcquisitionPlan,
+                        levels: dict[int, list[dict]], wrinkles: dict[int, int],
+                        notes_extra: str = "") -> None:  # fmt: skip
+    """Write the trials CSV and session TOML for the completed trials (atomically)."""
+    completed = sorted(wrinkles)
+    lines = ["trial,force,depth"]
+    for trial in completed:
+        for event in sorted(levels.get(trial, []), key=lambda e: e["target"]):
+            lines.append(f"{trial},{event['force']!r},{event['depth']!r}")
+    _atomic_write(paths.trials_csv, "\n".join(lines) + "\n")
+    session = {"schema_version": 1}
+    session.update({k: v for k, v in meta.items() if k not in ("geometry", "wall", "notes")})
+    notes = "\n".join(n for n in (meta.get("notes", ""), notes_extra) if n)
+    if notes:
+        session["notes"] = notes
+    session["geometry"] = meta["geometry"]
+    session["wall"] = meta["wall"]
+    session["indentation"] = {"force_unit": "N", "depth_unit": plan.depth_unit,
+                              "trials_csv": paths.trials_csv.name}  # fmt: skip
+    session["wrinkles"] = {"counts": [int(wrinkles[t]) for t in completed]}
+    header = "# Written by `shelljax acquire`; format: shelljax.session (docs/session-format.md).\n"
+    _atomic_write(paths.session, header + tomli_w.dumps(session))
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as handle:
+        handle.write(text)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
