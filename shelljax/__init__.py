@@ -3,11 +3,24 @@
 Importing shelljax turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process: shells
 mix E ≈ 1e6 Pa with h ≈ 1e-3 m, and Newton solves on them fail in float32. If you import jax
 yourself, import shelljax first or set ``JAX_ENABLE_X64=1``.
+
+It also turns on JAX's persistent compilation cache (unless you configured one yourself), in
+``$SHELLJAX_CACHE_DIR`` or ``~/.cache/shelljax/jax``: the shell solvers take tens of seconds to
+compile, and the cache makes the second run of a script start in seconds. Set
+``SHELLJAX_NO_COMPILATION_CACHE=1`` to leave JAX's cache settings alone.
 """
+
+import os as _os
 
 import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
+if not _os.environ.get("SHELLJAX_NO_COMPILATION_CACHE") and _jax.config.jax_compilation_cache_dir is None:
+    _jax.config.update(
+        "jax_compilation_cache_dir",
+        _os.environ.get("SHELLJAX_CACHE_DIR", _os.path.join(_os.path.expanduser("~"), ".cache", "shelljax", "jax")),
+    )
+    _jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 from ._errors import DeviceError, InvalidInputError, NoConvergenceError, ShelljaxError
 

@@ -19,24 +19,42 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .estimate import Estimate, estimate_session
+    from .estimate import Estimate, estimate_session, fit_session, sample_posterior
+    from .estimate._forward import forward_model_for
     from .session import load_session
 
     session = load_session(args.session)
-    k_s = None
-    if args.k_s is not None:
-        if args.k_s <= 0 or args.k_s_std < 0:
-            raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
-        k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
-    result = estimate_session(session, k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed)
-    out = {"session": str(session.source), "object": session.object_name, "method": args.method,
-           "estimates": {k: v.to_dict() for k, v in result.estimates().items()},
-           "bootstrap": {k: v.to_dict() for k, v in result.bootstrap.items()}}  # fmt: skip
+    out = {"session": str(session.source), "object": session.object_name, "method": args.method}
+    if args.method == "closed-form":
+        k_s = None
+        if args.k_s is not None:
+            if args.k_s <= 0 or args.k_s_std < 0:
+                raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
+            k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
+        result = estimate_session(session, k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed)
+        estimates = result.estimates()
+        out["bootstrap"] = {k: v.to_dict() for k, v in result.bootstrap.items()}
+    else:
+        options = {"gas": args.gas} if args.model == "axisym" else {}
+        model = forward_model_for(session, args.model, **options)
+        nuisance = tuple(args.nuisance or ())
+        if args.method == "fit":
+            result = fit_session(session, model, nuisance=nuisance)
+            estimates = result.estimates
+            out.update(chi2=result.chi2, dof=result.dof, iterations=result.steps)
+        else:
+            result = sample_posterior(session, model, nuisance=nuisance, n_walkers=args.walkers,
+                                      max_steps=args.max_steps, backend_path=args.chain, seed=args.seed)  # fmt: skip
+            estimates = result.estimates
+            out.update(converged=result.converged, steps=result.n_steps, effective_samples=result.effective_samples,
+                       failed_forward_solves=result.failed_forward)  # fmt: skip
+        out["forward_model"] = args.model
+    out["estimates"] = {k: v.to_dict() for k, v in estimates.items()}
     if args.json:
         json.dump(out, sys.stdout, indent=2)
         print()
     else:
-        for name, est in result.estimates().items():
+        for name, est in estimates.items():
             unit = "" if est.unit == "1" else f" {est.unit}"
             print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
                   f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip
@@ -65,12 +83,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")
     est.add_argument("session", help="session TOML file")
-    est.add_argument("--method", choices=["closed-form"], default="closed-form")
+    est.add_argument("--method", choices=["closed-form", "fit", "bayes"], default="closed-form",
+                     help="closed-form: the paper's Procedures 2-3; fit: least squares through a shell model; "
+                     "bayes: MCMC posterior through a shell model")
     est.add_argument("--json", action="store_true", help="print JSON on stdout")
     est.add_argument("--k-s", type=float, default=None, help="k_s [-] (default: the paper's 0.64)")
     est.add_argument("--k-s-std", type=float, default=0.0, help="standard deviation of --k-s [-]")
     est.add_argument("--bootstrap", type=int, default=2000, help="bootstrap resamples (0 disables)")
     est.add_argument("--seed", type=int, default=0)
+    est.add_argument("--model", choices=["axisym", "scaling"], default="axisym",
+                     help="forward model of fit/bayes (default: the axisymmetric shell engine)")
+    est.add_argument("--gas", choices=["prescribed", "isothermal"], default="prescribed", help="gas model of the axisym engine")
+    est.add_argument("--nuisance", nargs="*", choices=["depth_offset", "force_gain"], help="extra fitted parameters")
+    est.add_argument("--walkers", type=int, default=32, help="bayes: emcee walkers")
+    est.add_argument("--max-steps", type=int, default=20_000, help="bayes: most MCMC steps")
+    est.add_argument("--chain", default=None, help="bayes: HDF5 file for the chain (resumed if it exists)")
     est.set_defaults(func=_cmd_estimate)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")

@@ -15,9 +15,13 @@ from pathlib import Path
 
 from ._errors import InvalidInputError
 
-METHODS = ("closed-form",)
+METHODS = ("closed-form", "fit", "bayes")
+FORWARD_MODELS = ("axisym", "scaling")
+GAS_MODELS = ("prescribed", "isothermal")
+NUISANCE = ("depth_offset", "force_gain")
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
-_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin"}
+_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "nuisance",
+                   "bayes_walkers", "bayes_max_steps"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
 _OUTPUT_KEYS = {"figures"}
@@ -34,7 +38,9 @@ class ExperimentConfig:
 
     ``calibration_sessions`` (k_s from Procedure 1) or ``k_s``/``k_s_std`` [-] (None: the
     paper's 0.64); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
-    ``figures`` (write PNGs); ``output_dir`` where run directories are created.
+    ``figures`` (write PNGs); ``output_dir`` where run directories are created; for ``fit`` and
+    ``bayes``: ``forward_model`` ("axisym" or "scaling"), ``gas`` ("prescribed" or "isothermal"),
+    ``nuisance`` parameters, ``bayes_walkers`` and ``bayes_max_steps``.
     """
 
     source: Path
@@ -50,6 +56,11 @@ class ExperimentConfig:
     k_s_std: float | None
     sessions: tuple[Path, ...]
     figures: bool
+    forward_model: str = "axisym"
+    gas: str = "prescribed"
+    nuisance: tuple[str, ...] = ()
+    bayes_walkers: int = 32
+    bayes_max_steps: int = 20_000
 
 
 def _fail(path: Path, field: str, problem: str, fix: str) -> InvalidInputError:
@@ -120,6 +131,23 @@ def load_config(path: str | Path) -> ExperimentConfig:
     if not isinstance(through_origin, bool):
         raise _fail(path, "estimators.through_origin", f"{through_origin!r} is not true/false", "write true or false")
 
+    forward_model = estimators.get("forward_model", "axisym")
+    if forward_model not in FORWARD_MODELS:
+        raise _fail(path, "estimators.forward_model", f"unknown model {forward_model!r}", f"available: {', '.join(FORWARD_MODELS)}")
+    gas = estimators.get("gas", "prescribed")
+    if gas not in GAS_MODELS:
+        raise _fail(path, "estimators.gas", f"unknown gas model {gas!r}", f"available: {', '.join(GAS_MODELS)}")
+    nuisance = estimators.get("nuisance", [])
+    if not isinstance(nuisance, list) or any(n not in NUISANCE for n in nuisance):
+        raise _fail(path, "estimators.nuisance", f"{nuisance!r} is not a list of known nuisance parameters",
+                    f"choose from {', '.join(NUISANCE)}")  # fmt: skip
+    counts = {}
+    for key, default, minimum in (("bayes_walkers", 32, 8), ("bayes_max_steps", 20_000, 100)):
+        value = estimators.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise _fail(path, f"estimators.{key}", f"{value!r} is not an integer >= {minimum}", f"e.g. {default}")
+        counts[key] = value
+
     calibration = _table(path, data, "calibration", _CALIBRATION_KEYS)
     calibration_sessions = resolve_paths(path, "calibration.sessions", calibration["sessions"]) if "sessions" in calibration else ()
     k_s = calibration.get("k_s")
@@ -149,5 +177,6 @@ def load_config(path: str | Path) -> ExperimentConfig:
         output_dir=Path(output_dir), seed=seed, methods=tuple(methods), bootstrap_samples=boot,
         through_origin=through_origin, calibration_sessions=calibration_sessions,
         k_s=None if k_s is None else float(k_s), k_s_std=None if k_s_std is None else float(k_s_std),
-        sessions=sessions, figures=figures,
+        sessions=sessions, figures=figures, forward_model=forward_model, gas=gas,
+        nuisance=tuple(nuisance), **counts,
     )  # fmt: skip

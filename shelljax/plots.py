@@ -15,10 +15,12 @@ from .estimate import ClosedFormResult, KsCalibration  # noqa: E402
 from .session import Session  # noqa: E402
 
 
-def plot_force_depth(session: Session, result: ClosedFormResult, path: Path, level: float = 0.99) -> Path:
+def plot_force_depth(session: Session, result: ClosedFormResult, path: Path, level: float = 0.99,
+                     model_curves: dict[str, np.ndarray] | None = None) -> Path:  # fmt: skip
     """F against w(0): mean depth per force level ± std over trials, OLS line and its confidence band.
 
-    The paper's gauge-pressure figure, panel (b).
+    The paper's gauge-pressure figure, panel (b). ``model_curves``: label → predicted depth [m] at
+    the session's recorded forces (e.g. the fitted shell model), drawn as lines.
     """
     fig, ax = plt.subplots(figsize=(5, 4), dpi=120)
     levels = session.force_levels
@@ -34,6 +36,9 @@ def plot_force_depth(session: Session, result: ClosedFormResult, path: Path, lev
     ax.plot(w * 1e3, reg.slope * w + reg.intercept, color="C1",
             label=f"OLS: P̂ = {result.pressure_slope.value:.0f} ± {result.pressure_slope.std:.0f} Pa")  # fmt: skip
     ax.fill_between(w * 1e3, lo, hi, color="C1", alpha=0.25, label=f"{level:.0%} confidence band")
+    order = np.argsort(session.force)
+    for i, (label, depth) in enumerate((model_curves or {}).items()):
+        ax.plot(np.asarray(depth)[order] * 1e3, session.force[order], color=f"C{i + 2}", lw=1.5, label=label)
     ax.set_xlabel("indentation depth |w(0)| [mm]")
     ax.set_ylabel("force F [N]")
     ax.set_title(f"{session.object_name} ({session.source.stem})", fontsize=10)
@@ -80,19 +85,22 @@ def plot_calibration(calibration: KsCalibration, held_out: list[tuple[str, float
 def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
     """P_g and E per session with 95 % intervals; manometer readings where known.
 
-    ``rows``: dicts with ``label``, ``gauge_pressure`` and ``young_modulus`` (Estimate or None),
-    ``manometer`` [Pa] or None.
+    ``rows``: dicts with ``label``, ``manometer`` [Pa] or None, and ``estimates``: method →
+    {"gauge_pressure": Estimate, "young_modulus": Estimate or None}.
     """
     fig, axes = plt.subplots(1, 2, figsize=(9, 0.35 * len(rows) + 1.5), dpi=120, sharey=True)
     y = np.arange(len(rows))
     for ax, key, scale, label in ((axes[0], "gauge_pressure", 1e3, "gauge pressure P_g [kPa]"),
                                   (axes[1], "young_modulus", 1e6, "Young's modulus E [MPa]")):  # fmt: skip
+        methods = sorted({m for row in rows for m in row["estimates"]})
         for i, row in enumerate(rows):
-            est = row.get(key)
-            if est is None:
-                continue
-            ax.errorbar(est.value / scale, i, xerr=[[(est.value - est.ci95[0]) / scale], [(est.ci95[1] - est.value) / scale]],
-                        fmt="o", color="C0", capsize=3)  # fmt: skip
+            for j, method in enumerate(methods):
+                est = row["estimates"].get(method, {}).get(key)
+                if est is None:
+                    continue
+                offset = 0.25 * (j - (len(methods) - 1) / 2)
+                ax.errorbar(est.value / scale, i + offset, xerr=[[(est.value - est.ci95[0]) / scale], [(est.ci95[1] - est.value) / scale]],
+                            fmt="o", color=f"C{j}", capsize=3, label=method if (i == 0 and key == "gauge_pressure") else None)  # fmt: skip
             if key == "gauge_pressure" and row.get("manometer") is not None:
                 ax.plot(row["manometer"] / scale, i, "x", color="C3", ms=8)
         ax.set_xlabel(label)
@@ -102,9 +110,39 @@ def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
         ax.grid(alpha=0.3, which="both")
     axes[0].set_yticks(y, [r["label"] for r in rows], fontsize=7)
     axes[0].plot([], [], "x", color="C3", label="manometer")
-    axes[0].errorbar([], [], xerr=[], fmt="o", color="C0", label="closed form, 95 % interval")
-    axes[0].legend(fontsize=7, loc="best")
+    axes[0].legend(fontsize=7, loc="best", title="95 % intervals", title_fontsize=7)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tuple[str, ...], stem: str,
+                   directory: Path) -> list[Path]:  # fmt: skip
+    """Corner plot of the posterior samples (SI, P_g in kPa, E in MPa) and trace plot of the chain.
+
+    ``samples``: flat physical samples by name; ``chain``: raw (steps, walkers, dim) chain in the
+    sampler's coordinates; returns the two PNG paths.
+    """
+    import corner
+
+    scale = {"gauge_pressure": (1e3, "P_g [kPa]"), "young_modulus": (1e6, "E [MPa]"), "thickness": (1e-3, "h [mm]"),
+             "radius": (1e-3, "R [mm]"), "depth_offset": (1e-3, "offset [mm]"), "force_gain": (1.0, "gain [-]"),
+             "depth_noise": (1e-3, "σ_w [mm]")}  # fmt: skip
+    data = np.stack([samples[n] / scale[n][0] for n in names], axis=1)
+    fig = corner.corner(data, labels=[scale[n][1] for n in names], quantiles=[0.025, 0.5, 0.975], show_titles=True,
+                        title_fmt=".3g", title_kwargs={"fontsize": 8})  # fmt: skip
+    corner_path = directory / f"corner_{stem}.png"
+    fig.savefig(corner_path, dpi=90)
+    plt.close(fig)
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.4 * len(names)), sharex=True, dpi=100)
+    for ax, i, name in zip(np.atleast_1d(axes), range(len(names)), names):
+        ax.plot(chain[:, :, i], color="k", alpha=0.15, lw=0.5)
+        ax.set_ylabel(scale[name][1].split(" ")[0] + " (u)", fontsize=7)
+    np.atleast_1d(axes)[-1].set_xlabel("step")
+    fig.suptitle(f"MCMC trace, {stem} (sampler coordinates: log-scaled)", fontsize=9)
+    fig.tight_layout()
+    trace_path = directory / f"trace_{stem}.png"
+    fig.savefig(trace_path)
+    plt.close(fig)
+    return [corner_path, trace_path]

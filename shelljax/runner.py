@@ -6,13 +6,26 @@ import datetime as _dt
 import json
 import platform
 import shutil
+import warnings
 from pathlib import Path
 
+import numpy as np
 from tqdm.auto import tqdm
 
 from . import __version__
+from ._errors import ShelljaxError
 from .config import ExperimentConfig, load_config
-from .estimate import PAPER_KS, PAPER_KS_STD, Estimate, calibrate_ks, estimate_session
+from .estimate import (
+    PAPER_KS,
+    PAPER_KS_STD,
+    ConvergenceWarning,
+    Estimate,
+    calibrate_ks,
+    estimate_session,
+    fit_session,
+    sample_posterior,
+)
+from .estimate._forward import forward_model_for
 from .session import Session, file_sha256, load_session
 
 
@@ -47,6 +60,61 @@ def _session_inputs(session: Session) -> dict:
     if session.fit_rms_residual is not None:
         inputs["sphere_fit_rms_residual"] = {"value": session.fit_rms_residual, "unit": "m"}
     return inputs
+
+
+def _closed_form_block(result) -> dict:
+    block = {name: est.to_dict() for name, est in result.estimates().items()}
+    block["bootstrap"] = {name: est.to_dict() for name, est in result.bootstrap.items()}
+    block["regression"] = {"slope": {"value": result.regression.slope, "std": result.regression.slope_std, "unit": "N/m"},
+                           "intercept": {"value": result.regression.intercept, "std": result.regression.intercept_std, "unit": "N"},
+                           "residual_std": {"value": result.regression.residual_std, "unit": "N"}}  # fmt: skip
+    return block
+
+
+def _simulation_method(method: str, session: Session, config: ExperimentConfig, run_dir: Path):
+    """Run ``fit`` or ``bayes`` on one session: (results block, plotted estimates, model depths [m]).
+
+    A failure is recorded in the block (``error``) and reported, not raised: one bad session must
+    not lose the others' results.
+    """
+    model = forward_model_for(session, config.forward_model, **({"gas": config.gas} if config.forward_model == "axisym" else {}))
+    try:
+        if method == "fit":
+            result = fit_session(session, model, nuisance=config.nuisance)
+            block = {name: est.to_dict() for name, est in result.estimates.items()}
+            block.update(chi2=result.chi2, dof=result.dof, iterations=result.steps,
+                         predicted_wrinkle_count=result.predicted_wrinkle_count,
+                         depth_noise={"value": result.problem.depth_noise, "unit": "m"})  # fmt: skip
+            return block, _plotted(result.estimates), result.predicted_depth
+        chains = run_dir / "chains"
+        chains.mkdir(exist_ok=True)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            post = sample_posterior(session, model, nuisance=config.nuisance, n_walkers=config.bayes_walkers,
+                                    max_steps=config.bayes_max_steps, backend_path=chains / f"{session.source.stem}.h5",
+                                    seed=config.seed)  # fmt: skip
+        block = {name: {**est.to_dict(), "ci68": list(post.intervals68[name])} for name, est in post.estimates.items()}
+        block.update(converged=post.converged, steps=post.n_steps, effective_samples=post.effective_samples,
+                     autocorr_time={"value": post.autocorr_time, "unit": "steps"},
+                     failed_forward_solves=post.failed_forward, acceptance_fraction=post.acceptance_fraction,
+                     chain=str((chains / f"{session.source.stem}.h5").relative_to(run_dir)))  # fmt: skip
+        if caught:
+            block["warning"] = str(caught[-1].message)
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if config.figures:
+            from .plots import plot_posterior
+
+            paths = plot_posterior(post.samples, post.chain, post.names, session.source.stem, run_dir / "figures")
+            block["_figures"] = [str(p.relative_to(run_dir)) for p in paths]
+        return block, _plotted(post.estimates), None
+    except ShelljaxError as err:
+        warnings.warn(f"{method} failed on {session.source}: {err}", stacklevel=2)
+        return {"error": f"{type(err).__name__}: {err}"}, None, None
+
+
+def _plotted(estimates: dict[str, Estimate]) -> dict:
+    return {"gauge_pressure": estimates["gauge_pressure"], "young_modulus": estimates["young_modulus"]}
 
 
 def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = None, progress: bool | None = None) -> Path:
@@ -92,27 +160,37 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
                  "used_in_calibration": str(session.source) in calibration_files,
                  "input_files": session.input_files, "inputs": _session_inputs(session),
                  "estimates": {}, "figures": []}  # fmt: skip
+        row = {"label": session.source.stem, "manometer": session.manometer_gauge_pressure, "estimates": {}}
+        closed = estimate_session(session, k_s=k_s, through_origin=config.through_origin,
+                                  bootstrap_samples=config.bootstrap_samples, seed=config.seed)  # fmt: skip
+        model_curves: dict[str, np.ndarray] = {}
         if "closed-form" in config.methods:
-            result = estimate_session(session, k_s=k_s, through_origin=config.through_origin,
-                                      bootstrap_samples=config.bootstrap_samples, seed=config.seed)  # fmt: skip
-            block = {name: est.to_dict() for name, est in result.estimates().items()}
-            block["bootstrap"] = {name: est.to_dict() for name, est in result.bootstrap.items()}
-            block["regression"] = {"slope": {"value": result.regression.slope, "std": result.regression.slope_std, "unit": "N/m"},
-                                   "intercept": {"value": result.regression.intercept, "std": result.regression.intercept_std, "unit": "N"},
-                                   "residual_std": {"value": result.regression.residual_std, "unit": "N"}}  # fmt: skip
-            entry["estimates"]["closed-form"] = block
+            entry["estimates"]["closed-form"] = _closed_form_block(closed)
+            row["estimates"]["closed-form"] = {"gauge_pressure": closed.gauge_pressure, "young_modulus": closed.young_modulus}
             manometer = session.manometer_gauge_pressure
-            if manometer is not None:
-                entry["gauge_pressure_relative_error_vs_manometer"] = result.gauge_pressure.value / manometer - 1.0
-                if not entry["used_in_calibration"]:
-                    held_out.append((session.object_name, manometer, result.pressure_slope.value, result.pressure_slope.std))
-            summary_rows.append({"label": session.source.stem, "gauge_pressure": result.gauge_pressure,
-                                 "young_modulus": result.young_modulus, "manometer": manometer})  # fmt: skip
-            if config.figures:
-                from .plots import plot_force_depth
+            if manometer is not None and not entry["used_in_calibration"]:
+                held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
+        for method in ("fit", "bayes"):
+            if method not in config.methods:
+                continue
+            block, estimates, curve = _simulation_method(method, session, config, run_dir)
+            entry["estimates"][method] = block
+            if estimates:
+                row["estimates"][method] = estimates
+                entry["figures"] += block.pop("_figures", [])
+            if curve is not None:
+                model_curves[f"{method}: {config.forward_model} model"] = curve
+        if session.manometer_gauge_pressure is not None:
+            for method, estimates in row["estimates"].items():
+                error = estimates["gauge_pressure"].value / session.manometer_gauge_pressure - 1.0
+                entry["estimates"][method]["gauge_pressure_relative_error_vs_manometer"] = error
+        summary_rows.append(row)
+        if config.figures:
+            from .plots import plot_force_depth
 
-                fig = plot_force_depth(session, result, figures_dir / f"force_depth_{session.source.stem}.png")
-                entry["figures"].append(str(fig.relative_to(run_dir)))
+            fig = plot_force_depth(session, closed, figures_dir / f"force_depth_{session.source.stem}.png",
+                                   model_curves=model_curves)  # fmt: skip
+            entry["figures"].append(str(fig.relative_to(run_dir)))
         results["sessions"].append(entry)
 
     if calibration is not None:

@@ -45,8 +45,8 @@ def test_default_experiment_reports_pressure_and_modulus_for_every_session(paper
 
 def test_held_out_pressures_are_recovered(paper_run):
     _, results = paper_run
-    errors = [e["gauge_pressure_relative_error_vs_manometer"] for e in results["sessions"]
-              if "gauge_pressure_relative_error_vs_manometer" in e]  # fmt: skip
+    errors = [e["estimates"]["closed-form"]["gauge_pressure_relative_error_vs_manometer"] for e in results["sessions"]
+              if "gauge_pressure_relative_error_vs_manometer" in e["estimates"]["closed-form"]]  # fmt: skip
     assert len(errors) == 4
     # the bundled data carry 4 % depth noise and object-specific k_s within ±3 % of the
     # calibrated one: held-out pressures must come back within 10 %

@@ -18,5 +18,5 @@ from ._closed_form import (
 )
 from ._bayes import ConvergenceWarning, PosteriorResult, sample_posterior
 from ._fit import FitResult, fit_session
-from ._forward import AbstractForwardModel, Prediction, ScalingLawModel
+from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
 from ._result import Estimate

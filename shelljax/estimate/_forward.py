@@ -54,3 +54,65 @@ class ScalingLawModel(AbstractForwardModel):
         bending = bending_stiffness(young_modulus, thickness, self.poisson_ratio)
         tau = gauge_pressure * radius**2 / jnp.sqrt(young_modulus * thickness * bending)
         return Prediction(depth=depth, wrinkle_count=1.33 * jnp.sqrt(tau), converged=jnp.array(True))
+
+
+class AxisymForwardModel(AbstractForwardModel):
+    """The axisymmetric Neo-Hookean shell engine (``shelljax.axisym``) as a forward model.
+
+    A ball of inflated radius ``reference_radius`` R₀ [m] resting on the ground is poked by a
+    rigid spherical finger (force control). The curve is solved at ``n_grid`` forces evenly
+    spaced over [``force_min``, ``force_max``] [N] and interpolated linearly at the recorded forces
+    (the F–w(0) curve is smooth and nearly linear: the interpolation error is far below the
+    depth noise; see tests). The wrinkle count is the engine's mechanical count at the top force,
+    where the protocol records it.
+
+    Radius: the engine's R is a compile-time constant, so a radius R ≠ R₀ is reached through
+    exact similarity: scaling every length by s = R/R₀ at fixed E, P_g scales forces by s², so
+    w(F; h, R) = s·w(F/s²; h/s, R₀) and n(F; h, R) = n(F/s²; h/s, R₀). The finger radius and
+    penalty stiffness are the only quantities not rescaled; over the few-percent radius
+    uncertainty of a session their effect on w is negligible.
+    """
+
+    poisson_ratio: float
+    reference_radius: float
+    force_min: float
+    force_max: float
+    n_grid: int = eqx.field(static=True)
+    setup: object = eqx.field(static=True)
+
+    @classmethod
+    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = 0.4, n_grid: int = 7, **setup_kwargs):
+        """Model for a session of inflated radius R [m] and recorded ``forces`` [N]."""
+        from ..axisym import Setup
+
+        forces = jnp.asarray(forces)
+        return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()),
+                   poisson_ratio=poisson_ratio, n_grid=n_grid, setup=Setup(radius=float(radius), **setup_kwargs))  # fmt: skip
+
+    def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
+        from ..axisym import indentation_curves_raw
+
+        scale = radius / self.reference_radius
+        grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
+        params = jnp.stack([gauge_pressure, young_modulus, thickness / scale, jnp.asarray(self.poisson_ratio, jnp.float64)])
+        curve = indentation_curves_raw(params[None], grid / scale**2, self.setup)
+        depth = jnp.interp(forces, grid, scale * curve.w0[0])
+        return Prediction(depth=depth, wrinkle_count=curve.wrinkle_count[0, -1], converged=jnp.all(curve.converged[0]))
+
+
+FORWARD_MODELS = ("axisym", "scaling")
+
+
+def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwardModel:
+    """The forward model ``kind`` ("axisym" or "scaling") set up for ``session``.
+
+    ``options`` go to the axisymmetric engine's Setup (e.g. ``gas="isothermal"``,
+    ``n_elements``) or, for "scaling", ``k_s``.
+    """
+    from .._errors import InvalidInputError
+
+    if kind == "axisym":
+        return AxisymForwardModel.for_forces(session.radius, session.force, poisson_ratio=session.poisson_ratio, **options)
+    if kind == "scaling":
+        return ScalingLawModel(poisson_ratio=session.poisson_ratio, **options)
+    raise InvalidInputError(f"unknown forward model {kind!r}. Fix: use one of {', '.join(FORWARD_MODELS)}")
