@@ -64,23 +64,37 @@ class PosteriorResult:
     names: tuple[str, ...]
 
 
+@jax.jit
+def _batched_log_posterior(problem: InverseProblem, coords):
+    return jax.vmap(problem.log_posterior)(coords)
+
+
+@jax.jit
+def _batched_physical(problem: InverseProblem, u):
+    return jax.vmap(problem.physical)(u)
+
+
 class _LogPosterior:
-    """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior."""
+    """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior.
+
+    The compiled function is module-level and takes the problem as an argument, so a second
+    session of the same shape reuses the compilation.
+    """
 
     def __init__(self, problem: InverseProblem):
-        self._fn = jax.jit(jax.vmap(problem.log_posterior))
+        self.problem = problem
         self.failed_forward = 0
         self.evaluations = 0
 
     def __call__(self, coords: np.ndarray) -> np.ndarray:
-        log_p, converged = self._fn(jnp.asarray(coords))
+        log_p, converged = _batched_log_posterior(self.problem, jnp.asarray(coords))
         self.failed_forward += int(np.sum(~np.asarray(converged)))
         self.evaluations += coords.shape[0]
         return np.asarray(log_p)
 
 
 def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np.ndarray]:
-    phys = jax.vmap(problem.physical)(jnp.asarray(flat[:, :-1]))
+    phys = _batched_physical(problem, jnp.asarray(flat[:, :-1]))
     out = {name: np.asarray(phys[name]) for name in problem.names}
     out["depth_noise"] = np.exp(flat[:, -1])
     return out

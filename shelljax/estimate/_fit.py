@@ -48,10 +48,19 @@ class FitResult:
 
 
 @jax.jit
+def _start_is_finite(problem: InverseProblem, u0):
+    return jnp.all(jnp.isfinite(problem.residuals(u0)))
+
+
+@jax.jit
 def _solve(problem: InverseProblem, u0, rtol, atol):
+    # One compiled program: the LM solve and everything evaluated at its optimum.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol = optx.least_squares(problem.residuals, solver, u0, max_steps=200, throw=False)
-    return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+    u = sol.value
+    depth, count, _ = problem.predict(u)
+    return dict(u=u, ok=sol.result == optx.RESULTS.successful, steps=sol.stats["num_steps"],
+                residual=problem.residuals(u), jacobian=jax.jacfwd(problem.residuals)(u), depth=depth, count=count)  # fmt: skip
 
 
 def fit_session(
@@ -74,15 +83,15 @@ def fit_session(
     problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
                             start_modulus=start_modulus, depth_noise=depth_noise, nuisance=nuisance)  # fmt: skip
     u0 = jnp.zeros(problem.ndim)
-    if not bool(jnp.all(jnp.isfinite(problem.residuals(u0)))):
+    if not bool(_start_is_finite(problem, u0)):
         raise NoConvergenceError(
             f"{session.source}: the forward model {type(model).__name__} fails at the closed-form "
             f"start (P_g = {start.gauge_pressure.value:.4g} Pa, E = {start_modulus:.4g} Pa); "
             "check the session's forces and geometry against the model's range"
         )
-    u, ok, steps = _solve(problem, u0, rtol, atol)
-    residual = problem.residuals(u)
-    if not bool(ok) or not bool(jnp.all(jnp.isfinite(residual))):
+    out = _solve(problem, u0, rtol, atol)
+    u, steps, residual = out["u"], out["steps"], out["residual"]
+    if not bool(out["ok"]) or not bool(jnp.all(jnp.isfinite(residual))):
         phys = {k: float(v) for k, v in problem.physical(u).items()}
         raise NoConvergenceError(
             f"{session.source}: Levenberg-Marquardt did not converge in {int(steps)} steps "
@@ -90,7 +99,7 @@ def fit_session(
             f"forward model finite: {bool(jnp.all(jnp.isfinite(residual)))}); try nuisance=() or "
             "check the data for outliers"
         )
-    jac = np.asarray(jax.jacfwd(problem.residuals)(u))
+    jac = np.asarray(out["jacobian"])
     covariance = np.linalg.inv(jac.T @ jac)
     u_std = np.sqrt(np.diag(covariance))
     physical = {k: float(v) for k, v in problem.physical(u).items()}
@@ -102,11 +111,10 @@ def fit_session(
             estimates[name] = Estimate(value, std, (value - 1.96 * std, value + 1.96 * std), "m", method)
         else:  # log-parametrised: σ(u) is the relative standard deviation
             estimates[name] = Estimate.lognormal(physical[name], float(u_std[i]), _UNITS[name], method)
-    depth, count, _ = problem.predict(u)
     chi2 = float(residual @ residual)
     return FitResult(
         estimates=estimates, covariance=covariance, chi2=chi2, dof=int(residual.size - problem.ndim),
-        steps=int(steps), predicted_depth=np.asarray(depth), predicted_wrinkle_count=float(count),
+        steps=int(steps), predicted_depth=np.asarray(out["depth"]), predicted_wrinkle_count=float(out["count"]),
         problem=problem,
     )  # fmt: skip
 

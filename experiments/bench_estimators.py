@@ -1,0 +1,84 @@
+"""Benchmark of the simulation-based estimators (issue 4, item 6): table + JSON.
+
+* fit: wall time of ``fit_session`` after compilation, median over repeats;
+* bayes: wall time to reach ≥ 1000 effective samples (emcee, vectorized log posterior), after
+  compilation, and the effective-sample rate.
+
+Usage: python experiments/bench_estimators.py [--repeats 5] [--model axisym] [--out bench_estimators.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+import warnings
+
+import shelljax
+from shelljax.config import bundled_data_dir
+from shelljax.estimate import ConvergenceWarning, fit_session, sample_posterior
+from shelljax.estimate._forward import forward_model_for
+from shelljax.session import load_session
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--session", default=str(bundled_data_dir() / "sessions" / "pezzi.toml"))
+    parser.add_argument("--model", default="axisym", choices=["axisym", "scaling"])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--walkers", type=int, default=16)
+    parser.add_argument("--out", default="bench_estimators.json")
+    args = parser.parse_args(argv)
+    session = load_session(args.session)
+    model = forward_model_for(session, args.model)
+
+    t0 = time.perf_counter()
+    fit_session(session, model)
+    fit_first = time.perf_counter() - t0
+    fit_times = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        fit_session(session, model)
+        fit_times.append(time.perf_counter() - t0)
+
+    def posterior():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            t = time.perf_counter()
+            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=20_000, progress=False)
+            return time.perf_counter() - t, post
+
+    bayes_first, _ = posterior()
+    runs = [posterior() for _ in range(max(1, args.repeats // 2))]
+    times = [t for t, _ in runs]
+    ess = [p.effective_samples for _, p in runs]
+    rate = [e / t for t, e in zip(times, ess)]
+    rows = [
+        ("fit, first call (compile + solve)", f"{fit_first:.2f} s"),
+        (f"fit after compilation (median of {args.repeats})", f"{statistics.median(fit_times):.3f} s"),
+        ("bayes, first call (compile + sample)", f"{bayes_first:.1f} s"),
+        (f"bayes after compilation (median of {len(runs)})", f"{statistics.median(times):.1f} s"),
+        ("bayes effective samples (median)", f"{statistics.median(ess):.0f}"),
+        ("bayes time to 1000 effective samples", f"{1000 / statistics.median(rate):.1f} s"),
+    ]
+    print(f"session {session.source.name}, model {args.model}, machine: {platform.platform()}, {os.cpu_count()} CPUs")
+    width = max(len(r[0]) for r in rows)
+    for name, value in rows:
+        print(f"  {name:<{width}}  {value}")
+    result = {
+        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "session": str(session.source), "model": args.model,
+        "fit_first_s": fit_first, "fit_s": fit_times, "fit_median_s": statistics.median(fit_times),
+        "bayes_first_s": bayes_first, "bayes_s": times, "bayes_effective_samples": ess,
+        "bayes_seconds_per_1000_effective": 1000 / statistics.median(rate), "walkers": args.walkers,
+        "shelljax_version": shelljax.__version__,
+    }  # fmt: skip
+    with open(args.out, "w") as handle:
+        json.dump(result, handle, indent=2)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
