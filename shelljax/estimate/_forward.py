@@ -56,6 +56,9 @@ class ScalingLawModel(AbstractForwardModel):
         return Prediction(depth=depth, wrinkle_count=1.33 * jnp.sqrt(tau), converged=jnp.array(True))
 
 
+WRINKLE_LAWS = ("mechanics", "scaling")
+
+
 class AxisymForwardModel(AbstractForwardModel):
     """The axisymmetric Neo-Hookean shell engine (``shelljax.axisym``) as a forward model.
 
@@ -63,8 +66,9 @@ class AxisymForwardModel(AbstractForwardModel):
     rigid spherical finger (force control). The curve is solved at ``n_grid`` forces evenly
     spaced over [``force_min``, ``force_max``] [N] and interpolated linearly at the recorded forces
     (the F–w(0) curve is smooth and nearly linear: the interpolation error is far below the
-    depth noise; see tests). The wrinkle count is the engine's mechanical count at the top force,
-    where the protocol records it.
+    depth noise; see tests). The wrinkle count is, with ``wrinkle_law = "mechanics"`` (default),
+    the engine's mechanical count at the top force, where the protocol records it; with
+    ``"scaling"``, Vella et al.'s n = 1.33 τ^½ at the fitted parameters.
 
     Radius: the engine's R is a compile-time constant, so a radius R ≠ R₀ is reached through
     exact similarity: scaling every length by s = R/R₀ at fixed E, P_g scales forces by s², so
@@ -79,15 +83,21 @@ class AxisymForwardModel(AbstractForwardModel):
     force_max: float
     n_grid: int = eqx.field(static=True)
     setup: object = eqx.field(static=True)
+    wrinkle_law: str = eqx.field(static=True, default="mechanics")
 
     @classmethod
-    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = 0.4, n_grid: int = 7, **setup_kwargs):
+    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = 0.4, n_grid: int = 7,
+                   wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]."""
+        from .._errors import InvalidInputError
         from ..axisym import Setup
 
+        if wrinkle_law not in WRINKLE_LAWS:
+            raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: use one of {', '.join(WRINKLE_LAWS)}")
         forces = jnp.asarray(forces)
         return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()),
-                   poisson_ratio=poisson_ratio, n_grid=n_grid, setup=Setup(radius=float(radius), **setup_kwargs))  # fmt: skip
+                   poisson_ratio=poisson_ratio, n_grid=n_grid, setup=Setup(radius=float(radius), **setup_kwargs),
+                   wrinkle_law=wrinkle_law)  # fmt: skip
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
         from ..axisym import indentation_curves_raw
@@ -97,7 +107,11 @@ class AxisymForwardModel(AbstractForwardModel):
         params = jnp.stack([gauge_pressure, young_modulus, thickness / scale, jnp.asarray(self.poisson_ratio, jnp.float64)])
         curve = indentation_curves_raw(params[None], grid / scale**2, self.setup)
         depth = jnp.interp(forces, grid, scale * curve.w0[0])
-        return Prediction(depth=depth, wrinkle_count=curve.wrinkle_count[0, -1], converged=jnp.all(curve.converged[0]))
+        if self.wrinkle_law == "mechanics":
+            count = curve.wrinkle_count[0, -1]
+        else:
+            count = ScalingLawModel(self.poisson_ratio)(gauge_pressure, young_modulus, thickness, radius, forces).wrinkle_count
+        return Prediction(depth=depth, wrinkle_count=count, converged=jnp.all(curve.converged[0]))
 
 
 FORWARD_MODELS = ("axisym", "scaling")
