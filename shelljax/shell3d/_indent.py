@@ -1,0 +1,361 @@
+"""Indentation of a pressurized shell resting on the ground: the user-facing simulation.
+
+``Indentation(shell, ...)`` sets up a shell (from :func:`ball` or a scanned closed mesh), solves
+for its stress-free rest shape (the scan is the *pressurized* shape), and poses it on a rigid
+ground plane under a rigid spherical indenter (the finger) above its top vertex. ``solve(depth=…)``
+moves the indenter down by ``depth`` [m] from first touch (displacement control) in continuation
+steps; ``solve(force=…)`` pushes it with a prescribed force [N] (force control, the indenter height
+becomes an unknown). Both return an :class:`IndentationState` with the observables of the paper's
+elasticity figure (panel b) and OBJ/PNG export.
+
+Rigid-body modes: the ground and the indenter fix the vertical motion; the horizontal ones
+(x/y translation, rotations) are removed by pins on the top and bottom vertices (x, y) and on the
++x-most vertex (y), see :func:`rigid_mode_pins`. The force balance test checks that the pins carry
+no vertical load.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import InvalidInputError, NoConvergenceError
+from ..physics import ATMOSPHERIC_PRESSURE
+from ..solve import continuation, implicit_equilibrium
+from ._mesh import ShellMesh, sphere_mesh
+from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from ._observables import observables as _observables
+from ._rest import solve_rest_scale, solve_rest_shape
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Shell:
+    """A closed shell surface: ``mesh`` (its vertices are the pressurized/scanned shape [m]) and
+    wall ``thickness`` h [m]."""
+
+    mesh: ShellMesh
+    thickness: float
+
+    def __post_init__(self):
+        if not (self.thickness > 0 and math.isfinite(self.thickness)):
+            raise InvalidInputError(f"thickness: must be a positive length in m, got {self.thickness}.")
+
+
+def ball(radius: float, thickness: float, n_triangles: int = 5000, *, pole_refinement: float = 3.0, growth: float = 0.25) -> Shell:
+    """A spherical ball of ``radius`` [m] and wall ``thickness`` [m], meshed with about
+    ``n_triangles`` faces refined ``pole_refinement``× at the top (indenter) and bottom (ground)."""
+    if not radius > 0:
+        raise InvalidInputError(f"radius: must be a positive length in m, got {radius}.")
+    mesh = sphere_mesh(radius, n_triangles, pole_refinement=pole_refinement, growth=growth, name="ball")
+    return Shell(mesh=mesh, thickness=float(thickness))
+
+
+def load(path, thickness: float) -> Shell:
+    """A shell from a closed triangle mesh file (any format trimesh reads), in m, z up."""
+    import trimesh
+
+    try:
+        tm = trimesh.load(str(path), force="mesh", process=True)
+    except Exception as err:  # trimesh raises many types for unreadable files
+        raise InvalidInputError(f"{path}: could not read a triangle mesh ({err}).") from err
+    return Shell(mesh=ShellMesh.from_arrays(tm.vertices, tm.faces, name=str(path)), thickness=float(thickness))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class IndentationState:
+    """A solved equilibrium: ``q`` (3V + 3,) [m] (vertex positions then indenter center), the
+    simulation it belongs to, the indenter travel ``depth`` [m] and Newton ``iterations``."""
+
+    sim: "Indentation"
+    q: np.ndarray
+    depth: float
+    iterations: int
+    history: list
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """Deformed vertex positions (V, 3) [m]."""
+        return self.q[:-3].reshape(-1, 3)
+
+    @property
+    def indenter_center(self) -> np.ndarray:
+        """Indenter center (3,) [m]."""
+        return self.q[-3:]
+
+    def observables(self) -> dict:
+        """Observables (SI): see :func:`shelljax.shell3d.observables`."""
+        return _observables(self.sim, self.q, self.sim._params_for(self.q))
+
+    def export(self, path) -> None:
+        """Write the deformed mesh (OBJ, PLY, STL: by suffix) [m]."""
+        import trimesh
+
+        trimesh.Trimesh(self.vertices, self.sim.model.mesh.faces, process=False).export(str(path))
+
+    def plot(self, path) -> None:
+        """PNG: deformed shell (3D view) and its x–z cross-section with indenter and ground."""
+        from ._export import plot_state
+
+        plot_state(self, path)
+
+
+class Indentation:
+    """Poke a pressurized shell on the ground with a rigid sphere.
+
+    Arguments (SI units): ``shell`` (:class:`Shell`), ``young_modulus`` E [Pa], ``poisson_ratio``
+    ν [-], ``gauge_pressure`` P_g [Pa] of the scanned state; ``gas``: "prescribed" (constant
+    P_g, the paper's model), "isothermal" or "adiabatic" (sealed ideal gas that holds P_g at the
+    scanned volume); ``indenter_radius`` [m]; ``ground``: put a rigid plane under the shell;
+    ``mass`` [kg] adds gravity; ``contact``: "barrier" (default; IPC log barrier, no
+    penetration, surfaces stop within ``activation_distance`` [m] of a body) or "penalty"
+    (penetration ≈ ``activation_distance`` × local contact pressure / reference pressure);
+    ``rest_shape``: "solve" (default: the scan shrunk uniformly so that its pressurized
+    equilibrium encloses the scan's volume to 1e-6; exact for spheres, the achieved shape
+    mismatch is ``rest_mismatch`` [m]), "exact" (Newton on all rest vertices so that the scan is
+    an equilibrium; can stall on coarse meshes at high pressure, then raises) or "scan" (take
+    the scan as stress-free, i.e. inflate it a second time);
+    ``force_tolerance`` [N]: Newton tolerance on the largest nodal force residual (default
+    1e-8 E h L, L the shell's size); ``max_step`` [m]: largest continuation step in depth.
+    """
+
+    def __init__(
+        self,
+        shell: Shell,
+        young_modulus: float,
+        poisson_ratio: float = 0.4,
+        gauge_pressure: float = 0.0,
+        *,
+        gas: str = "prescribed",
+        indenter_radius: float = 0.008,
+        ground: bool = True,
+        mass: float | None = None,
+        contact: str = "barrier",
+        activation_distance: float | None = None,
+        rest_shape: str = "solve",
+        force_tolerance: float | None = None,
+        max_step: float | None = None,
+        progress: bool | None = None,
+    ):
+        if not young_modulus > 0:
+            raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
+        if not -1.0 < poisson_ratio < 0.5:
+            raise InvalidInputError(f"poisson_ratio: must be in (-1, 0.5), got {poisson_ratio}.")
+        if not gauge_pressure >= 0:
+            raise InvalidInputError(f"gauge_pressure: must be ≥ 0 Pa, got {gauge_pressure}.")
+        if not indenter_radius > 0:
+            raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
+        if rest_shape not in ("solve", "exact", "scan"):
+            raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
+        self.shell = shell
+        self.progress = progress
+        mesh = shell.mesh
+        scan = mesh.vertices - np.array([0.0, 0.0, mesh.vertices[:, 2].min()])
+        size = float(np.ptp(scan, axis=0).max())
+        self.size = size
+        self.gap0 = (activation_distance or 2e-4 * size / 0.13) if contact == "barrier" else 0.0
+        ghat = activation_distance or (2e-4 * size / 0.13 if contact == "barrier" else 2e-5 * size / 0.13)
+        self.activation_distance = ghat
+        scan = scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
+        self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * size
+        self.max_step = max_step or 0.02 * size
+        self.base_params = {
+            "young_modulus": jnp.asarray(float(young_modulus)),
+            "poisson_ratio": jnp.asarray(float(poisson_ratio)),
+            "thickness": jnp.asarray(float(shell.thickness)),
+            "gauge_pressure": jnp.asarray(float(gauge_pressure)),
+            "indenter_center": jnp.zeros(3),
+            "indenter_force": jnp.asarray(0.0),
+        }
+        if mass is not None:
+            self.base_params["mass"] = jnp.asarray(float(mass))
+        top = int(np.argmax(scan[:, 2]))
+        self.top, self.bottom = top, int(np.argmin(scan[:, 2]))
+        fixed = rigid_mode_pins(scan)
+        # 1. Rest shape: free shell (no contacts) under the prescribed pressure; the bottom vertex's
+        #    height is pinned only to remove the vertical translation.
+        free_fixed = fixed.copy()
+        free_fixed[3 * self.bottom + 2] = True
+        free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), free_fixed)
+        q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
+        if rest_shape == "exact" and gauge_pressure > 0:
+            self.rest = solve_rest_shape(free_model, scan, self.base_params, atol=self.atol)
+        elif rest_shape == "solve" and gauge_pressure > 0:
+            self.rest, q_scan, _ = solve_rest_scale(free_model, scan, self.base_params, atol=self.atol)
+        else:
+            self.rest = scan
+        free_model = free_model.with_rest(self.rest)
+        ref = free_model.solve(q_scan, self.base_params, atol=self.atol, name="reference state")
+        #: Largest distance [m] between the pressurized reference state and the scan.
+        self.rest_mismatch = float(np.max(np.linalg.norm(ref.x[:-3].reshape(-1, 3) - scan, axis=1)))
+        self.q_reference = ref.x
+        self.reference_volume = float(free_model.volume(jnp.asarray(ref.x)))
+        if gas != "prescribed":
+            self.base_params["reference_volume"] = jnp.asarray(self.reference_volume)
+            self.base_params["atmospheric_pressure"] = jnp.asarray(ATMOSPHERIC_PRESSURE)
+        x_ref = ref.x[:-3].reshape(-1, 3)
+        self.top_height = float(x_ref[top, 2])
+        self.indenter_radius = float(indenter_radius)
+        self.touch_center = np.array([x_ref[top, 0], x_ref[top, 1], self.top_height + indenter_radius + 0.5 * self.gap0])
+        self.q_reference[-3:] = self.touch_center
+        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
+        contact_cfg = ContactConfig(
+            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
+            activation_distance=float(ghat), reference_pressure=float(max(gauge_pressure, 1e3)),
+        )
+        cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact_cfg)
+        self.model = ShellModel(mesh, self.rest, cfg, fixed)
+        self._fixed = fixed
+        self._force_model = None
+
+    @property
+    def force_model(self) -> ShellModel:
+        """The force-control model (built on first use): the indenter height is an unknown."""
+        if self._force_model is None:
+            fixed_force = self._fixed.copy()
+            fixed_force[-1] = False
+            cfg = dataclasses.replace(self.model.config, force_control=True)
+            self._force_model = ShellModel(self.model.mesh, self.rest, cfg, fixed_force)
+        return self._force_model
+
+    # ------------------------------------------------------------------------------------------
+    def _params_for(self, q, **extra):
+        p = dict(self.base_params)
+        p["indenter_center"] = jnp.asarray(q[-3:])
+        p.update({k: jnp.asarray(v) for k, v in extra.items()})
+        return p
+
+    def _feasible_start(self, q, model):
+        """Move penetrating vertices back outside the bodies so the barrier energy is finite."""
+        if model.config.contact.kind != "barrier":
+            return q
+        q = q.copy()
+        x = q[:-3].reshape(-1, 3)
+        eps = 0.25 * self.activation_distance
+        c = q[-3:]
+        d = x - c
+        dist = np.linalg.norm(d, axis=1)
+        inside = dist < self.indenter_radius + eps
+        x[inside] = c + d[inside] / dist[inside, None] * (self.indenter_radius + eps)
+        if model.config.contact.planes:
+            x[:, 2] = np.maximum(x[:, 2], eps)
+        q[:-3] = x.ravel()
+        return q
+
+    def _step(self, model, q_guess, params, label):
+        q0 = self._feasible_start(q_guess, model)
+        try:
+            res = model.solve(q0, params, atol=self.atol, name=label)
+        except NoConvergenceError:
+            raise
+        return res
+
+    def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
+        """Equilibrium at indenter travel ``depth`` [m] (from first touch) or at ``force`` [N]."""
+        if (depth is None) == (force is None):
+            raise InvalidInputError("solve: give exactly one of depth= [m] or force= [N].")
+        if depth is not None:
+            return self.curve(self._levels(depth, steps))[-1]
+        return self.force_curve(self._force_levels(force, steps))[-1]
+
+    def _levels(self, depth, steps):
+        if not (0 <= depth < 0.9 * self.top_height):
+            raise InvalidInputError(f"depth: must be in [0, {0.9 * self.top_height:.3g}) m, got {depth}.")
+        n = steps or max(1, int(math.ceil(depth / self.max_step)))
+        return [depth * (i + 1) / n for i in range(n)]
+
+    def _force_levels(self, force, steps):
+        if not force >= 0:
+            raise InvalidInputError(f"force: must be ≥ 0 N, got {force}.")
+        n = steps or 8
+        return [force * (i + 1) / n for i in range(n)]
+
+    def curve(self, depths) -> list[IndentationState]:
+        """Displacement-controlled continuation through increasing ``depths`` [m]; one state each.
+
+        Each level is warm-started by linear extrapolation of the previous two (secant predictor).
+        """
+        depths = [float(d) for d in depths]
+        if any(b < a for a, b in zip(depths[:-1], depths[1:])) or depths[0] < 0:
+            raise InvalidInputError("depths: must be non-negative and increasing.")
+        history = [(0.0, self.q_reference)]
+
+        def step(depth, _prev):
+            # Insert sub-steps where the user's levels are further apart than max_step.
+            d_prev = history[-1][0]
+            n_sub = max(1, int(math.ceil((depth - d_prev) / self.max_step - 1e-9)))
+            for k in range(1, n_sub + 1):
+                d = d_prev + (depth - d_prev) * k / n_sub
+                guess = self._predict(history, d)
+                guess[-3:] = self.touch_center - np.array([0.0, 0.0, d])
+                res = self._step(self.model, guess, self._params_for(guess), f"indentation depth {d:.4g} m")
+                history.append((d, res.x))
+            return IndentationState(self, res.x, depth, res.iterations, res.history)
+
+        return continuation(depths, step, progress=self.progress, desc="indentation")
+
+    def force_curve(self, forces) -> list[IndentationState]:
+        """Force-controlled continuation through increasing indenter ``forces`` [N]."""
+        forces = [float(f) for f in forces]
+        history = [(0.0, self.q_reference)]
+
+        def step(force, _prev):
+            guess = self._predict(history, force)
+            params = self._params_for(guess, indenter_force=force)
+            res = self._step(self.force_model, guess, params, f"indentation force {force:.4g} N")
+            history.append((force, res.x))
+            depth = float(self.touch_center[2] - res.x[-1])
+            return IndentationState(self, res.x, depth, res.iterations, res.history)
+
+        return continuation(forces, step, progress=self.progress, desc="indentation (force)")
+
+    @staticmethod
+    def _predict(history, value):
+        if len(history) < 2:
+            return history[-1][1].copy()
+        (a, qa), (b, qb) = history[-2], history[-1]
+        if b == a:
+            return qb.copy()
+        return qb + (qb - qa) * (value - b) / (b - a)
+
+    # ------------------------------------------------------------------------------------------
+    def force_function(self, depth: float):
+        """Differentiable map θ ↦ indenter force F [N] at indenter travel ``depth`` [m].
+
+        θ is a dict with any of ``gauge_pressure`` [Pa], ``young_modulus`` [Pa], ``thickness`` [m]
+        (others keep their values). The equilibrium is differentiated implicitly (forward and
+        reverse mode, see :func:`shelljax.solve.implicit_equilibrium`). The rest shape (and a sealed
+        gas's reference volume) are held at their values for the nominal parameters: this is the
+        sensitivity of the forward model with a fixed stress-free shape.
+        """
+        model = self.model
+        state0 = self.solve(depth=depth)
+        cache = {"q": state0.q}
+
+        def params_of(theta):
+            p = dict(self.base_params)
+            p["indenter_center"] = jnp.asarray(state0.q[-3:])
+            p.update(theta)
+            return p
+
+        def solve_host(theta):
+            q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal")
+            cache["q"] = q.x
+            return q.x
+
+        def residual(q, theta):
+            return model.gradient(q, params_of(theta))
+
+        def hessian_host(q, theta):
+            return model.host_hessian(q, params_of(theta), project=False)
+
+        equilibrium = implicit_equilibrium(solve_host, residual, hessian_host, model.free, model.n_dofs)
+
+        def force(theta):
+            q = equilibrium(theta)
+            return -jax.grad(lambda c: model.energy(jnp.concatenate([q[:-3], c]), params_of(theta)))(q[-3:])[2]
+
+        return force

@@ -1,0 +1,196 @@
+"""Closed triangle-mesh topology for the discrete shell, and sphere (ball) mesh generation.
+
+Each face carries a 6-vertex *flap stencil* ``[v0, v1, v2, o0, o1, o2]``: ``o_i`` is the vertex
+across edge i (the edge opposite ``v_i``), which the midedge bending formulation needs. Building the
+stencil checks that the mesh is closed, manifold and consistently oriented; otherwise a
+:class:`shelljax.InvalidInputError` names what is wrong.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .._errors import InvalidInputError
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ShellMesh:
+    """A closed, outward-oriented triangle mesh: vertices (V, 3) [m], faces (F, 3), stencil (F, 6)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    stencil: np.ndarray
+    name: str = "mesh"
+
+    @staticmethod
+    def from_arrays(vertices, faces, name: str = "mesh") -> "ShellMesh":
+        """Validate a closed mesh, orient it outward and build its flap stencil."""
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+            raise InvalidInputError(
+                f"{name}: vertices must be (V, 3) and faces (F, 3); got {v.shape} and {f.shape}."
+            )
+        if not np.all(np.isfinite(v)):
+            raise InvalidInputError(f"{name}: vertex coordinates contain NaN or inf.")
+        if f.size == 0 or f.min() < 0 or f.max() >= len(v):
+            raise InvalidInputError(f"{name}: face indices out of range [0, {len(v)}).")
+        if np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])):
+            raise InvalidInputError(f"{name}: degenerate face (repeated vertex); clean the mesh.")
+        stencil = _flap_stencil(f, len(v), name)
+        if signed_volume(v, f) < 0.0:
+            f = f[:, ::-1].copy()
+            stencil = _flap_stencil(f, len(v), name)
+        used = np.zeros(len(v), dtype=bool)
+        used[f.ravel()] = True
+        if not used.all():
+            raise InvalidInputError(
+                f"{name}: {int((~used).sum())} vertices belong to no face; remove them "
+                "(trimesh: mesh.remove_unreferenced_vertices())."
+            )
+        return ShellMesh(vertices=v, faces=f, stencil=stencil, name=name)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+
+def signed_volume(vertices, faces) -> float:
+    """Enclosed volume [m³] of a closed mesh (positive when its faces are oriented outward)."""
+    p = np.asarray(vertices)[np.asarray(faces)]
+    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
+
+
+def _flap_stencil(faces: np.ndarray, n_vertices: int, name: str) -> np.ndarray:
+    n_f = len(faces)
+    # Directed edge i of face f goes v_{i+1} -> v_{i+2} (opposite vertex v_i).
+    a = np.stack([faces[:, 1], faces[:, 2], faces[:, 0]], axis=1).ravel()
+    b = np.stack([faces[:, 2], faces[:, 0], faces[:, 1]], axis=1).ravel()
+    key = a * n_vertices + b
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    if np.any(sorted_key[1:] == sorted_key[:-1]):
+        raise InvalidInputError(
+            f"{name}: an edge is used twice in the same direction (non-manifold edge or "
+            "inconsistently oriented faces); repair the mesh (trimesh: mesh.fix_normals())."
+        )
+    twin_key = b * n_vertices + a
+    pos = np.searchsorted(sorted_key, twin_key)
+    pos = np.minimum(pos, len(sorted_key) - 1)
+    found = sorted_key[pos] == twin_key
+    if not found.all():
+        raise InvalidInputError(
+            f"{name}: the mesh is not closed ({int((~found).sum())} boundary edges). The "
+            "enclosed gas volume needs a watertight surface; fill the holes "
+            "(trimesh: mesh.fill_holes()) or use a closed scan."
+        )
+    twin = order[pos]  # flat index f*3 + i of the twin edge
+    opposite = faces.ravel()[twin].reshape(n_f, 3)  # the twin face's vertex opposite the edge
+    return np.concatenate([faces, opposite], axis=1)
+
+
+def _sphere_rings(radius: float, spacing_max: float, spacing_pole: float, growth: float):
+    """Polar angles [rad] of the vertex rings, graded from both poles, symmetric about the equator."""
+    thetas = [0.0]
+    while thetas[-1] < 0.5 * np.pi:
+        s = min(spacing_max, spacing_pole + growth * radius * thetas[-1])
+        thetas.append(thetas[-1] + s / radius)
+    north = np.array(thetas)
+    if len(north) < 3:
+        north = np.linspace(0.0, 0.5 * np.pi, 3)
+    north = north * (0.5 * np.pi / north[-1])
+    return np.concatenate([north, np.pi - north[-2::-1]])
+
+
+def sphere_mesh(
+    radius: float,
+    n_triangles: int = 2000,
+    *,
+    pole_refinement: float = 1.0,
+    growth: float = 0.25,
+    max_spacing: float | None = None,
+    pole_spacing: float | None = None,
+    name: str = "sphere",
+) -> ShellMesh:
+    """Closed sphere mesh [m] of about ``n_triangles`` faces, ring-structured about the z axis.
+
+    Vertices lie on the sphere of ``radius`` [m] with one vertex at each pole (the indenter and
+    the ground contact sit there), and one equator vertex on the +x axis. ``pole_refinement`` ≥ 1
+    divides the edge length at the poles; it grows back to the uniform length at a rate
+    ``growth`` (edge length per unit arc distance), which concentrates resolution where the
+    indentation and contact happen.
+    """
+    if radius <= 0 or n_triangles < 20 or pole_refinement < 1.0 or growth <= 0:
+        raise InvalidInputError(
+            f"sphere_mesh: need radius > 0 (got {radius}), n_triangles ≥ 20 (got {n_triangles}), "
+            f"pole_refinement ≥ 1 (got {pole_refinement}), growth > 0 (got {growth})."
+        )
+    # Equilateral lattice: n_tri ≈ 2 V and area per vertex (√3/2) s², so s from the target count.
+    if max_spacing is not None:
+        pole = max_spacing / pole_refinement if pole_spacing is None else pole_spacing
+        return _ring_sphere(radius, max_spacing, min(pole, max_spacing), growth, name)
+    spacing = np.sqrt(8.0 * np.pi * radius**2 / (np.sqrt(3.0) * n_triangles))
+    for _ in range(6):  # adjust the uniform spacing so the graded mesh meets the target count
+        mesh = _ring_sphere(radius, spacing, spacing / pole_refinement, growth, name)
+        ratio = mesh.n_faces / n_triangles
+        if abs(ratio - 1.0) < 0.05:
+            break
+        spacing *= np.sqrt(ratio)
+    return mesh
+
+
+def _ring_sphere(radius, spacing_max, spacing_pole, growth, name) -> ShellMesh:
+    thetas = _sphere_rings(radius, spacing_max, spacing_pole, growth)
+    n_equator = (len(thetas) - 1) // 2
+    rings, verts = [], []
+    for k, th in enumerate(thetas):
+        if k == 0 or k == len(thetas) - 1:
+            n, offset = 1, 0.0
+        else:
+            s = min(spacing_max, spacing_pole + growth * radius * min(th, np.pi - th))
+            n = max(6, int(round(2.0 * np.pi * radius * np.sin(th) / s)))
+            offset = 0.0 if (k - n_equator) % 2 == 0 else 0.5
+        phi = 2.0 * np.pi * (np.arange(n) + offset) / n
+        start = len(verts)
+        for p in phi:
+            verts.append(
+                (radius * np.sin(th) * np.cos(p), radius * np.sin(th) * np.sin(p), radius * np.cos(th))
+            )
+        rings.append((np.arange(start, start + n), phi))
+    faces = []
+    for (ia, pa), (ib, pb) in zip(rings[:-1], rings[1:]):
+        faces.extend(_stitch(ia, pa, ib, pb))
+    verts = np.asarray(verts)
+    faces = np.asarray(faces, dtype=np.int64)
+    # Orient each face outward (the sphere is star-shaped about the origin).
+    p = verts[faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", normal, p.mean(axis=1)) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    return ShellMesh.from_arrays(verts, faces, name=name)
+
+
+def _stitch(ia, pa, ib, pb):
+    """Triangles joining two consecutive rings (indices ia/ib at azimuths pa/pb [rad])."""
+    na, nb = len(ia), len(ib)
+    if na == 1:
+        return [(ia[0], ib[j], ib[(j + 1) % nb]) for j in range(nb)]
+    if nb == 1:
+        return [(ia[i], ia[(i + 1) % na], ib[0]) for i in range(na)]
+    ua = np.concatenate([pa, pa[:1] + 2 * np.pi])
+    ub = np.concatenate([pb, pb[:1] + 2 * np.pi])
+    out, i, j = [], 0, 0
+    while i < na or j < nb:
+        if j == nb or (i < na and ua[i + 1] < ub[j + 1]):
+            out.append((ia[i % na], ia[(i + 1) % na], ib[j % nb]))
+            i += 1
+        else:
+            out.append((ia[i % na], ib[(j + 1) % nb], ib[j % nb]))
+            j += 1
+    return out

@@ -1,0 +1,82 @@
+"""Observables of an indented shell on the ground (the paper's elasticity figure, panel b).
+
+All lengths in m, forces in N, pressure in Pa, volume in m³. With the ground at z = 0 and the
+indenter on the vertical axis through the top vertex:
+
+* ``force`` F: the indenter's push on the shell, −∂E_contact/∂c_z (c: indenter center).
+* ``depth``: indenter travel from first touch of the unloaded (pressurized) shell.
+* ``w0``: indentation depth w(0), the drop of the top (loaded) vertex from its unloaded height.
+* ``H``: deformed height, the highest point of the shell above the ground.
+* ``D_u``: upper-circle diameter, 2 × the distance from the axis of the highest point (the rim of
+  the dimple; 0 while the top vertex is still the highest point).
+* ``D_l``: ground-contact diameter, 2 × the largest distance from the axis of a vertex touching
+  the ground (gap below the contact activation distance, i.e. carrying load).
+* ``d``: sunken depth, rim height minus top-vertex height.
+* ``pressure`` (gauge) and ``volume`` of the gas; ``ground_reaction``: vertical force of the
+  ground on the shell (equals F plus the weight at equilibrium).
+
+The rim radius is refined by a parabola through the ring heights around the highest vertex, the
+contact diameter is vertex-resolved (error up to one edge length near the contact edge).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..physics import plane_gap
+from ._model import plane_contact_energy, sphere_contact_energy, _split
+
+
+def observables(sim, q, params) -> dict:
+    """Observables dict of a solved indentation state ``q`` (see the module docstring)."""
+    model = sim.model
+    qj = jnp.asarray(q)
+    x, c = _split(qj, model.config)
+    f_ind = -jax.grad(lambda cc: sphere_contact_energy(x, cc, model.geometry, model.config))(c)
+    out = {"force": float(f_ind[2])}
+    ground = 0.0
+    for plane in model.config.contact.planes:
+        f = -jax.grad(lambda xx: plane_contact_energy(xx, plane, model.geometry, model.config))(x)
+        ground += float(jnp.sum(f[:, 2]))
+    xn = np.asarray(x)
+    axis = np.asarray(model.rest_vertices)[sim.top, :2]
+    r = np.hypot(xn[:, 0] - axis[0], xn[:, 1] - axis[1])
+    z = xn[:, 2]
+    top_z = z[sim.top]
+    i_max = int(np.argmax(z))
+    z_rim, r_rim = float(z[i_max]), float(r[i_max])
+    if i_max != sim.top:
+        r_rim, z_rim = _parabola_peak(r, z, r_rim)
+    gaps = np.asarray(plane_gap(x, jnp.zeros(3), jnp.array([0.0, 0.0, 1.0])))
+    touching = gaps < model.config.contact.activation_distance
+    d_l = 2.0 * float(r[touching].max()) if touching.any() else 0.0
+    out.update(
+        depth=float(sim.touch_center[2] - np.asarray(c)[2]),
+        w0=float(sim.top_height - top_z),
+        H=float(z_rim),
+        D_u=2.0 * r_rim if i_max != sim.top else 0.0,
+        D_l=d_l,
+        d=float(z_rim - top_z),
+        pressure=float(model.gauge_pressure(qj, params)),
+        volume=float(model.volume(qj)),
+        ground_reaction=ground,
+    )
+    return out
+
+
+def _parabola_peak(r, z, r0):
+    """Peak (r*, z*) of z(r) from a parabola through the ring-averaged heights near r0."""
+    rings = np.unique(np.round(r, 9))
+    near = rings[np.argsort(np.abs(rings - r0))[:3]]
+    if near.size < 3:
+        return r0, float(z.max())
+    zs = np.array([z[np.isclose(r, rv, atol=1e-9)].max() for rv in near])
+    a, b, c = np.polyfit(near, zs, 2)
+    if a >= 0:
+        return r0, float(zs.max())
+    rp = -b / (2 * a)
+    if not (near.min() <= rp <= near.max()):
+        return r0, float(zs.max())
+    return float(rp), float(c - b * b / (4 * a))

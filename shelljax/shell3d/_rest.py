@@ -1,0 +1,127 @@
+"""Rest-shape inverse problem: the stress-free shape whose pressurized equilibrium is the scan.
+
+A scan (photogrammetry) shows the object inflated. We seek rest vertices X such that the scan x_s
+is an equilibrium of the shell under the prescribed gauge pressure: r(X) = ∇ₓE(x_s; X) = 0 on the
+free dofs. Newton on X with the sparse, nonsymmetric Jacobian ∂r/∂X (per-face 18×18 blocks by
+autodiff, same sparsity as the Hessian) converges quadratically from the small-strain guess
+X₀ = c + (x_s − c) / (1 + P R (1−ν) / (2 E h)) (DESIGN.md; c the centroid, R = 3V/A). The rigid
+motions of X (which leave r unchanged) are removed by holding X at the same pinned dofs as x; the
+matching equations (net force and torque) hold identically.
+
+Stops when max |r| ≤ ``atol`` [N]; then the forward solve from X reproduces the scan up to
+``atol`` divided by the shell's stiffness. A failure raises NoConvergenceError with the history
+of max |r| [N]. (A plain fixed point X ← X + x_s − x*(X) was tried first and diverges: a
+pressurized membrane amplifies short-wavelength bumps of its rest shape.)
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import NoConvergenceError
+from ..solve import SparseSolver
+from ._mesh import signed_volume
+from ._model import rest_jacobian_values
+
+
+def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
+    """Rest vertices (V, 3) [m] of ``model``'s mesh for which ``scan`` (V, 3) [m] is in equilibrium.
+
+    ``model``: a :class:`ShellModel` without contacts, pins fixing the rigid modes, prescribed
+    gas; ``params``: its parameters (gauge pressure P_g [Pa], E [Pa], ν, h [m]); ``atol`` [N].
+    """
+    scan = np.asarray(scan, dtype=np.float64)
+    mesh = model.mesh
+    area = 0.5 * np.linalg.norm(
+        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
+        axis=1,
+    ).sum()
+    radius = 3.0 * signed_volume(scan, mesh.faces) / area
+    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
+    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    centroid = scan.mean(axis=0)
+    rest = centroid + (scan - centroid) / (1.0 + strain)
+    q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
+    # Continuation in pressure: at full pressure, Newton from the small-strain guess can stall on
+    # coarse meshes; each level starts from the previous level's rest shape.
+    target = float(np.asarray(params["gauge_pressure"]))
+    for level in (0.25, 0.5, 0.75, 1.0):
+        level_params = dict(params, gauge_pressure=jnp.asarray(target * level))
+        rest = _newton_rest(model, scan, q_scan, rest, level_params, atol, max_iter, level == 1.0)
+    return rest
+
+
+def _newton_rest(model, scan, q_scan, rest, params, atol, max_iter, final):
+    mesh = model.mesh
+    free = model.free
+    n3 = 3 * mesh.n_vertices
+    pattern = model.pattern
+    stencil = jnp.asarray(mesh.stencil)
+    history = []
+    for _ in range(max_iter):
+        r = np.where(free, model.with_rest(rest).host_gradient(q_scan, params), 0.0)
+        history.append(float(np.max(np.abs(r))))
+        if history[-1] <= atol or (not final and history[-1] <= 1e3 * atol):
+            return rest
+        data = rest_jacobian_values(jnp.asarray(scan), jnp.asarray(rest), stencil, params, pattern)
+        jac = pattern.matrix(data)
+        step = SparseSolver(jac).solve(-r)
+        # Backtrack on the residual norm: the first steps can overshoot on stiff short modes.
+        alpha, r_norm = 1.0, np.linalg.norm(r)
+        for _ in range(20):
+            trial = rest + alpha * step[:n3].reshape(-1, 3)
+            r_try = np.where(free, model.with_rest(trial).host_gradient(q_scan, params), 0.0)
+            if np.all(np.isfinite(r_try)) and np.linalg.norm(r_try) < r_norm:
+                break
+            alpha *= 0.5
+        else:
+            break
+        rest = trial
+    raise NoConvergenceError(
+        f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
+        f"{history[-1]:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
+        "E and h.",
+        history,
+    )
+
+
+def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, max_iter: int = 20):
+    """Rest shape as the scan shrunk uniformly about its centroid, scaled so that the pressurized
+    equilibrium encloses the scan's volume to ``rtol``.
+
+    Exact for a sphere (the equilibrium of a uniformly shrunk sphere is a uniformly inflated one,
+    up to mesh effects); for other shapes it is the small-strain approximation of DESIGN.md
+    generalised to a volume match. Returns ``(rest (V, 3) [m], q_equilibrium, max vertex
+    mismatch from the scan [m])``. Robust where the exact inverse (:func:`solve_rest_shape`)
+    stalls. The fixed point s ← s (V_scan / V(s))^(1/3) contracts by about the membrane strain.
+    """
+    scan = np.asarray(scan, dtype=np.float64)
+    mesh = model.mesh
+    v_scan = signed_volume(scan, mesh.faces)
+    area = 0.5 * np.linalg.norm(
+        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
+        axis=1,
+    ).sum()
+    radius = 3.0 * v_scan / area
+    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
+    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    bottom = int(np.argmin(scan[:, 2]))
+    anchor = scan[bottom].copy()  # the pinned bottom vertex stays put
+    scale = 1.0 / (1.0 + strain)
+    q = np.concatenate([scan.ravel(), np.zeros(3)])
+    history = []
+    for _ in range(max_iter):
+        rest = anchor + (scan - anchor) * scale
+        q = model.with_rest(rest).solve(q, params, atol=atol, name="rest-scale forward solve").x
+        vol = float(model.volume(jnp.asarray(q)))
+        history.append(abs(vol / v_scan - 1.0))
+        if history[-1] <= rtol:
+            mismatch = float(np.max(np.linalg.norm(q[:-3].reshape(-1, 3) - scan, axis=1)))
+            return rest, q, mismatch
+        scale *= (v_scan / vol) ** (1.0 / 3.0)
+    raise NoConvergenceError(
+        f"rest shape: the pressurized volume misses the scan's by {history[-1]:.3e} (relative) "
+        f"after {max_iter} iterations.",
+        history,
+    )

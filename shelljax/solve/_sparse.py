@@ -1,0 +1,142 @@
+"""Sparse assembly of per-element Hessians and host-side sparse direct solves.
+
+The element Hessians are computed in JAX (vmapped over elements) and summed into the values of a
+CSR matrix by a precomputed scatter map, so only ``nnz`` numbers cross to the host. The matrix is
+never densified: the linear solve is SciPy's SuperLU (``scipy.sparse.linalg.splu``) on the host.
+A dense rank-one term (sealed gas: Π''(V) ∇V ∇Vᵀ) is handled by Sherman–Morrison on top of the
+sparse factorization.
+
+Fixed degrees of freedom (pins that remove rigid-body modes) are folded into the matrix: their
+rows and columns are zeroed and their diagonal set to one, so a right-hand side that is zero on
+them gives a solution that is zero on them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .._errors import NoConvergenceError
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SparsityPattern:
+    """CSR pattern of a sum of element matrices, with the scatter map from element entries.
+
+    Built once per mesh topology (the symbolic part); every Newton iteration only recomputes the
+    ``nnz`` values. ``blocks`` are the element dof index arrays, one ``(n_elements, k)`` int array
+    per element family; ``maps[i]`` sends the flattened ``(n_elements, k, k)`` values of family ``i``
+    to positions in the CSR data array.
+    """
+
+    n_dofs: int
+    indptr: np.ndarray
+    indices: np.ndarray
+    maps: tuple
+    fixed_entries: np.ndarray  # CSR positions in a row or column of a fixed dof
+    fixed_diagonal: np.ndarray  # CSR positions of the diagonal of fixed dofs
+    free: np.ndarray  # (n_dofs,) bool
+
+    @staticmethod
+    def from_elements(blocks, n_dofs: int, free) -> "SparsityPattern":
+        """Pattern from element dof blocks (list of (n_e, k) int arrays) and a free-dof mask."""
+        free = np.asarray(free, dtype=bool)
+        keys = []
+        for blk in blocks:
+            blk = np.asarray(blk, dtype=np.int64)
+            rows = np.broadcast_to(blk[:, :, None], blk.shape + (blk.shape[1],))
+            cols = np.broadcast_to(blk[:, None, :], blk.shape + (blk.shape[1],))
+            keys.append((rows * n_dofs + cols).ravel())
+        # The diagonal is always present so that fixed dofs can carry their unit pivot.
+        diag = np.arange(n_dofs, dtype=np.int64) * (n_dofs + 1)
+        all_keys = np.concatenate(keys + [diag])
+        unique, inverse = np.unique(all_keys, return_inverse=True)
+        rows = unique // n_dofs
+        cols = unique % n_dofs
+        indptr = np.zeros(n_dofs + 1, dtype=np.int64)
+        np.add.at(indptr, rows + 1, 1)
+        indptr = np.cumsum(indptr)
+        maps, start = [], 0
+        for k in keys:
+            maps.append(inverse[start : start + k.size].astype(np.int32 if unique.size < 2**31 else np.int64))
+            start += k.size
+        fixed_entries = np.nonzero(~free[rows] | ~free[cols])[0]
+        fixed_diagonal = np.nonzero((rows == cols) & ~free[rows])[0]
+        return SparsityPattern(
+            n_dofs=n_dofs,
+            indptr=indptr,
+            indices=cols.astype(np.int32),
+            maps=tuple(jnp.asarray(m) for m in maps),
+            fixed_entries=fixed_entries,
+            fixed_diagonal=fixed_diagonal,
+            free=free,
+        )
+
+    @property
+    def nnz(self) -> int:
+        return int(self.indices.size)
+
+    def assemble_values(self, element_matrices) -> jax.Array:
+        """CSR values (JAX, traceable) from element matrices, one (n_e, k, k) array per family."""
+        data = jnp.zeros(self.nnz, dtype=jnp.float64)
+        for m, values in zip(self.maps, element_matrices):
+            data = data.at[m].add(values.reshape(-1))
+        return data
+
+    def matrix(self, data) -> sp.csr_matrix:
+        """Host CSR matrix with the fixed dofs folded in (zero rows/cols, unit diagonal)."""
+        data = np.array(data, dtype=np.float64)
+        data[self.fixed_entries] = 0.0
+        data[self.fixed_diagonal] = 1.0
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_dofs, self.n_dofs))
+
+
+class SparseSolver:
+    """Factorization of K + c u uᵀ (K sparse, u dense, c scalar) for repeated solves.
+
+    K is factorized once by SuperLU; the rank-one part by Sherman–Morrison, never densified.
+    Raises :class:`NoConvergenceError` when K is numerically singular.
+    """
+
+    def __init__(self, matrix: sp.csr_matrix, rank_one=None):
+        csc = matrix.tocsc()
+        try:
+            # Symmetric mode (minimum degree on AᵀA+A, diagonal pivots) keeps the fill of the
+            # symmetric Hessian ~2× lower and factorizes ~3.5× faster than SuperLU's default
+            # COLAMD with partial pivoting (30k dofs: 4.4 s vs 15 s); if the diagonal pivots
+            # lose accuracy (indefinite matrix), fall back to threshold pivoting.
+            self._lu = spla.splu(
+                csc, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+            )
+            probe = np.ones(csc.shape[0])
+            residual = np.linalg.norm(csc @ self._lu.solve(probe) - probe) / np.sqrt(csc.shape[0])
+            if not residual < 1e-8:
+                self._lu = spla.splu(csc, permc_spec="MMD_AT_PLUS_A")
+        except RuntimeError as err:  # SuperLU: "Factor is exactly singular"
+            raise NoConvergenceError(
+                f"sparse Hessian ({matrix.shape[0]} dofs) is singular: {err}. An unconstrained "
+                "rigid-body mode or a collapsed element; check the pins and the load."
+            ) from err
+        self._rank_one = None
+        if rank_one is not None:
+            c, u = rank_one
+            u = np.asarray(u, dtype=np.float64)
+            c = float(c)
+            if c != 0.0:
+                z = self._lu.solve(u)
+                self._rank_one = (c, u, z, 1.0 + c * float(u @ z))
+
+    def solve(self, rhs) -> np.ndarray:
+        """Solve (K + c u uᵀ) x = rhs; rhs (n,) or (n, m)."""
+        rhs = np.asarray(rhs, dtype=np.float64)
+        y = self._lu.solve(rhs)
+        if self._rank_one is not None:
+            c, u, z, denom = self._rank_one
+            coef = c * (u @ y) / denom
+            y = y - (np.multiply.outer(z, coef) if y.ndim == 2 else z * coef)
+        return y
