@@ -1,0 +1,95 @@
+"""Benchmark of the axisymmetric engine (issue 6, item 5).
+
+Measures, after compilation, medians over repeats of:
+  1. one full 7-level F–w(0) curve (the paper's 5–20 N protocol),
+  2. a vmapped batch of 64 parameter sets,
+  3. a large batch (default 1024) whose per-curve time is extrapolated to 10⁵ curves
+     (the size of a posterior run) — labelled as an extrapolation in the table.
+Prints a table and writes JSON (``--out``), naming the machine.
+
+    python experiments/bench_axisym.py --out bench_axisym.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+
+import jax
+import numpy as np
+
+import shelljax  # noqa: F401  (x64)
+from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw
+
+
+def _params(n, seed=0):
+    rng = np.random.default_rng(seed)
+    base = np.array([1300.0, 2.34e6, 9e-4, 0.4])
+    return base * rng.uniform(0.85, 1.15, size=(n, 4)) * np.array([1, 1, 1, 0]) + np.array(
+        [0, 0, 0, 0.4]
+    )
+
+
+def _time(fn, repeats):
+    out = fn()
+    jax.block_until_ready(out)  # compile + warm
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", default="bench_axisym.json")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--large", type=int, default=1024, help="batch size timed for the 1e5 estimate")
+    ap.add_argument("--n-elements", type=int, default=101)
+    ap.add_argument("--chunk", type=int, default=4, help="vmapped chunk size (0: whole batch)")
+    args = ap.parse_args(argv)
+
+    setup = Setup(radius=0.13, n_elements=args.n_elements)
+    forces = np.asarray(PAPER_FORCES)
+    rows = []
+
+    one = _params(1)
+    t1, r1 = _time(lambda: indentation_curves_raw(one, forces, setup), args.repeats)
+    rows.append(("single 7-level curve", 1, t1, t1, float(np.mean(np.all(r1.converged, axis=1))), "< 0.020 s"))
+
+    b64 = _params(64, 1)
+    t64, r64 = _time(lambda: indentation_curves_raw(b64, forces, setup, args.chunk), args.repeats)
+    rows.append(("vmapped batch", 64, t64, t64 / 64, float(np.mean(np.all(r64.converged, axis=1))), "< 0.5 s"))
+
+    big = _params(args.large, 2)
+    tl, rl = _time(lambda: indentation_curves_raw(big, forces, setup, args.chunk), max(1, args.repeats // 3))
+    rows.append(("large batch", args.large, tl, tl / args.large, float(np.mean(np.all(rl.converged, axis=1))), ""))
+    t_1e5 = tl / args.large * 1e5
+    rows.append(("1e5 curves (extrapolated)", 100000, t_1e5, tl / args.large, None, "< 120 s"))
+
+    device = jax.devices()[0]
+    machine = dict(
+        platform=platform.platform(), processor=platform.processor(),
+        cpu_count=os.cpu_count(), jax=jax.__version__, device=str(device.device_kind),
+        backend=jax.default_backend(), n_elements=args.n_elements, chunk=args.chunk,
+    )
+    print(f"machine: {machine}")
+    print(f"{'case':28s} {'batch':>7s} {'median [s]':>11s} {'per curve [ms]':>15s} "
+          f"{'conv. frac':>10s} {'target':>10s}")
+    for name, n, t, per, conv, target in rows:
+        print(f"{name:28s} {n:7d} {t:11.4f} {per * 1e3:15.3f} {'' if conv is None else f'{conv:.3f}':>10s} {target:>10s}")
+    with open(args.out, "w") as fh:
+        json.dump(dict(machine=machine, rows=[
+            dict(case=a, batch=b, median_s=c, per_curve_s=d, converged=e, target=f)
+            for a, b, c, d, e, f in rows
+        ]), fh, indent=2)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

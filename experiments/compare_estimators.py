@@ -1,0 +1,187 @@
+"""Closed form vs fit vs bayes on virtual experiments from the 3D engine (issue 4, item 3).
+
+Sessions: ``experiments/make_virtual_sessions.py`` (noise-free 3D curves bundled in
+``shelljax/data/virtual/curves.json``, noisy sessions drawn reproducibly). For P_g [Pa] and E [Pa]
+and each method it reports, over sessions, the bias (mean relative error), the median |relative
+error|, the RMS relative error and the 95 %-interval coverage of the truth. Methods:
+
+* ``closed-form (calibrated k_s)``: k_s from ``calibrate_ks`` on one manometer session per curve
+  (independent noise draws), delta-method intervals;
+* ``closed-form (k_s = 0.64)``: the paper's default;
+* ``fit``: ``fit_session`` through the axisymmetric engine (``wrinkle_law`` from ``--wrinkle-law``);
+* ``bayes``: ``sample_posterior`` (same forward model) on the first realisation of every curve at the
+  depth-noise levels ``--bayes-noise`` [mm] (a documented subset: it costs minutes per session),
+  ``--walkers``, ``--bayes-steps``.
+
+Per-session results are appended to ``<out>.jsonl`` as they finish (a rerun skips finished ones);
+the summary table is printed and written to ``--out`` (JSON).
+
+Usage: python experiments/compare_estimators.py [--out compare_estimators.json] [--bayes-noise 1.0] [--only-bayes]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from make_virtual_sessions import CURVES_PATH, FORCES, calibration_sessions, draw_sessions, load_curves  # noqa: E402
+
+QUANTITIES = ("gauge_pressure", "young_modulus")
+
+
+def _record(est, truth: float) -> dict:
+    lo, hi = est.ci95
+    return {"value": est.value, "std": est.std, "ci95": [lo, hi], "rel_error": est.value / truth - 1.0,
+            "covered": bool(lo <= truth <= hi)}  # fmt: skip
+
+
+def summarise(rows: list[dict], method: str) -> dict:
+    """Bias, median |rel. err.|, RMS rel. err. and coverage per quantity for ``method``."""
+    out = {}
+    for q in QUANTITIES:
+        recs = [r[method][q] for r in rows if method in r and isinstance(r[method], dict) and q in r[method]]
+        if not recs:
+            continue
+        err = np.array([x["rel_error"] for x in recs])
+        cov = np.array([x["covered"] for x in recs])
+        out[q] = {"n": int(err.size), "bias": float(err.mean()), "median_abs": float(np.median(np.abs(err))),
+                  "rms": float(np.sqrt(np.mean(err**2))), "coverage95": float(cov.mean())}  # fmt: skip
+    failed = sum(1 for r in rows if isinstance(r.get(method), dict) and "error" in r[method])
+    out["failed"] = failed
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--curves", type=Path, default=CURVES_PATH)
+    ap.add_argument("--realisations", type=int, default=4, help="noise draws per curve and noise level")
+    ap.add_argument("--wrinkle-law", default="scaling", choices=["scaling", "mechanics"])
+    ap.add_argument("--bayes-noise", type=float, nargs="*", default=[1.0],
+                    help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)")
+    ap.add_argument("--walkers", type=int, default=12)
+    ap.add_argument("--bayes-steps", type=int, default=1500)
+    ap.add_argument("--skip-fit", action="store_true")
+    ap.add_argument("--only-bayes", action="store_true", help="skip closed form and fit (a parallel bayes job)")
+    ap.add_argument("--also", type=Path, nargs="*", default=[],
+                    help="per-session .jsonl files of other runs whose method results join the table")
+    ap.add_argument("--out", type=Path, default=Path("compare_estimators.json"))
+    args = ap.parse_args(argv)
+
+    import jax
+
+    import shelljax  # noqa: F401  (float64)
+
+    # Same guard as make_virtual_sessions.py: XLA CPU async dispatch wedged long runs on this box.
+    jax.config.update("jax_cpu_enable_async_dispatch", False)
+    from tqdm import tqdm
+
+    from shelljax import InvalidInputError, NoConvergenceError
+    from shelljax.estimate import AxisymForwardModel, ConvergenceWarning, calibrate_ks, estimate_session, fit_session
+    from shelljax.estimate import sample_posterior
+
+    curves = load_curves(args.curves)
+    sessions = draw_sessions(curves, realisations=args.realisations)
+    calib = calibrate_ks(calibration_sessions(curves))
+    print(f"{len(curves)} curves, {len(sessions)} sessions; calibrated k_s = {calib.k_s.value:.4f} "
+          f"± {calib.k_s.std:.4f}", flush=True)  # fmt: skip
+    radius = curves[0]["radius"]
+    if any(c["radius"] != radius for c in curves):
+        raise SystemExit("all curves must share one radius (one compiled forward model)")
+    # One model for every session: the grid brackets the recorded (noisy) forces, so the compiled
+    # program is shared; w0 between grid points is linearly interpolated (docs/fit-and-bayes.md).
+    model = AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
+                                          poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law)  # fmt: skip
+
+    log_path = args.out.with_suffix(".jsonl")
+    done = {}
+    if log_path.exists():
+        for line in log_path.read_text().splitlines():
+            r = json.loads(line)
+            done[r["name"]] = r
+    t_start = time.perf_counter()
+    with log_path.open("a") as log:
+        for k, (truth, session) in enumerate(tqdm(sessions, desc="sessions", file=sys.stdout, mininterval=5)):
+            previous = done.get(truth["name"], {})
+            row = dict(truth)
+            # fit and bayes results are reused from the .jsonl; the closed form is recomputed
+            # (instant), so a k_s calibrated on a grown set of curves applies to every session.
+            row.update({m: previous[m] for m in ("fit", "bayes") if m in previous})
+            true = {q: truth[q] for q in QUANTITIES}
+            for label, ks in (() if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None))):
+                t0 = time.perf_counter()
+                cf = estimate_session(session, k_s=ks, bootstrap_samples=0) if ks is not None else \
+                    estimate_session(session, bootstrap_samples=0)  # fmt: skip
+                row[label] = {"gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
+                              "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
+                              "seconds": time.perf_counter() - t0}  # fmt: skip
+            if not (args.skip_fit or args.only_bayes or "fit" in row):
+                t0 = time.perf_counter()
+                try:
+                    fit = fit_session(session, model)
+                    row["fit"] = {q: _record(fit.estimates[q], true[q]) for q in QUANTITIES}
+                    row["fit"]["chi2"] = fit.chi2
+                    row["fit"]["dof"] = fit.dof
+                except (NoConvergenceError, InvalidInputError) as err:
+                    row["fit"] = {"error": str(err)[:300]}
+                row["fit"]["seconds"] = time.perf_counter() - t0
+            if "bayes" not in row and truth["realisation"] == 0 and any(abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise):
+                t0 = time.perf_counter()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", ConvergenceWarning)
+                    try:
+                        post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=args.bayes_steps,
+                                                min_steps=min(1000, args.bayes_steps), seed=k, progress=False)  # fmt: skip
+                        row["bayes"] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
+                        row["bayes"].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
+                                            converged=post.converged, failed_forward=post.failed_forward)  # fmt: skip
+                    except (NoConvergenceError, InvalidInputError) as err:
+                        row["bayes"] = {"error": str(err)[:300]}
+                row["bayes"]["seconds"] = time.perf_counter() - t0
+            if row.keys() - previous.keys():
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+            done[truth["name"]] = row
+
+    for extra in args.also:
+        for line in extra.read_text().splitlines():
+            r = json.loads(line)
+            if r["name"] in done:
+                done[r["name"]].update({m: v for m, v in r.items() if isinstance(v, dict) and m not in done[r["name"]]})
+    rows = [done[t["name"]] for t, _ in sessions if t["name"] in done]
+    methods = ("closed_form_calibrated", "closed_form_paper", "fit", "bayes")
+    summary = {m: summarise(rows, m) for m in methods}
+    print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
+          f"wrinkle law {args.wrinkle_law}; wall {time.perf_counter() - t_start:.0f} s")  # fmt: skip
+    print(f"{'method':<26}{'qty':<5}{'n':>4}{'bias':>9}{'med|err|':>10}{'RMS':>9}{'cover95':>9}")
+    for m in methods:
+        for q in QUANTITIES:
+            s = summary[m].get(q)
+            if s:
+                print(f"{m:<26}{'P_g' if q == 'gauge_pressure' else 'E':<5}{s['n']:>4}{s['bias']:>+9.3f}"
+                      f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}")  # fmt: skip
+        if summary[m].get("failed"):
+            print(f"{m:<26}failed: {summary[m]['failed']}")
+    timing = {m: float(np.median([r[m]["seconds"] for r in rows if m in r])) for m in methods if any(m in r for r in rows)}
+    result = {
+        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+        "n_sessions": len(rows), "wrinkle_law": args.wrinkle_law, "k_s_calibrated": calib.k_s.to_dict(),
+        "bayes": {"walkers": args.walkers, "max_steps": args.bayes_steps, "noise_levels_mm": args.bayes_noise, "realisation": 0},
+        "median_seconds_per_session": timing, "summary": summary,
+        "curves": [{k: c[k] for k in ("gauge_pressure", "young_modulus", "thickness", "tau", "n_faces", "pole_edge")}
+                   for c in curves],
+    }  # fmt: skip
+    args.out.write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out} (per-session rows: {log_path})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,161 @@
+"""The one function the fitted estimator calls: batched F → w(0) curves and wrinkle counts."""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from .._errors import InvalidInputError, NoConvergenceError
+from ._model import Setup, curve_single
+from ._wrinkles import wrinkle_count
+
+PAPER_FORCES = (5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)  # [N], the paper's protocol
+
+
+class CurveResult(eqx.Module):
+    """Batched indentation curves; every field has shape (batch, n_forces) unless noted.
+
+    ``force`` [N]; ``w0`` [m] local dimple depth (positive, the paper's −w(0), see
+    docs/axisym.md); ``travel`` [m] indenter travel since first contact; ``top_drop`` [m]
+    drop of the top pole (the 3D engine's w0); ``height`` H [m];
+    ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_model``);
+    ``contact_diameter_mesh`` [m] geometric edge; ``sunken_depth`` d [m];
+    ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N];
+    ``min_hoop_tension`` [N/m] most compressive unrelaxed hoop stress resultant of the upper
+    half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
+    annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``residual`` [N] worst
+    Newton residual up to this level; ``converged`` (bool); ``rest_radius`` [m] (batch,).
+    """
+
+    force: Float[Array, "b k"]
+    w0: Float[Array, "b k"]
+    travel: Float[Array, "b k"]
+    top_drop: Float[Array, "b k"]
+    height: Float[Array, "b k"]
+    upper_diameter: Float[Array, "b k"]
+    contact_diameter: Float[Array, "b k"]
+    contact_diameter_mesh: Float[Array, "b k"]
+    sunken_depth: Float[Array, "b k"]
+    pressure: Float[Array, "b k"]
+    volume: Float[Array, "b k"]
+    ground_reaction: Float[Array, "b k"]
+    min_hoop_tension: Float[Array, "b k"]
+    compressive_inner_radius: Float[Array, "b k"]
+    compressive_outer_radius: Float[Array, "b k"]
+    wrinkle_count: Float[Array, "b k"]
+    residual: Float[Array, "b k"]
+    converged: Bool[Array, "b k"]
+    rest_radius: Float[Array, " b"]
+
+
+def _one(setup: Setup, theta, forces):
+    pressure, young, thick, nu = theta[0], theta[1], theta[2], theta[3]
+    out = curve_single(setup, pressure, young, thick, nu, forces)
+    n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
+                      young, thick, nu, setup.radius)
+    fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
+    fields.update(
+        force=forces,
+        wrinkle_count=n,
+        converged=jnp.isfinite(out["residual"]) & (out["residual"] <= setup.atol),
+    )
+    return fields
+
+
+@functools.partial(jax.jit, static_argnums=(0, 3))
+def _batched(setup: Setup, params, forces, chunk: int):
+    one = jax.vmap(lambda th: _one(setup, th, forces))
+    b = params.shape[0]
+    if chunk <= 0 or b <= chunk:
+        return one(params)
+    # Chunks of `chunk` curves run one after the other (lax.map): a vmapped while_loop runs
+    # until its slowest member converges, and small chunks keep the work arrays in cache.
+    n_chunks = -(-b // chunk)
+    pad = n_chunks * chunk - b
+    padded = jnp.concatenate([params, jnp.broadcast_to(params[-1:], (pad, 4))], axis=0)
+    out = jax.lax.map(one, padded.reshape(n_chunks, chunk, 4))
+    return jax.tree_util.tree_map(lambda v: v.reshape((n_chunks * chunk,) + v.shape[2:])[:b], out)
+
+
+def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0) -> CurveResult:
+    """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
+
+    ``params`` (batch, 4): columns P_g [Pa], E [Pa], h [m], ν [-]; ``forces`` (k,) [N].
+    ``chunk`` > 0 solves the batch in sequential vmapped chunks of that size (throughput on
+    CPUs); 0 vmaps the whole batch at once. Differentiable in ``params`` (implicit
+    differentiation of every equilibrium).
+    """
+    return CurveResult(**_batched(setup, jnp.asarray(params, jnp.float64),
+                                  jnp.asarray(forces, jnp.float64), int(chunk)))
+
+
+def _check(params, forces, radius):
+    p = np.asarray(params, dtype=float)
+    if p.ndim == 1:
+        p = p[None]
+    if p.ndim != 2 or p.shape[1] != 4:
+        raise InvalidInputError(
+            f"indentation_curves: params has shape {np.shape(params)}; expected (batch, 4) "
+            "columns (P_g [Pa], E [Pa], h [m], nu [-])."
+        )
+    names = ("P_g", "E", "h")
+    for j, name in enumerate(names):
+        if not np.all(np.isfinite(p[:, j])) or np.any(p[:, j] <= 0):
+            raise InvalidInputError(
+                f"indentation_curves: params[:, {j}] ({name}) must be finite and > 0; got "
+                f"{p[:, j][~(np.isfinite(p[:, j]) & (p[:, j] > 0))][:3]}."
+            )
+    if np.any(p[:, 3] <= -1.0) or np.any(p[:, 3] >= 0.5):
+        raise InvalidInputError("indentation_curves: params[:, 3] (nu) must lie in (-1, 0.5).")
+    f = np.asarray(forces, dtype=float)
+    if f.ndim != 1 or f.size == 0 or np.any(f <= 0) or np.any(np.diff(f) <= 0):
+        raise InvalidInputError(
+            f"indentation_curves: forces must be a 1-D increasing array of positive values [N]; "
+            f"got {forces!r}."
+        )
+    if not (np.isfinite(radius) and radius > 0):
+        raise InvalidInputError(f"indentation_curves: radius must be > 0 [m]; got {radius!r}.")
+    if np.any(p[:, 2] >= 0.2 * radius):
+        raise InvalidInputError("indentation_curves: thickness h must be < 0.2 R (thin shell).")
+    return p, f
+
+
+def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
+                       chunk: int = 4, **setup_kwargs) -> CurveResult:
+    """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
+
+    ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
+    increasing positive forces (default: the paper's 5–20 N in 2.5 N steps); ``radius`` [m]:
+    inflated radius R. Further keywords go to :class:`Setup` (``n_elements``, ``grading``,
+    ``gas`` = "prescribed" | "isothermal", ``relax``, ``indenter_radius`` [m],
+    ``contact_stiffness`` [N/m³], ``atol`` [N], ...).
+
+    Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
+    ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: batch members
+    solved together (vmapped) per sequential chunk; 4 is fastest on 2 CPU cores. For use
+    inside jit/vmap/grad call :func:`indentation_curves_raw`.
+    """
+    p, f = _check(params, forces, radius)
+    setup = Setup(radius=float(radius), **setup_kwargs)
+    if setup.gas not in ("prescribed", "isothermal"):
+        raise InvalidInputError(
+            f"indentation_curves: gas={setup.gas!r}; use 'prescribed' or 'isothermal'."
+        )
+    res = indentation_curves_raw(p, f, setup, chunk)
+    if raise_on_failure:
+        conv = np.asarray(res.converged)
+        if not conv.all():
+            bad = np.argwhere(~conv)
+            b, k = bad[0]
+            raise NoConvergenceError(
+                f"axisymmetric Newton did not converge for {len(bad)} (batch, force) entries; "
+                f"first: params[{b}] = {p[b].tolist()}, force {f[k]} N. Try more elements "
+                "(n_elements), a larger max_iter, or a different ramp.",
+                history=np.asarray(res.residual[b]).tolist(),
+            )
+    return res

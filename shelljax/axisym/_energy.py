@@ -1,0 +1,282 @@
+"""Total potential energy of an axisymmetric shell of revolution (meridian elements).
+
+Unknowns ``y`` (2n + 1,): node coordinates (r_0, z_0, …, r_{n−1}, z_{n−1}) [m] followed by the
+indenter-centre height z_c [m]. The energy [J] is
+
+  membrane (2-point Gauss per linear element, principal stretches λ_s = L/L0, λ_θ = r/r0)
++ bending (per node, discrete meridional curvature from the turning angle of the polygon and
+  hoop curvature sin ψ / r; poles use the isotropy M_θθ = M_ss)
++ gas (prescribed gauge pressure or sealed isothermal ideal gas, V = Σ ∫ π r² dz, exact for
+  the polygon of revolution)
++ rigid contact (indenter sphere on top and ground plane below: area-weighted penalty)
++ load potential F·z_c (force control: the indenter is a dof loaded by F [N] downwards).
+
+Material laws, gas and contact potentials are the shared ones in ``shelljax.physics``; the only
+axisymmetric-specific law here is the tension-field relaxation of the hoop direction.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..physics import (
+    bending_density_invariants,
+    isothermal_gas_energy,
+    lame_constants_2d,
+    neo_hookean_membrane_invariants,
+    penalty_energy,
+    plane_gap,
+    prescribed_pressure_energy,
+    sphere_gap,
+)
+from ._geometry import gauss_points_2
+
+GAS_MODELS = ("prescribed", "isothermal")
+RELAX_WIDTH = 1e-3  # [-] smoothing width of the tension-field switch, in units of stretch²
+LOADINGS = ("none", "sphere", "point")
+
+
+class Config(eqx.Module):
+    """Static (compile-time) description of one axisymmetric problem.
+
+    ``theta``: rest polar angles of the nodes [rad] (tuple, even count); ``gas``: "prescribed" or
+    "isothermal"; ``loading``: "none", "sphere" (rigid spherical indenter, force control) or
+    "point" (point force on the top pole); ``ground``: rigid plane under the bottom pole;
+    ``pin_bottom``: fix z of the bottom pole (removes the vertical rigid mode when nothing
+    else does); ``relax``: tension-field relaxation of compressive hoop stress.
+    """
+
+    theta: tuple = eqx.field(static=True)
+    gas: str = eqx.field(static=True, default="prescribed")
+    loading: str = eqx.field(static=True, default="none")
+    ground: bool = eqx.field(static=True, default=False)
+    pin_bottom: bool = eqx.field(static=True, default=True)
+    relax: bool = eqx.field(static=True, default=False)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.theta)
+
+
+class Params(eqx.Module):
+    """Traced scalars of one solve (all SI).
+
+    young_modulus E [Pa], thickness h [m], poisson_ratio ν [-], rest_radius R0 [m],
+    gauge_pressure P_g [Pa] (prescribed value, or sealed gas gauge pressure at reference_volume),
+    reference_volume V_ref [m³] (sealed gas only), force F [N], indenter_radius a [m],
+    ground_z [m] (height of the ground plane), contact_stiffness k_c [N/m³] (contact pressure
+    per unit penetration: penetration = contact pressure / k_c), bending_scale [-] (multiplies
+    the bending energy; 1 for physical shells, < 1 only to emulate large τ in shallow-shell checks).
+    """
+
+    young_modulus: Float[Array, ""]
+    thickness: Float[Array, ""]
+    poisson_ratio: Float[Array, ""]
+    rest_radius: Float[Array, ""]
+    gauge_pressure: Float[Array, ""]
+    reference_volume: Float[Array, ""]
+    force: Float[Array, ""]
+    indenter_radius: Float[Array, ""]
+    ground_z: Float[Array, ""]
+    contact_stiffness: Float[Array, ""]
+    bending_scale: Float[Array, ""]
+
+
+def rest_nodes(cfg: Config, rest_radius) -> Float[Array, "n 2"]:
+    """Rest node coordinates (r0, z0) [m] on the sphere of radius R0 [m], bottom pole first."""
+    th = np.asarray(cfg.theta)
+    unit = np.stack([np.sin(th), -np.cos(th)], axis=-1)
+    unit[0, 0] = unit[-1, 0] = 0.0
+    return rest_radius * jnp.asarray(unit)
+
+
+def split(y, n):
+    """(node coordinates (n, 2) [m], indenter height z_c [m]) from the flat unknown vector."""
+    return y[: 2 * n].reshape(n, 2), y[2 * n]
+
+
+def relaxed_hoop_stretch_sq(lam_s_sq, alpha, beta):
+    """Natural hoop stretch² λ_θ*² [-] at which the Neo-Hookean hoop stress vanishes for λ_s².
+
+    From ∂W/∂λ_θ = h[β(λ_θ − 1/λ_θ) + α/2 (λ_s² λ_θ − 1/λ_θ)] = 0.
+    """
+    return (beta + 0.5 * alpha) / (beta + 0.5 * alpha * lam_s_sq)
+
+
+def membrane_terms(x, x0, p: Params, relax: bool):
+    """Per-Gauss-point (λ_s, λ_θ, rest area weight [m²]) of the linear meridian elements."""
+    xi, wts = gauss_points_2()
+    seg = x[1:] - x[:-1]
+    seg0 = x0[1:] - x0[:-1]
+    length = jnp.sqrt(jnp.sum(seg**2, axis=-1))
+    length0 = jnp.sqrt(jnp.sum(seg0**2, axis=-1))
+    lam_s = length / length0
+    r_g = (1.0 - xi)[:, None] * x[None, :-1, 0] + xi[:, None] * x[None, 1:, 0]
+    r0_g = (1.0 - xi)[:, None] * x0[None, :-1, 0] + xi[:, None] * x0[None, 1:, 0]
+    lam_t = r_g / r0_g
+    area0 = jnp.asarray(wts)[:, None] * 2.0 * jnp.pi * r0_g * length0[None, :]
+    return jnp.broadcast_to(lam_s, lam_t.shape), lam_t, area0
+
+
+def membrane_density(lam_s, lam_t, p: Params, relax: bool):
+    """Neo-Hookean membrane energy per rest area [J/m²]; hoop-relaxed (tension field) if asked."""
+    lam_s_sq = lam_s**2
+    lam_t_sq = lam_t**2
+    if relax:
+        alpha, beta = lame_constants_2d(p.young_modulus, p.poisson_ratio)
+        # Smooth maximum (width RELAX_WIDTH in stretch²): the plain max has a jump in the
+        # tangent stiffness that makes Newton cycle between slack and taut states.
+        star = relaxed_hoop_stretch_sq(lam_s_sq, alpha, beta)
+        relaxed = 0.5 * (lam_t_sq + star + jnp.sqrt((lam_t_sq - star) ** 2 + RELAX_WIDTH**2))
+        # Only the indented (upper) half is relaxed: there the hoop compression is the
+        # wrinkling of the paper; in the ground-contact disc relaxation lets the pole lift
+        # into a micrometre blister that makes Newton cycle on the contact kink.
+        n_el = lam_t_sq.shape[-1]
+        upper = jnp.arange(n_el) >= n_el // 2
+        lam_t_sq = jnp.where(upper, relaxed, lam_t_sq)
+    dens = neo_hookean_membrane_invariants(
+        lam_s_sq + lam_t_sq, lam_s_sq * lam_t_sq, p.thickness, p.young_modulus, p.poisson_ratio
+    )
+    # λ_θ = r / r0 < 0 means a node crossed the axis (an inverted, folded meridian); det C
+    # only sees λ_θ², so forbid it explicitly: the line search rejects infinite energies.
+    return jnp.where(lam_t > 0.0, dens, jnp.inf)
+
+
+def _ghosted(x):
+    # Mirror images of the pole neighbours across the axis make the poles ordinary hinge nodes.
+    lo = jnp.stack([-x[1, 0], x[1, 1]])[None]
+    hi = jnp.stack([-x[-2, 0], x[-2, 1]])[None]
+    return jnp.concatenate([lo, x, hi], axis=0)
+
+
+def _hinges(x):
+    xe = _ghosted(x)
+    t = xe[1:] - xe[:-1]
+    seg_len = jnp.sqrt(jnp.sum(t**2, axis=-1))
+    cross = t[:-1, 0] * t[1:, 1] - t[:-1, 1] * t[1:, 0]
+    dot = jnp.sum(t[:-1] * t[1:], axis=-1)
+    turning = jnp.arctan2(cross, dot)
+    dual = 0.5 * (seg_len[:-1] + seg_len[1:])
+    u = t[:-1] / seg_len[:-1, None] + t[1:] / seg_len[1:, None]
+    sin_psi = u[:, 1] / jnp.sqrt(jnp.sum(u**2, axis=-1))
+    return turning, dual, sin_psi
+
+
+def node_rest_areas(x0):
+    """Rest dual area [m²] of each node: 2π r0 × half the adjacent rest lengths; pole disks."""
+    seg0 = jnp.sqrt(jnp.sum((x0[1:] - x0[:-1]) ** 2, axis=-1))
+    dual0 = 0.5 * (jnp.concatenate([seg0[:1], seg0]) + jnp.concatenate([seg0, seg0[-1:]]))
+    area = 2.0 * jnp.pi * x0[:, 0] * dual0
+    area = area.at[0].set(jnp.pi * (0.5 * seg0[0]) ** 2)
+    return area.at[-1].set(jnp.pi * (0.5 * seg0[-1]) ** 2)
+
+
+def bending_changes(x, x0):
+    """(M_ss, M_θθ) [1/m] per node: M = ā⁻¹(b − b̄) in rest arc-length/angle coordinates.
+
+    M_ss = κ_s λ_s² − κ̄_s, M_θθ = κ_θ λ_θ² − κ̄_θ = (r sin ψ − r0 sin ψ0)/r0² (the libshell
+    convention of ``physics.bending_density``); at the poles M_θθ = M_ss by isotropy.
+    """
+    turning, dual, sin_psi = _hinges(x)
+    turning0, dual0, sin_psi0 = _hinges(x0)
+    m_ss = (turning * dual / dual0 - turning0) / dual0
+    r, r0 = x[:, 0], x0[:, 0]
+    safe_r0 = jnp.where(r0 > 0.0, r0, 1.0)
+    m_tt = (r * sin_psi - r0 * sin_psi0) / safe_r0**2
+    interior = jnp.asarray(np.r_[False, np.ones(x0.shape[0] - 2, bool), False])
+    m_tt = jnp.where(interior, m_tt, m_ss)
+    return m_ss, m_tt
+
+
+def bending_energy(x, x0, p: Params):
+    """Σ_nodes rest dual area × bending density [J]."""
+    m_ss, m_tt = bending_changes(x, x0)
+    dens = bending_density_invariants(
+        m_ss + m_tt, m_ss**2 + m_tt**2, p.thickness, p.young_modulus, p.poisson_ratio
+    )
+    return p.bending_scale * jnp.sum(node_rest_areas(x0) * dens)
+
+
+def enclosed_volume(x):
+    """Volume [m³] enclosed by the polygon of revolution: Σ π Δz (r_a² + r_a r_b + r_b²)/3."""
+    ra, rb = x[:-1, 0], x[1:, 0]
+    dz = x[1:, 1] - x[:-1, 1]
+    return jnp.pi * jnp.sum(dz * (ra**2 + ra * rb + rb**2)) / 3.0
+
+
+def gas_energy(volume, cfg: Config, p: Params):
+    """Gas potential [J] of the enclosed volume [m³] (shared ``physics`` gas laws)."""
+    if cfg.gas == "prescribed":
+        return prescribed_pressure_energy(volume, p.gauge_pressure)
+    return isothermal_gas_energy(volume, p.reference_volume, p.gauge_pressure)
+
+
+def gauge_pressure_at(volume, cfg: Config, p: Params):
+    """Gauge pressure [Pa] acting on the wall at enclosed volume [m³]: −dΠ_gas/dV."""
+    return -jax.grad(gas_energy)(volume, cfg, p)
+
+
+def indenter_gaps(x, zc, p: Params):
+    """Signed gaps [m] of the nodes to the indenter sphere centred at (0, z_c)."""
+    return sphere_gap(x, jnp.stack([jnp.zeros_like(zc), zc]), p.indenter_radius)
+
+
+def ground_gaps(x, p: Params):
+    """Signed gaps [m] of the nodes above the ground plane z = ground_z."""
+    origin = jnp.stack([jnp.zeros_like(p.ground_z), p.ground_z])
+    return plane_gap(x, origin, jnp.array([0.0, 1.0]))
+
+
+def local_energy(y, cfg: Config, p: Params):
+    """All energy terms [J] except the gas: elasticity + contact + load potential."""
+    n = cfg.n_nodes
+    x, zc = split(y, n)
+    x0 = rest_nodes(cfg, p.rest_radius)
+    lam_s, lam_t, area0 = membrane_terms(x, x0, p, cfg.relax)
+    energy = jnp.sum(area0 * membrane_density(lam_s, lam_t, p, cfg.relax))
+    energy = energy + bending_energy(x, x0, p)
+    k_node = p.contact_stiffness * node_rest_areas(x0)
+    if cfg.loading == "sphere":
+        energy = energy + jnp.sum(penalty_energy(indenter_gaps(x, zc, p), k_node))
+        energy = energy + p.force * zc
+    elif cfg.loading == "point":
+        energy = energy + p.force * x[-1, 1]
+    if cfg.ground:
+        energy = energy + jnp.sum(penalty_energy(ground_gaps(x, p), k_node))
+    return energy
+
+
+def total_energy(y, cfg: Config, p: Params):
+    """Total potential energy [J] at unknowns y [m]."""
+    n = cfg.n_nodes
+    x, _ = split(y, n)
+    return local_energy(y, cfg, p) + gas_energy(enclosed_volume(x), cfg, p)
+
+
+def constrained_mask(cfg: Config) -> np.ndarray:
+    """Boolean mask (2n + 1,) of fixed unknowns: pole radii, optionally z_0, z_c if unused."""
+    n = cfg.n_nodes
+    mask = np.zeros(2 * n + 1, bool)
+    mask[0] = mask[2 * (n - 1)] = True
+    if cfg.pin_bottom:
+        mask[1] = True
+    if cfg.loading != "sphere":
+        mask[-1] = True
+    return mask
+
+
+def hoop_tension(x, x0, p: Params):
+    """Unrelaxed hoop stress resultant N_θ [N/m] per Gauss point (per deformed meridian length).
+
+    N_θ = (1/λ_s) ∂W/∂λ_θ with W the (unrelaxed) membrane energy per rest area; negative =
+    compressive hoop stress (where a real shell wrinkles). Returns (N_θ, r at Gauss points [m]).
+    """
+    lam_s, lam_t, _ = membrane_terms(x, x0, p, False)
+    dw = jax.grad(lambda lt, ls: jnp.sum(membrane_density(ls, lt, p, False)))(lam_t, lam_s)
+    xi, _ = gauss_points_2()
+    r_g = (1.0 - xi)[:, None] * x[None, :-1, 0] + xi[:, None] * x[None, 1:, 0]
+    return dw / lam_s, r_g

@@ -1,0 +1,99 @@
+"""Point-load checks against shallow-shell theory (Reissner; Vella et al. 2011, 2012).
+
+Set-up: the inflated sphere is pinched by equal and opposite point forces F [N] at its poles
+(bottom pole pinned, force on the top pole), no contact. Each pole gets its own dimple, so the
+local indentation stiffness of one dimple is k = 2 F / δ with δ the change of pole distance,
+as long as the dimples are far apart (l_p, l_b ≪ R).
+
+Analytic references (linear shallow shell, pre-tension T = P_g R / 2, foundation K = E h / R²,
+bending B; w(0) = F/(2π) ∫₀^∞ q dq / (B q⁴ + T q² + K) from the Hankel transform):
+
+* Reissner (P_g = 0): k = 8 √(B K) = 4 E h² / (R √(3 (1 − ν²))).
+* Vella et al. 2012 (J. R. Soc. Interface 9, 448): k = 2π √(T² − 4BK) / artanh(√(1 − 4BK/T²)),
+  continued analytically (artanh → arctan) for T² < 4BK; with τ = P_g R² / √(E h B) one has
+  4BK/T² = 16/τ², so k → Reissner as τ → 0 and k → π P_g R / ln(τ/2) as τ → ∞.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..physics import bending_stiffness
+from ._energy import Config, hoop_tension, rest_nodes, split
+from ._model import Setup, _params, inflate
+from ._newton import SolverOptions, equilibrium
+
+
+def reissner_stiffness(young_modulus, thickness, poisson_ratio, radius):
+    """k = 4 E h² / (R √(3(1 − ν²))) [N/m] of an unpressurized spherical shell under a point load."""
+    return 4.0 * young_modulus * thickness**2 / (radius * np.sqrt(3.0 * (1.0 - poisson_ratio**2)))
+
+
+def vella_linear_stiffness(gauge_pressure, young_modulus, thickness, poisson_ratio, radius,
+                           bending_scale=1.0):
+    """Linear point-load stiffness [N/m] of a pressurized spherical shell (Vella et al. 2012)."""
+    b = bending_scale * bending_stiffness(young_modulus, thickness, poisson_ratio)
+    t = gauge_pressure * radius / 2.0
+    k = young_modulus * thickness / radius**2
+    disc = t**2 - 4.0 * b * k
+    if disc > 0:
+        s = np.sqrt(disc)
+        return 2.0 * np.pi * s / np.arctanh(s / t)
+    s = np.sqrt(-disc)
+    # ∫₀^∞ du / (B u² + T u + K) = (2/s)(π/2 − arctan(T/s)) for T² < 4BK
+    integral = (2.0 / s) * (0.5 * np.pi - np.arctan(t / s))
+    return 4.0 * np.pi / integral
+
+
+def pinch_setup(n_elements=201, grading=0.9, radius=0.1):
+    """A Setup for pinch checks (no indenter: only its mesh/tolerance fields are used)."""
+    return Setup(radius=radius, n_elements=n_elements, grading=grading, relax=False)
+
+
+def pinch_config(setup: Setup, relax=False) -> Config:
+    return Config(theta=setup.theta(), gas="prescribed", loading="point", ground=False,
+                  pin_bottom=True, relax=relax)
+
+
+def pinch_state(setup: Setup, pressure, young, thick, nu, force, bending_scale=1.0,
+                guess=None, relax=False):
+    """Equilibrium (y [m], inflated y [m], params, residual [N]) of the pole pinch at force F [N]."""
+    r0, y_inf, _, _ = inflate(setup, pressure, young, thick, nu, bending_scale)
+    cfg = pinch_config(setup, relax)
+    p = _params(young, thick, nu, r0, pressure, setup, force=force,
+                bending_scale=bending_scale)
+    opts = SolverOptions(setup.atol, 200, 30, 0.05 * setup.radius)
+    y, res, _, _ = equilibrium(cfg, opts, p, y_inf if guess is None else guess)
+    return y, y_inf, p, res
+
+
+def pinch_linear_stiffness(setup: Setup, pressure, young, thick, nu, bending_scale=1.0):
+    """Local linear stiffness k = 2 / (dδ/dF) [N/m] at F = 0, by implicit differentiation."""
+    n = len(setup.theta())
+
+    def approach(force):
+        y, _, _, _ = pinch_state(setup, pressure, young, thick, nu, force, bending_scale)
+        x, _ = split(y, n)
+        return x[0, 1] - x[-1, 1]  # minus the pole distance [m]
+
+    dd = jax.jvp(approach, (jnp.asarray(0.0),), (jnp.asarray(1.0),))[1]
+    return 2.0 / dd
+
+
+def pinch_observables(setup: Setup, y, y_inf, p):
+    """(w(0) [m] dimple depth of the top pole relative to the equator, min upper hoop tension [N/m],
+    compressive annulus (r_in, r_out) [m])."""
+    from ._model import compressive_annulus
+
+    n = len(setup.theta())
+    x, _ = split(y, n)
+    xi, _ = split(y_inf, n)
+    eq = jnp.array([n // 2 - 1, n // 2])
+    w0 = (jnp.mean(x[eq, 1]) - jnp.mean(xi[eq, 1])) - (x[-1, 1] - xi[-1, 1])
+    n_theta, r_g = hoop_tension(x, rest_nodes(pinch_config(setup), p.rest_radius), p)
+    upper = jnp.arange(n_theta.shape[1]) >= n_theta.shape[1] // 2
+    return w0, jnp.min(jnp.where(upper, n_theta, jnp.inf)), compressive_annulus(x, n_theta, r_g)
+
+

@@ -1,0 +1,73 @@
+"""The axisymmetric shell engine as the estimators' forward model: gradients, similarity, a fit."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from shelljax.estimate import AxisymForwardModel, fit_session
+from shelljax.session import Session
+
+FORCES = jnp.asarray(np.tile(np.arange(5.0, 20.01, 2.5), 3))
+TRUTH = (1300.0, 2.34e6, 0.9e-3, 0.13)  # P_g [Pa], E [Pa], h [m], R [m]: the paper's Pezzi ball
+
+
+@pytest.fixture(scope="module")
+def model():
+    return AxisymForwardModel.for_forces(0.13, FORCES, poisson_ratio=0.4)
+
+
+def test_depth_gradient_matches_central_differences(model):
+    theta = jnp.asarray(TRUTH)
+
+    def depth(t):
+        return model(t[0], t[1], t[2], t[3], FORCES[:7]).depth
+
+    jac = jax.jacfwd(depth)(theta)
+    for k in range(4):
+        step = 1e-4 * theta[k]
+        fd = (depth(theta.at[k].add(step)) - depth(theta.at[k].add(-step))) / (2 * step)
+        # Newton converges to 1e-7 N (docs/axisym.md), so depths are exact to ~1e-12 m and the
+        # central difference carries O(step²) ≈ 1e-8 relative truncation error: 1e-5 is ample
+        np.testing.assert_allclose(np.asarray(jac[:, k]), np.asarray(fd), rtol=1e-5, atol=1e-12)
+
+
+def test_similarity_in_radius(model):
+    # A ball 4 % larger: exact length scaling except for the finger radius (kept at 8 mm), whose
+    # effect on the dimple depth at these forces is below 1 %.
+    direct = AxisymForwardModel.for_forces(0.1352, FORCES, poisson_ratio=0.4)
+    p, e, h, _ = TRUTH
+    scaled = model(p, e, h, 0.1352, FORCES[:7]).depth
+    reference = direct(p, e, h, 0.1352, FORCES[:7]).depth
+    np.testing.assert_allclose(np.asarray(scaled), np.asarray(reference), rtol=1e-2)
+
+
+def test_fit_recovers_parameters_of_its_own_model(model):
+    p, e, h, r = TRUTH
+    pred = model(p, e, h, r, FORCES)
+    rng = np.random.default_rng(0)
+    counts = np.full(3, int(round(float(pred.wrinkle_count))))
+    session = Session(
+        source=Path("axisym-synthetic.toml"), object_name="synthetic", radius=r, radius_std=0.0,
+        thickness=h, thickness_std=0.0, poisson_ratio=0.4, trial=np.repeat([1, 2, 3], 7),
+        force=np.asarray(FORCES), depth=np.asarray(pred.depth) + rng.normal(0, 1e-3, FORCES.size),
+        wrinkle_counts=counts,
+    )  # fmt: skip
+    result = fit_session(session, model)
+    est = result.estimates["gauge_pressure"]
+    # 1 mm depth noise on 21 samples of 20-80 mm: P_g is known to ~1 %; the truth must lie within
+    # the 95 % Laplace interval (a failure here is a 1-in-20 event only if the errors are right)
+    assert est.ci95[0] < p < est.ci95[1]
+    assert est.std / est.value < 0.03
+    # The recorded count is the truth's n rounded to an integer, so it pins E only to a band: E
+    # also shapes the post-wrinkling depths, and least squares trades the count residual (σ = 1
+    # wrinkle) against 21 depth residuals. The fitted n must lie inside the ±½ reading band of
+    # the recorded count, and the true E inside its 95 % interval.
+    assert abs(result.predicted_wrinkle_count - counts[0]) < 0.5
+    modulus = result.estimates["young_modulus"]
+    assert modulus.ci95[0] < e < modulus.ci95[1]

@@ -1,0 +1,76 @@
+"""Bundled virtual 3D-engine curves (shelljax/data/virtual/curves.json) and session drawing.
+
+No 3D solve: the curves were made by experiments/make_virtual_sessions.py --curves.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+import make_virtual_sessions as mvs  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def curves():
+    return mvs.load_curves()
+
+
+def test_curves_cover_the_protocol(curves):
+    assert len(curves) >= 5
+    for c in curves:
+        np.testing.assert_allclose(c["force"], mvs.FORCES, atol=1e-6)  # force control hits each level
+        assert c["radius"] == mvs.RADIUS and c["poisson_ratio"] == mvs.POISSON
+        assert c["n_faces"] > 1000
+
+
+def test_curves_are_physically_sensible(curves):
+    for c in curves:
+        f, w, drop = (np.asarray(c[k]) for k in ("force", "w0", "top_drop"))
+        assert np.all(w > 0) and np.all(np.diff(w) > 0), f"w0 not increasing with F: {w}"
+        # Sinking into the ground flattening adds to the pole's drop: the local dimple is shallower.
+        assert np.all(w < drop)
+        # Order of magnitude: F = π k_s R P_g w0 with k_s between 0.3 and 1 (docs/axisym.md finds
+        # 0.36–0.74 on the axisymmetric engine over a wide τ range).
+        k = f / (np.pi * c["radius"] * c["gauge_pressure"] * w)
+        assert np.all((k > 0.3) & (k < 1.0)), k
+        # The depth stays below the ball's radius (no flattening through the ball).
+        assert w[-1] < c["radius"]
+
+
+def test_session_drawing_is_reproducible(curves):
+    a = mvs.draw_session(curves[0], 1e-3, seed=5)
+    b = mvs.draw_session(curves[0], 1e-3, seed=5)
+    c = mvs.draw_session(curves[0], 1e-3, seed=6)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(a.force, b.force)
+    np.testing.assert_array_equal(a.wrinkle_counts, b.wrinkle_counts)
+    assert not np.array_equal(a.depth, c.depth)
+    assert a.force.size == mvs.N_TRIALS * len(mvs.FORCES) and a.wrinkle_counts.size == mvs.N_TRIALS
+    # 0.5 mm ruler: depths are multiples of the rounding step.
+    np.testing.assert_allclose(a.depth / mvs.DEPTH_ROUNDING, np.round(a.depth / mvs.DEPTH_ROUNDING), atol=1e-9)
+
+
+def test_drawn_noise_matches_the_requested_level(curves):
+    # Mean over many draws of the per-sample deviation from the truth: σ² + rounding²/12.
+    sigma = 2e-3
+    dev = []
+    for seed in range(200):
+        s = mvs.draw_session(curves[0], sigma, seed=seed)
+        dev.append(s.depth - np.tile(curves[0]["w0"], mvs.N_TRIALS))
+    dev = np.concatenate(dev)
+    expected = np.sqrt(sigma**2 + mvs.DEPTH_ROUNDING**2 / 12)
+    # 4200 samples: the std's relative standard error is 1/√(2·4200) ≈ 1.1 %; allow 5 %.
+    assert abs(dev.std() / expected - 1) < 0.05
+    assert abs(dev.mean()) < 4 * expected / np.sqrt(dev.size)
+
+
+def test_test_and_calibration_sets(curves):
+    sessions = mvs.draw_sessions(curves, realisations=4)  # as experiments/compare_estimators.py
+    assert len(sessions) == len(curves) * len(mvs.NOISE_LEVELS) * 4 >= 50
+    assert len({t["seed"] for t, _ in sessions}) == len(sessions)  # independent draws
+    calib = mvs.calibration_sessions(curves)
+    assert all(s.manometer_gauge_pressure == c["gauge_pressure"] for s, c in zip(calib, curves))
+    assert all(s.manometer_gauge_pressure is None for _, s in sessions)
