@@ -8,11 +8,21 @@ It also turns on JAX's persistent compilation cache (unless you configured one y
 ``$SHELLJAX_CACHE_DIR`` or ``~/.cache/shelljax/jax``: the shell solvers take tens of seconds to
 compile, and the cache makes the second run of a script start in seconds. Set
 ``SHELLJAX_NO_COMPILATION_CACHE=1`` to leave JAX's cache settings alone.
+
+On the CPU it adds ``--xla_cpu_multi_thread_eigen=false`` to ``XLA_FLAGS`` (unless that flag is
+already set): with jaxlib 0.10.2, XLA:CPU's multi-threaded Eigen pool intermittently wedges on
+large vmapped programs (every worker idle, the caller blocked forever in ``BlockUntilReady``;
+seen here on the 3D shell's Hessian assembly at 20k faces; the same symptom and workaround are in
+PyAutoLabs/PyAutoFit#1530). The flag only takes effect if shelljax is imported before JAX runs its
+first computation.
 """
 
 import os as _os
 
-import jax as _jax
+if "xla_cpu_multi_thread_eigen" not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
+
+import jax as _jax  # noqa: E402
 
 _jax.config.update("jax_enable_x64", True)
 if not _os.environ.get("SHELLJAX_NO_COMPILATION_CACHE") and _jax.config.jax_compilation_cache_dir is None:

@@ -43,6 +43,31 @@ def test_rest_curvature_of_sphere_converges_to_minus_identity_over_r():
     assert errs[1] < 0.4 * errs[0]  # 4× the faces halves the edge: O(h²) predicts 1/4
 
 
+def test_second_fundamental_form_is_the_six_point_quadratic_interpolant():
+    """Independent computation: fit w = c₀ + c₁s + c₂t + c₃s² + c₄st + c₅t² through all six
+    stencil vertices in an orthonormal frame of the face (a 6×6 Vandermonde solve in NumPy),
+    map its Hessian to the (e₁, e₂) parametrisation and compare with the barycentric-product
+    solve of ``fundamental_forms`` on distorted stencils. Both are the same unique interpolant,
+    so they agree to round-off (1e-9 relative allows for the conditioning of the 6×6 solve)."""
+    rng = np.random.default_rng(6)
+    mesh = s3.sphere_mesh(1.0, 300)
+    stencils = mesh.vertices[mesh.stencil[:40]] * 1.05 + 0.01 * rng.normal(size=(40, 6, 3))
+    for p in stencils:
+        e1, e2 = p[1] - p[0], p[2] - p[0]
+        n = np.cross(e1, e2) / np.linalg.norm(np.cross(e1, e2))
+        t1 = e1 / np.linalg.norm(e1)
+        t2 = np.cross(n, t1)
+        d = p - p[0]
+        s_, t_, w_ = d @ t1, d @ t2, d @ n
+        coef = np.linalg.solve(np.stack([np.ones(6), s_, t_, s_**2, s_ * t_, t_**2], axis=1), w_)
+        hess_st = np.array([[2 * coef[3], coef[4]], [coef[4], 2 * coef[5]]])
+        jac = np.array([[e1 @ t1, e2 @ t1], [e1 @ t2, e2 @ t2]])
+        expected_b = jac.T @ hess_st @ jac
+        a, b = s3.fundamental_forms(jnp.asarray(p))
+        np.testing.assert_allclose(np.asarray(a), [[e1 @ e1, e1 @ e2], [e1 @ e2, e2 @ e2]], rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(b), expected_b, rtol=1e-9, atol=1e-9 * np.abs(expected_b).max())
+
+
 def test_scaled_sphere_energies_match_analytic_values():
     """x = λX: C = λ²I exactly per face and M = (λ−1) ā⁻¹b̄ exactly, so the membrane energy is
     exact to round-off and the bending energy off only by the rest-curvature error (≤ 4 %)."""

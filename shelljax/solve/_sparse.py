@@ -2,7 +2,8 @@
 
 The element Hessians are computed in JAX (vmapped over elements) and summed into the values of a
 CSR matrix by a precomputed scatter map, so only ``nnz`` numbers cross to the host. The matrix is
-never densified: the linear solve is SciPy's SuperLU (``scipy.sparse.linalg.splu``) on the host.
+never densified: the linear solve is SciPy's SuperLU (``scipy.sparse.linalg.splu``) on the host,
+on a METIS nested-dissection ordering (pymetis) computed once per sparsity pattern.
 A dense rank-one term (sealed gas: Π''(V) ∇V ∇Vᵀ) is handled by Sherman–Morrison on top of the
 sparse factorization.
 
@@ -14,6 +15,7 @@ them gives a solution that is zero on them.
 from __future__ import annotations
 
 import dataclasses
+import zlib
 
 import jax
 import jax.numpy as jnp
@@ -104,19 +106,24 @@ class SparseSolver:
     """
 
     def __init__(self, matrix: sp.csr_matrix, rank_one=None):
-        csc = matrix.tocsc()
+        matrix = sp.csr_matrix(matrix, dtype=np.float64)
+        matrix.sum_duplicates()  # canonical CSR (sorted, unique): the ordering cache relies on it
+        ordering = _nested_dissection(matrix)
+        self._perm = ordering.perm
+        permuted = ordering.permute(matrix)
         try:
-            # Symmetric mode (minimum degree on AᵀA+A, diagonal pivots) keeps the fill of the
-            # symmetric Hessian ~2× lower and factorizes ~3.5× faster than SuperLU's default
-            # COLAMD with partial pivoting (30k dofs: 4.4 s vs 15 s); if the diagonal pivots
-            # lose accuracy (indefinite matrix), fall back to threshold pivoting.
+            # SuperLU in symmetric mode (diagonal pivots) on the METIS nested-dissection ordering
+            # of the Hessian's graph: on the 20k-face ball (30k dofs) this factorizes in 1.5 s
+            # with 20M fill, against 2.6 s / 25M for SuperLU's own minimum degree on AᵀA+A and
+            # 15 s for its default COLAMD with partial pivoting. If the diagonal pivots lose
+            # accuracy (indefinite matrix), fall back to threshold pivoting.
             self._lu = spla.splu(
-                csc, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+                permuted, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
             )
-            probe = np.ones(csc.shape[0])
-            residual = np.linalg.norm(csc @ self._lu.solve(probe) - probe) / np.sqrt(csc.shape[0])
+            probe = np.ones(permuted.shape[0])
+            residual = np.linalg.norm(permuted @ self._lu.solve(probe) - probe) / np.sqrt(permuted.shape[0])
             if not residual < 1e-8:
-                self._lu = spla.splu(csc, permc_spec="MMD_AT_PLUS_A")
+                self._lu = spla.splu(permuted, permc_spec="NATURAL")
         except RuntimeError as err:  # SuperLU: "Factor is exactly singular"
             raise NoConvergenceError(
                 f"sparse Hessian ({matrix.shape[0]} dofs) is singular: {err}. An unconstrained "
@@ -128,15 +135,72 @@ class SparseSolver:
             u = np.asarray(u, dtype=np.float64)
             c = float(c)
             if c != 0.0:
-                z = self._lu.solve(u)
+                z = self._solve_sparse(u)
                 self._rank_one = (c, u, z, 1.0 + c * float(u @ z))
 
     def solve(self, rhs) -> np.ndarray:
         """Solve (K + c u uᵀ) x = rhs; rhs (n,) or (n, m)."""
-        rhs = np.asarray(rhs, dtype=np.float64)
-        y = self._lu.solve(rhs)
+        y = self._solve_sparse(np.asarray(rhs, dtype=np.float64))
         if self._rank_one is not None:
             c, u, z, denom = self._rank_one
             coef = c * (u @ y) / denom
             y = y - (np.multiply.outer(z, coef) if y.ndim == 2 else z * coef)
         return y
+
+    def _solve_sparse(self, rhs: np.ndarray) -> np.ndarray:
+        """K⁻¹ rhs through the permuted factorization (P K Pᵀ) (P x) = P rhs."""
+        out = np.empty_like(rhs)
+        out[self._perm] = self._lu.solve(np.ascontiguousarray(rhs[self._perm]))
+        return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Ordering:
+    """A symmetric permutation of one sparsity pattern, with the CSC scatter map it induces."""
+
+    perm: np.ndarray  # new position k holds old index perm[k]
+    indptr: np.ndarray
+    indices: np.ndarray
+    data_map: np.ndarray  # permuted CSC data = csr.data[data_map]
+
+    def permute(self, matrix: sp.csr_matrix) -> sp.csc_matrix:
+        """P A Pᵀ in CSC form for a matrix of the pattern this ordering was built for."""
+        n = matrix.shape[0]
+        return sp.csc_matrix((matrix.data[self.data_map], self.indices, self.indptr), shape=(n, n))
+
+
+_ORDERINGS: dict = {}
+
+
+def _nested_dissection(matrix: sp.csr_matrix) -> _Ordering:
+    """METIS nested-dissection ordering of the graph of A + Aᵀ (A in canonical CSR), cached per
+    sparsity pattern.
+
+    The key is the pattern's checksum (a few ms against a factorization of seconds), so every
+    Newton iteration on one mesh reuses the ordering and the scatter map computed at its first.
+    """
+    import pymetis
+
+    n = matrix.shape[0]
+    key = (n, matrix.nnz, zlib.crc32(matrix.indptr.tobytes()), zlib.crc32(matrix.indices.tobytes()))
+    if key in _ORDERINGS:
+        return _ORDERINGS[key]
+    pattern = sp.csr_matrix((np.ones(matrix.nnz), matrix.indices, matrix.indptr), shape=(n, n))
+    graph = (pattern + pattern.T).tocsr()
+    graph.setdiag(0.0)
+    graph.eliminate_zeros()
+    if graph.nnz == 0:  # diagonal matrix: nothing to reorder
+        perm = np.arange(n)
+    else:
+        perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(graph.indptr, graph.indices))
+        perm = np.asarray(perm, dtype=np.int64)
+    # Scatter map: permute a matrix whose data are the CSR positions, then read them back.
+    positions = sp.csr_matrix((np.arange(1, matrix.nnz + 1, dtype=np.float64), matrix.indices, matrix.indptr), shape=(n, n))
+    permuted = positions[perm][:, perm].tocsc()
+    permuted.sort_indices()
+    ordering = _Ordering(perm=perm, indptr=permuted.indptr, indices=permuted.indices,
+                         data_map=permuted.data.astype(np.int64) - 1)  # fmt: skip
+    if len(_ORDERINGS) >= 16:
+        _ORDERINGS.pop(next(iter(_ORDERINGS)))
+    _ORDERINGS[key] = ordering
+    return ordering
