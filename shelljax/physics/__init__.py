@@ -1,6 +1,14 @@
 """Physics layer: material, gas and contact energies as pure JAX functions (SI units)."""
 
-from ._contact import barrier_energy, penalty_energy, plane_gap, sphere_gap
+from ._contact import (
+    barrier_energy,
+    friction_energy,
+    friction_force,
+    friction_mollifier,
+    penalty_energy,
+    plane_gap,
+    sphere_gap,
+)
 from ._gas import (
     AIR_HEAT_CAPACITY_RATIO,
     ATMOSPHERIC_PRESSURE,

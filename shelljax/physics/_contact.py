@@ -10,11 +10,18 @@ Two choices, both C¹ or smoother so Newton sees continuous forces:
   positive; ĝ [m] is the activation distance, κ [J/m²] the stiffness.
 
 Gaps for the rigid bodies shelljax models: a sphere (finger) and a plane (ground, wall).
+
+Friction (``friction_energy``): the smoothed, lagged Coulomb potential of Incremental Potential
+Contact (Li et al. 2020, ACM TOG 39(4) 49, Sec. 5): D = μ λ f₀(‖u‖) per contact point, with the
+normal force λ [N] and the slip origin ("anchor") frozen at a lagged state, u [m] the tangential
+slip since the anchor. Its force −∂D/∂u has magnitude μ λ f₁(‖u‖) ≤ μ λ (the Coulomb cone), equal
+to μ λ once ‖u‖ ≥ ε (sliding) and growing linearly, with stiffness 2 μ λ / ε, below (sticking).
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 
 def sphere_gap(points, center, radius):
@@ -42,3 +49,69 @@ def barrier_energy(gap, activation_distance, stiffness):
         -stiffness * (safe_gap - activation_distance) ** 2 * jnp.log(safe_gap / activation_distance),
         0.0,
     )
+
+
+def _safe_norm(u: Float[Array, "... k"]) -> Float[Array, "..."]:
+    """‖u‖ along the last axis with finite derivatives of every order at u = 0 (they are 0 there).
+
+    The double ``where`` keeps sqrt's infinite slope at 0 out of the derivative graph; every use
+    below multiplies the norm by ‖u‖² or sits in the branch ‖u‖ ≥ ε > 0, so the true derivatives of
+    the friction potential (Hessian (2/ε) I at u = 0) come out exactly.
+    """
+    sq = jnp.sum(u * u, axis=-1)
+    positive = sq > 0.0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
+
+
+def friction_mollifier(y: Float[ArrayLike, "..."], slip_tolerance: float | Float[ArrayLike, ""]):
+    """IPC friction mollifier f₀(y) [m] of a slip length y ≥ 0 [m] with tolerance ε [m].
+
+    f₀(y) = −y³/(3ε²) + y²/ε + ε/3 for y < ε and y for y ≥ ε: C¹ at ε (f₀ = ε, f₀' = 1), with
+    f₀' = f₁(y) = 2y/ε − y²/ε² ∈ [0, 1] below ε.
+    """
+    y = jnp.asarray(y)
+    eps = slip_tolerance
+    below = y < eps
+    y_low = jnp.where(below, y, 0.0)
+    return jnp.where(below, -(y_low**3) / (3.0 * eps**2) + y_low**2 / eps + eps / 3.0, y)
+
+
+def friction_energy(
+    slip: Float[ArrayLike, "... k"],
+    normal_force: Float[ArrayLike, "..."],
+    friction: float | Float[ArrayLike, ""],
+    slip_tolerance: float | Float[ArrayLike, ""],
+) -> Float[Array, "..."]:
+    """Smoothed lagged Coulomb friction potential D = μ λ f₀(‖u‖) [J] per contact point.
+
+    ``slip`` u (…, k) [m]: tangential displacement since the lagged anchor (k = 2 in-plane
+    coordinates or k = 3 with the normal component already projected out); ``normal_force`` λ
+    (…) [N] ≥ 0: lagged normal contact force magnitude; ``friction`` μ [-] ≥ 0: Coulomb
+    coefficient; ``slip_tolerance`` ε [m] > 0: the slip below which the contact sticks (the
+    friction force ramps from 0 to μ λ over ‖u‖ ∈ [0, ε]). Derivatives are finite everywhere:
+    ∂D/∂u = μ λ f₁(‖u‖) u/‖u‖ (0 at u = 0), ∂²D/∂u² = 2 μ λ/ε I at u = 0.
+    """
+    u = jnp.asarray(slip)
+    eps = slip_tolerance
+    y = _safe_norm(u)
+    below = y < eps
+    # Below ε write the cubic with ‖u‖² = u·u (smooth) so that only the y³ term sees the safe norm.
+    sq = jnp.sum(u * u, axis=-1)
+    sq_low = jnp.where(below, sq, 0.0)
+    f0 = jnp.where(below, -sq_low * y / (3.0 * eps**2) + sq_low / eps + eps / 3.0, y)
+    return friction * jnp.asarray(normal_force) * f0
+
+
+def friction_force(
+    slip: Float[ArrayLike, "... k"],
+    normal_force: Float[ArrayLike, "..."],
+    friction: float | Float[ArrayLike, ""],
+    slip_tolerance: float | Float[ArrayLike, ""],
+) -> Float[Array, "... k"]:
+    """Friction force −∂D/∂u [N] on the contact point (opposes the slip; ‖·‖ ≤ μ λ)."""
+    u = jnp.asarray(slip)
+    y = _safe_norm(u)
+    eps = slip_tolerance
+    f1 = jnp.where(y < eps, 2.0 * y / eps - y**2 / eps**2, 1.0)
+    direction = u / jnp.where(y > 0.0, y, 1.0)[..., None]
+    return -(friction * jnp.asarray(normal_force) * f1)[..., None] * direction

@@ -11,7 +11,18 @@ elasticity figure (panel b) and OBJ/PNG export.
 Rigid-body modes: the ground and the indenter fix the vertical motion; the horizontal ones
 (x/y translation, rotations) are removed by pins on the top and bottom vertices (x, y) and on the
 +x-most vertex (y), see :func:`rigid_mode_pins`. The force balance test checks that the pins carry
-no vertical load.
+no vertical load. Friction does not replace the pins: a centred poke has no net tangential load,
+so the ground's total friction force vanishes by symmetry and cannot hold the rigid modes.
+
+Ground friction (``friction=μ > 0``) is the smoothed Coulomb potential of IPC, lagged (Li et al.
+2020; :func:`shelljax.physics.friction_energy`). Each load step (continuation sub-step) takes its
+anchors x̂ (the slip origin) and normal forces λ from the converged state at the start of the step,
+solves, then re-solves up to ``friction_iterations`` times with λ recomputed from the last
+solution (anchors kept), stopping early once λ changes by less than ``FRICTION_LAG_TOLERANCE``
+(1 %) of its largest value. The friction force of a vertex is therefore bounded by μ times its
+lagged normal force exactly, and by μ times its current one to within that lag change
+(``IndentationState.friction_lag_change``). Friction makes the response path dependent: the
+result depends on the continuation steps (``max_step``), as a real poke depends on its history.
 """
 
 from __future__ import annotations
@@ -28,6 +39,9 @@ from ..physics import ATMOSPHERIC_PRESSURE
 from ..solve import continuation, implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+
+#: Lagging stops once the normal forces change by less than this fraction of their largest value.
+FRICTION_LAG_TOLERANCE = 0.01
 from ._observables import observables as _observables
 from ._rest import solve_rest_scale, solve_rest_shape
 
@@ -68,13 +82,24 @@ def load(path, thickness: float) -> Shell:
 @dataclasses.dataclass(frozen=True, eq=False)
 class IndentationState:
     """A solved equilibrium: ``q`` (3V + 3,) [m] (vertex positions then indenter center), the
-    simulation it belongs to, the indenter travel ``depth`` [m] and Newton ``iterations``."""
+    simulation it belongs to, the indenter travel ``depth`` [m] and Newton ``iterations``.
+
+    With ground friction: ``friction`` holds the lagged data of the last solve
+    (``friction_anchor`` (V, 3) [m], ``friction_normal_force`` (n_planes, V) [N]; empty without
+    friction), ``friction_lag_change`` the relative change [-] of the normal forces between the
+    lagged values and this state's. ``ground_slip`` (V, 3) [m] (None without ground): each vertex's
+    tangential displacement along the ground accumulated over the load steps at whose end it
+    touched the ground (gap < activation distance), with or without friction.
+    """
 
     sim: "Indentation"
     q: np.ndarray
     depth: float
     iterations: int
     history: list
+    friction: dict = dataclasses.field(default_factory=dict)
+    friction_lag_change: float = 0.0
+    ground_slip: np.ndarray | None = None
 
     @property
     def vertices(self) -> np.ndarray:
@@ -88,7 +113,7 @@ class IndentationState:
 
     def observables(self) -> dict:
         """Observables (SI): see :func:`shelljax.shell3d.observables`."""
-        return _observables(self.sim, self.q, self.sim._params_for(self.q))
+        return _observables(self.sim, self.q, self.sim._params_for(self.q, **self.friction))
 
     def export(self, path) -> None:
         """Write the deformed mesh (OBJ, PLY, STL: by suffix) [m]."""
@@ -119,7 +144,12 @@ class Indentation:
     an equilibrium; can stall on coarse meshes at high pressure, then raises) or "scan" (take
     the scan as stress-free, i.e. inflate it a second time);
     ``force_tolerance`` [N]: Newton tolerance on the largest nodal force residual (default
-    1e-8 E h L, L the shell's size); ``max_step`` [m]: largest continuation step in depth.
+    1e-8 E h L, L the shell's size); ``max_step`` [m]: largest continuation step in depth;
+    ``friction`` μ [-] ≥ 0: Coulomb coefficient between shell and ground (default 0: frictionless;
+    the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
+    contact sticks (default activation_distance / 100); ``friction_iterations``: at most this many
+    re-solves per load step with updated lagged normal forces (default 2, see the module docstring).
+    :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape.
     """
 
     def __init__(
@@ -139,6 +169,9 @@ class Indentation:
         force_tolerance: float | None = None,
         max_step: float | None = None,
         progress: bool | None = None,
+        friction: float = 0.0,
+        slip_tolerance: float | None = None,
+        friction_iterations: int = 2,
     ):
         if not young_modulus > 0:
             raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
@@ -150,6 +183,13 @@ class Indentation:
             raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
         if rest_shape not in ("solve", "exact", "scan"):
             raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
+        if not (isinstance(friction_iterations, (int, np.integer)) and not isinstance(friction_iterations, bool)
+                and friction_iterations >= 0):
+            raise InvalidInputError(
+                f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
+            )
+        self.friction_iterations = int(friction_iterations)
+        ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.shell = shell
         self.progress = progress
         mesh = shell.mesh
@@ -205,11 +245,26 @@ class Indentation:
         contact_cfg = ContactConfig(
             indenter_radius=float(indenter_radius), planes=planes, kind=contact,
             activation_distance=float(ghat), reference_pressure=float(max(gauge_pressure, 1e3)),
+            friction=friction, slip_tolerance=slip_tolerance,
         )
+        self.friction = contact_cfg.friction
         cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact_cfg)
         self.model = ShellModel(mesh, self.rest, cfg, fixed)
         self._fixed = fixed
         self._force_model = None
+
+    def with_friction(self, friction: float, slip_tolerance: float | None = None) -> "Indentation":
+        """The same simulation (shell, rest shape, reference state, settings) with another ground
+        friction μ [-] and slip tolerance ε [m] (None: the default). Skips the rest-shape solve
+        and keeps the sparsity pattern; μ is a traced value in the compiled functions, so every
+        μ > 0 with the same ε shares one compilation."""
+        contact = dataclasses.replace(self.model.config.contact, friction=friction, slip_tolerance=slip_tolerance)
+        other = object.__new__(Indentation)
+        other.__dict__.update(self.__dict__)
+        other.model = self.model.with_config(dataclasses.replace(self.model.config, contact=contact))
+        other.friction = contact.friction
+        other._force_model = None
+        return other
 
     @property
     def force_model(self) -> ShellModel:
@@ -253,6 +308,45 @@ class Indentation:
             raise
         return res
 
+    def _lagged_step(self, model, q_guess, params, label, q_start):
+        """One load step from the converged ``q_start``, with lagged friction if μ > 0.
+
+        Returns (NewtonResult, friction params dict, relative lag change of the normal forces).
+        """
+        if not model.config.contact.has_friction:
+            return self._step(model, q_guess, params, label), {}, 0.0
+        lagged = {
+            "friction_anchor": np.array(q_start[:-3].reshape(-1, 3)),
+            "friction_normal_force": model.plane_normal_forces(q_start),
+        }
+        res = self._step(model, q_guess, {**params, **lagged}, label)
+        iterations = res.iterations
+        for k in range(self.friction_iterations + 1):
+            current = model.plane_normal_forces(res.x)
+            change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
+            change /= max(float(np.max(np.abs(current))), 1e-300)
+            if change < FRICTION_LAG_TOLERANCE or k == self.friction_iterations:
+                break
+            lagged = {**lagged, "friction_normal_force": current}
+            res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})")
+            iterations += res.iterations
+        res = dataclasses.replace(res, iterations=iterations)
+        return res, lagged, change
+
+    def _accumulate_slip(self, slip, q_start, q_end):
+        """Add the tangential motion of the vertices touching the ground at ``q_end`` to ``slip``."""
+        if slip is None:
+            return None
+        point, normal = (np.asarray(v, dtype=np.float64) for v in self.model.config.contact.planes[0])
+        x0, x1 = q_start[:-3].reshape(-1, 3), q_end[:-3].reshape(-1, 3)
+        touching = (x1 - point) @ normal < self.activation_distance
+        d = x1 - x0
+        d = d - (d @ normal)[:, None] * normal
+        return slip + np.where(touching[:, None], d, 0.0)
+
+    def _initial_slip(self):
+        return np.zeros((self.model.mesh.n_vertices, 3)) if self.model.config.contact.planes else None
+
     def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
         """Equilibrium at indenter travel ``depth`` [m] (from first touch) or at ``force`` [N]."""
         if (depth is None) == (force is None):
@@ -282,6 +376,7 @@ class Indentation:
         if any(b < a for a, b in zip(depths[:-1], depths[1:])) or depths[0] < 0:
             raise InvalidInputError("depths: must be non-negative and increasing.")
         history = [(0.0, self.q_reference)]
+        slip = [self._initial_slip()]
 
         def step(depth, _prev):
             # Insert sub-steps where the user's levels are further apart than max_step.
@@ -291,9 +386,13 @@ class Indentation:
                 d = d_prev + (depth - d_prev) * k / n_sub
                 guess = self._predict(history, d)
                 guess[-3:] = self.touch_center - np.array([0.0, 0.0, d])
-                res = self._step(self.model, guess, self._params_for(guess), f"indentation depth {d:.4g} m")
+                q_start = history[-1][1]
+                res, lagged, change = self._lagged_step(
+                    self.model, guess, self._params_for(guess), f"indentation depth {d:.4g} m", q_start
+                )
+                slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
                 history.append((d, res.x))
-            return IndentationState(self, res.x, depth, res.iterations, res.history)
+            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0])
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
 
@@ -301,14 +400,19 @@ class Indentation:
         """Force-controlled continuation through increasing indenter ``forces`` [N]."""
         forces = [float(f) for f in forces]
         history = [(0.0, self.q_reference)]
+        slip = [self._initial_slip()]
 
         def step(force, _prev):
             guess = self._predict(history, force)
             params = self._params_for(guess, indenter_force=force)
-            res = self._step(self.force_model, guess, params, f"indentation force {force:.4g} N")
+            q_start = history[-1][1]
+            res, lagged, change = self._lagged_step(
+                self.force_model, guess, params, f"indentation force {force:.4g} N", q_start
+            )
+            slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
             history.append((force, res.x))
             depth = float(self.touch_center[2] - res.x[-1])
-            return IndentationState(self, res.x, depth, res.iterations, res.history)
+            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0])
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 
@@ -329,7 +433,9 @@ class Indentation:
         (others keep their values). The equilibrium is differentiated implicitly (forward and
         reverse mode, see :func:`shelljax.solve.implicit_equilibrium`). The rest shape (and a sealed
         gas's reference volume) are held at their values for the nominal parameters: this is the
-        sensitivity of the forward model with a fixed stress-free shape.
+        sensitivity of the forward model with a fixed stress-free shape. With friction, the lagged
+        anchors and normal forces of the nominal solve are held fixed too (the last load step's
+        sensitivity).
         """
         model = self.model
         state0 = self.solve(depth=depth)
@@ -338,6 +444,7 @@ class Indentation:
         def params_of(theta):
             p = dict(self.base_params)
             p["indenter_center"] = jnp.asarray(state0.q[-3:])
+            p.update({k: jnp.asarray(v) for k, v in state0.friction.items()})
             p.update(theta)
             return p
 

@@ -4,24 +4,34 @@ Unknowns ``q`` (3V + 3,) [m]: the vertex positions x (V, 3) flattened, then the 
 (3,). Total potential energy [J]:
 
     E(q) = Σ_faces A̅ (W_membrane + W_bending) + Π_gas(V(x)) + Σ_contacts φ(gap)
-           + F_ind c_z − Σ_v f_v·x_v + m g Σ_v w_v z_v
+           + F_ind c_z − Σ_v f_v·x_v + m g Σ_v w_v z_v + Σ_planes Σ_v μ λ_pv f₀(‖P_p(x_v − x̂_v)‖)
 
 with the gas energy Π from :mod:`shelljax.physics` (prescribed gauge pressure or a sealed ideal gas
 at atmospheric pressure outside), contact potentials φ per vertex against a rigid sphere (the
 indenter, radius r) and rigid planes (ground, walls), an optional downward force F_ind on the
 indenter (force control; in displacement control c is prescribed), nodal forces f_v and the
-weight of the shell (mass m spread by lumped rest area w_v).
+weight of the shell (mass m spread by lumped rest area w_v). The last term is the optional
+smoothed lagged Coulomb friction against the planes (:func:`shelljax.physics.friction_energy`):
+μ [-] and the slip tolerance ε [m] of f₀ are set in :class:`ContactConfig`, the anchors x̂ and the
+lagged normal forces λ are parameters; P_p = I − n nᵀ keeps the slip in the plane.
 
 Parameters that can be differentiated live in a dict ``params`` (SI units):
 ``young_modulus`` [Pa], ``poisson_ratio`` [-], ``thickness`` [m], ``gauge_pressure`` [Pa]
 (prescribed, or the sealed gas's gauge pressure at ``reference_volume`` [m³]),
-``indenter_center`` (3,) [m], ``indenter_force`` [N], ``nodal_forces`` (V, 3) [N], ``mass`` [kg].
+``indenter_center`` (3,) [m], ``indenter_force`` [N], ``nodal_forces`` (V, 3) [N], ``mass`` [kg];
+with friction (μ > 0 and planes) also ``friction_anchor`` (V, 3) [m] (lagged vertex positions, the
+origin of the slip) and ``friction_normal_force`` (n_planes, V) [N] (lagged normal contact force
+magnitude of every vertex on every plane, see :meth:`ShellModel.plane_normal_forces`), and
+optionally ``friction_coefficient`` [-], which overrides the config's μ (differentiable; the host
+functions of :class:`ShellModel` pass the config's μ this way, so that models differing only in
+μ > 0 share one compilation).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
 import equinox as eqx
 import jax
@@ -34,6 +44,7 @@ from ..physics import (
     ATMOSPHERIC_PRESSURE,
     adiabatic_gas_energy,
     barrier_energy,
+    friction_energy,
     isothermal_gas_energy,
     penalty_energy,
     plane_gap,
@@ -49,6 +60,22 @@ GAS_MODELS = ("prescribed", "isothermal", "adiabatic")
 # Barrier calibration: the IPC barrier's force at g = ĝ/10 is κ ĝ · 12.2 (φ(s) = 2(s−1)ln s +
 # (s−1)²/s at s = 0.1), so κ = p_ref A_v / (12.2 ĝ) makes a vertex pressed with p_ref sit at ĝ/10.
 _BARRIER_FORCE_AT_TENTH = 2.0 * 0.9 * np.log(10.0) + 0.81 / 0.1
+# Default friction slip tolerance ε = ĝ/100 (4 µm for a 0.13 m-radius ball, whose Indentation ĝ
+# is 0.4 mm). A sticking vertex creeps by up to ε per load step, so ε must sit well below the slip
+# friction is meant to stop: such a ball poked 2 cm slides its ground contact by only ~65 µm in
+# total, ~8 µm per continuation step. With ε = ĝ/10 the "sticking" creep (up to 8 steps × 40 µm)
+# exceeds that, and μ = 0.5 removed only a third of the friction effect; ĝ/100, ĝ/400 and ĝ/800
+# give the same slip, force and contact diameter to 5 digits (800 faces, μ = 0.5). The stick
+# stiffness 2μλ/ε (~1e4–1e5 N/m per loaded vertex) stays within a few tens of the barrier's, which
+# the sparse direct solve absorbs (Newton iterations per load step about double).
+FRICTION_SLIP_FRACTION = 0.01
+
+
+def _as_float(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,6 +86,12 @@ class ContactConfig:
     ``kind``: "barrier" (IPC log barrier, no penetration, surface stops within
     ``activation_distance`` ĝ [m] of the body) or "penalty" (quadratic; a vertex pressed by the
     reference pressure penetrates by ``activation_distance``).
+
+    ``friction`` μ [-] ≥ 0: Coulomb coefficient between the shell and the planes (0: frictionless,
+    the default; the indenter stays frictionless). ``slip_tolerance`` ε [m] > 0: slip below which a
+    vertex counts as sticking (None: ``FRICTION_SLIP_FRACTION`` × ``activation_distance``, see
+    :attr:`friction_slip_tolerance`). With μ = 0, ε is dropped so that every frictionless config
+    compares (and hashes, i.e. jit-keys) equal to the one without friction fields set.
     """
 
     indenter_radius: float | None = None
@@ -66,6 +99,36 @@ class ContactConfig:
     kind: str = "barrier"
     activation_distance: float = 2e-4
     reference_pressure: float = 1e3
+    friction: float = 0.0
+    slip_tolerance: float | None = None
+
+    def __post_init__(self):
+        mu = _as_float(self.friction)
+        if not (math.isfinite(mu) and mu >= 0):
+            raise InvalidInputError(
+                f"friction: the Coulomb coefficient μ must be a finite number ≥ 0, got {self.friction!r}; "
+                "use 0 for frictionless contact."
+            )
+        eps = None if self.slip_tolerance is None else _as_float(self.slip_tolerance)
+        if eps is not None and not (math.isfinite(eps) and eps > 0):
+            raise InvalidInputError(
+                f"slip_tolerance: must be a positive length in m, got {self.slip_tolerance!r}; use None for the "
+                f"default {FRICTION_SLIP_FRACTION} × activation_distance."
+            )
+        object.__setattr__(self, "friction", mu)
+        object.__setattr__(self, "slip_tolerance", None if mu == 0 else eps)
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether the plane contacts carry friction (μ > 0 and at least one plane)."""
+        return self.friction > 0 and bool(self.planes)
+
+    @property
+    def friction_slip_tolerance(self) -> float:
+        """Slip tolerance ε [m] of the friction mollifier (explicit or the default)."""
+        if self.slip_tolerance is not None:
+            return self.slip_tolerance
+        return FRICTION_SLIP_FRACTION * self.activation_distance
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,6 +216,61 @@ def plane_contact_energy(x, plane, geometry, config):
     return jnp.sum(_contact_potential(gap, k, config.contact))
 
 
+def plane_normal_forces(x, plane, geometry, config) -> Float[Array, " V"]:
+    """Normal contact force magnitude λ = −dφ/dgap [N] (≥ 0) of every vertex on one plane."""
+    k = _contact_stiffness(geometry, config.contact)
+    gap = plane_gap(x, jnp.asarray(plane[0]), jnp.asarray(plane[1]))
+    dphi = jax.vmap(jax.grad(_contact_potential), in_axes=(0, 0, None))(gap, k, config.contact)
+    return -dphi
+
+
+def _friction_data(params, config):
+    keys = ("friction_anchor", "friction_normal_force")
+    missing = [key for key in keys if key not in params]
+    if missing:
+        raise InvalidInputError(
+            f"params: friction μ = {config.contact.friction} needs {missing} (lagged vertex positions "
+            "(V, 3) [m] and normal forces (n_planes, V) [N]); Indentation sets them, or use μ = 0."
+        )
+    return params["friction_anchor"], params["friction_normal_force"]
+
+
+def _vertex_friction(y, anchor, lam, normal, mu, contact: ContactConfig):
+    """Friction potential [J] of vertex positions y (…, 3) on a plane of unit ``normal``."""
+    d = y - anchor
+    slip = d - (d @ normal)[..., None] * normal
+    return friction_energy(slip, lam, mu, contact.friction_slip_tolerance)
+
+
+_FRICTION_KEYS = ("friction_anchor", "friction_normal_force", "friction_coefficient")
+
+
+def _friction_coefficient(params, config):
+    return params.get("friction_coefficient", config.contact.friction)
+
+
+def _jit_config(config: ModelConfig) -> ModelConfig:
+    """``config`` with μ > 0 normalised to 1 (μ then travels in ``params``): the compile key."""
+    if not config.contact.has_friction:
+        return config
+    contact = dataclasses.replace(
+        config.contact, friction=1.0, slip_tolerance=config.contact.friction_slip_tolerance
+    )
+    return dataclasses.replace(config, contact=contact)
+
+
+def friction_potential(x, params, config) -> Float[Array, ""]:
+    """Lagged smoothed Coulomb friction energy [J] of all vertices on all planes (0 if μ = 0)."""
+    if not config.contact.has_friction:
+        return jnp.zeros(())
+    anchor, lam = _friction_data(params, config)
+    mu = _friction_coefficient(params, config)
+    e = jnp.zeros(())
+    for i, plane in enumerate(config.contact.planes):
+        e = e + jnp.sum(_vertex_friction(x, anchor, lam[i], jnp.asarray(plane[1]), mu, config.contact))
+    return e
+
+
 def elastic_energy(x, params, geometry):
     """Membrane + bending energy [J] of the whole shell."""
     p = x[geometry.stencil]
@@ -172,6 +290,8 @@ def total_energy(q, params, geometry: ShellGeometry, config: ModelConfig):
         e = e + sphere_contact_energy(x, c, geometry, config)
     for plane in config.contact.planes:
         e = e + plane_contact_energy(x, plane, geometry, config)
+    if config.contact.has_friction:
+        e = e + friction_potential(x, params, config)
     if config.force_control:
         e = e + params["indenter_force"] * c[2]
     if "nodal_forces" in params:
@@ -227,15 +347,49 @@ def _hessian_values(q, params, geometry, config, project, pattern):
 
         cc = jnp.broadcast_to(c, x.shape)
         blocks.append(jax.vmap(jax.hessian(pair))(jnp.concatenate([x, cc], axis=1), k))
-    for plane in config.contact.planes:
-        def single(y, kv, plane=plane):
+    friction = config.contact.has_friction
+    if friction:
+        anchor, lam = _friction_data(params, config)
+        mu = _friction_coefficient(params, config)
+    for i, plane in enumerate(config.contact.planes):
+        # The friction of a vertex on a plane involves only that vertex: it shares the plane's
+        # per-vertex 3×3 block (same sparsity pattern with or without friction).
+        def single(y, kv, y_hat, lam_v, plane=plane):
             gap = plane_gap(y, jnp.asarray(plane[0]), jnp.asarray(plane[1]))
-            return _contact_potential(gap, kv, config.contact)
+            e = _contact_potential(gap, kv, config.contact)
+            if friction:
+                e = e + _vertex_friction(y, y_hat, lam_v, jnp.asarray(plane[1]), mu, config.contact)
+            return e
 
-        blocks.append(jax.vmap(jax.hessian(single))(x, k))
+        y_hat = anchor if friction else x
+        lam_i = lam[i] if friction else jnp.zeros_like(k)
+        blocks.append(jax.vmap(jax.hessian(single))(x, k, y_hat, lam_i))
     if project:
         blocks = [jax.vmap(project_psd)(b) for b in blocks]
     return pattern.assemble_values(blocks)
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _plane_normal_forces(q, geometry, config):
+    x, _ = _split(q, config)
+    forces = [plane_normal_forces(x, plane, geometry, config) for plane in config.contact.planes]
+    return jnp.stack(forces) if forces else jnp.zeros((0, config.n_vertices))
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _friction_forces(q, params, config):
+    x, _ = _split(q, config)
+    if not config.contact.has_friction:
+        return jnp.zeros((len(config.contact.planes),) + x.shape)
+    anchor, lam = _friction_data(params, config)
+    mu = _friction_coefficient(params, config)
+    out = []
+    for i, plane in enumerate(config.contact.planes):
+        e = lambda y, i=i, plane=plane: jnp.sum(  # noqa: E731
+            _vertex_friction(y, anchor, lam[i], jnp.asarray(plane[1]), mu, config.contact)
+        )
+        out.append(-jax.grad(e)(x))
+    return jnp.stack(out)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
@@ -248,6 +402,15 @@ def _rank_one(q, params, geometry, config):
     return c2, jnp.concatenate([dvol, jnp.zeros(3)])
 
 
+def _check_config(config: ModelConfig) -> None:
+    if config.gas not in GAS_MODELS:
+        raise InvalidInputError(f"gas: unknown model {config.gas!r}; use one of {GAS_MODELS}.")
+    if config.contact.kind not in ("barrier", "penalty"):
+        raise InvalidInputError(
+            f"contact: unknown kind {config.contact.kind!r}; use 'barrier' or 'penalty'."
+        )
+
+
 class ShellModel:
     """A discrete shell on a closed mesh with gas, contacts and pins; Newton-ready.
 
@@ -257,14 +420,10 @@ class ShellModel:
     """
 
     def __init__(self, mesh: ShellMesh, rest_vertices, config: ModelConfig, fixed):
-        if config.gas not in GAS_MODELS:
-            raise InvalidInputError(f"gas: unknown model {config.gas!r}; use one of {GAS_MODELS}.")
-        if config.contact.kind not in ("barrier", "penalty"):
-            raise InvalidInputError(
-                f"contact: unknown kind {config.contact.kind!r}; use 'barrier' or 'penalty'."
-            )
+        _check_config(config)
         self.mesh = mesh
         self.config = config
+        self._jit_config = _jit_config(config)
         self.rest_vertices = np.asarray(rest_vertices, dtype=np.float64)
         self.geometry = make_geometry(mesh, self.rest_vertices)
         self.n_dofs = 3 * mesh.n_vertices + 3
@@ -288,7 +447,24 @@ class ShellModel:
 
     def with_config(self, config: ModelConfig, fixed=None) -> "ShellModel":
         """Same mesh and rest shape with another static setup (new pattern if contacts change)."""
-        return ShellModel(self.mesh, self.rest_vertices, config, ~self.free if fixed is None else fixed)
+        old = self.config.contact
+        new = config.contact
+        same_blocks = (
+            fixed is None
+            and config.n_vertices == self.config.n_vertices
+            and (old.indenter_radius is None) == (new.indenter_radius is None)
+            and len(old.planes) == len(new.planes)
+        )
+        if not same_blocks:
+            return ShellModel(self.mesh, self.rest_vertices, config, ~self.free if fixed is None else fixed)
+        # Same element families (e.g. only friction, gas or contact constants changed): keep the
+        # sparsity pattern (and the geometry), validate the new setup the same way.
+        _check_config(config)
+        other = object.__new__(ShellModel)
+        other.__dict__.update(self.__dict__)
+        other.config = config
+        other._jit_config = _jit_config(config)
+        return other
 
     # --- JAX functions (traceable) -------------------------------------------------------------
     def energy(self, q, params):
@@ -307,27 +483,50 @@ class ShellModel:
         """Current gas gauge pressure [Pa]."""
         return gauge_pressure(q, params, self.geometry, self.config)
 
+    def plane_normal_forces(self, q) -> np.ndarray:
+        """(n_planes, V) normal contact force magnitudes λ = −dφ/dgap [N] at state q (host)."""
+        return np.asarray(_plane_normal_forces(jnp.asarray(q), self.geometry, self._jit_config))
+
+    def friction_forces(self, q, params) -> np.ndarray:
+        """(n_planes, V, 3) friction forces −∂D/∂x_v [N] of each plane on each vertex (host; 0
+        without friction). Tangential to the plane, magnitude μ λ f₁(‖slip‖) ≤ μ λ."""
+        return np.asarray(_friction_forces(jnp.asarray(q), self._host_params(params), self._jit_config))
+
     # --- host functions for Newton --------------------------------------------------------------
+    def _host_params(self, params):
+        """``params`` as arrays, with the config's μ as a traced value (see :func:`_jit_config`).
+
+        Without friction the friction entries are dropped: they are unused, and leaving them in
+        would change the pytree and so recompile the frictionless functions.
+        """
+        params = jax.tree_util.tree_map(jnp.asarray, params)
+        if not self.config.contact.has_friction:
+            return {k: v for k, v in params.items() if k not in _FRICTION_KEYS}
+        if "friction_coefficient" not in params:
+            params = {**params, "friction_coefficient": jnp.asarray(self.config.contact.friction)}
+        return params
+
     def host_energy(self, q, params) -> float:
-        return float(_search_energy(jnp.asarray(q), params, self.geometry, self.config))
+        return float(_search_energy(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config))
 
     def host_gradient(self, q, params) -> np.ndarray:
-        return np.asarray(_gradient(jnp.asarray(q), params, self.geometry, self.config))
+        return np.asarray(_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config))
 
     def host_hessian(self, q, params, project: bool = False):
         """(CSR Hessian with pins folded in, rank-one part or None)."""
         q = jnp.asarray(q)
-        data = _hessian_values(q, params, self.geometry, self.config, bool(project), self.pattern)
+        params = self._host_params(params)
+        data = _hessian_values(q, params, self.geometry, self._jit_config, bool(project), self.pattern)
         mat = self.pattern.matrix(data)
         rank_one = None
         if self.config.gas != "prescribed":
-            c2, u = _rank_one(q, params, self.geometry, self.config)
+            c2, u = _rank_one(q, params, self.geometry, self._jit_config)
             rank_one = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank_one
 
     def solve(self, q0, params, *, atol: float, max_iter: int = 60, name: str = "shell Newton"):
         """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]; NewtonResult."""
-        params = jax.tree_util.tree_map(jnp.asarray, params)
+        params = self._host_params(params)
         return newton(
             lambda q: self.host_energy(q, params),
             lambda q: self.host_gradient(q, params),

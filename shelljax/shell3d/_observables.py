@@ -14,6 +14,12 @@ indenter on the vertical axis through the top vertex:
 * ``d``: sunken depth, rim height minus top-vertex height.
 * ``pressure`` (gauge) and ``volume`` of the gas; ``ground_reaction``: vertical force of the
   ground on the shell (equals F plus the weight at equilibrium).
+* ``friction_force`` [N]: magnitude of the ground's total tangential friction force on the shell,
+  ‖Σ_v f_v‖ with f_v = −∂D/∂x_v (≈ 0 by symmetry for a centred poke; 0 without friction).
+* ``friction_inward`` [N]: total radial friction force on the ground-contact vertices (gap below the
+  activation distance), counted positive *inward*: −Σ_contact f_v · r̂_v, r̂_v the horizontal unit
+  vector from the axis to the vertex. Positive when the ground holds the contact patch back from
+  spreading outward, negative when it holds it from sliding inward; 0 without friction.
 
 The rim radius is refined by a parabola through the ring heights around the highest vertex, the
 contact diameter is vertex-resolved (error up to one edge length near the contact edge).
@@ -52,6 +58,13 @@ def observables(sim, q, params) -> dict:
     gaps = np.asarray(plane_gap(x, jnp.zeros(3), jnp.array([0.0, 0.0, 1.0])))
     touching = gaps < model.config.contact.activation_distance
     d_l = 2.0 * float(r[touching].max()) if touching.any() else 0.0
+    friction_force, friction_inward = 0.0, 0.0
+    if model.config.contact.has_friction:
+        f_fric = model.friction_forces(qj, params).sum(axis=0)  # (V, 3) over all planes
+        friction_force = float(np.linalg.norm(f_fric.sum(axis=0)))
+        radial = np.stack([xn[:, 0] - axis[0], xn[:, 1] - axis[1]], axis=1)
+        radial = radial / np.maximum(r, 1e-300)[:, None]  # r = 0 (on the axis): no radial direction
+        friction_inward = -float(np.sum(np.sum(f_fric[touching, :2] * radial[touching], axis=1)))
     out.update(
         depth=float(sim.touch_center[2] - np.asarray(c)[2]),
         w0=float(sim.top_height - top_z),
@@ -62,6 +75,8 @@ def observables(sim, q, params) -> dict:
         pressure=float(model.gauge_pressure(qj, params)),
         volume=float(model.volume(qj)),
         ground_reaction=ground,
+        friction_force=friction_force,
+        friction_inward=friction_inward,
     )
     return out
 
