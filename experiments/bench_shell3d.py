@@ -51,8 +51,8 @@ def run_one(n_triangles: int, repeats: int) -> dict:
         warm.append(time.perf_counter() - t0)
     model = sim.model
     q = jnp.asarray(states[-1].q)
-    params = sim._params_for(states[-1].q)
-    args = (q, params, model.geometry, model.config, False, model.pattern)
+    params = model._host_params(sim._params_for(states[-1].q))
+    args = (q, params, model.geometry, model._jit_config, model.pattern)
     _hessian_values(*args).block_until_ready()
     reps, t0 = 5, time.perf_counter()
     for _ in range(reps):

@@ -134,40 +134,10 @@ def _start_watchdog(limit: float):
     threading.Thread(target=watch, daemon=True).start()
 
 
-def _avoid_projected_hessian():
-    """Do the 3D Newton's per-element PSD projection (eigenvalue clamp) in NumPy on the host.
-
-    Why: the first projected-Hessian evaluation (needed once the exact Hessian stops giving a
-    descent direction, around the wrinkling onset) never returned on this machine: XLA's CPU
-    executable of the vmapped ``jnp.linalg.eigh`` waited forever for completion (gdb:
-    CpuPjRtRawLoadedExecutable::Execute → BlockUntilReady, every worker idle), deterministically at
-    the same force level. The same clamp via ``jax.pure_callback`` + ``numpy.linalg.eigh`` gives the
-    identical matrix (the engine's own function, evaluated elsewhere).
-    """
-    import jax
-
-    from shelljax.shell3d import _model
-
-    if getattr(_model.project_psd, "_virtual_patch", False):
-        return
-
-    def clamp(a):
-        a = 0.5 * (a + np.swapaxes(a, -1, -2))
-        w, v = np.linalg.eigh(a)
-        return (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
-
-    def project_psd(h):
-        return jax.pure_callback(clamp, jax.ShapeDtypeStruct(h.shape, h.dtype), h, vmap_method="broadcast_all")
-
-    project_psd._virtual_patch = True
-    _model.project_psd = project_psd
-
-
 def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None) -> dict:
     """3D force curve of one parameter set; returns a JSON-ready dict (SI)."""
     import shelljax.shell3d as s3
 
-    _avoid_projected_hessian()
     pg, e, h = params
     ball = s3.ball(RADIUS, h, n_triangles, pole_refinement=pole_refinement)
     t0 = time.perf_counter()

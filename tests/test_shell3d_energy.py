@@ -147,13 +147,3 @@ def test_element_energy_derivatives_match_central_differences():
         e = jnp.zeros(18).at[i].set(eps)
         np.testing.assert_allclose(g[i], (f(y + e) - f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-9 * float(jnp.abs(g).max()))
         np.testing.assert_allclose(hess[:, i], (grad_f(y + e) - grad_f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-7 * float(jnp.abs(hess).max()))
-
-
-def test_psd_projection():
-    rng = np.random.default_rng(5)
-    m = rng.normal(size=(18, 18))
-    m = m + m.T
-    p = s3.project_psd(jnp.asarray(m))
-    assert np.linalg.eigvalsh(np.asarray(p)).min() > -1e-10
-    spd = m @ m.T
-    np.testing.assert_allclose(s3.project_psd(jnp.asarray(spd)), spd, rtol=1e-9, atol=1e-9)

@@ -29,6 +29,28 @@ def test_pattern_assembles_the_dense_sum_and_folds_pins():
     np.testing.assert_allclose(mat, dense, rtol=1e-13, atol=1e-13)
 
 
+def test_projected_assembly_sums_clamped_element_matrices():
+    """Independent computation: clamp each symmetric element matrix through its own eigen-
+    decomposition (np.linalg.eig, unsorted, general solver) and sum densely."""
+    rng = np.random.default_rng(7)
+    n = 9
+    blocks = [np.stack([rng.permutation(n)[:4] for _ in range(6)])]
+    values = rng.normal(size=(6, 4, 4))
+    values = values + np.swapaxes(values, 1, 2)  # symmetric, indefinite
+    pattern = SparsityPattern.from_elements(blocks, n, np.ones(n, dtype=bool))
+    mat = pattern.matrix(pattern.assemble_projected([values])).toarray()
+    dense = np.zeros((n, n))
+    for b, v in zip(blocks[0], values):
+        w, vec = np.linalg.eig(v)
+        dense[np.ix_(b, b)] += np.real(vec @ np.diag(np.maximum(np.real(w), 0.0)) @ vec.T)
+    np.testing.assert_allclose(mat, dense, rtol=1e-12, atol=1e-12)
+    assert np.linalg.eigvalsh(mat).min() > -1e-12  # a sum of PSD matrices is PSD
+    # PSD elements pass through unchanged
+    spd = np.einsum("eij,ekj->eik", values, values)
+    exact = pattern.matrix(pattern.assemble_values([jnp.asarray(spd)])).toarray()
+    np.testing.assert_allclose(pattern.matrix(pattern.assemble_projected([spd])).toarray(), exact, rtol=1e-10, atol=1e-9)
+
+
 def test_sherman_morrison_matches_dense_solve():
     import scipy.sparse as sp
 

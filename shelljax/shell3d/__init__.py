@@ -11,7 +11,7 @@ Quick start (SI units)::
     state.export("poked.obj"); state.plot("poked.png")
 """
 
-from ._energy import face_energy, fundamental_forms, project_psd, rest_geometry
+from ._energy import face_energy, fundamental_forms, rest_geometry
 from ._indent import Indentation, IndentationState, Shell, ball, load
 from ._mesh import ShellMesh, signed_volume, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins

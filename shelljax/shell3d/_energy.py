@@ -108,9 +108,3 @@ def rest_geometry(rest_stencils: Float[Array, "F 6 3"]):
     a, b = jax.vmap(fundamental_forms)(rest_stencils)
     area = 0.5 * jnp.sqrt(a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] ** 2)
     return a, b, area
-
-
-def project_psd(h: Float[Array, "k k"]) -> Float[Array, "k k"]:
-    """Nearest positive semi-definite matrix (eigenvalues clamped at 0) of a symmetric matrix."""
-    w, v = jnp.linalg.eigh(0.5 * (h + h.T))
-    return (v * jnp.maximum(w, 0.0)) @ v.T

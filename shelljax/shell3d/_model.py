@@ -52,7 +52,7 @@ from ..physics import (
     sphere_gap,
 )
 from ..solve import SparseSolver, SparsityPattern, newton
-from ._energy import face_energy, face_volume, project_psd, rest_geometry
+from ._energy import face_energy, face_volume, rest_geometry
 from ._mesh import ShellMesh
 
 GRAVITY = 9.81  # [m/s²]
@@ -324,8 +324,9 @@ def _search_energy(q, params, geometry, config):
 _gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))
 
 
-@functools.partial(jax.jit, static_argnames=("config", "project", "pattern"))
-def _hessian_values(q, params, geometry, config, project, pattern):
+def _element_hessians(q, params, geometry, config):
+    """Per-element Hessian blocks [N/m], one (n_e, k, k) array per element family (the order of
+    the families of :class:`ShellModel`'s sparsity pattern)."""
     x, c = _split(q, config)
     vol = volume(x, geometry.stencil)
     pressure = -jax.grad(gas_energy)(vol, params, config)
@@ -364,9 +365,16 @@ def _hessian_values(q, params, geometry, config, project, pattern):
         y_hat = anchor if friction else x
         lam_i = lam[i] if friction else jnp.zeros_like(k)
         blocks.append(jax.vmap(jax.hessian(single))(x, k, y_hat, lam_i))
-    if project:
-        blocks = [jax.vmap(project_psd)(b) for b in blocks]
-    return pattern.assemble_values(blocks)
+    return blocks
+
+
+_element_hessians_jit = jax.jit(_element_hessians, static_argnames=("config",))
+
+
+@functools.partial(jax.jit, static_argnames=("config", "pattern"))
+def _hessian_values(q, params, geometry, config, pattern):
+    """CSR values of the exact Hessian [N/m], element blocks summed inside one XLA program."""
+    return pattern.assemble_values(_element_hessians(q, params, geometry, config))
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
@@ -516,7 +524,13 @@ class ShellModel:
         """(CSR Hessian with pins folded in, rank-one part or None)."""
         q = jnp.asarray(q)
         params = self._host_params(params)
-        data = _hessian_values(q, params, self.geometry, self._jit_config, bool(project), self.pattern)
+        if project:
+            # The eigenvalue clamp runs in NumPy: a vmapped jnp.linalg.eigh (a LAPACK custom call)
+            # inside this XLA:CPU program never returned on 2-core machines (see docs/shell3d.md).
+            blocks = _element_hessians_jit(q, params, self.geometry, self._jit_config)
+            data = self.pattern.assemble_projected([np.asarray(b) for b in blocks])
+        else:
+            data = _hessian_values(q, params, self.geometry, self._jit_config, self.pattern)
         mat = self.pattern.matrix(data)
         rank_one = None
         if self.config.gas != "prescribed":

@@ -90,6 +90,21 @@ class SparsityPattern:
             data = data.at[m].add(values.reshape(-1))
         return data
 
+    def assemble_projected(self, element_matrices) -> np.ndarray:
+        """CSR values (host) of the sum of the nearest positive semi-definite element matrices.
+
+        Each symmetric element matrix (one (n_e, k, k) NumPy array per family) has its negative
+        eigenvalues clamped to zero before the sum, so the assembled matrix is PSD: Newton's
+        fallback when the exact Hessian gives no descent direction.
+        """
+        data = np.zeros(self.nnz)
+        for m, values in zip(self.maps, element_matrices):
+            sym = 0.5 * (values + np.swapaxes(values, -1, -2))
+            w, v = np.linalg.eigh(sym)
+            clamped = (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
+            data += np.bincount(np.asarray(m), weights=clamped.ravel(), minlength=self.nnz)
+        return data
+
     def matrix(self, data) -> sp.csr_matrix:
         """Host CSR matrix with the fixed dofs folded in (zero rows/cols, unit diagonal)."""
         data = np.array(data, dtype=np.float64)
