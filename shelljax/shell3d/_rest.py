@@ -106,6 +106,12 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     radius = 3.0 * v_scan / area
     p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
     strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    if p["gauge_pressure"] > 0:
+        # A force residual δ [N] per vertex moves the volume by about 3 × strain × δ / (p A_v)
+        # (relative), with p A_v the vertex's pressure load. The caller's atol scales with the
+        # object's size, not with A_v, so on fine meshes (80k faces) or with a loose tolerance the
+        # forward solves stopped before the volume could reach rtol and the fixed point stalled.
+        atol = min(atol, rtol * p["gauge_pressure"] * area / len(scan))
     bottom = int(np.argmin(scan[:, 2]))
     anchor = scan[bottom].copy()  # the pinned bottom vertex stays put
     scale = 1.0 / (1.0 + strain)
