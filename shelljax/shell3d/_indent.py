@@ -39,11 +39,11 @@ from ..physics import ATMOSPHERIC_PRESSURE
 from ..solve import continuation, implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from ._observables import observables as _observables
+from ._rest import solve_rest_scale, solve_rest_shape
 
 #: Lagging stops once the normal forces change by less than this fraction of their largest value.
 FRICTION_LAG_TOLERANCE = 0.01
-from ._observables import observables as _observables
-from ._rest import solve_rest_scale, solve_rest_shape
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
