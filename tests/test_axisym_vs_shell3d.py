@@ -47,6 +47,6 @@ def test_geometric_contact_diameter_includes_the_lift_off_ring(both):
     # Vertices within ĝ of the ground include the whole pressure-carrying disc plus the ring where
     # the shell lifts off by less than ĝ; that ring is narrower than √(2 R ĝ) per side because the
     # meridian bends more sharply than 1/R at the contact edge, and vertex resolution adds up to
-    # about one edge there (≈ 7 mm at 2000 faces). Measured: +10 mm.
+    # about one edge there (the 7 mm allowance: a few mm on this pole-refined mesh). Measured: +10 mm.
     activation = 0.4e-3  # ĝ [m] of a 0.13 m ball (docs/shell3d.md)
     assert obs3["D_l"] < obs3["D_l_mesh"] < obs3["D_l"] + 2 * np.sqrt(2 * R * activation) + 0.007
