@@ -75,7 +75,7 @@ def hessian_at(y, cfg: Config, p: Params):
 
 
 def _add_ground_springs(hess: StructuredHessian, springs):
-    """H + diag(springs) on the nodes' z unknowns; ``springs`` (n,) [N/m], may be negative."""
+    """H + diag(springs) on the nodes' z unknowns; ``springs`` (n,) [N/m]."""
     m = hess.diag.shape[0]
     extra = jnp.zeros((m, 4)).at[:, 1].set(springs[0::2]).at[:, 3].set(springs[1::2])
     diag = hess.diag + extra[:, :, None] * jnp.eye(4)[None]
