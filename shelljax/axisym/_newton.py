@@ -76,9 +76,8 @@ def hessian_at(y, cfg: Config, p: Params):
 
 def _add_ground_springs(hess: StructuredHessian, springs):
     """H + diag(springs) on the nodes' z unknowns; ``springs`` (n,) [N/m]."""
-    m = hess.diag.shape[0]
-    extra = jnp.zeros((m, 4)).at[:, 1].set(springs[0::2]).at[:, 3].set(springs[1::2])
-    diag = hess.diag + extra[:, :, None] * jnp.eye(4)[None]
+    on_z = jnp.stack([jnp.zeros_like(springs), springs], axis=-1).reshape(hess.diag.shape[:2])
+    diag = hess.diag + on_z[:, :, None] * jnp.eye(4)[None]
     return eqx.tree_at(lambda h: h.diag, hess, diag)
 
 
