@@ -1,8 +1,11 @@
 """Benchmark of the simulation-based estimators (issue 4, item 6): table + JSON.
 
 * fit: wall time of ``fit_session`` after compilation, median over repeats;
-* bayes: wall time to reach ≥ 1000 effective samples (emcee, vectorized log posterior), after
-  compilation, and the effective-sample rate.
+* bayes: wall time of ``sample_posterior`` after compilation (with the default surrogate: the
+  least-squares fit, the surrogate's engine solves and check, and the chain until its
+  autocorrelation criterion holds), its effective samples and the time to 1000 effective samples;
+* the exact-engine log posterior: seconds per walker evaluation, and what a chain of the same
+  length would take through the engine (an extrapolation, labelled as such).
 
 Usage: python experiments/bench_estimators.py [--repeats 5] [--model axisym] [--out bench_estimators.json]
 """
@@ -17,11 +20,34 @@ import statistics
 import time
 import warnings
 
+import numpy as np
+
 import shelljax
 from shelljax.config import bundled_data_dir
-from shelljax.estimate import ConvergenceWarning, fit_session, sample_posterior
+from shelljax.estimate import ConvergenceWarning, estimate_session, fit_session, sample_posterior
 from shelljax.estimate._forward import forward_model_for
 from shelljax.session import load_session
+
+
+def _exact_seconds_per_evaluation(session, model, walkers, repeats=3):
+    """Median seconds per walker of the exact (engine) vectorized log posterior, after compiling."""
+    from shelljax.estimate._bayes import _LogPosterior
+    from shelljax.estimate._problem import build_problem
+
+    start = estimate_session(session, bootstrap_samples=0)
+    problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
+                            start_modulus=start.young_modulus.value)  # fmt: skip
+    log_prob = _LogPosterior(problem)
+    rng = np.random.default_rng(0)
+    coords = np.concatenate([1e-2 * rng.standard_normal((walkers, problem.ndim)),
+                             np.full((walkers, 1), np.log(problem.depth_noise))], axis=1)  # fmt: skip
+    log_prob(coords)
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        log_prob(coords)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times) / walkers
 
 
 def main(argv=None):
@@ -29,7 +55,8 @@ def main(argv=None):
     parser.add_argument("--session", default=str(bundled_data_dir() / "sessions" / "pezzi.toml"))
     parser.add_argument("--model", default="axisym", choices=["axisym", "scaling"])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--walkers", type=int, default=16)
+    parser.add_argument("--walkers", type=int, default=32)
+    parser.add_argument("--no-surrogate", action="store_true", help="bayes through the engine itself")
     parser.add_argument("--out", default="bench_estimators.json")
     args = parser.parse_args(argv)
     session = load_session(args.session)
@@ -48,7 +75,8 @@ def main(argv=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             t = time.perf_counter()
-            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=20_000, progress=False)
+            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=20_000, progress=False,
+                                    surrogate=not args.no_surrogate)
             return time.perf_counter() - t, post
 
     bayes_first, _ = posterior()
@@ -56,6 +84,9 @@ def main(argv=None):
     times = [t for t, _ in runs]
     ess = [p.effective_samples for _, p in runs]
     rate = [e / t for t, e in zip(times, ess)]
+    steps = statistics.median(p.n_steps for _, p in runs)
+    exact_per_eval = _exact_seconds_per_evaluation(session, model, args.walkers) if args.model == "axisym" else None
+    surrogate = runs[-1][1].surrogate
     rows = [
         ("fit, first call (compile + solve)", f"{fit_first:.2f} s"),
         (f"fit after compilation (median of {args.repeats})", f"{statistics.median(fit_times):.3f} s"),
@@ -63,7 +94,19 @@ def main(argv=None):
         (f"bayes after compilation (median of {len(runs)})", f"{statistics.median(times):.1f} s"),
         ("bayes effective samples (median)", f"{statistics.median(ess):.0f}"),
         ("bayes time to 1000 effective samples", f"{1000 / statistics.median(rate):.1f} s"),
+        ("bayes chain length (median)", f"{steps:.0f} steps x {args.walkers} walkers"),
     ]
+    if surrogate is not None:
+        rows += [
+            ("surrogate: engine curves solved", f"{surrogate['curves']} + {surrogate['check_points']} checks"),
+            ("surrogate: max depth error / sigma_w", f"{surrogate['depth_error_in_noise']:.3f}"),
+            ("surrogate: max wrinkle-count error", f"{surrogate['wrinkle_count_error']:.3f}"),
+        ]
+    if exact_per_eval is not None:
+        rows += [
+            ("exact engine: s per walker evaluation", f"{exact_per_eval * 1e3:.1f} ms"),
+            ("exact engine: same chain (extrapolated)", f"{exact_per_eval * steps * args.walkers:.0f} s"),
+        ]
     print(f"session {session.source.name}, model {args.model}, machine: {platform.platform()}, {os.cpu_count()} CPUs")
     width = max(len(r[0]) for r in rows)
     for name, value in rows:
@@ -73,6 +116,7 @@ def main(argv=None):
         "fit_first_s": fit_first, "fit_s": fit_times, "fit_median_s": statistics.median(fit_times),
         "bayes_first_s": bayes_first, "bayes_s": times, "bayes_effective_samples": ess,
         "bayes_seconds_per_1000_effective": 1000 / statistics.median(rate), "walkers": args.walkers,
+        "bayes_steps_median": steps, "surrogate": surrogate, "exact_seconds_per_walker_evaluation": exact_per_eval,
         "shelljax_version": shelljax.__version__,
     }  # fmt: skip
     with open(args.out, "w") as handle:

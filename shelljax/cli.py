@@ -44,10 +44,11 @@ def _cmd_estimate(args) -> int:
             out.update(chi2=result.chi2, dof=result.dof, iterations=result.steps)
         else:
             result = sample_posterior(session, model, nuisance=nuisance, n_walkers=args.walkers,
-                                      max_steps=args.max_steps, backend_path=args.chain, seed=args.seed)  # fmt: skip
+                                      max_steps=args.max_steps, backend_path=args.chain, seed=args.seed,
+                                      surrogate=not args.no_surrogate)  # fmt: skip
             estimates = result.estimates
             out.update(converged=result.converged, steps=result.n_steps, effective_samples=result.effective_samples,
-                       failed_forward_solves=result.failed_forward)  # fmt: skip
+                       failed_forward_solves=result.failed_forward, surrogate=result.surrogate)  # fmt: skip
         out["forward_model"] = args.model
     out["estimates"] = {k: v.to_dict() for k, v in estimates.items()}
     if args.json:
@@ -98,6 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--walkers", type=int, default=32, help="bayes: emcee walkers")
     est.add_argument("--max-steps", type=int, default=20_000, help="bayes: most MCMC steps")
     est.add_argument("--chain", default=None, help="bayes: HDF5 file for the chain (resumed if it exists)")
+    est.add_argument("--no-surrogate", action="store_true",
+                     help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
     est.set_defaults(func=_cmd_estimate)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")

@@ -21,7 +21,7 @@ GAS_MODELS = ("prescribed", "isothermal")
 NUISANCE = ("depth_offset", "force_gain")
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
 _ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "nuisance",
-                   "bayes_walkers", "bayes_max_steps"}  # fmt: skip
+                   "bayes_walkers", "bayes_max_steps", "bayes_surrogate"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
 _OUTPUT_KEYS = {"figures"}
@@ -40,7 +40,8 @@ class ExperimentConfig:
     paper's 0.64); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
     ``figures`` (write PNGs); ``output_dir`` where run directories are created; for ``fit`` and
     ``bayes``: ``forward_model`` ("axisym" or "scaling"), ``gas`` ("prescribed" or "isothermal"),
-    ``nuisance`` parameters, ``bayes_walkers`` and ``bayes_max_steps``.
+    ``nuisance`` parameters, ``bayes_walkers``, ``bayes_max_steps`` and ``bayes_surrogate``
+    (sample the axisym engine through its checked Chebyshev surrogate; default true).
     """
 
     source: Path
@@ -61,6 +62,7 @@ class ExperimentConfig:
     nuisance: tuple[str, ...] = ()
     bayes_walkers: int = 32
     bayes_max_steps: int = 20_000
+    bayes_surrogate: bool = True
 
 
 def _fail(path: Path, field: str, problem: str, fix: str) -> InvalidInputError:
@@ -147,6 +149,9 @@ def load_config(path: str | Path) -> ExperimentConfig:
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise _fail(path, f"estimators.{key}", f"{value!r} is not an integer >= {minimum}", f"e.g. {default}")
         counts[key] = value
+    surrogate = estimators.get("bayes_surrogate", True)
+    if not isinstance(surrogate, bool):
+        raise _fail(path, "estimators.bayes_surrogate", f"{surrogate!r} is not true/false", "write true or false")
 
     calibration = _table(path, data, "calibration", _CALIBRATION_KEYS)
     calibration_sessions = resolve_paths(path, "calibration.sessions", calibration["sessions"]) if "sessions" in calibration else ()
@@ -178,5 +183,5 @@ def load_config(path: str | Path) -> ExperimentConfig:
         through_origin=through_origin, calibration_sessions=calibration_sessions,
         k_s=None if k_s is None else float(k_s), k_s_std=None if k_s_std is None else float(k_s_std),
         sessions=sessions, figures=figures, forward_model=forward_model, gas=gas,
-        nuisance=tuple(nuisance), **counts,
+        nuisance=tuple(nuisance), bayes_surrogate=surrogate, **counts,
     )  # fmt: skip

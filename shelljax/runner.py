@@ -20,6 +20,7 @@ from .estimate import (
     PAPER_KS_STD,
     ConvergenceWarning,
     Estimate,
+    SurrogateWarning,
     calibrate_ks,
     estimate_session,
     fit_session,
@@ -90,14 +91,17 @@ def _simulation_method(method: str, session: Session, config: ExperimentConfig, 
         chains.mkdir(exist_ok=True)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
+            warnings.simplefilter("always", SurrogateWarning)
             post = sample_posterior(session, model, nuisance=config.nuisance, n_walkers=config.bayes_walkers,
                                     max_steps=config.bayes_max_steps, backend_path=chains / f"{session.source.stem}.h5",
-                                    seed=config.seed)  # fmt: skip
+                                    seed=config.seed, surrogate=config.bayes_surrogate)  # fmt: skip
         block = {name: {**est.to_dict(), "ci68": list(post.intervals68[name])} for name, est in post.estimates.items()}
         block.update(converged=post.converged, steps=post.n_steps, effective_samples=post.effective_samples,
                      autocorr_time={"value": post.autocorr_time, "unit": "steps"},
                      failed_forward_solves=post.failed_forward, acceptance_fraction=post.acceptance_fraction,
                      chain=str((chains / f"{session.source.stem}.h5").relative_to(run_dir)))  # fmt: skip
+        if post.surrogate is not None:
+            block["surrogate"] = post.surrogate
         if caught:
             block["warning"] = str(caught[-1].message)
             for w in caught:

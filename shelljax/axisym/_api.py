@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._errors import InvalidInputError, NoConvergenceError
+from .._parallel import map_batch
 from ._model import Setup, curve_single
 from ._wrinkles import wrinkle_count
 
@@ -126,7 +127,7 @@ def _check(params, forces, radius):
 
 
 def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
-                       chunk: int = 4, **setup_kwargs) -> CurveResult:
+                       chunk: int = 4, workers: int | None = None, **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
@@ -137,8 +138,10 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
 
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
     ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: batch members
-    solved together (vmapped) per sequential chunk; 4 is fastest on 2 CPU cores. For use
-    inside jit/vmap/grad call :func:`indentation_curves_raw`.
+    solved together (vmapped) per sequential chunk; 4 is fastest on 2 CPU cores. ``workers``:
+    host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
+    GPU; see ``shelljax._parallel``). For use inside jit/vmap/grad call
+    :func:`indentation_curves_raw`.
     """
     p, f = _check(params, forces, radius)
     setup = Setup(radius=float(radius), **setup_kwargs)
@@ -146,7 +149,7 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
         raise InvalidInputError(
             f"indentation_curves: gas={setup.gas!r}; use 'prescribed' or 'isothermal'."
         )
-    res = indentation_curves_raw(p, f, setup, chunk)
+    res = map_batch(lambda rows: indentation_curves_raw(rows, f, setup, chunk), p, workers)
     if raise_on_failure:
         conv = np.asarray(res.converged)
         if not conv.all():

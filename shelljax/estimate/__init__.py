@@ -16,7 +16,8 @@ from ._closed_form import (
     regress_force_on_depth,
     tau,
 )
-from ._bayes import ConvergenceWarning, PosteriorResult, sample_posterior
+from ._bayes import ConvergenceWarning, PosteriorResult, SurrogateWarning, sample_posterior
 from ._fit import FitResult, fit_session
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
 from ._result import Estimate
+from ._surrogate import SurrogateForwardModel, build_surrogate, surrogate_error

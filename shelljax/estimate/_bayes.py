@@ -19,16 +19,20 @@ import warnings
 from pathlib import Path
 
 import emcee
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError
+from .._parallel import map_batch
 from ..session import Session
 from ._closed_form import estimate_session
-from ._forward import AbstractForwardModel
+from ._fit import fit_session
+from ._forward import AbstractForwardModel, AxisymForwardModel
 from ._problem import InverseProblem, build_problem
+from ._surrogate import DEFAULT_NODES, SURROGATE_AXES, build_surrogate, surrogate_error
 from ._result import Estimate
 
 _UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
@@ -37,6 +41,16 @@ _UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radi
 
 class ConvergenceWarning(UserWarning):
     """An MCMC chain stopped before its autocorrelation-time criterion was met."""
+
+
+class SurrogateWarning(UserWarning):
+    """The surrogate of the forward model differs from it by more than SURROGATE_TOLERANCE."""
+
+
+SURROGATE_SIGMAS = 6.0  # half-width of the surrogate box in Laplace standard deviations
+SURROGATE_MIN_HALF_WIDTH = 0.03  # [-] in log space: never narrower than ±3 %
+SURROGATE_CHECKS = 8  # engine solves that check the surrogate
+SURROGATE_TOLERANCE = 0.2  # of σ_w (depth) and of one wrinkle (count)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,7 +62,11 @@ class PosteriorResult:
     ``samples``: flat physical samples per name after burn-in and thinning; ``autocorr_time``
     τ [steps] per unknown; ``n_steps``; ``effective_samples`` = walkers · (steps − burn-in) / max τ;
     ``converged``; ``failed_forward``: walker proposals whose forward solve failed;
-    ``acceptance_fraction``: mean over walkers; ``chain``: the raw chain (steps, walkers, dim).
+    ``acceptance_fraction``: mean over walkers; ``chain``: the raw chain (steps, walkers, dim);
+    ``surrogate``: None when the model itself was sampled, else how the Chebyshev surrogate was
+    built and its largest error against the engine (``depth_error`` [m] at the recorded forces,
+    ``depth_error_in_noise`` [-] relative to σ_w, ``wrinkle_count_error`` [-], ``curves`` solved,
+    ``box``: log-space half-widths [-]).
     """
 
     estimates: dict[str, Estimate]
@@ -62,6 +80,7 @@ class PosteriorResult:
     acceptance_fraction: float
     chain: np.ndarray
     names: tuple[str, ...]
+    surrogate: dict | None = None
 
 
 @jax.jit
@@ -78,16 +97,19 @@ class _LogPosterior:
     """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior.
 
     The compiled function is module-level and takes the problem as an argument, so a second
-    session of the same shape reuses the compilation.
+    session of the same shape reuses the compilation. For the engine model the walkers are split
+    over the CPU cores (``shelljax._parallel``); cheap models (surrogate, scaling law) stay on one
+    thread, where a thread pool would cost more than it saves.
     """
 
     def __init__(self, problem: InverseProblem):
         self.problem = problem
         self.failed_forward = 0
         self.evaluations = 0
+        self.workers = None if isinstance(problem.model, AxisymForwardModel) else 1
 
     def __call__(self, coords: np.ndarray) -> np.ndarray:
-        log_p, converged = _batched_log_posterior(self.problem, jnp.asarray(coords))
+        log_p, converged = map_batch(lambda c: _batched_log_posterior(self.problem, c), coords, self.workers)
         self.failed_forward += int(np.sum(~np.asarray(converged)))
         self.evaluations += coords.shape[0]
         return np.asarray(log_p)
@@ -98,6 +120,39 @@ def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np
     out = {name: np.asarray(phys[name]) for name in problem.names}
     out["depth_noise"] = np.exp(flat[:, -1])
     return out
+
+
+def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nodes, progress):
+    """(surrogate model, u at the fit, report) for ``sample_posterior``."""
+    fit = fit_session(session, model, nuisance=nuisance)
+    u_std = np.sqrt(np.diag(fit.covariance))
+    center = {k: float(v) for k, v in problem.physical(jnp.asarray(fit.u)).items()}
+    half_width = {name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
+                  for i, name in enumerate(problem.names) if name in SURROGATE_AXES}  # fmt: skip
+    built = build_surrogate(model, center, half_width, nodes, progress=progress)
+    # check points: Laplace draws, pulled into the box
+    rng = np.random.default_rng(0)
+    draws = rng.multivariate_normal(fit.u, fit.covariance, size=SURROGATE_CHECKS)
+    phys = _batched_physical(problem, jnp.asarray(draws))
+    points = np.stack([np.asarray(phys[name]) for name in SURROGATE_AXES], axis=1)
+    points = np.exp(np.clip(np.log(points), np.asarray(built.log_lower), np.asarray(built.log_upper)))
+    error = surrogate_error(built, model, points, np.asarray(problem.force))
+    report = {
+        "depth_error": {"value": error["depth"], "unit": "m"},
+        "depth_error_in_noise": error["depth"] / problem.depth_noise,
+        "wrinkle_count_error": error["wrinkle_count"],
+        "check_points": SURROGATE_CHECKS,
+        "curves": int(np.prod(built.coefficients.shape[:4])),
+        "box": {"half_width_log": half_width, "center": center},
+    }  # fmt: skip
+    if error["depth"] > SURROGATE_TOLERANCE * problem.depth_noise or error["wrinkle_count"] > SURROGATE_TOLERANCE:
+        warnings.warn(
+            f"{session.source}: the surrogate differs from the engine by up to {error['depth'] * 1e3:.3g} mm in depth "
+            f"({error['depth'] / problem.depth_noise:.2f} σ_w) and {error['wrinkle_count']:.2g} wrinkles; "
+            "Fix: more surrogate_nodes, or surrogate=False",
+            SurrogateWarning, stacklevel=3,
+        )  # fmt: skip
+    return built, np.asarray(fit.u), report
 
 
 def sample_posterior(
@@ -114,17 +169,31 @@ def sample_posterior(
     backend_path: str | Path | None = None,
     seed: int = 0,
     progress: bool | None = None,
+    surrogate: bool = True,
+    surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES,
 ) -> PosteriorResult:
     """Sample the posterior of ``session``'s unknowns under ``model``.
 
     ``backend_path``: HDF5 file for the chain; if it already holds a chain for this problem, it
     is resumed. ``progress``: None shows a bar on terminals only. Warns with
     :class:`ConvergenceWarning` when ``max_steps`` is reached before the τ criterion holds.
+    ``surrogate`` (axisymmetric engine models only): sample through a Chebyshev surrogate of the
+    engine (``surrogate_nodes`` per axis P_g, E, h, R) built in a box of ±``SURROGATE_SIGMAS``
+    Laplace standard deviations around the least-squares fit, started there; its error against
+    the engine is in ``PosteriorResult.surrogate``, and a :class:`SurrogateWarning` says when it
+    exceeds ``SURROGATE_TOLERANCE`` of the depth noise. False samples the engine itself (about
+    an hour on 2 CPU cores).
     """
     start = estimate_session(session, bootstrap_samples=0)
     start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
     problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
                             start_modulus=start_modulus, nuisance=nuisance)  # fmt: skip
+    u_start = np.zeros(problem.ndim)
+    surrogate_info = None
+    if surrogate and isinstance(model, AxisymForwardModel):
+        model, u_start, surrogate_info = _surrogate_around_fit(session, model, problem, nuisance,
+                                                               surrogate_nodes, progress)  # fmt: skip
+        problem = eqx.tree_at(lambda q: q.model, problem, model)
     ndim = problem.ndim + 1  # + log σ_w
     if n_walkers < 2 * ndim:
         raise InvalidInputError(f"n_walkers = {n_walkers} is too few for {ndim} unknowns. Fix: use at least {2 * ndim}")
@@ -143,8 +212,9 @@ def sample_posterior(
             backend.reset(n_walkers, ndim)
     rng = np.random.default_rng(seed)
     if backend is None or backend.iteration == 0:  # a fresh chain
-        # Start in a small ball around the closed form (u = 0) and the scatter-based σ_w.
-        center = np.concatenate([np.zeros(problem.ndim), [math.log(problem.depth_noise)]])
+        # Start in a small ball around the closed form (u = 0), or the fit when a surrogate is
+        # used (its box is centred there), and the scatter-based σ_w.
+        center = np.concatenate([u_start, [math.log(problem.depth_noise)]])
         initial = center + 1e-3 * rng.standard_normal((n_walkers, ndim))
         if not np.all(np.isfinite(log_prob(initial))):
             raise InvalidInputError(
@@ -197,7 +267,7 @@ def sample_posterior(
         autocorr_time=dict(zip(names, map(float, tau))), n_steps=int(done),
         effective_samples=float(n_walkers * (done - burn) / np.max(tau)), converged=converged,
         failed_forward=log_prob.failed_forward, acceptance_fraction=float(np.mean(sampler.acceptance_fraction)),
-        chain=sampler.get_chain(), names=names,
+        chain=sampler.get_chain(), names=names, surrogate=surrogate_info,
     )  # fmt: skip
 
 

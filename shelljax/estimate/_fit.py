@@ -34,7 +34,8 @@ class FitResult:
     thickness [m], radius [m], depth_offset [m], force_gain [-]); ``covariance``: Cov(u) of the
     unknowns in the problem's scaled space; ``chi2`` and ``dof`` of the whitened residuals;
     ``steps``: LM iterations; ``predicted_depth`` [m] at the recorded forces and
-    ``predicted_wrinkle_count`` at the optimum; ``problem``: the inverse problem solved.
+    ``predicted_wrinkle_count`` at the optimum; ``problem``: the inverse problem solved;
+    ``u``: the optimum in the problem's scaled space.
     """
 
     estimates: dict[str, Estimate]
@@ -45,6 +46,7 @@ class FitResult:
     predicted_depth: np.ndarray
     predicted_wrinkle_count: float
     problem: InverseProblem
+    u: np.ndarray
 
 
 @jax.jit
@@ -115,7 +117,7 @@ def fit_session(
     return FitResult(
         estimates=estimates, covariance=covariance, chi2=chi2, dof=int(residual.size - problem.ndim),
         steps=int(steps), predicted_depth=np.asarray(out["depth"]), predicted_wrinkle_count=float(out["count"]),
-        problem=problem,
+        problem=problem, u=np.asarray(u),
     )  # fmt: skip
 
 
