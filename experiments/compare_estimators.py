@@ -69,6 +69,10 @@ def main(argv=None):
                     help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)")
     ap.add_argument("--bayes-realisations", type=int, default=1,
                     help="how many realisations per curve and noise level get bayes (from the first)")
+    ap.add_argument("--bayes-nuisance", nargs="*", default=[], choices=["depth_offset", "force_gain"],
+                    help="nuisance parameters of bayes (force_gain: a 5 %% prior on the force scale, which "
+                         "also absorbs a proportional model discrepancy)")
+    ap.add_argument("--bayes-label", default="bayes", help="method name of this bayes variant in the table")
     ap.add_argument("--walkers", type=int, default=32)
     ap.add_argument("--bayes-steps", type=int, default=20_000)
     ap.add_argument("--skip-fit", action="store_true")
@@ -116,7 +120,8 @@ def main(argv=None):
             row = dict(truth)
             # fit and bayes results are reused from the .jsonl; the closed form is recomputed
             # (instant), so a k_s calibrated on a grown set of curves applies to every session.
-            row.update({m: previous[m] for m in ("fit", "bayes") if m in previous})
+            row.update({m: v for m, v in previous.items()
+                        if isinstance(v, dict) and not m.startswith("closed_form")})
             true = {q: truth[q] for q in QUANTITIES}
             for label, ks in (() if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None))):
                 t0 = time.perf_counter()
@@ -135,20 +140,21 @@ def main(argv=None):
                 except (NoConvergenceError, InvalidInputError) as err:
                     row["fit"] = {"error": str(err)[:300]}
                 row["fit"]["seconds"] = time.perf_counter() - t0
-            if "bayes" not in row and truth["realisation"] < args.bayes_realisations and any(abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise):
+            if args.bayes_label not in row and truth["realisation"] < args.bayes_realisations and any(abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise):
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", ConvergenceWarning)
                     try:
                         post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=args.bayes_steps,
-                                                min_steps=min(1000, args.bayes_steps), seed=k, progress=False)  # fmt: skip
-                        row["bayes"] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
-                        row["bayes"].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
+                                                min_steps=min(1000, args.bayes_steps), seed=k, progress=False,
+                                                nuisance=tuple(args.bayes_nuisance))  # fmt: skip
+                        row[args.bayes_label] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
+                        row[args.bayes_label].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
                                             converged=post.converged, failed_forward=post.failed_forward,
                                             surrogate=post.surrogate)  # fmt: skip
                     except (NoConvergenceError, InvalidInputError) as err:
-                        row["bayes"] = {"error": str(err)[:300]}
-                row["bayes"]["seconds"] = time.perf_counter() - t0
+                        row[args.bayes_label] = {"error": str(err)[:300]}
+                row[args.bayes_label]["seconds"] = time.perf_counter() - t0
             if row.keys() - previous.keys():
                 log.write(json.dumps(row) + "\n")
                 log.flush()
@@ -160,7 +166,8 @@ def main(argv=None):
             if r["name"] in done:
                 done[r["name"]].update({m: v for m, v in r.items() if isinstance(v, dict) and m not in done[r["name"]]})
     rows = [done[t["name"]] for t, _ in sessions if t["name"] in done]
-    methods = ("closed_form_calibrated", "closed_form_paper", "fit", "bayes")
+    methods = ("closed_form_calibrated", "closed_form_paper", "fit")
+    methods += tuple(sorted({m for r in rows for m in r if m.startswith("bayes") and isinstance(r[m], dict)}))
     summary = {m: summarise(rows, m) for m in methods}
     print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
           f"wrinkle law {args.wrinkle_law}; wall {time.perf_counter() - t_start:.0f} s")  # fmt: skip

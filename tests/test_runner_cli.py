@@ -85,6 +85,8 @@ def test_cli_reports_bad_input_without_traceback(tmp_path, capsys):
         ('colour = 1\n[sessions]\npaths = []\n', r"field 'colour': unknown key"),
         ('[estimators]\nbootstrap_samples = -1\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n', r"bootstrap_samples"),
         ('name = "x"\n', r"sessions.paths'.*missing"),
+        ('[estimators]\nbayes_surrogate = "yes"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
+         r"estimators.bayes_surrogate'.*not true/false"),
     ],
 )
 def test_bad_config_is_named(tmp_path, text, pattern):

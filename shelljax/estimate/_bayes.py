@@ -124,7 +124,9 @@ def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np
 
 def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nodes, progress):
     """(surrogate model, u at the fit, report) for ``sample_posterior``."""
-    fit = fit_session(session, model, nuisance=nuisance)
+    # The fit only places the box: its last iterate will do when LM stops short of its tolerances
+    # (seen once in 60 sessions, 0.6 % from the truth, on the kinks of the force interpolation).
+    fit = fit_session(session, model, nuisance=nuisance, raise_on_failure=False)
     u_std = np.sqrt(np.diag(fit.covariance))
     center = {k: float(v) for k, v in problem.physical(jnp.asarray(fit.u)).items()}
     half_width = {name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
@@ -142,6 +144,7 @@ def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nod
         "depth_error_in_noise": error["depth"] / problem.depth_noise,
         "wrinkle_count_error": error["wrinkle_count"],
         "check_points": SURROGATE_CHECKS,
+        "fit_converged": fit.converged,
         "curves": int(np.prod(built.coefficients.shape[:4])),
         "box": {"half_width_log": half_width, "center": center},
     }  # fmt: skip

@@ -35,7 +35,8 @@ class FitResult:
     unknowns in the problem's scaled space; ``chi2`` and ``dof`` of the whitened residuals;
     ``steps``: LM iterations; ``predicted_depth`` [m] at the recorded forces and
     ``predicted_wrinkle_count`` at the optimum; ``problem``: the inverse problem solved;
-    ``u``: the optimum in the problem's scaled space.
+    ``u``: the optimum in the problem's scaled space; ``converged``: False only when
+    ``fit_session(..., raise_on_failure=False)`` returned the last Levenberg–Marquardt iterate.
     """
 
     estimates: dict[str, Estimate]
@@ -47,6 +48,7 @@ class FitResult:
     predicted_wrinkle_count: float
     problem: InverseProblem
     u: np.ndarray
+    converged: bool = True
 
 
 @jax.jit
@@ -73,12 +75,18 @@ def fit_session(
     depth_noise: float | None = None,
     rtol: float = 1e-8,
     atol: float = 1e-8,
+    raise_on_failure: bool = True,
 ) -> FitResult:
     """Fit P_g [Pa] and E [Pa] (and nuisances) of ``session`` through ``model``.
 
+    ``raise_on_failure=False`` returns the last iterate (``converged = False``) when
+    Levenberg–Marquardt stops without meeting its tolerances but the forward model is finite
+    there (bayes uses it only to place its surrogate).
+
     Raises:
-        NoConvergenceError: when Levenberg–Marquardt stops without converging, or the forward
-            model fails at the optimum; the message says which and where.
+        NoConvergenceError: when Levenberg–Marquardt stops without converging (unless
+            ``raise_on_failure`` is False), or the forward model fails at the optimum; the
+            message says which and where.
     """
     start = estimate_session(session, bootstrap_samples=0)
     start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
@@ -93,12 +101,14 @@ def fit_session(
         )
     out = _solve(problem, u0, rtol, atol)
     u, steps, residual = out["u"], out["steps"], out["residual"]
-    if not bool(out["ok"]) or not bool(jnp.all(jnp.isfinite(residual))):
+    finite = bool(jnp.all(jnp.isfinite(residual)))
+    converged = bool(out["ok"]) and finite
+    if not converged and (raise_on_failure or not finite):
         phys = {k: float(v) for k, v in problem.physical(u).items()}
         raise NoConvergenceError(
             f"{session.source}: Levenberg-Marquardt did not converge in {int(steps)} steps "
             f"(last P_g = {phys['gauge_pressure']:.4g} Pa, E = {phys['young_modulus']:.4g} Pa, "
-            f"forward model finite: {bool(jnp.all(jnp.isfinite(residual)))}); try nuisance=() or "
+            f"forward model finite: {finite}); try nuisance=() or "
             "check the data for outliers"
         )
     jac = np.asarray(out["jacobian"])
@@ -117,7 +127,7 @@ def fit_session(
     return FitResult(
         estimates=estimates, covariance=covariance, chi2=chi2, dof=int(residual.size - problem.ndim),
         steps=int(steps), predicted_depth=np.asarray(out["depth"]), predicted_wrinkle_count=float(out["count"]),
-        problem=problem, u=np.asarray(u),
+        problem=problem, u=np.asarray(u), converged=converged,
     )  # fmt: skip
 
 
