@@ -1,15 +1,15 @@
 """A Chebyshev surrogate of the axisymmetric forward model, for MCMC.
 
 A posterior needs ~10⁵ forward curves; the engine costs ~15–30 ms a curve on 2 CPU cores, so an
-exact chain takes an hour. The posterior, though, lives in a small box around the least-squares
+exact chain takes about half an hour (docs/fit-and-bayes.md, benchmark). The posterior, though, lives in a small box around the least-squares
 optimum, where the model is smooth in (log P_g, log E, log h, log R). ``build_surrogate`` solves
 the engine once on a tensor grid of Chebyshev nodes in that box (a few hundred curves, batched
 over the CPU cores) and interpolates every output — the depth at each force of the model's force
 grid and the wrinkle count — by a tensor-product Chebyshev series. ``surrogate_error`` checks it
 against the engine at random points of the box; ``sample_posterior`` reports that error next to
 the intervals. Outside the box the surrogate reports a failed forward solve (log p = −∞), so
-the box truncates the posterior: it is made wide enough (``half_width_sigmas`` Laplace standard
-deviations) that the truncation is far in the tails.
+the box truncates the posterior: ``sample_posterior`` makes it wide enough (``SURROGATE_SIGMAS``
+Laplace standard deviations) that the truncation is far in the tails.
 """
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel,
     """Largest |surrogate − engine| over ``points`` (m, 4) of physical (P_g, E, h, R).
 
     Returns ``depth`` [m] (at ``forces`` [N]) and ``wrinkle_count`` [-]. The engine is evaluated
-    one point at a time through the same code path the fit uses.
+    through the engine model's own call (the fit's code path), vmapped over the points.
     """
     forces = jnp.asarray(forces)
     exact = jax.jit(jax.vmap(lambda q: model(q[0], q[1], q[2], q[3], forces)))(jnp.asarray(points))
