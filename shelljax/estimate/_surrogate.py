@@ -156,6 +156,12 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
     return surrogate_from_values(values, lower, upper, grid, model.poisson_ratio, model.wrinkle_law)
 
 
+@jax.jit
+def _evaluate(model: AbstractForwardModel, points, forces):
+    # module-level, the model an argument: one compilation per model structure, not per session
+    return jax.vmap(lambda q: model(q[0], q[1], q[2], q[3], forces))(points)
+
+
 def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel, points: np.ndarray,
                     forces: np.ndarray) -> dict[str, float]:  # fmt: skip
     """Largest |surrogate − engine| over ``points`` (m, 4) of physical (P_g, E, h, R).
@@ -163,9 +169,8 @@ def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel,
     Returns ``depth`` [m] (at ``forces`` [N]) and ``wrinkle_count`` [-]. The engine is evaluated
     through the engine model's own call (the fit's code path), vmapped over the points.
     """
-    forces = jnp.asarray(forces)
-    exact = jax.jit(jax.vmap(lambda q: model(q[0], q[1], q[2], q[3], forces)))(jnp.asarray(points))
-    approx = jax.jit(jax.vmap(lambda q: surrogate(q[0], q[1], q[2], q[3], forces)))(jnp.asarray(points))
+    points, forces = jnp.asarray(points), jnp.asarray(forces)
+    exact, approx = _evaluate(model, points, forces), _evaluate(surrogate, points, forces)
     if not bool(jnp.all(exact.converged)):
         raise NoConvergenceError("surrogate check: the engine failed at a check point inside the box")
     return {
