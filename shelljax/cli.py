@@ -35,7 +35,7 @@ def _cmd_estimate(args) -> int:
         estimates = result.estimates()
         out["bootstrap"] = {k: v.to_dict() for k, v in result.bootstrap.items()}
     else:
-        options = {"gas": args.gas} if args.model == "axisym" else {}
+        options = {"gas": args.gas, "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
         model = forward_model_for(session, args.model, **options)
         nuisance = tuple(args.nuisance or ())
         if args.method == "fit":
@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--model", choices=["axisym", "scaling"], default="axisym",
                      help="forward model of fit/bayes (default: the axisymmetric shell engine)")
     est.add_argument("--gas", choices=["prescribed", "isothermal"], default="prescribed", help="gas model of the axisym engine")
+    est.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="mechanics",
+                     help="wrinkle count of the axisym model: the engine's (mechanics) or n = 1.33 tau^1/2 (scaling)")
     est.add_argument("--nuisance", nargs="*", choices=["depth_offset", "force_gain"], help="extra fitted parameters")
     est.add_argument("--walkers", type=int, default=32, help="bayes: emcee walkers")
     est.add_argument("--max-steps", type=int, default=20_000, help="bayes: most MCMC steps")

@@ -18,9 +18,10 @@ from ._errors import InvalidInputError
 METHODS = ("closed-form", "fit", "bayes")
 FORWARD_MODELS = ("axisym", "scaling")
 GAS_MODELS = ("prescribed", "isothermal")
+WRINKLE_LAWS = ("mechanics", "scaling")  # as shelljax.estimate._forward (kept JAX-free here)
 NUISANCE = ("depth_offset", "force_gain")
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
-_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "nuisance",
+_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
                    "bayes_walkers", "bayes_max_steps", "bayes_surrogate"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
@@ -40,6 +41,7 @@ class ExperimentConfig:
     paper's 0.64); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
     ``figures`` (write PNGs); ``output_dir`` where run directories are created; for ``fit`` and
     ``bayes``: ``forward_model`` ("axisym" or "scaling"), ``gas`` ("prescribed" or "isothermal"),
+    ``wrinkle_law`` of the axisym model ("mechanics" or "scaling"),
     ``nuisance`` parameters, ``bayes_walkers``, ``bayes_max_steps`` and ``bayes_surrogate``
     (sample the axisym engine through its checked Chebyshev surrogate; default true).
     """
@@ -59,6 +61,7 @@ class ExperimentConfig:
     figures: bool
     forward_model: str = "axisym"
     gas: str = "prescribed"
+    wrinkle_law: str = "mechanics"
     nuisance: tuple[str, ...] = ()
     bayes_walkers: int = 32
     bayes_max_steps: int = 20_000
@@ -139,6 +142,10 @@ def load_config(path: str | Path) -> ExperimentConfig:
     gas = estimators.get("gas", "prescribed")
     if gas not in GAS_MODELS:
         raise _fail(path, "estimators.gas", f"unknown gas model {gas!r}", f"available: {', '.join(GAS_MODELS)}")
+    wrinkle_law = estimators.get("wrinkle_law", "mechanics")
+    if wrinkle_law not in WRINKLE_LAWS:
+        raise _fail(path, "estimators.wrinkle_law", f"unknown wrinkle law {wrinkle_law!r}",
+                    f"available: {', '.join(WRINKLE_LAWS)}")  # fmt: skip
     nuisance = estimators.get("nuisance", [])
     if not isinstance(nuisance, list) or any(n not in NUISANCE for n in nuisance):
         raise _fail(path, "estimators.nuisance", f"{nuisance!r} is not a list of known nuisance parameters",
@@ -182,6 +189,6 @@ def load_config(path: str | Path) -> ExperimentConfig:
         output_dir=Path(output_dir), seed=seed, methods=tuple(methods), bootstrap_samples=boot,
         through_origin=through_origin, calibration_sessions=calibration_sessions,
         k_s=None if k_s is None else float(k_s), k_s_std=None if k_s_std is None else float(k_s_std),
-        sessions=sessions, figures=figures, forward_model=forward_model, gas=gas,
+        sessions=sessions, figures=figures, forward_model=forward_model, gas=gas, wrinkle_law=wrinkle_law,
         nuisance=tuple(nuisance), bayes_surrogate=surrogate, **counts,
     )  # fmt: skip

@@ -78,7 +78,8 @@ def _simulation_method(method: str, session: Session, config: ExperimentConfig, 
     A failure is recorded in the block (``error``) and reported, not raised: one bad session must
     not lose the others' results.
     """
-    model = forward_model_for(session, config.forward_model, **({"gas": config.gas} if config.forward_model == "axisym" else {}))
+    options = {"gas": config.gas, "wrinkle_law": config.wrinkle_law} if config.forward_model == "axisym" else {}
+    model = forward_model_for(session, config.forward_model, **options)
     try:
         if method == "fit":
             result = fit_session(session, model, nuisance=config.nuisance)

@@ -85,6 +85,8 @@ def test_cli_reports_bad_input_without_traceback(tmp_path, capsys):
         ('colour = 1\n[sessions]\npaths = []\n', r"field 'colour': unknown key"),
         ('[estimators]\nbootstrap_samples = -1\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n', r"bootstrap_samples"),
         ('name = "x"\n', r"sessions.paths'.*missing"),
+        ('[estimators]\nwrinkle_law = "folklore"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
+         r"estimators.wrinkle_law'.*unknown wrinkle law 'folklore'"),
         ('[estimators]\nbayes_surrogate = "yes"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
          r"estimators.bayes_surrogate'.*not true/false"),
     ],
@@ -102,3 +104,12 @@ def test_console_script_entry_point_runs():
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "inflatable-hammer" in proc.stdout
+
+
+def test_config_carries_the_forward_model_options(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[estimators]\nmethods = ["fit"]\ngas = "isothermal"\nwrinkle_law = "scaling"\nbayes_surrogate = false\n'
+                    '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')  # fmt: skip
+    config = load_config(path)
+    assert (config.gas, config.wrinkle_law, config.bayes_surrogate) == ("isothermal", "scaling", False)
+    assert load_config(PAPER_CONFIG).wrinkle_law == "mechanics"  # the default
