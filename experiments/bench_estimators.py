@@ -25,7 +25,7 @@ import numpy as np
 import shelljax
 from shelljax.config import bundled_data_dir
 from shelljax.estimate import ConvergenceWarning, estimate_session, fit_session, sample_posterior
-from shelljax.estimate._forward import forward_model_for
+from shelljax.estimate import forward_model_for
 from shelljax.session import load_session
 
 

@@ -1,13 +1,20 @@
 """Regenerate the bundled virtual measurement sessions in shelljax/data/sessions/.
 
-These are NOT real measurements. Until the shell FEM produces virtual experiments, they come from
-the paper's own closed-form model with realistic noise (documented in shelljax/data/README.md):
+These are NOT real measurements. They are virtual experiments of the axisymmetric Neo-Hookean
+shell engine (``shelljax.axisym``) at a finer mesh (201 meridian elements) than the estimators'
+forward model uses (101), with the sealed (isothermal) gas of each object's volume (the mesh's, for
+mesh sessions), and with realistic measurement noise (documented in shelljax/data/README.md):
 
-    depth = F / (π k_s R P_g) · (1 + ε) + δ_trial,   ε ~ N(0, 4 %),  δ_trial ~ N(0, 0.5 mm)
-    depth rounded to 0.5 mm (ruler resolution); force = level + N(0, 0.05 N), rounded to 0.01 N
+    forces per trial: level + N(0, 0.05 N), 0.01 N resolution, levels 5–20 N in 2.5 N steps
+    depth = w0_engine(F) · (1 + ε) + δ_trial,  ε ~ N(0, 2 %),  δ_trial ~ N(0, 0.5 mm)
+    depth rounded to 0.5 mm (ruler resolution)
     wrinkles per trial n = round(1.33 τ^½ + N(0, 0.5)),  τ = P_g R² / √(E h B)
 
-with a per-object "true" k_s near the paper's 0.64 (objects differ a little, as the paper observed).
+w0_engine is the local dimple depth (the paper's −w(0)) of the engine's force-controlled curve
+through the trial's own forces. The notes give the truth and the engine's noise-free
+k_s = s / (π R P_g), s the slope of the closed form's regression F = s w(0) + c. The engine's mechanical wrinkle count is zero for the yoga and
+beach balls at 5–20 N (before the wrinkling onset, docs/axisym.md), so the counts come from
+Vella et al.'s law, which the estimators then use too (``wrinkle_law = "scaling"``).
 Run:  python experiments/make_bundled_data.py
 """
 
@@ -23,14 +30,16 @@ DATA = Path(__file__).resolve().parents[1] / "shelljax" / "data"
 SESSIONS = DATA / "sessions"
 FORCE_LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)  # [N], paper Section 4.1
 N_TRIALS = 3
+N_ELEMENTS = 201  # the estimators' forward model uses the engine's default of 101
+POISSON = 0.4
 
-# name: radius [m] (None: from mesh), thickness [m], E [Pa], true k_s, Poisson, mass [kg]
+# name: radius [m] (None: from mesh), thickness [m], E [Pa], mass [kg]
 OBJECTS = {
-    "pezzi-ball": dict(radius=0.13, thickness=0.9e-3, young_modulus=2.34e6, k_s=0.62, mass=0.80),
-    "yoga-ball": dict(radius=0.325, thickness=2.0e-3, young_modulus=1.34e6, k_s=0.66, mass=1.10),
-    "beach-ball": dict(radius=0.25, thickness=0.25e-3, young_modulus=4.10e6, k_s=0.63, mass=0.12,
+    "pezzi-ball": dict(radius=0.13, thickness=0.9e-3, young_modulus=2.34e6, mass=0.80),
+    "yoga-ball": dict(radius=0.325, thickness=2.0e-3, young_modulus=1.34e6, mass=1.10),
+    "beach-ball": dict(radius=0.25, thickness=0.25e-3, young_modulus=4.10e6, mass=0.12,
                        mesh="../meshes/beach_ball.ply", poke_point=[0.0, 0.0, 0.25]),
-    "inflatable-hammer": dict(radius=None, thickness=0.3e-3, young_modulus=53.98e6, k_s=0.64, mass=0.09,
+    "inflatable-hammer": dict(radius=None, thickness=0.3e-3, young_modulus=53.98e6, mass=0.09,
                               mesh="../meshes/hammer.stl", poke_point=None),
 }
 
@@ -41,35 +50,57 @@ def _hammer_geometry():
     return _primitives.HAMMER_POKE_POINT, _primitives.HAMMER_HEAD_RADIUS
 
 
+def _mesh_volume_ratio(mesh_file: str, radius: float) -> float:
+    """Enclosed volume of the bundled mesh over 4/3 π R³ [-]: the sealed gas of a non-ball."""
+    from shelljax.geometry import enclosed_volume, load_mesh
+
+    return enclosed_volume(load_mesh(SESSIONS / mesh_file)) / (4.0 / 3.0 * math.pi * radius**3)
+
+
+def engine_depths(gauge_pressure, obj, radius, forces, gas_volume_ratio):
+    """Noise-free local dimple depths w0 [m] of the engine at increasing ``forces`` [N]."""
+    from shelljax.axisym import indentation_curves
+
+    params = np.array([gauge_pressure, obj["young_modulus"], obj["thickness"], POISSON])
+    curve = indentation_curves(params, np.asarray(forces), radius=radius, n_elements=N_ELEMENTS,
+                               gas="isothermal", gas_volume_ratio=gas_volume_ratio, workers=1)  # fmt: skip
+    return np.asarray(curve.w0[0])
+
+
 def make_session(rng, name, slug, gauge_pressure, *, manometer: bool, role: str, inline: bool = False):
     obj = dict(OBJECTS[name])
     radius = obj["radius"]
     geometry: dict = {}
+    volume_ratio = 1.0
     if "mesh" in obj:
         poke = obj["poke_point"]
         if name == "inflatable-hammer":
             poke, radius = _hammer_geometry()
+        volume_ratio = _mesh_volume_ratio(obj["mesh"], radius)
         geometry = {"mesh": obj["mesh"], "poke_point": [float(v) for v in poke], "length_unit": "m"}
     else:
         geometry = {"radius": radius, "radius_std": 0.02 * radius, "length_unit": "m"}
-    nu = 0.4
-    bending = obj["young_modulus"] * obj["thickness"] ** 3 / (12 * (1 - nu**2))
+    bending = obj["young_modulus"] * obj["thickness"] ** 3 / (12 * (1 - POISSON**2))
     tau = gauge_pressure * radius**2 / math.sqrt(obj["young_modulus"] * obj["thickness"] * bending)
-    rows, counts = [], []
+    rows, counts, slopes = [], [], []
     for trial in range(1, N_TRIALS + 1):
         offset = rng.normal(0.0, 0.5e-3)
-        for level in FORCE_LEVELS:
-            force = round(level + rng.normal(0.0, 0.05), 2)
-            depth = force / (math.pi * obj["k_s"] * radius * gauge_pressure) * (1 + rng.normal(0, 0.04)) + offset
-            rows.append((trial, force, round(depth * 2e3) / 2))  # mm, 0.5 mm resolution
+        forces = np.round(FORCE_LEVELS + rng.normal(0.0, 0.05, FORCE_LEVELS.size), 2)
+        depths = engine_depths(gauge_pressure, obj, radius, forces, volume_ratio)
+        slopes.append(np.polyfit(depths, forces, 1)[0])  # the closed form's regression F = s w + c [N/m]
+        for force, depth in zip(forces, depths * (1 + rng.normal(0, 0.02, forces.size)) + offset):
+            rows.append((trial, float(force), round(depth * 2e3) / 2))  # mm, 0.5 mm resolution
         counts.append(int(round(1.33 * math.sqrt(tau) + rng.normal(0.0, 0.5))))
+    k_s = float(np.mean(slopes)) / (math.pi * radius * gauge_pressure)
     doc: dict = {
         "schema_version": 1,
         "object": name,
-        "notes": (f"VIRTUAL session ({role}) generated by experiments/make_bundled_data.py from the "
-                  f"closed-form model: true P_g = {gauge_pressure:.1f} Pa, E = {obj['young_modulus']:.4g} Pa, "
-                  f"k_s = {obj['k_s']}, tau = {tau:.1f}"),
-        "poisson_ratio": nu,
+        "notes": (f"VIRTUAL session ({role}) generated by experiments/make_bundled_data.py with the "
+                  f"axisymmetric shell engine ({N_ELEMENTS} elements, sealed isothermal gas, gas volume "
+                  f"{volume_ratio:.3f} x 4/3 pi R^3): true P_g = {gauge_pressure:.1f} Pa, "
+                  f"E = {obj['young_modulus']:.4g} Pa, h = {obj['thickness']:.4g} m, R = {radius:.4g} m; "
+                  f"tau = {tau:.1f}, noise-free k_s = {k_s:.3f}"),
+        "poisson_ratio": POISSON,
         "mass": obj["mass"],
     }
     if manometer:

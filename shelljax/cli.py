@@ -11,16 +11,16 @@ from ._errors import ShelljaxError
 
 
 def _cmd_run(args) -> int:
-    from .runner import run_experiment
+    from .runner import run_experiment, summary_table
 
     run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False)
+    print(summary_table(json.loads((run_dir / "results.json").read_text())))
     print(f"results: {run_dir / 'results.json'}")
     return 0
 
 
 def _cmd_estimate(args) -> int:
-    from .estimate import Estimate, estimate_session, fit_session, sample_posterior
-    from .estimate._forward import forward_model_for
+    from .estimate import Estimate, estimate_session, fit_session, forward_model_for, sample_posterior
     from .session import load_session
 
     session = load_session(args.session)

@@ -24,9 +24,9 @@ from .estimate import (
     calibrate_ks,
     estimate_session,
     fit_session,
+    forward_model_for,
     sample_posterior,
 )
-from .estimate._forward import forward_model_for
 from .session import Session, file_sha256, load_session
 
 
@@ -217,3 +217,36 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
             results["summary_figure"] = "figures/estimates.png"
     (run_dir / "results.json").write_text(json.dumps(results, indent=2))
     return run_dir
+
+
+def _cell(block: dict, quantity: str, scale: float) -> str:
+    if quantity not in block:
+        return "failed" if "error" in block else ""
+    est = block[quantity]
+    return f"{est['value'] / scale:.4g} ± {est['std'] / scale:.2g}"
+
+
+def summary_table(results: dict) -> str:
+    """Plain-text table of P_g [kPa] and E [MPa] (value ± std) per session and method, side by side.
+
+    ``results``: the dict written to ``results.json``. Sessions used in the k_s calibration are
+    left out (their pressures are known); the manometer column shows held-out truths.
+    """
+    methods = list(results["config"]["methods"])
+    header = ["session", "manometer P_g [kPa]"] + [f"P_g {m} [kPa]" for m in methods] + [f"E {m} [MPa]" for m in methods]
+    rows = []
+    for entry in results["sessions"]:
+        if entry["used_in_calibration"]:
+            continue
+        manometer = entry["inputs"].get("manometer_gauge_pressure")
+        row = [Path(entry["session"]).stem, f"{manometer['value'] / 1e3:.4g}" if manometer else ""]
+        blocks = [entry["estimates"].get(m, {}) for m in methods]
+        row += [_cell(b, "gauge_pressure", 1e3) for b in blocks] + [_cell(b, "young_modulus", 1e6) for b in blocks]
+        rows.append(row)
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in [header, *rows]]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    k_s = results["k_s"]
+    lines.append(f"closed form with k_s = {k_s['value']:.3g} ± {k_s['std']:.2g} ({k_s['method']}); "
+                 "fit/bayes need no k_s; failures are explained in results.json")  # fmt: skip
+    return "\n".join(lines)

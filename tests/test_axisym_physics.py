@@ -93,3 +93,24 @@ def test_onset_of_compressive_hoop_stress_at_w0_minus_2_52():
     assert onset is not None, "hoop stress never became compressive"
     # Vella et al. 2011: W(0) ≈ −2.52 (we report the depth, positive); measured 2.511 (201 el.)
     assert abs(onset / 2.52 - 1.0) < 0.03
+
+
+def test_sealed_gas_of_another_volume_loses_the_volume_the_wall_sweeps():
+    # An object whose poke region is a sphere of volume V_ref but whose gas fills ratio·V_ref:
+    # Boyle's law for that gas after the wall sweeps ΔV = V − V_ref, computed independently.
+    from shelljax.axisym._energy import Config, Params, gauge_pressure_at
+    from shelljax.physics import isothermal_gauge_pressure
+
+    v_ref, p0 = 9.2e-3, 1300.0
+    fields = dict.fromkeys(Params.__dataclass_fields__, 1.0) | dict(gauge_pressure=p0, reference_volume=v_ref)
+    params = Params(**{k: np.float64(v) for k, v in fields.items()})
+    for ratio in (1.0, 2.94):
+        cfg = Config(theta=(0.0, 1.0), gas="isothermal", gas_volume_ratio=ratio)
+        for swept in (-5e-4, 0.0, 2e-4):
+            expected = isothermal_gauge_pressure(ratio * v_ref + swept, ratio * v_ref, p0)
+            # exact arithmetic up to round-off of the 1e5 Pa absolute pressure
+            assert float(gauge_pressure_at(v_ref + swept, cfg, params)) == pytest.approx(float(expected), rel=1e-12, abs=1e-8)
+    # a larger gas volume stiffens less: the same swept volume raises the pressure less
+    small = gauge_pressure_at(v_ref - 5e-4, Config(theta=(0.0, 1.0), gas="isothermal"), params)
+    large = gauge_pressure_at(v_ref - 5e-4, Config(theta=(0.0, 1.0), gas="isothermal", gas_volume_ratio=2.94), params)
+    assert p0 < float(large) < float(small)

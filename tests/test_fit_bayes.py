@@ -110,6 +110,22 @@ def test_fit_that_cannot_start_says_why():
         fit_session(s, model)
 
 
+def test_fit_blocked_by_failing_forward_solves_is_not_called_converged():
+    # Data of k_s = 0.64 fitted with k_s = 0.64/1.3: the optimum is P_g = 1.3 × 1300 = 1690 Pa,
+    # beyond a wall at 1600 Pa where the model fails. LM must push against the wall, have its steps
+    # rejected (failed solves are large finite residuals), and report that it did not converge.
+    s = synthetic(depth_noise=1e-3, seed=4)
+    wall = _FailsAbovePressure(poisson_ratio=0.4, k_s=0.64 / 1.3, limit=1600.0)
+    with pytest.raises(NoConvergenceError, match="would still remove"):
+        fit_session(s, wall)
+    last = fit_session(s, wall, raise_on_failure=False)
+    assert not last.converged and last.estimates["gauge_pressure"].value < 1600.0
+    # without the wall the same fit reaches the optimum
+    free = fit_session(s, ScalingLawModel(poisson_ratio=0.4, k_s=0.64 / 1.3))
+    # (1 mm depth noise on 21 samples pins P_g to ~1 %: 3 % is 3σ)
+    assert free.converged and free.estimates["gauge_pressure"].value == pytest.approx(1690.0, rel=0.03)
+
+
 def test_fit_without_wrinkles_is_a_clear_error():
     s = dataclasses.replace(synthetic(), wrinkle_counts=None)
     with pytest.raises(InvalidInputError, match="no \\[wrinkles\\] counts"):

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -13,17 +15,44 @@ import pytest
 from shelljax import InvalidInputError
 from shelljax.cli import main
 from shelljax.config import bundled_data_dir, load_config
-from shelljax.runner import run_experiment
+from shelljax.runner import run_experiment, summary_table
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER_CONFIG = REPO / "configs" / "paper.toml"
 
 
+def paper_variant(tmp_path: Path, methods: list[str], sessions: list[str] | None = None) -> Path:
+    """configs/paper.toml with other ``methods`` (and ``sessions``): the full default run compiles
+    fit and bayes for four object radii, several minutes, so the suite runs it by parts."""
+    text = PAPER_CONFIG.read_text()
+    text = re.sub(r"(?m)^methods = .*$", f"methods = {json.dumps(methods)}", text)
+    if sessions is not None:
+        text = re.sub(r"(?ms)^\[sessions\]\npaths = \[.*?\]\n", f"[sessions]\npaths = {json.dumps(sessions)}\n", text)
+    path = tmp_path / "paper-variant.toml"
+    path.write_text(text)
+    return path
+
+
 @pytest.fixture(scope="module")
 def paper_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
-    run_dir = run_experiment(PAPER_CONFIG, output_dir=out, progress=False)
+    config = paper_variant(out, ["closed-form"])
+    run_dir = run_experiment(config, output_dir=out, progress=False)
     return run_dir, json.loads((run_dir / "results.json").read_text())
+
+
+def _truth(session_path: str) -> dict[str, float]:
+    """True P_g [Pa], E [Pa] and the engine's noise-free k_s [-] from a bundled session's notes."""
+    notes = tomllib.loads(Path(session_path).read_text())["notes"]
+    return {"gauge_pressure": float(re.search(r"P_g = ([\d.]+) Pa", notes).group(1)),
+            "young_modulus": float(re.search(r"E = ([\d.e+]+) Pa", notes).group(1)),
+            "k_s": float(re.search(r"noise-free k_s = ([\d.]+)", notes).group(1))}  # fmt: skip
+
+
+def test_default_experiment_runs_all_three_estimators():
+    config = load_config(PAPER_CONFIG)
+    assert config.methods == ("closed-form", "fit", "bayes")
+    assert (config.forward_model, config.gas, config.wrinkle_law) == ("axisym", "isothermal", "scaling")
 
 
 def test_default_experiment_reports_pressure_and_modulus_for_every_session(paper_run):
@@ -43,21 +72,52 @@ def test_default_experiment_reports_pressure_and_modulus_for_every_session(paper
     assert (run_dir / "figures" / "estimates.png").is_file()
 
 
-def test_held_out_pressures_are_recovered(paper_run):
+def test_closed_form_held_out_errors_are_the_k_s_mismatch(paper_run):
+    # The bundled sessions come from the shell engine, whose k_s = s/(π R P_g) (s: slope of the
+    # closed form's regression F = s w + c) differs between the balls and with pressure (Pezzi
+    # 0.69–1.11 at 1.65–0.9 kPa, yoga 0.37–0.48: the sealed gas and the wall's bending carry part
+    # of the load). One calibrated k_s lands between them, and the closed form misses each
+    # held-out pressure by k_s(session)/k_s(calibrated) − 1: the error the fit removes.
     _, results = paper_run
-    errors = [e["estimates"]["closed-form"]["gauge_pressure_relative_error_vs_manometer"] for e in results["sessions"]
-              if "gauge_pressure_relative_error_vs_manometer" in e["estimates"]["closed-form"]]  # fmt: skip
-    assert len(errors) == 4
-    # the bundled data carry 4 % depth noise and object-specific k_s within ±3 % of the
-    # calibrated one: held-out pressures must come back within 10 %
-    assert max(abs(e) for e in errors) < 0.10
-    k = results["calibration"]["k_s"]
-    assert 0.60 < k["value"] < 0.68 and len(results["calibration"]["points"]) == 10
+    k_cal = results["calibration"]["k_s"]["value"]
+    held_out = [e for e in results["sessions"]
+                if "gauge_pressure_relative_error_vs_manometer" in e["estimates"]["closed-form"]]  # fmt: skip
+    assert len(held_out) == 4 and len(results["calibration"]["points"]) == 10
+    truths = [_truth(e["session"])["k_s"] for e in held_out]
+    assert min(truths) < k_cal < max(truths)
+    for entry, k_true in zip(held_out, truths):
+        block = entry["estimates"]["closed-form"]
+        error = block["gauge_pressure_relative_error_vs_manometer"]
+        slope = block["pressure_slope"]
+        # the session's own regression (2 % depth noise, 0.5 mm offsets and rounding) is its only
+        # other error: 3 of its standard deviations
+        assert abs((1 + error) / (k_true / k_cal) - 1) < 3 * slope["std"] / slope["value"], (entry["session"], error)
+
+
+def test_default_fit_recovers_held_out_pressures(tmp_path):
+    # The default experiment's fit on the Pezzi sessions (one compiled engine, shared with
+    # tests/test_fit_axisym.py): the truth inside each 95 % interval, and the fit's error below
+    # the closed form's on every session.
+    names = ["heldout_pezzi_1100Pa", "heldout_pezzi_1450Pa", "pezzi"]
+    config = paper_variant(tmp_path, ["closed-form", "fit"], [f"bundled:sessions/{n}.toml" for n in names])
+    results = json.loads((run_experiment(config, output_dir=tmp_path, progress=False) / "results.json").read_text())
+    for entry in results["sessions"]:
+        truth = _truth(entry["session"])
+        fit, closed = entry["estimates"]["fit"], entry["estimates"]["closed-form"]
+        for quantity in ("gauge_pressure", "young_modulus"):
+            assert fit[quantity]["ci95"][0] < truth[quantity] < fit[quantity]["ci95"][1], (entry["session"], quantity)
+        fit_error = abs(fit["gauge_pressure"]["value"] / truth["gauge_pressure"] - 1)
+        closed_error = abs(closed["gauge_pressure"]["value"] / truth["gauge_pressure"] - 1)
+        assert fit_error < closed_error, (entry["session"], fit_error, closed_error)
+    table = summary_table(results).splitlines()
+    assert "P_g closed-form [kPa]" in table[0] and "E fit [MPa]" in table[0]
+    assert [line.split()[0] for line in table[2:5]] == names
 
 
 def test_run_directories_are_fresh(tmp_path):
-    first = run_experiment(PAPER_CONFIG, output_dir=tmp_path, progress=False)
-    second = run_experiment(PAPER_CONFIG, output_dir=tmp_path, progress=False)
+    config = paper_variant(tmp_path, ["closed-form"], ["bundled:sessions/pezzi.toml"])
+    first = run_experiment(config, output_dir=tmp_path, progress=False)
+    second = run_experiment(config, output_dir=tmp_path, progress=False)
     assert first != second and (first / "results.json").is_file() and (second / "results.json").is_file()
 
 
@@ -112,4 +172,6 @@ def test_config_carries_the_forward_model_options(tmp_path):
                     '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')  # fmt: skip
     config = load_config(path)
     assert (config.gas, config.wrinkle_law, config.bayes_surrogate) == ("isothermal", "scaling", False)
-    assert load_config(PAPER_CONFIG).wrinkle_law == "mechanics"  # the default
+    path.write_text('[estimators]\nmethods = ["fit"]\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')
+    defaults = load_config(path)
+    assert (defaults.gas, defaults.wrinkle_law, defaults.bayes_surrogate) == ("prescribed", "mechanics", True)

@@ -47,7 +47,9 @@ class Config(eqx.Module):
     "isothermal"; ``loading``: "none", "sphere" (rigid spherical indenter, force control) or
     "point" (point force on the top pole); ``ground``: rigid plane under the bottom pole;
     ``pin_bottom``: fix z of the bottom pole (removes the vertical rigid mode when nothing
-    else does); ``relax``: tension-field relaxation of compressive hoop stress.
+    else does); ``relax``: tension-field relaxation of compressive hoop stress;
+    ``gas_volume_ratio`` [-]: sealed gas volume over the ball's inflated volume (an object whose
+    locally spherical poke region belongs to a body of another volume, e.g. from its mesh).
     """
 
     theta: tuple = eqx.field(static=True)
@@ -56,6 +58,7 @@ class Config(eqx.Module):
     ground: bool = eqx.field(static=True, default=False)
     pin_bottom: bool = eqx.field(static=True, default=True)
     relax: bool = eqx.field(static=True, default=False)
+    gas_volume_ratio: float = eqx.field(static=True, default=1.0)
 
     @property
     def n_nodes(self) -> int:
@@ -212,7 +215,9 @@ def gas_energy(volume, cfg: Config, p: Params):
     """Gas potential [J] of the enclosed volume [m³] (shared ``physics`` gas laws)."""
     if cfg.gas == "prescribed":
         return prescribed_pressure_energy(volume, p.gauge_pressure)
-    return isothermal_gas_energy(volume, p.reference_volume, p.gauge_pressure)
+    # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
+    gas_volume = cfg.gas_volume_ratio * p.reference_volume
+    return isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
 
 
 def gauge_pressure_at(volume, cfg: Config, p: Params):

@@ -65,7 +65,9 @@ class Setup(eqx.Module):
     "none" (start from the last converged state: the most robust), "secant" (extrapolate the
     last two states, ≈ 20 % faster, failed on some parameter sets) or "tangent" (Euler step);
     ``substeps``: equal load steps per interval between requested forces (raise it when the
-    requested forces are far apart; the paper's 2.5 N steps need 1).
+    requested forces are far apart; the paper's 2.5 N steps need 1); ``gas_volume_ratio`` [-]:
+    with ``gas = "isothermal"``, the sealed gas volume over the ball's inflated volume 4/3 π R³
+    (1: a ball; an object's enclosed volume over 4/3 π R³ when only its poke region is a sphere).
     """
 
     radius: float = eqx.field(static=True, default=0.13)
@@ -80,6 +82,7 @@ class Setup(eqx.Module):
     max_iter: int = eqx.field(static=True, default=100)
     predictor: str = eqx.field(static=True, default="none")
     substeps: int = eqx.field(static=True, default=1)
+    gas_volume_ratio: float = eqx.field(static=True, default=1.0)
 
     def theta(self) -> tuple:
         n_el = self.n_elements + (1 - self.n_elements % 2)
@@ -223,7 +226,7 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     n = len(setup.theta())
     x_inf, _ = split(y_inf, n)
     cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
-                 pin_bottom=False, relax=setup.relax)
+                 pin_bottom=False, relax=setup.relax, gas_volume_ratio=setup.gas_volume_ratio)
     volume_ref = enclosed_volume(x_inf)
     ground_z = x_inf[0, 1]
     zc_contact = x_inf[-1, 1] + setup.indenter_radius

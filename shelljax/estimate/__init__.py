@@ -18,6 +18,6 @@ from ._closed_form import (
 )
 from ._bayes import ConvergenceWarning, PosteriorResult, SurrogateWarning, sample_posterior
 from ._fit import FitResult, fit_session
-from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
+from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel, forward_model_for
 from ._result import Estimate
 from ._surrogate import SurrogateForwardModel, build_surrogate, surrogate_error

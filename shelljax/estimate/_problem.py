@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import log_ndtr
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from .._errors import InvalidInputError
 from ..session import Session
@@ -43,6 +43,7 @@ OFFSET_BOUND = 10e-3  # [m]
 GAIN_STD = 0.05  # [-]
 COUNT_NOISE = 1.0  # [wrinkles]
 OFFSET_SCALE = 1e-3  # [m] per unit of u
+FAILED_RESIDUAL = 1e4  # [-] whitened residual of a failed forward solve (cost 5e7 per entry)
 OPTIONAL_PARAMETERS = ("depth_offset", "force_gain")
 
 
@@ -110,12 +111,22 @@ class InverseProblem(eqx.Module):
         return out
 
     def residuals(self, u, args=None) -> Float[Array, " r"]:
-        """Whitened residuals (data and Gaussian priors) for least squares; NaN if not converged."""
+        """Whitened residuals (data and Gaussian priors) for least squares.
+
+        Where the forward model fails every residual is ``FAILED_RESIDUAL``: a finite cost far
+        above any fit's, so Levenberg–Marquardt rejects the trial step and shrinks its trust
+        region (a NaN would stop it); :meth:`forward_ok` tells a real optimum from such a point.
+        """
         depth, count, converged = self.predict(u)
         parts = [(depth - self.depth) / self.depth_noise, (count - self.counts) / COUNT_NOISE]
         parts += [jnp.atleast_1d(r) for r in self._prior_residuals(u)]
         r = jnp.concatenate(parts)
-        return jnp.where(converged, r, jnp.nan)
+        return jnp.where(converged & jnp.all(jnp.isfinite(r)), r, FAILED_RESIDUAL)
+
+    def forward_ok(self, u) -> Bool[Array, ""]:
+        """Whether the forward model converged at ``u`` with finite predictions."""
+        depth, count, converged = self.predict(u)
+        return converged & jnp.all(jnp.isfinite(depth)) & jnp.isfinite(count)
 
     def log_posterior(self, u_and_noise: Float[Array, " d1"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """Log posterior (up to a constant) of (u, log σ_w); returns (log p, forward converged)."""

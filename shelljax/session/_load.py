@@ -224,7 +224,7 @@ def load_session(path: str | Path) -> Session:
 
     geometry = reader.table(data, "geometry", _GEOMETRY_KEYS, required=True)
     length_scale = reader.unit(geometry, "length_unit", "length", "m", "geometry.")
-    mesh_path = poke_point = fit_radius = fit_rms = None
+    mesh_path = poke_point = fit_radius = fit_rms = mesh_volume = None
     if ("radius" in geometry) == ("mesh" in geometry):
         raise reader.fail(
             "geometry", "give exactly one of 'radius' or 'mesh'",
@@ -239,7 +239,7 @@ def load_session(path: str | Path) -> Session:
                 "if you wrote millimetres or centimetres, set length_unit in [geometry]",
             )  # fmt: skip
     else:
-        radius, radius_std, mesh_path, poke_point, fit_radius, fit_rms = _mesh_geometry(
+        radius, radius_std, mesh_path, poke_point, fit_radius, fit_rms, mesh_volume = _mesh_geometry(
             reader, geometry, length_scale, input_files
         )
     if thickness >= 0.2 * radius:
@@ -326,7 +326,8 @@ def load_session(path: str | Path) -> Session:
         thickness_std=float(thickness_std), poisson_ratio=float(poisson_ratio), trial=trial,
         force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
         manometer_gauge_pressure=manometer, mass=mass, mesh_path=mesh_path, poke_point=poke_point,
-        fit_radius=fit_radius, fit_rms_residual=fit_rms, notes=notes, input_files=input_files,
+        fit_radius=fit_radius, fit_rms_residual=fit_rms, enclosed_volume=mesh_volume, notes=notes,
+        input_files=input_files,
     )  # fmt: skip
 
 
@@ -349,7 +350,9 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     try:
         mesh = geo.load_mesh(mesh_path, length_unit=unit_name)
         local = geo.fit_local_sphere(mesh, poke_point, fit_radius)
+        # an open photogrammetry scan has no volume; the sealed-gas model then says so when used
+        volume = geo.enclosed_volume(mesh) if mesh.is_watertight else None
     except InvalidInputError as err:
         raise InvalidInputError(f"{reader.path}: field 'geometry.mesh': {err}") from None
     input_files[str(mesh_path)] = file_sha256(mesh_path)
-    return local.radius, local.radius_std, mesh_path, poke_point, fit_radius, local.rms_residual
+    return local.radius, local.radius_std, mesh_path, poke_point, fit_radius, local.rms_residual, volume

@@ -30,6 +30,7 @@ class Session:
         mass: total mass [kg] or None.
         mesh_path, poke_point [m], fit_radius [m]: mesh geometry, when R comes from a mesh.
         fit_rms_residual: rms distance of mesh vertices to the fitted sphere [m] (mesh only).
+        enclosed_volume: volume enclosed by the mesh [m³] (watertight meshes only; the sealed gas).
         input_files: sha256 of every file the session was read from, by path.
     """
 
@@ -51,6 +52,7 @@ class Session:
     poke_point: np.ndarray | None = None
     fit_radius: float | None = None
     fit_rms_residual: float | None = None
+    enclosed_volume: float | None = None
     notes: str = ""
     input_files: dict[str, str] = dataclasses.field(default_factory=dict)
 
