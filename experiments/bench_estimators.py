@@ -54,13 +54,17 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--session", default=str(bundled_data_dir() / "sessions" / "pezzi.toml"))
     parser.add_argument("--model", default="axisym", choices=["axisym", "scaling"])
+    # defaults: the forward model of the default experiment (configs/paper.toml)
+    parser.add_argument("--gas", default="isothermal", choices=["prescribed", "isothermal"])
+    parser.add_argument("--wrinkle-law", default="scaling", choices=["mechanics", "scaling"])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--walkers", type=int, default=32)
     parser.add_argument("--no-surrogate", action="store_true", help="bayes through the engine itself")
     parser.add_argument("--out", default="bench_estimators.json")
     args = parser.parse_args(argv)
     session = load_session(args.session)
-    model = forward_model_for(session, args.model)
+    options = {"gas": args.gas, "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
+    model = forward_model_for(session, args.model, **options)
 
     t0 = time.perf_counter()
     fit_session(session, model)
@@ -107,12 +111,12 @@ def main(argv=None):
             ("exact engine: s per walker evaluation", f"{exact_per_eval * 1e3:.1f} ms"),
             ("exact engine: same chain (extrapolated)", f"{exact_per_eval * steps * args.walkers:.0f} s"),
         ]
-    print(f"session {session.source.name}, model {args.model}, machine: {platform.platform()}, {os.cpu_count()} CPUs")
+    print(f"session {session.source.name}, model {args.model} {options}, machine: {platform.platform()}, {os.cpu_count()} CPUs")
     width = max(len(r[0]) for r in rows)
     for name, value in rows:
         print(f"  {name:<{width}}  {value}")
     result = {
-        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "session": str(session.source), "model": args.model,
+        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "session": str(session.source), "model": args.model, "model_options": options,
         "fit_first_s": fit_first, "fit_s": fit_times, "fit_median_s": statistics.median(fit_times),
         "bayes_first_s": bayes_first, "bayes_s": times, "bayes_effective_samples": ess,
         "bayes_seconds_per_1000_effective": 1000 / statistics.median(rate), "walkers": args.walkers,
