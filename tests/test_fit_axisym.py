@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax import InvalidInputError
 from shelljax.estimate import AxisymForwardModel, fit_session
 from shelljax.session import Session
 
@@ -98,3 +99,5 @@ def test_sealed_gas_volume_comes_from_the_session_mesh():
     assert forward_model_for(hammer, gas="prescribed").setup.gas_volume_ratio == 1.0
     ball = load_session(bundled_data_dir() / "sessions" / "pezzi.toml")  # radius only: no mesh volume
     assert ball.enclosed_volume is None and forward_model_for(ball, gas="isothermal").setup.gas_volume_ratio == 1.0
+    with pytest.raises(InvalidInputError, match="gas_volume_ratio = -1.0 must be a positive number"):
+        forward_model_for(ball, gas="isothermal", gas_volume_ratio=-1.0)

@@ -149,11 +149,6 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
         raise InvalidInputError(
             f"indentation_curves: gas={setup.gas!r}; use 'prescribed' or 'isothermal'."
         )
-    if not (np.isfinite(setup.gas_volume_ratio) and setup.gas_volume_ratio > 0):
-        raise InvalidInputError(
-            f"indentation_curves: gas_volume_ratio={setup.gas_volume_ratio!r} must be a positive "
-            "number (sealed gas volume / 4/3 π R³; 1 for a ball)."
-        )
     res = map_batch(lambda rows: indentation_curves_raw(rows, f, setup, chunk), p, workers)
     if raise_on_failure:
         conv = np.asarray(res.converged)

@@ -31,10 +31,13 @@ Observables per force level (all SI; "inflated" = the pressurized state before i
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._errors import InvalidInputError
 from ._energy import (
     Config,
     Params,
@@ -83,6 +86,13 @@ class Setup(eqx.Module):
     predictor: str = eqx.field(static=True, default="none")
     substeps: int = eqx.field(static=True, default=1)
     gas_volume_ratio: float = eqx.field(static=True, default=1.0)
+
+    def __check_init__(self):
+        if not (math.isfinite(self.gas_volume_ratio) and self.gas_volume_ratio > 0):
+            raise InvalidInputError(
+                f"Setup: gas_volume_ratio = {self.gas_volume_ratio!r} must be a positive number "
+                "(sealed gas volume / 4/3 π R³). Fix: pass 1 for a ball"
+            )
 
     def theta(self) -> tuple:
         n_el = self.n_elements + (1 - self.n_elements % 2)

@@ -131,10 +131,6 @@ def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwa
         volume = getattr(session, "enclosed_volume", None)
         if options.get("gas") == "isothermal" and volume is not None:
             options = {"gas_volume_ratio": volume / (4.0 / 3.0 * jnp.pi * session.radius**3), **options}
-        ratio = options.get("gas_volume_ratio", 1.0)
-        if not (ratio > 0 and jnp.isfinite(ratio)):
-            raise InvalidInputError(f"gas_volume_ratio = {ratio!r} must be a positive number (sealed gas "
-                                    "volume / 4/3 π R³). Fix: pass 1 for a ball")  # fmt: skip
         return AxisymForwardModel.for_forces(session.radius, session.force, poisson_ratio=session.poisson_ratio, **options)
     if kind == "scaling":
         return ScalingLawModel(poisson_ratio=session.poisson_ratio, **options)
