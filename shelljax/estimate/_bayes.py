@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from .._errors import InvalidInputError, NoConvergenceError
+from .._errors import InvalidInputError
 from .._parallel import map_batch
 from ..session import Session
 from ._closed_form import estimate_session
@@ -48,8 +48,6 @@ class SurrogateWarning(UserWarning):
 
 
 SURROGATE_SIGMAS = 6.0  # half-width of the surrogate box in Laplace standard deviations
-# narrower boxes tried when the engine fails at a node of the wider one
-SURROGATE_SIGMAS_TRIED = (SURROGATE_SIGMAS, SURROGATE_SIGMAS / 2)
 SURROGATE_MIN_HALF_WIDTH = 0.03  # [-] in log space: never narrower than ±3 %
 SURROGATE_CHECKS = 8  # engine solves that check the surrogate
 SURROGATE_TOLERANCE = 0.2  # of σ_w (depth) and of one wrinkle (count)
@@ -131,19 +129,9 @@ def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nod
     fit = fit_session(session, model, nuisance=nuisance, raise_on_failure=False)
     u_std = np.sqrt(np.diag(fit.covariance))
     center = {k: float(v) for k, v in problem.physical(jnp.asarray(fit.u)).items()}
-    for sigmas in SURROGATE_SIGMAS_TRIED:
-        half_width = {name: max(sigmas * u_std[i], SURROGATE_MIN_HALF_WIDTH)
-                      for i, name in enumerate(problem.names) if name in SURROGATE_AXES}  # fmt: skip
-        try:
-            built = build_surrogate(model, center, half_width, nodes, progress=progress)
-            break
-        except NoConvergenceError as err:
-            if sigmas == SURROGATE_SIGMAS_TRIED[-1]:
-                raise
-            # a corner of the box reached parameters the engine cannot solve (seen on the thin
-            # beach ball at +6σ in E): a narrower box still holds the 95 % intervals
-            warnings.warn(f"{session.source}: {err}; narrowing the surrogate box to ±{sigmas / 2:g} σ",
-                          SurrogateWarning, stacklevel=3)  # fmt: skip
+    half_width = {name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
+                  for i, name in enumerate(problem.names) if name in SURROGATE_AXES}  # fmt: skip
+    built = build_surrogate(model, center, half_width, nodes, progress=progress)
     # check points: Laplace draws, pulled into the box
     rng = np.random.default_rng(0)
     draws = rng.multivariate_normal(fit.u, fit.covariance, size=SURROGATE_CHECKS)
@@ -158,7 +146,7 @@ def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nod
         "check_points": SURROGATE_CHECKS,
         "fit_converged": fit.converged,
         "curves": int(np.prod(built.coefficients.shape[:4])),
-        "box": {"half_width_log": half_width, "half_width_laplace_sigmas": sigmas, "center": center},
+        "box": {"half_width_log": half_width, "center": center},
     }  # fmt: skip
     if error["depth"] > SURROGATE_TOLERANCE * problem.depth_noise or error["wrinkle_count"] > SURROGATE_TOLERANCE:
         warnings.warn(
