@@ -12,9 +12,10 @@ mesh sessions), and with realistic measurement noise (documented in shelljax/dat
 
 w0_engine is the local dimple depth (the paper's −w(0)) of the engine's force-controlled curve
 through the trial's own forces. The notes give the truth and the engine's noise-free
-k_s = s / (π R P_g), s the slope of the closed form's regression F = s w(0) + c. The engine's mechanical wrinkle count is zero for the yoga and
-beach balls at 5–20 N (before the wrinkling onset, docs/axisym.md), so the counts come from
-Vella et al.'s law, which the estimators then use too (``wrinkle_law = "scaling"``).
+k_s = s / (π R P_g), s the slope of the closed form's regression F = s w(0) + c. The engine's
+mechanical wrinkle count is zero for the yoga and beach balls at 5–20 N (before the wrinkling
+onset, docs/axisym.md), so the counts come from Vella et al.'s law, which the estimators then
+use too (``wrinkle_law = "scaling"``).
 Run:  python experiments/make_bundled_data.py
 """
 

@@ -101,3 +101,6 @@ def test_sealed_gas_volume_comes_from_the_session_mesh():
     assert ball.enclosed_volume is None and forward_model_for(ball, gas="isothermal").setup.gas_volume_ratio == 1.0
     with pytest.raises(InvalidInputError, match="gas_volume_ratio = -1.0 must be a positive number"):
         forward_model_for(ball, gas="isothermal", gas_volume_ratio=-1.0)
+    open_scan = dataclasses.replace(hammer, enclosed_volume=None)  # a mesh that is not watertight
+    with pytest.warns(UserWarning, match="not watertight"):
+        assert forward_model_for(open_scan, gas="isothermal").setup.gas_volume_ratio == 1.0

@@ -10,6 +10,7 @@ law and the axisymmetric shell engine are interchangeable.
 from __future__ import annotations
 
 import abc
+import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -129,8 +130,13 @@ def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwa
 
     if kind == "axisym":
         volume = getattr(session, "enclosed_volume", None)
-        if options.get("gas") == "isothermal" and volume is not None:
-            options = {"gas_volume_ratio": volume / (4.0 / 3.0 * jnp.pi * session.radius**3), **options}
+        if options.get("gas") == "isothermal" and "gas_volume_ratio" not in options:
+            if volume is not None:
+                options = {**options, "gas_volume_ratio": volume / (4.0 / 3.0 * jnp.pi * session.radius**3)}
+            elif getattr(session, "mesh_path", None) is not None:
+                warnings.warn(f"{session.source}: the mesh {session.mesh_path} is not watertight, so it encloses no "
+                              "volume; the sealed gas fills the local sphere of radius R instead. Fix: close the mesh, "
+                              "or pass gas_volume_ratio = V / (4/3 π R³)", stacklevel=2)  # fmt: skip
         return AxisymForwardModel.for_forces(session.radius, session.force, poisson_ratio=session.poisson_ratio, **options)
     if kind == "scaling":
         return ScalingLawModel(poisson_ratio=session.poisson_ratio, **options)

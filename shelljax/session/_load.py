@@ -350,7 +350,7 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     try:
         mesh = geo.load_mesh(mesh_path, length_unit=unit_name)
         local = geo.fit_local_sphere(mesh, poke_point, fit_radius)
-        # an open photogrammetry scan has no volume; the sealed-gas model then says so when used
+        # an open photogrammetry scan has no volume; forward_model_for warns if the sealed gas needs it
         volume = geo.enclosed_volume(mesh) if mesh.is_watertight else None
     except InvalidInputError as err:
         raise InvalidInputError(f"{reader.path}: field 'geometry.mesh': {err}") from None
