@@ -65,6 +65,9 @@ def main(argv=None):
     ap.add_argument("--curves", type=Path, default=CURVES_PATH)
     ap.add_argument("--realisations", type=int, default=4, help="noise draws per curve and noise level")
     ap.add_argument("--wrinkle-law", default="scaling", choices=["scaling", "mechanics"])
+    ap.add_argument("--no-relax", action="store_true",
+                    help="forward model without the tension-field hoop relaxation (docs/estimators.md)")
+    ap.add_argument("--fit-label", default="fit", help="method name of this fit variant in the table")
     ap.add_argument("--bayes-noise", type=float, nargs="*", default=[1.0],
                     help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)")
     ap.add_argument("--bayes-realisations", type=int, default=1,
@@ -80,6 +83,8 @@ def main(argv=None):
     ap.add_argument("--also", type=Path, nargs="*", default=[],
                     help="per-session .jsonl files of other runs whose method results join the table")
     ap.add_argument("--out", type=Path, default=Path("compare_estimators.json"))
+    ap.add_argument("--write-rows", type=Path, default=None,
+                    help="also write the final per-session rows (closed form recomputed, --also merged) as JSON lines")
     args = ap.parse_args(argv)
 
     import jax
@@ -105,7 +110,8 @@ def main(argv=None):
     # One model for every session: the grid brackets the recorded (noisy) forces, so the compiled
     # program is shared; w0 between grid points is linearly interpolated (docs/fit-and-bayes.md).
     model = AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
-                                          poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law)  # fmt: skip
+                                          poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law,
+                                          relax=not args.no_relax)  # fmt: skip
 
     log_path = args.out.with_suffix(".jsonl")
     done = {}
@@ -130,16 +136,17 @@ def main(argv=None):
                 row[label] = {"gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
                               "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
                               "seconds": time.perf_counter() - t0}  # fmt: skip
-            if not (args.skip_fit or args.only_bayes or "fit" in row):
+            fit_label = args.fit_label
+            if not (args.skip_fit or args.only_bayes or fit_label in row):
                 t0 = time.perf_counter()
                 try:
                     fit = fit_session(session, model)
-                    row["fit"] = {q: _record(fit.estimates[q], true[q]) for q in QUANTITIES}
-                    row["fit"]["chi2"] = fit.chi2
-                    row["fit"]["dof"] = fit.dof
+                    row[fit_label] = {q: _record(fit.estimates[q], true[q]) for q in QUANTITIES}
+                    row[fit_label]["chi2"] = fit.chi2
+                    row[fit_label]["dof"] = fit.dof
                 except (NoConvergenceError, InvalidInputError) as err:
-                    row["fit"] = {"error": str(err)[:300]}
-                row["fit"]["seconds"] = time.perf_counter() - t0
+                    row[fit_label] = {"error": str(err)[:300]}
+                row[fit_label]["seconds"] = time.perf_counter() - t0
             if args.bayes_label not in row and truth["realisation"] < args.bayes_realisations and any(abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise):
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
@@ -166,8 +173,11 @@ def main(argv=None):
             if r["name"] in done:
                 done[r["name"]].update({m: v for m, v in r.items() if isinstance(v, dict) and m not in done[r["name"]]})
     rows = [done[t["name"]] for t, _ in sessions if t["name"] in done]
-    methods = ("closed_form_calibrated", "closed_form_paper", "fit")
-    methods += tuple(sorted({m for r in rows for m in r if m.startswith("bayes") and isinstance(r[m], dict)}))
+    if args.write_rows is not None:
+        args.write_rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    methods = ("closed_form_calibrated", "closed_form_paper")
+    for family in ("fit", "bayes"):
+        methods += tuple(sorted({m for r in rows for m in r if m.startswith(family) and isinstance(r[m], dict)}))
     summary = {m: summarise(rows, m) for m in methods}
     print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
           f"wrinkle law {args.wrinkle_law}; wall {time.perf_counter() - t_start:.0f} s")  # fmt: skip
@@ -180,13 +190,25 @@ def main(argv=None):
                       f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}")  # fmt: skip
         if summary[m].get("failed"):
             print(f"{m:<26}failed: {summary[m]['failed']}")
+    per_set = {}
+    for k in sorted({r["set"] for r in rows}):
+        mine = [r for r in rows if r["set"] == k]
+        per_set[k] = {m: {q: float(np.median([r[m][q]["rel_error"] for r in mine if q in r.get(m, {})]))
+                          for q in QUANTITIES} for m in methods if any(QUANTITIES[0] in r.get(m, {}) for r in mine)}  # fmt: skip
+        fits = [r["fit"] for r in mine if "chi2" in r.get("fit", {})]
+        if fits:
+            per_set[k]["fit"]["chi2_per_dof"] = float(np.median([f["chi2"] / f["dof"] for f in fits]))
+            per_set[k]["fit"]["coverage95_gauge_pressure"] = float(np.mean([f["gauge_pressure"]["covered"] for f in fits]))
+    print("\nmedian relative error per parameter set (P_g / E):")
+    for k, v in per_set.items():
+        print(f"set {k}: " + "  ".join(f"{m} {e['gauge_pressure']:+.3f}/{e['young_modulus']:+.3f}" for m, e in v.items()))
     timing = {m: float(np.median([r[m]["seconds"] for r in rows if m in r])) for m in methods if any(m in r for r in rows)}
     result = {
         "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
         "n_sessions": len(rows), "wrinkle_law": args.wrinkle_law, "k_s_calibrated": calib.k_s.to_dict(),
         "bayes": {"walkers": args.walkers, "max_steps": args.bayes_steps, "noise_levels_mm": args.bayes_noise,
                   "realisations": args.bayes_realisations},
-        "median_seconds_per_session": timing, "summary": summary,
+        "median_seconds_per_session": timing, "summary": summary, "median_rel_error_per_set": per_set,
         "curves": [{k: c[k] for k in ("gauge_pressure", "young_modulus", "thickness", "tau", "n_faces", "pole_edge")}
                    for c in curves],
     }  # fmt: skip

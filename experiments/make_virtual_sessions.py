@@ -7,17 +7,19 @@ Two stages (SI units throughout):
    8 mm finger, rigid ground) at 5–15 N in 2.5 N steps (the paper: 5–20 N; see FORCES). The local dimple depth
    w0 = Δz(equator) − Δz(top pole) [m] (both vertical displacements from the inflated reference
    state, the axisymmetric engine's definition) is computed from the vertices and written, with the
-   mesh size, to ``shelljax/data/virtual/curves.json`` (one entry per set, appended as each set is
-   solved so that an interrupted run keeps its work).
+   mesh size and each level's wrinkle spectrum (dominant angular mode of the normal displacement and
+   its amplitude, ``shelljax.shell3d.wrinkle_spectrum``), to ``shelljax/data/virtual/curves.json``
+   (one entry per set, appended as each set is solved so that an interrupted run keeps its work).
 2. ``draw_sessions`` (library function, used by ``experiments/compare_estimators.py`` and the tests):
    noisy sessions from the noise-free curves: 3 trials per force level, force noise N(0, 0.05 N)
    rounded to 0.01 N, depth noise N(0, σ_w) rounded to 0.5 mm, one wrinkle count per trial from
-   Vella et al.'s n = 1.33 τ^½ with N(0, 1) reading noise, rounded. The 3D engine cannot count
-   wrinkles, so the count comes from the same law the closed form inverts (limitation).
+   Vella et al.'s n = 1.33 τ^½ with N(0, 1) reading noise, rounded. The 3D meshes affordable here
+   do not resolve the wrinkles to a converged count (docs/estimators.md), so the count comes from
+   the same law the closed form inverts (limitation).
 
 Usage::
 
-    python experiments/make_virtual_sessions.py --curves [--n-triangles 3000] [--sets 0,1,2]
+    python experiments/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600]
 """
 
 from __future__ import annotations
@@ -57,6 +59,12 @@ DEPTH_ROUNDING = 0.5e-3  # m
 FORCE_ROUNDING = 0.01  # N
 N_TRIALS = 3
 COUNT_NOISE = 1.0  # wrinkles, reading noise per trial
+WRINKLE_RINGS = (0.1, 0.005)  # m: outer radius and width of the rings of the 3D wrinkle spectrum
+CURVES_DESCRIPTION = (
+    "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
+    "--curves. SI units: force [N], w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
+    "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum)."
+)
 
 
 def tau(gauge_pressure, young_modulus, thickness, radius=RADIUS, poisson_ratio=POISSON):
@@ -155,7 +163,10 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         if f < FORCES[0]:
             continue
         x = q[:-3].reshape(-1, 3)
+        spectrum = s3.wrinkle_spectrum(reference, x, ball.mesh.faces, reference[top], max_radius=WRINKLE_RINGS[0],
+                                       ring_width=WRINKLE_RINGS[1])  # fmt: skip
         out.append({"force": f, "w0": local_dimple_depth(reference, x, top, band),
+                    "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
                     "top_drop": float(reference[top, 2] - x[top, 2]),
                     "travel": float(sim.touch_center[2] - q[-1])})  # fmt: skip
     return {
@@ -165,6 +176,7 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         "pole_refinement": pole_refinement, "pole_edge": pole_edge, "median_edge": float(np.median(edge_len)),
         "equator_band": band, "force": [c["force"] for c in out], "w0": [c["w0"] for c in out],
         "top_drop": [c["top_drop"] for c in out], "travel": [c["travel"] for c in out],
+        "wrinkle_mode": [c["wrinkle_mode"] for c in out], "wrinkle_amplitude": [c["wrinkle_amplitude"] for c in out],
         "solve_seconds": time.perf_counter() - t0, "machine": f"{platform.machine()} ({platform.system()})",
     }  # fmt: skip
 
@@ -233,11 +245,13 @@ def main():
     jax.config.update("jax_cpu_enable_async_dispatch", False)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--curves", action="store_true", help="solve the 3D curves (slow: minutes per set)")
-    ap.add_argument("--n-triangles", type=int, default=3000)
+    ap.add_argument("--n-triangles", type=int, default=12000)
     ap.add_argument("--pole-refinement", type=float, default=6.0)
     ap.add_argument("--sets", default="", help="comma-separated indices (default: all)")
     ap.add_argument("--out", type=Path, default=CURVES_PATH)
     ap.add_argument("--restarts", type=int, default=10, help="child restarts per set after a wedged run")
+    ap.add_argument("--watchdog", type=float, default=600.0,
+                    help="seconds without a solved level before a child is restarted (raise it for fine meshes)")
     ap.add_argument("--child", action="store_true", help="(internal) solve the given sets in this process")
     args = ap.parse_args()
     if not args.curves:
@@ -249,13 +263,14 @@ def main():
         for i in sets:
             for attempt in range(args.restarts + 1):
                 cmd = [sys.executable, __file__, "--curves", "--child", "--sets", str(i), "--out", str(args.out),
-                       "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement)]  # fmt: skip
+                       "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
+                       "--watchdog", str(args.watchdog)]  # fmt: skip
                 if subprocess.run(cmd).returncode == 0:
                     break
                 print(f"set {i}: child exited abnormally (attempt {attempt + 1}), restarting from its checkpoint", flush=True)
         return
-    _start_watchdog(120.0)
-    data = json.loads(args.out.read_text()) if args.out.exists() else {"curves": []}
+    _start_watchdog(args.watchdog)
+    data = json.loads(args.out.read_text()) if args.out.exists() else {"description": CURVES_DESCRIPTION, "curves": []}
     done = {(c["gauge_pressure"], c["young_modulus"], c["thickness"], c["n_faces"]) for c in data["curves"]}
     for i in sets:
         p = PARAMETER_SETS[i]

@@ -9,6 +9,7 @@ Quick start (SI units)::
     state = sim.solve(depth=0.02)      # or sim.curve(depths), sim.solve(force=10.0)
     print(state.observables())         # force [N], w0/H/D_u/D_l/d [m], pressure [Pa], volume [m³]
     state.export("poked.obj"); state.plot("poked.png")
+    state.wrinkles(max_radius=0.08, ring_width=0.005).count   # radial wrinkles (angular Fourier)
 """
 
 from ._energy import face_energy, fundamental_forms, rest_geometry
@@ -17,3 +18,4 @@ from ._mesh import ShellMesh, signed_volume, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 from ._observables import observables
 from ._rest import solve_rest_shape
+from ._wrinkles import WrinkleSpectrum, vertex_normals, wrinkle_spectrum

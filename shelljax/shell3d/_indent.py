@@ -115,6 +115,16 @@ class IndentationState:
         """Observables (SI): see :func:`shelljax.shell3d.observables`."""
         return _observables(self.sim, self.q, self.sim._params_for(self.q, **self.friction))
 
+    def wrinkles(self, max_radius: float, ring_width: float, max_mode: int = 60):
+        """Angular spectrum of the normal displacement from the inflated reference state, on rings
+        of ``ring_width`` [m] up to ``max_radius`` [m] from the indentation axis: see
+        :func:`shelljax.shell3d.wrinkle_spectrum` (``.count`` is the wrinkle count)."""
+        from ._wrinkles import wrinkle_spectrum
+
+        reference = self.sim.q_reference[:-3].reshape(-1, 3)
+        return wrinkle_spectrum(reference, self.vertices, self.sim.model.mesh.faces, reference[self.sim.top],
+                                max_radius=max_radius, ring_width=ring_width, max_mode=max_mode)  # fmt: skip
+
     def export(self, path) -> None:
         """Write the deformed mesh (OBJ, PLY, STL: by suffix) [m]."""
         import trimesh
