@@ -18,4 +18,4 @@ from ._mesh import ShellMesh, signed_volume, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 from ._observables import observables
 from ._rest import solve_rest_shape
-from ._wrinkles import WrinkleSpectrum, vertex_normals, wrinkle_spectrum
+from ._wrinkles import WrinkleSpectrum, wrinkle_spectrum

@@ -38,7 +38,7 @@ class WrinkleSpectrum:
     axisymmetric_rms: float
 
 
-def vertex_normals(vertices: Float[np.ndarray, "V 3"], faces) -> np.ndarray:
+def _vertex_normals(vertices: Float[np.ndarray, "V 3"], faces) -> np.ndarray:
     """Outward unit vertex normals (V, 3) [-], area-weighted over the incident faces."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces)
@@ -72,7 +72,7 @@ def wrinkle_spectrum(
         raise InvalidInputError(f"reference and deformed must both be (V, 3) arrays in m, got {ref.shape} and {cur.shape}.")
     if not (ring_width > 0 and max_radius > ring_width):
         raise InvalidInputError(f"need 0 < ring_width < max_radius [m], got ring_width={ring_width}, max_radius={max_radius}.")
-    w = np.sum((cur - ref) * vertex_normals(ref, faces), axis=1)
+    w = np.sum((cur - ref) * _vertex_normals(ref, faces), axis=1)
     dx, dy = ref[:, 0] - axis_point[0], ref[:, 1] - axis_point[1]
     r, phi = np.hypot(dx, dy), np.arctan2(dy, dx)
     upper = ref[:, 2] > 0.5 * (ref[:, 2].max() + ref[:, 2].min())
