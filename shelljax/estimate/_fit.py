@@ -106,11 +106,12 @@ def fit_session(
     u, steps, residual = out["u"], out["steps"], out["residual"]
     finite = bool(out["forward_ok"])
     jac = np.asarray(out["jacobian"])
-    covariance = np.linalg.inv(jac.T @ jac)
     # optimistix also stops "successfully" after a step it rejected (e.g. the engine failed at the
-    # trial point): the χ² decrease a Gauss–Newton step still promises tells an optimum from that.
-    gradient = jac.T @ np.asarray(residual)
-    promised_decrease = float(gradient @ covariance @ gradient)
+    # trial point): the χ² decrease a Gauss–Newton step still promises, ‖J δ‖² with δ the
+    # least-squares solution of J δ = r, tells an optimum from that (lstsq: J may be singular
+    # where the forward model failed and every residual is the same constant).
+    step = np.linalg.lstsq(jac, np.asarray(residual), rcond=None)[0]
+    promised_decrease = float(np.sum((jac @ step) ** 2))
     converged = bool(out["ok"]) and finite and promised_decrease < OPTIMALITY_TOL
     if not converged and (raise_on_failure or not finite):
         phys = {k: float(v) for k, v in problem.physical(u).items()}
@@ -120,6 +121,7 @@ def fit_session(
             f"forward model finite: {finite}, χ² a Gauss-Newton step would still remove: "
             f"{promised_decrease:.3g}); try nuisance=() or check the data for outliers"
         )
+    covariance = np.linalg.inv(jac.T @ jac)
     u_std = np.sqrt(np.diag(covariance))
     physical = {k: float(v) for k, v in problem.physical(u).items()}
     method = _METHOD.format(model=type(model).__name__)

@@ -39,6 +39,7 @@ from ..physics import ATMOSPHERIC_PRESSURE
 from ..solve import continuation, implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from ._wrinkles import wrinkle_spectrum
 from ._observables import observables as _observables
 from ._rest import solve_rest_scale, solve_rest_shape
 
@@ -119,8 +120,6 @@ class IndentationState:
         """Angular spectrum of the normal displacement from the inflated reference state, on rings
         of ``ring_width`` [m] up to ``max_radius`` [m] from the indentation axis: see
         :func:`shelljax.shell3d.wrinkle_spectrum` (``.count`` is the wrinkle count)."""
-        from ._wrinkles import wrinkle_spectrum
-
         reference = self.sim.q_reference[:-3].reshape(-1, 3)
         return wrinkle_spectrum(reference, self.vertices, self.sim.model.mesh.faces, reference[self.sim.top],
                                 max_radius=max_radius, ring_width=ring_width, max_mode=max_mode)  # fmt: skip

@@ -1,12 +1,12 @@
 """Radial wrinkles of an indented 3D shell, counted by an angular Fourier analysis.
 
-The shell's normal displacement w = (x − x_ref) · n_ref [m] (n_ref: outward area-weighted vertex
+The shell's normal displacement w = (x − x_ref) · n_ref [m] (n_ref: trimesh's outward vertex
 normal of the reference state) is sampled on rings of reference vertices around the indentation
 axis. On each ring, w(φ) minus its mean (the axisymmetric dimple) is fitted by least squares with
 cos mφ and sin mφ (the vertices are not evenly spaced in φ); the mode amplitude is
 √(a_m² + b_m²) [m]. The wrinkle count is the mode with the largest amplitude summed in quadrature
-over the rings. Mode 1 (a tilt or sideways shift of the dimple, not a wrinkle) is excluded, and
-so are modes a ring cannot resolve (fewer than four vertices per wavelength).
+over the rings. Mode 1 (a tilt or sideways shift of the dimple, not a wrinkle) is fitted but not
+reported, and modes a ring cannot resolve (fewer than four vertices per wavelength) are left out.
 """
 
 from __future__ import annotations
@@ -38,17 +38,6 @@ class WrinkleSpectrum:
     axisymmetric_rms: float
 
 
-def _vertex_normals(vertices: Float[np.ndarray, "V 3"], faces) -> np.ndarray:
-    """Outward unit vertex normals (V, 3) [-], area-weighted over the incident faces."""
-    v = np.asarray(vertices, float)
-    f = np.asarray(faces)
-    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 × area
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], face_n)
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
-
-
 def wrinkle_spectrum(
     reference: Float[np.ndarray, "V 3"],
     deformed: Float[np.ndarray, "V 3"],
@@ -66,13 +55,19 @@ def wrinkle_spectrum(
     on the axis side of the shell (above its mid-height) whose horizontal distance from the axis is
     in [j, j + 1) · ``ring_width`` [m], up to ``max_radius`` [m].
     """
+    import trimesh
+
     ref = np.asarray(reference, float)
     cur = np.asarray(deformed, float)
+    tri = np.asarray(faces)
     if ref.shape != cur.shape or ref.ndim != 2 or ref.shape[1] != 3:
         raise InvalidInputError(f"reference and deformed must both be (V, 3) arrays in m, got {ref.shape} and {cur.shape}.")
+    if tri.ndim != 2 or tri.shape[1] != 3 or tri.size == 0 or tri.min() < 0 or tri.max() >= ref.shape[0]:
+        raise InvalidInputError(f"faces must be an (F, 3) array of vertex indices below {ref.shape[0]}, got shape {tri.shape}.")
     if not (ring_width > 0 and max_radius > ring_width):
         raise InvalidInputError(f"need 0 < ring_width < max_radius [m], got ring_width={ring_width}, max_radius={max_radius}.")
-    w = np.sum((cur - ref) * _vertex_normals(ref, faces), axis=1)
+    normals = trimesh.Trimesh(ref, tri, process=False).vertex_normals
+    w = np.sum((cur - ref) * normals, axis=1)
     dx, dy = ref[:, 0] - axis_point[0], ref[:, 1] - axis_point[1]
     r, phi = np.hypot(dx, dy), np.arctan2(dy, dx)
     upper = ref[:, 2] > 0.5 * (ref[:, 2].max() + ref[:, 2].min())
@@ -83,11 +78,11 @@ def wrinkle_spectrum(
         if ring.sum() < 8:
             continue
         resolvable = modes <= ring.sum() // 4
-        m = modes[resolvable]
+        m = np.concatenate([[1], modes[resolvable]])  # mode 1 fitted so that it does not leak into others
         design = np.concatenate([np.ones((ring.sum(), 1)), np.cos(np.outer(phi[ring], m)), np.sin(np.outer(phi[ring], m))], axis=1)
         coef, *_ = np.linalg.lstsq(design, w[ring], rcond=None)
         amp = np.full(modes.size, np.nan)
-        amp[resolvable] = np.hypot(coef[1 : 1 + m.size], coef[1 + m.size :])
+        amp[resolvable] = np.hypot(coef[2 : 1 + m.size], coef[2 + m.size :])
         radii.append(r[ring].mean())
         amps.append(amp)
         means.append(coef[0])
