@@ -66,7 +66,10 @@ def main(argv=None):
     ap.add_argument("--realisations", type=int, default=4, help="noise draws per curve and noise level")
     ap.add_argument("--wrinkle-law", default="scaling", choices=["scaling", "mechanics"])
     ap.add_argument("--no-relax", action="store_true",
-                    help="forward model without the tension-field hoop relaxation (docs/estimators.md)")
+                    help="forward model without the wrinkling relaxation of the hoop stress (docs/estimators.md)")
+    ap.add_argument("--hoop-capacity", type=float, default=None,
+                    help="hoop compression of the wrinkled wall in classical buckling resultants "
+                         "(default: the engine's calibrated value; 0: tension field)")
     ap.add_argument("--fit-label", default="fit", help="method name of this fit variant in the table")
     ap.add_argument("--bayes-noise", type=float, nargs="*", default=[1.0],
                     help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)")
@@ -111,7 +114,8 @@ def main(argv=None):
     # program is shared; w0 between grid points is linearly interpolated (docs/fit-and-bayes.md).
     model = AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
                                           poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law,
-                                          relax=not args.no_relax)  # fmt: skip
+                                          relax=not args.no_relax,
+                                          **({} if args.hoop_capacity is None else {"hoop_capacity": args.hoop_capacity}))  # fmt: skip
 
     log_path = args.out.with_suffix(".jsonl")
     done = {}

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 
 from .._errors import InvalidInputError
 from ._energy import (
+    WRINKLED_HOOP_CAPACITY,
     Config,
     Params,
     enclosed_volume,
@@ -61,9 +62,11 @@ class Setup(eqx.Module):
     ``radius`` R: inflated radius; ``n_elements``: meridian elements pole to pole (made odd);
     ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: "prescribed" (constant P_g,
     the paper's model) or "isothermal" (sealed ideal gas, P_g is the gauge pressure before
-    indentation); ``relax``: tension-field relaxation of compressive hoop stress (wrinkled
-    shell); ``indenter_radius`` a; ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the
-    first force solved first (load stepping); ``atol`` [N]: Newton tolerance on the
+    indentation); ``relax``: relaxation of compressive hoop stress (wrinkled shell), which
+    saturates at ``hoop_capacity`` [-] classical buckling resultants E h²/(R0 √(3(1−ν²)))
+    (default calibrated on a 3D curve, see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
+    ``indenter_radius`` a; ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
+    force solved first (load stepping); ``atol`` [N]: Newton tolerance on the
     out-of-balance force; ``max_iter``: Newton iterations per load step; ``predictor``:
     "none" (start from the last converged state: the most robust), "secant" (extrapolate the
     last two states, ≈ 20 % faster, failed on some parameter sets) or "tangent" (Euler step);
@@ -86,8 +89,15 @@ class Setup(eqx.Module):
     predictor: str = eqx.field(static=True, default="none")
     substeps: int = eqx.field(static=True, default=1)
     gas_volume_ratio: float = eqx.field(static=True, default=1.0)
+    hoop_capacity: float = eqx.field(static=True, default=WRINKLED_HOOP_CAPACITY)
 
     def __check_init__(self):
+        if not (math.isfinite(self.hoop_capacity) and self.hoop_capacity >= 0):
+            raise InvalidInputError(
+                f"Setup: hoop_capacity = {self.hoop_capacity!r} must be a number >= 0 (hoop compression "
+                "of the wrinkled wall in classical buckling resultants). Fix: 0 for a tension field, "
+                f"or the calibrated default {WRINKLED_HOOP_CAPACITY}"
+            )
         if not (math.isfinite(self.gas_volume_ratio) and self.gas_volume_ratio > 0):
             raise InvalidInputError(
                 f"Setup: gas_volume_ratio = {self.gas_volume_ratio!r} must be a positive number "
@@ -236,7 +246,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     n = len(setup.theta())
     x_inf, _ = split(y_inf, n)
     cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
-                 pin_bottom=False, relax=setup.relax, gas_volume_ratio=setup.gas_volume_ratio)
+                 pin_bottom=False, relax=setup.relax, gas_volume_ratio=setup.gas_volume_ratio,
+                 hoop_capacity=setup.hoop_capacity)
     volume_ref = enclosed_volume(x_inf)
     ground_z = x_inf[0, 1]
     zc_contact = x_inf[-1, 1] + setup.indenter_radius

@@ -171,9 +171,13 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
         # gradient step crawls (measured: 30+ iterations on soft balls); shifting the next
         # Hessians until Newton descends again, and relaxing the shift after clean steps,
         # recovers in a few. The shift only changes directions, never the equilibrium.
-        mu = jnp.where(~ok_dir, jnp.maximum(100.0 * mu, 1e-4),
+        # A step the line search could not make acceptable is not taken (it may sit past the
+        # infinite-energy wall of a node crossing the axis); the next direction is shifted instead.
+        accepted = accept(alpha, e_new)
+        mu = jnp.where(~ok_dir | ~accepted, jnp.maximum(100.0 * mu, 1e-4),
                        jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu))
-        y_new = y + alpha * d
+        y_new = jnp.where(accepted, y + alpha * d, y)
+        e_new = jnp.where(accepted, e_new, e)
         g_new = grad(y_new)
         res = jnp.max(jnp.abs(g_new))
         res = jnp.where(jnp.isfinite(res), res, jnp.inf)
