@@ -74,8 +74,11 @@ def test_fixed_axes_and_gradients():
 
 
 def test_surrogate_matches_the_engine_between_nodes():
-    # A small engine (31 elements) on a 3 × 3 box in (P_g, E): the check the posterior relies on.
-    model = AxisymForwardModel.for_forces(0.13, FORCES, n_elements=31)
+    # A small engine (61 elements) on a 3 × 3 box in (P_g, E): the check the posterior relies on.
+    # Not 31: there the wrinkling relaxation switches Gauss point by Gauss point on coarse elements
+    # and w0(P_g, E) carries 0.1 mm bumps between nodes (measured 1.02e-4 m at 31, 3.1e-5 m at 61;
+    # the estimators' default is 101).
+    model = AxisymForwardModel.for_forces(0.13, FORCES, n_elements=61)
     half = {"gauge_pressure": 0.05, "young_modulus": 0.1}
     surrogate = build_surrogate(model, CENTER, half, nodes=(3, 3, 1, 1), progress=False)
     rng = np.random.default_rng(1)
