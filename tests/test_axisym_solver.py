@@ -37,3 +37,19 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
     # time the ground disc grows by a node). Iteration counts can move by one or two with another
     # CPU's rounding, so require a clear saving (≥ 15 %), not the exact count.
     assert float(predicted["iterations"].sum()) <= 0.85 * float(plain["iterations"].sum())
+
+
+def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
+    # A hammer surrogate node (sealed gas, E ≈ 198 MPa, τ ≈ 9): at the fourth level a ground node
+    # hovers 4 nm above the plane, where the contact-predicted model's pull k·gap cancels its
+    # true load and the predicted step vanished (1e-17 m): Newton repeated it until max_iter.
+    setup = Setup(radius=0.08, gas="isothermal", gas_volume_ratio=2.936825663641749)
+    forces = np.array([5.192942604266566, 7.838569549712717, 10.484196495158868, 13.12982344060502])
+    params = (4322.770123333427, 197785522.1706926, 0.00030831352398951936, 0.4)
+
+    def residuals():
+        return np.asarray(jax.jit(lambda: curve_single(setup, *params, forces))()["residual"])
+
+    assert np.all(residuals() <= setup.atol)
+    monkeypatch.setattr(newton, "MIN_DESCENT_FRACTION", 0.0)  # the former rule (read at trace time)
+    assert residuals()[-1] > 1e-2  # stuck at ≈ 0.14 N

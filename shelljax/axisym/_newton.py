@@ -33,6 +33,7 @@ from ..physics import ATMOSPHERIC_PRESSURE
 from ._linalg import StructuredHessian, structured_hessian, structured_solve
 
 ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the ground contact set the step predicts
+MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a contact-predicted step
 
 
 class SolverOptions(tuple):
@@ -115,7 +116,8 @@ def _ground_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         # per row (12 in the blocks, the contact nodes in the indenter row): 1e-3 rejects only
         # such degenerate steps.
         slope = g @ d_pred
-        d = jnp.where(jnp.isfinite(slope) & (slope < -1e-3 * (g @ (g / _jacobi_diagonal(hess)))), d_pred, d)
+        floor = MIN_DESCENT_FRACTION * (g @ (g / _jacobi_diagonal(hess)))
+        d = jnp.where(jnp.isfinite(slope) & (slope < -floor), d_pred, d)
     return d
 
 
