@@ -26,6 +26,7 @@ from jaxtyping import Array, Float
 
 from ..physics import (
     bending_density_invariants,
+    bending_stiffness,
     isothermal_gas_energy,
     lame_constants_2d,
     neo_hookean_membrane_invariants,
@@ -120,8 +121,8 @@ def wrinkled_hoop_resultant(p: Params, hoop_capacity: float):
     compressive hoop stress saturates at 2 √(B K) instead of vanishing (c_w = 0: tension field).
     The scale is h/R0 × E h, so the exact similarity of the forward model (docs/axisym.md) holds.
     """
-    return (hoop_capacity * p.young_modulus * p.thickness**2
-            / (p.rest_radius * jnp.sqrt(3.0 * (1.0 - p.poisson_ratio**2))))
+    bending = bending_stiffness(p.young_modulus, p.thickness, p.poisson_ratio)
+    return hoop_capacity * 2.0 * jnp.sqrt(bending * p.young_modulus * p.thickness) / p.rest_radius
 
 
 def wrinkling_hoop_stretch_sq(lam_s_sq, hoop_resultant, p: Params):
@@ -177,7 +178,7 @@ def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float 
         # Relaxation removes the log barrier of det C against λ_θ → 0, so a Newton step could park
         # a node on the axis (a collapsed element: Newton stalled there on 1 of 96 fits). Restore
         # a barrier far below any physical state (converged dimples keep λ_θ > 0.73).
-        alpha, beta = lame_constants_2d(p.young_modulus, p.poisson_ratio)
+        _, beta = lame_constants_2d(p.young_modulus, p.poisson_ratio)
         collapse = jnp.minimum(jnp.log(lam_t_sq / COLLAPSE_HOOP_STRETCH**2), 0.0) ** 2
         wrinkle_work = wrinkle_work + jnp.where(upper, p.thickness * beta * collapse, 0.0)
         lam_t_sq = jnp.where(upper, relaxed, lam_t_sq)
