@@ -7,9 +7,9 @@ Ball R = 0.13 m, h = 0.9 mm, E = 2.34 MPa, ν = 0.4, P_g = 1300 Pa (sealed isoth
 indenter radius 8 mm, depths 2/7 … 2 cm. Each size runs in its own subprocess so that the peak
 resident memory (ru_maxrss) is per size. Reported: setup (mesh, rest shape, reference state,
 includes compiling the free-shell functions), cold curve (includes compiling the contact model),
-warm curve (median over repeats; compile ≈ cold − warm), Newton iterations per level, peak RSS,
-and the element-Hessian assembly throughput against the XLA cost-analysis flop count of that
-kernel. Not a test: numbers depend on the machine, which is named in the output.
+warm curve (median over repeats; compile ≈ cold − warm), Newton iterations and Hessian
+factorizations per level, peak RSS, the element-Hessian assembly throughput against the XLA
+cost-analysis flop count of that kernel, and one factorization + solve of the final Hessian. Not a test: numbers depend on the machine, which is named in the output.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ def run_one(n_triangles: int, repeats: int) -> dict:
 
     import shelljax.shell3d as s3
     from shelljax.shell3d._model import _hessian_values
+    from shelljax.solve import SparseSolver
 
     t0 = time.perf_counter()
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=n_triangles)
@@ -64,6 +65,14 @@ def run_one(n_triangles: int, repeats: int) -> dict:
         flops = float(cost.get("flops", float("nan")))
     except Exception:  # cost analysis is backend-dependent
         flops = float("nan")
+    mat, rank_one = model.host_hessian(states[-1].q, sim._params_for(states[-1].q))
+    SparseSolver(mat, rank_one, symmetric=True)  # the pattern's symbolic analysis, done once
+    t_fact = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        solver = SparseSolver(mat, rank_one, symmetric=True)
+        solver.solve(np.ones(mat.shape[0]))
+        t_fact.append(time.perf_counter() - t0)
     obs = states[-1].observables()
     return {
         "faces": ball.mesh.n_faces,
@@ -74,6 +83,9 @@ def run_one(n_triangles: int, repeats: int) -> dict:
         "curve_warm_s": float(np.median(warm)),
         "compile_s_estimate": cold - float(np.median(warm)),
         "newton_iterations": [s.iterations for s in states],
+        "factorizations": [s.factorizations for s in states],
+        "factorization_method": solver.method,
+        "factorization_s": float(np.median(t_fact)),
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "hessian_assembly_s": t_hess,
         "hessian_faces_per_s": ball.mesh.n_faces / t_hess,
@@ -108,16 +120,19 @@ def main(argv=None):
             continue
         rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
     print(f"machine: {machine}")
-    hdr = f"{'faces':>7} {'dofs':>7} {'setup[s]':>9} {'compile[s]':>10} {'curve[s]':>9} {'Newton its/level':>24} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'F(2cm)[N]':>9}"
+    hdr = (f"{'faces':>7} {'dofs':>7} {'setup[s]':>9} {'compile[s]':>10} {'curve[s]':>9} {'Newton its/level':>24} "
+           f"{'factorizations/level':>24} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'factor[ms]':>10} {'F(2cm)[N]':>9}")
     print(hdr)
     for r in rows:
         if "error" in r:
             print(f"{r['target_faces']:>7} failed")
             continue
         its = ",".join(str(i) for i in r["newton_iterations"])
+        facts = ",".join(str(i) for i in r["factorizations"])
         print(
             f"{r['faces']:>7} {r['dofs']:>7} {r['setup_s']:>9.1f} {r['compile_s_estimate']:>10.1f} {r['curve_warm_s']:>9.1f} "
-            f"{its:>24} {r['peak_rss_mib']:>10.0f} {1e3 * r['hessian_assembly_s']:>12.1f} {r['hessian_gflops_per_s']:>8.2f} {r['final_force_N']:>9.3f}"
+            f"{its:>24} {facts:>24} {r['peak_rss_mib']:>10.0f} {1e3 * r['hessian_assembly_s']:>12.1f} "
+            f"{r['hessian_gflops_per_s']:>8.2f} {1e3 * r['factorization_s']:>10.1f} {r['final_force_N']:>9.3f}"
         )
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -87,14 +87,93 @@ def _quartic_problem(n=12):
 def test_newton_converges_in_force_units_and_reports_failure():
     energy, grad, hess, b = _quartic_problem()
     free = np.ones(b.size, dtype=bool)
-    res = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12)
+    res = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
     assert np.max(np.abs(grad(res.x))) <= 1e-12
     # Quadratic convergence: the last residuals drop super-linearly.
     h = res.history
     assert h[-1] < 1e-3 * h[-2] or h[-1] < 1e-14
+    assert res.factorizations == res.iterations
     with pytest.raises(NoConvergenceError) as err:
         newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, max_iter=2)
     assert len(err.value.history) == 3 and "residual history" in str(err.value)
+
+
+def test_newton_reuses_factorizations_only_while_they_contract():
+    from shelljax.solve._newton import REUSE_CONTRACTION
+
+    energy, grad, hess, b = _quartic_problem(40)
+    free = np.ones(b.size, dtype=bool)
+    factorized = []
+
+    def counting_hess(x, project):
+        factorized.append(len(factorized))
+        return hess(x, project)
+
+    exact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
+    lagged = newton(energy, grad, counting_hess, np.zeros(b.size), free, atol=1e-12)
+    assert np.max(np.abs(grad(lagged.x))) <= 1e-12
+    assert lagged.factorizations == len(factorized) < exact.factorizations
+    # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
+    np.testing.assert_allclose(lagged.x, exact.x, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
+    # Every lagged step but the last (which may stop early at the tolerance) contracted enough to
+    # be followed by another lagged step; all other steps were fresh factorizations.
+    h = lagged.history
+    reused_steps = lagged.iterations - lagged.factorizations
+    assert reused_steps > 0
+    ratios = np.array(h[:-1]) / np.array(h[1:])
+    assert np.sum(ratios >= REUSE_CONTRACTION) >= reused_steps - 1
+
+
+def test_cholesky_and_lu_paths_agree_with_dense_solves():
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    n = 40
+    a = sp.random(n, n, density=0.15, random_state=4)
+    spd = (a @ a.T + sp.identity(n)).tocsr()
+    indefinite = (a + a.T - 0.5 * sp.identity(n)).tocsr()
+    nonsymmetric = (a + 3 * sp.identity(n)).tocsr()
+    b = rng.normal(size=(n, 2))
+    first = SparseSolver(spd, symmetric=True)
+    assert first.method == "cholesky"
+    np.testing.assert_allclose(first.solve(b), np.linalg.solve(spd.toarray(), b), rtol=1e-10)
+    # Same pattern, other values: the second factorization reuses the first's symbolic analysis,
+    # and the first solver must still solve its own matrix afterwards.
+    other = (spd + sp.diags(np.linspace(1.0, 5.0, n))).tocsr()
+    second = SparseSolver(other, symmetric=True)
+    np.testing.assert_allclose(second.solve(b[:, 0]), np.linalg.solve(other.toarray(), b[:, 0]), rtol=1e-10)
+    np.testing.assert_allclose(first.solve(b[:, 0]), np.linalg.solve(spd.toarray(), b[:, 0]), rtol=1e-10)
+    fallback = SparseSolver(indefinite, symmetric=True)
+    assert fallback.method == "lu"  # not positive definite
+    np.testing.assert_allclose(fallback.solve(b), np.linalg.solve(indefinite.toarray(), b), rtol=1e-8)
+    lu = SparseSolver(nonsymmetric)  # the default never assumes symmetry
+    assert lu.method == "lu"
+    np.testing.assert_allclose(lu.solve(b), np.linalg.solve(nonsymmetric.toarray(), b), rtol=1e-10)
+
+
+def test_nodal_pattern_build_equals_the_entrywise_one():
+    """The shell models' patterns are built from node pairs; the entrywise build is the reference."""
+    from shelljax.solve._sparse import _dof_pattern, _nodal_blocks, _nodal_pattern
+
+    rng = np.random.default_rng(5)
+    n_nodes = 30
+    faces = np.stack([rng.permutation(n_nodes)[:6] for _ in range(25)])
+    pairs = np.stack([rng.permutation(n_nodes)[:2] for _ in range(10)])
+    blocks = [(3 * nodes[:, :, None] + np.arange(3)).reshape(len(nodes), -1) for nodes in (faces, pairs)]
+    n_dofs = 3 * n_nodes
+    nodal = _nodal_blocks(blocks, n_dofs)
+    assert nodal is not None and _nodal_blocks([blocks[0][:, ::-1]], n_dofs) is None
+    reference, built = _dof_pattern(blocks, n_dofs), _nodal_pattern(nodal, n_nodes)
+    for ref, new in zip(reference[:3], built[:3]):
+        np.testing.assert_array_equal(ref, new)
+    for ref, new in zip(reference[3], built[3]):
+        np.testing.assert_array_equal(ref, new)
+    # A node in no element (here the last one, pinned) still gets its unit pivots.
+    free = np.ones(n_dofs + 3, dtype=bool)
+    free[-3:] = False
+    pattern = SparsityPattern.from_elements(blocks, n_dofs + 3, free)
+    values = [jnp.ones((len(b), b.shape[1], b.shape[1])) for b in blocks]
+    np.testing.assert_array_equal(pattern.matrix(pattern.assemble_values(values)).toarray()[-3:, -3:], np.eye(3))
 
 
 def test_implicit_equilibrium_forward_and_reverse_match_finite_differences():

@@ -90,7 +90,9 @@ class IndentationState:
     friction), ``friction_lag_change`` the relative change [-] of the normal forces between the
     lagged values and this state's. ``ground_slip`` (V, 3) [m] (None without ground): each vertex's
     tangential displacement along the ground accumulated over the load steps at whose end it
-    touched the ground (gap < activation distance), with or without friction.
+    touched the ground (gap < activation distance), with or without friction. ``factorizations``:
+    Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
+    a factorization while it keeps converging fast).
     """
 
     sim: "Indentation"
@@ -101,6 +103,7 @@ class IndentationState:
     friction: dict = dataclasses.field(default_factory=dict)
     friction_lag_change: float = 0.0
     ground_slip: np.ndarray | None = None
+    factorizations: int = 0
 
     @property
     def vertices(self) -> np.ndarray:
@@ -329,7 +332,7 @@ class Indentation:
             "friction_normal_force": model.plane_normal_forces(q_start),
         }
         res = self._step(model, q_guess, {**params, **lagged}, label)
-        iterations = res.iterations
+        iterations, factorizations = res.iterations, res.factorizations
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.x)
             change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
@@ -339,7 +342,8 @@ class Indentation:
             lagged = {**lagged, "friction_normal_force": current}
             res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})")
             iterations += res.iterations
-        res = dataclasses.replace(res, iterations=iterations)
+            factorizations += res.factorizations
+        res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations)
         return res, lagged, change
 
     def _accumulate_slip(self, slip, q_start, q_end):
@@ -401,7 +405,8 @@ class Indentation:
                 )
                 slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
                 history.append((d, res.x))
-            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0])
+            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
+                                    res.factorizations)  # fmt: skip
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
 
@@ -421,7 +426,8 @@ class Indentation:
             slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
             history.append((force, res.x))
             depth = float(self.touch_center[2] - res.x[-1])
-            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0])
+            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
+                                    res.factorizations)  # fmt: skip
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 

@@ -324,6 +324,10 @@ def _search_energy(q, params, geometry, config):
 _gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))
 
 
+#: Faces per vectorized chunk of the element-Hessian kernel.
+FACE_HESSIAN_CHUNK = 1024
+
+
 def _element_hessians(q, params, geometry, config):
     """Per-element Hessian blocks [N/m], one (n_e, k, k) array per element family (the order of
     the families of :class:`ShellModel`'s sparsity pattern)."""
@@ -333,13 +337,11 @@ def _element_hessians(q, params, geometry, config):
     face_hess = jax.hessian(
         lambda p, *rest: face_energy(p.reshape(6, 3), *rest)
     )
-    blocks = [
-        jax.vmap(face_hess, in_axes=(0, 0, 0, 0, None, None, None, None))(
-            x[geometry.stencil].reshape(-1, 18), geometry.rest_metric, geometry.rest_curvature,
-            geometry.rest_area, params["thickness"], params["young_modulus"],
-            params["poisson_ratio"], pressure,
-        )
-    ]
+    material = (params["thickness"], params["young_modulus"], params["poisson_ratio"], pressure)
+    faces = (x[geometry.stencil].reshape(-1, 18), geometry.rest_metric, geometry.rest_curvature, geometry.rest_area)
+    # Vectorized in chunks: the autodiff intermediates of all faces at once cost GiBs at 80k faces,
+    # and chunks that fit in cache are faster too (0.72 → 0.52 s at 20k faces on 2 cores).
+    blocks = [jax.lax.map(lambda face: face_hess(*face, *material), faces, batch_size=FACE_HESSIAN_CHUNK)]
     k = _contact_stiffness(geometry, config.contact)
     if config.contact.indenter_radius is not None:
         def pair(y, kv):
@@ -556,7 +558,7 @@ class ShellModel:
         """Displacement [m] solving H u = load [N] at state q (exact Hessian; pins held)."""
         params = jax.tree_util.tree_map(jnp.asarray, params)
         mat, rank_one = self.host_hessian(q, params, project=False)
-        return SparseSolver(mat, rank_one).solve(np.where(self.free, load, 0.0))
+        return SparseSolver(mat, rank_one, symmetric=True).solve(np.where(self.free, load, 0.0))
 
 
 def rigid_mode_pins(vertices, n_extra: int = 3, fixed_extra=(True, True, True)) -> np.ndarray:

@@ -3,7 +3,7 @@
 At an equilibrium r(x*, θ) = ∇ₓE(x*, θ) = 0 on the free dofs, so dx* = −H⁻¹ ∂r/∂θ dθ with the
 (symmetric) Hessian H = ∂r/∂x. The primal solve is a host Newton run (``jax.pure_callback``), the
 tangent solve a ``jax.lax.custom_linear_solve`` whose matvec is a JAX Hessian-vector product and
-whose solve is the same host sparse factorization (SuperLU + Sherman–Morrison) as in Newton. Being
+whose solve is the same host sparse factorization (CHOLMOD or SuperLU, + Sherman–Morrison) as in Newton. Being
 symmetric, the same solve serves the transpose, so both ``jax.jvp``/``jacfwd`` and
 ``jax.grad``/``jacrev`` work, also under ``jax.jit``. No Newton iteration is unrolled and no dense
 Hessian is formed.
@@ -55,7 +55,7 @@ def implicit_equilibrium(
             def host(x_, theta_, b_):
                 theta_np = jax.tree_util.tree_map(np.asarray, theta_)
                 mat, rank_one = hessian_host(np.asarray(x_), theta_np)
-                return SparseSolver(mat, rank_one).solve(np.asarray(b_))
+                return SparseSolver(mat, rank_one, symmetric=True).solve(np.asarray(b_))
 
             return jax.pure_callback(host, out_shape, x, theta, b)
 
