@@ -29,9 +29,12 @@ def test_pattern_assembles_the_dense_sum_and_folds_pins():
     np.testing.assert_allclose(mat, dense, rtol=1e-13, atol=1e-13)
 
 
-def test_projected_assembly_sums_clamped_element_matrices():
+def test_projected_assembly_sums_clamped_element_matrices(monkeypatch):
     """Independent computation: clamp each symmetric element matrix through its own eigen-
     decomposition (np.linalg.eig, unsorted, general solver) and sum densely."""
+    import shelljax.solve._sparse as sparse_module
+
+    monkeypatch.setattr(sparse_module, "_PROJECTION_CHUNK", 4)  # 6 elements: two chunks
     rng = np.random.default_rng(7)
     n = 9
     blocks = [np.stack([rng.permutation(n)[:4] for _ in range(6)])]

@@ -5,10 +5,13 @@ Convergence is measured in force units: the largest free component of the energy
 trial point whose energy is not finite, which is how contact barriers stay feasible (the energy
 callback returns +inf for a penetrating configuration).
 
-Each iteration first tries the exact Hessian (quadratic convergence); if its factorization fails
-or its step is not a descent direction, it retries with the per-element PSD-projected Hessian and
-finally with a diagonal shift. A failure raises :class:`shelljax.NoConvergenceError` carrying the
-residual history; a result is never returned without meeting the tolerance.
+Each iteration first tries the exact Hessian (quadratic convergence); if it is not positive
+definite (its Cholesky factorization fails) or its step is not a descent direction, it retries
+with the per-element PSD-projected Hessian and finally with a diagonal shift. An indefinite
+Hessian is never solved by LU here: its Newton step heads for saddles as readily as for minima,
+and at 80k faces the LU factors alone need GiBs. A failure raises
+:class:`shelljax.NoConvergenceError` carrying the residual history; a result is never returned
+without meeting the tolerance.
 
 Once a full Newton step has been taken, the next iteration first reuses the last factorization
 (a lagged-Hessian or Shamanskii step: one solve instead of an assembly and a factorization, which
@@ -93,7 +96,7 @@ def newton(
                     if mode == "shifted":
                         diag = np.abs(mat.diagonal())
                         mat = mat + 1e-3 * np.mean(diag) * _identity_like(mat)
-                    solver = SparseSolver(mat, rank_one, symmetric=True)
+                    solver = SparseSolver(mat, rank_one, symmetric=True, definite=True)
                     factorizations += 1
                     d = -solver.solve(g)
                 except NoConvergenceError:

@@ -28,6 +28,9 @@ import scipy.sparse.linalg as spla
 from .._errors import NoConvergenceError
 
 
+_PROJECTION_CHUNK = 8192  # elements per eigenvalue-clamp batch
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class SparsityPattern:
     """CSR pattern of a sum of element matrices, with the scatter map from element entries.
@@ -89,10 +92,16 @@ class SparsityPattern:
         """
         data = np.zeros(self.nnz)
         for m, values in zip(self.maps, element_matrices):
-            sym = 0.5 * (values + np.swapaxes(values, -1, -2))
-            w, v = np.linalg.eigh(sym)
-            clamped = (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
-            data += np.bincount(np.asarray(m), weights=clamped.ravel(), minlength=self.nnz)
+            m = np.asarray(m).reshape(len(values), -1)
+            # In chunks: eigh and its products hold ~5 copies of the element matrices (1 GiB at
+            # 80k faces at once).
+            for start in range(0, len(values), _PROJECTION_CHUNK):
+                chunk = values[start : start + _PROJECTION_CHUNK]
+                sym = 0.5 * (chunk + np.swapaxes(chunk, -1, -2))
+                w, v = np.linalg.eigh(sym)
+                clamped = (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
+                rows = m[start : start + _PROJECTION_CHUNK].ravel()
+                data += np.bincount(rows, weights=clamped.ravel(), minlength=self.nnz)
         return data
 
     def matrix(self, data) -> sp.csr_matrix:
@@ -186,12 +195,21 @@ class SparseSolver:
 
     ``symmetric=True`` (the caller guarantees K = Kᵀ; Newton, implicit differentiation): a
     supernodal CHOLMOD Cholesky (cvxopt) on the METIS ordering, whose symbolic analysis is done
-    once per sparsity pattern; if K is not positive definite, SuperLU in symmetric mode. Otherwise
-    (e.g. the rest-shape Jacobian): SuperLU. The rank-one part by Sherman–Morrison, never
-    densified. Raises :class:`NoConvergenceError` when K is numerically singular.
+    once per sparsity pattern; if K is not positive definite, SuperLU in symmetric mode, or, with
+    ``definite=True`` (Newton's steps, which need a positive definite model), a
+    :class:`NoConvergenceError`. Otherwise (e.g. the rest-shape Jacobian): SuperLU. The rank-one
+    part by Sherman–Morrison, never densified. Raises :class:`NoConvergenceError` when K is
+    numerically singular.
     """
 
-    def __init__(self, matrix: sp.csr_matrix, rank_one=None, *, symmetric: bool = False):
+    def __init__(
+        self,
+        matrix: sp.csr_matrix,
+        rank_one=None,
+        *,
+        symmetric: bool = False,
+        definite: bool = False,
+    ):
         matrix = sp.csr_matrix(matrix, dtype=np.float64)
         matrix.sum_duplicates()  # canonical CSR (sorted, unique): the ordering cache relies on it
         ordering = _nested_dissection(matrix)
@@ -201,6 +219,10 @@ class SparseSolver:
             # On the 20k-face ball (30k dofs) one numeric Cholesky takes 0.3 s against 2.5 s for
             # SuperLU's LU on the same ordering (docs/shell3d.md).
             self._cholesky = _Cholesky.factorize(matrix, ordering)
+        if self._cholesky is None and definite:
+            raise NoConvergenceError(
+                f"sparse Hessian ({matrix.shape[0]} dofs) is not positive definite (Cholesky failed)."
+            )
         if self._cholesky is None:
             self._lu = _superlu(ordering.permute(matrix))
         self._rank_one = None
@@ -346,10 +368,23 @@ class _Ordering:
         return sp.csc_matrix((matrix.data[self.data_map], self.indices, self.indptr), shape=(n, n))
 
     def cholesky_analysis(self, matrix: sp.csr_matrix) -> _CholeskyAnalysis:
-        """CHOLMOD's symbolic analysis of this pattern on this ordering (built on first use)."""
+        """CHOLMOD's symbolic analysis of this pattern on this ordering (built on first use).
+
+        An analysis holds its pattern's factor storage (≈ 0.9 GiB at 80k faces), so only the
+        ``_CHOLESKY_KEPT`` most recently analysed patterns keep theirs: the free shell's of the
+        rest-shape solve is dropped once the contact model factorizes (switching back and forth
+        costs one symbolic analysis per switch, 0.1 s at 20k faces).
+        """
         if not self._cholesky:
+            while len(_ANALYSED) >= _CHOLESKY_KEPT:  # drop before building: never two at once
+                _ANALYSED.pop(0)._cholesky.clear()
             self._cholesky.append(_CholeskyAnalysis.build(matrix, self.perm))
+            _ANALYSED.append(self)
         return self._cholesky[0]
+
+
+_CHOLESKY_KEPT = 1
+_ANALYSED: list = []  # orderings holding a Cholesky analysis, oldest first
 
 
 _ORDERINGS: dict = {}
