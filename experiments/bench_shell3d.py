@@ -54,24 +54,19 @@ def run_one(n_triangles: int, repeats: int) -> dict:
     model = sim.model
     q = jnp.asarray(states[-1].q)
     params = model._host_params(sim._params_for(states[-1].q))
-    args = (q, params, model.geometry, model._jit_config, model.pattern)
+    args = (q, params, model.geometry, model._jit_config, model.pattern.maps, model.pattern.nnz)
     _hessian_values(*args).block_until_ready()
     reps, t0 = 5, time.perf_counter()
     for _ in range(reps):
         _hessian_values(*args).block_until_ready()
     t_hess = (time.perf_counter() - t0) / reps
     try:
-        # XLA's cost analysis counts a loop body once: count the flops of the kernel with all faces
-        # in one chunk (the same arithmetic as the chunked kernel that was timed).
-        import shelljax.shell3d._model as model_module
+        # XLA's cost analysis counts a loop body once: count the flops of the face kernel over all
+        # faces at once (the same arithmetic as the chunked loop that was timed).
+        from shelljax.shell3d._model import _face_hessians
 
-        config = model._jit_config
-        one_chunk = jax.jit(lambda q, p, g: model_module._element_hessians(q, p, g, config))  # fresh trace
-        chunk, model_module.FACE_HESSIAN_CHUNK = model_module.FACE_HESSIAN_CHUNK, ball.mesh.n_faces
-        try:
-            cost = one_chunk.lower(q, params, model.geometry).compile().cost_analysis()
-        finally:
-            model_module.FACE_HESSIAN_CHUNK = chunk
+        cost = _face_hessians.lower(q, params, model.geometry, model._jit_config, 0, ball.mesh.n_faces)
+        cost = cost.compile().cost_analysis()
         cost = cost[0] if isinstance(cost, (list, tuple)) else cost
         flops = float(cost.get("flops", float("nan")))
     except Exception:  # cost analysis is backend-dependent

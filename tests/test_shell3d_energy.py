@@ -127,6 +127,42 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas):
     assert (rank_one is None) == (gas == "prescribed")
 
 
+def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
+    """The exact Hessian is scattered chunk by chunk (the last chunk shifted back to end at the
+    last face) and the projected one streamed in chunks: both against unchunked references."""
+    import shelljax.shell3d._model as model_module
+
+    rng = np.random.default_rng(5)
+    mesh = s3.sphere_mesh(1.0, 150)
+    n_chunks = -(-mesh.n_faces // 35)
+    assert n_chunks * -(-mesh.n_faces // n_chunks) > mesh.n_faces  # the last chunk overlaps its predecessor
+    contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
+    cfg = ModelConfig(mesh.n_vertices, contact=contact)
+    model = ShellModel(mesh, mesh.vertices, cfg, np.zeros(3 * mesh.n_vertices + 3, dtype=bool))
+    x = _random_state(mesh, rng)
+    x[:, 2] = np.maximum(x[:, 2], -1.0)
+    c = x[int(np.argmax(x[:, 2]))] + np.array([0.0, 0.0, 0.32])
+    q = np.concatenate([x.ravel(), c])
+    params = _params(indenter_center=c)
+    monkeypatch.setattr(model_module, "FACE_HESSIAN_CHUNK", 35)
+    monkeypatch.setattr(model_module, "PROJECTION_CHUNK", 35)
+    model_module._hessian_values.clear_cache()  # the chunk size is read when tracing
+    mat, _ = model.host_hessian(q, params)
+    model_module._hessian_values.clear_cache()
+    # Reference: every face's Hessian from one unchunked vmap, scattered at once.
+    hp = model._host_params(params)
+    faces = np.asarray(model_module._face_hessians(jnp.asarray(q), hp, model.geometry, model._jit_config, 0, mesh.n_faces))
+    blocks = [faces] + [np.asarray(b) for b in model_module._contact_hessians_jit(jnp.asarray(q), hp, model.geometry, model._jit_config)]
+    exact = model.pattern.matrix(model.pattern.assemble_values([jnp.asarray(b) for b in blocks])).toarray()
+    scale = np.abs(exact).max()
+    # The same numbers summed in another order: equal to round-off of the largest entry. A face
+    # left out or added twice would be off by a whole face stiffness (≥ 1e-3 of the largest).
+    np.testing.assert_allclose(mat.toarray(), exact, rtol=0, atol=1e-12 * scale)
+    projected, _ = model.host_hessian(q, params, project=True)
+    reference = model.pattern.matrix(model.pattern.assemble_projected(blocks)).toarray()
+    np.testing.assert_allclose(projected.toarray(), reference, rtol=0, atol=1e-12 * scale)
+
+
 def test_element_energy_derivatives_match_central_differences():
     rng = np.random.default_rng(4)
     mesh = s3.sphere_mesh(1.0, 200)

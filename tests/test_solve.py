@@ -48,6 +48,8 @@ def test_projected_assembly_sums_clamped_element_matrices(monkeypatch):
         dense[np.ix_(b, b)] += np.real(vec @ np.diag(np.maximum(np.real(w), 0.0)) @ vec.T)
     np.testing.assert_allclose(mat, dense, rtol=1e-12, atol=1e-12)
     assert np.linalg.eigvalsh(mat).min() > -1e-12  # a sum of PSD matrices is PSD
+    streamed = pattern.assemble_projected([iter([values[:1], values[1:5], values[5:]])])
+    np.testing.assert_allclose(pattern.matrix(streamed).toarray(), dense, rtol=1e-12, atol=1e-12)
     # PSD elements pass through unchanged
     spd = np.einsum("eij,ekj->eik", values, values)
     exact = pattern.matrix(pattern.assemble_values([jnp.asarray(spd)])).toarray()

@@ -51,7 +51,7 @@ from ..physics import (
     prescribed_pressure_energy,
     sphere_gap,
 )
-from ..solve import SparseSolver, SparsityPattern, newton
+from ..solve import SparseSolver, SparsityPattern, assemble_values, newton
 from ._energy import face_energy, face_volume, rest_geometry
 from ._mesh import ShellMesh
 
@@ -326,22 +326,28 @@ _gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))
 
 #: Faces per vectorized chunk of the element-Hessian kernel.
 FACE_HESSIAN_CHUNK = 1024
+#: Faces per chunk of the PSD-projected Hessian (its eigenvalue clamp runs on the host).
+PROJECTION_CHUNK = 8192
 
 
-def _element_hessians(q, params, geometry, config):
-    """Per-element Hessian blocks [N/m], one (n_e, k, k) array per element family (the order of
-    the families of :class:`ShellModel`'s sparsity pattern)."""
-    x, c = _split(q, config)
+def _face_hessian_kernel(q, params, geometry, config):
+    """(face ↦ its 18×18 Hessian [N/m], the per-face inputs): the membrane, bending and
+    pressure-follower energy of one face, differentiated twice (the gas pressure is fixed at the
+    current volume's; the gas's rank-one term is :func:`_rank_one`)."""
+    x, _ = _split(q, config)
     vol = volume(x, geometry.stencil)
     pressure = -jax.grad(gas_energy)(vol, params, config)
-    face_hess = jax.hessian(
-        lambda p, *rest: face_energy(p.reshape(6, 3), *rest)
-    )
+    face_hess = jax.hessian(lambda p, *rest: face_energy(p.reshape(6, 3), *rest))
     material = (params["thickness"], params["young_modulus"], params["poisson_ratio"], pressure)
     faces = (x[geometry.stencil].reshape(-1, 18), geometry.rest_metric, geometry.rest_curvature, geometry.rest_area)
-    # Vectorized in chunks: the autodiff intermediates of all faces at once cost GiBs at 80k faces,
-    # and chunks that fit in cache are faster too (0.72 → 0.52 s at 20k faces on 2 cores).
-    blocks = [jax.lax.map(lambda face: face_hess(*face, *material), faces, batch_size=FACE_HESSIAN_CHUNK)]
+    return (lambda face: face_hess(*face, *material)), faces
+
+
+def _contact_hessians(q, params, geometry, config):
+    """Per-vertex contact (and friction) Hessian blocks [N/m], one (V, k, k) array per contact
+    family (indenter, then each plane), in the order of :class:`ShellModel`'s pattern."""
+    x, c = _split(q, config)
+    blocks = []
     k = _contact_stiffness(geometry, config.contact)
     if config.contact.indenter_radius is not None:
         def pair(y, kv):
@@ -370,13 +376,47 @@ def _element_hessians(q, params, geometry, config):
     return blocks
 
 
-_element_hessians_jit = jax.jit(_element_hessians, static_argnames=("config",))
+def _face_chunk(kernel, faces, start, size):
+    """(Hessians of ``size`` consecutive faces from ``start``, the start used): a chunk that would
+    overrun is shifted back to end at the last face, and the caller drops the overlap."""
+    start = jnp.minimum(start, faces[0].shape[0] - size)
+    return jax.vmap(kernel)([jax.lax.dynamic_slice_in_dim(a, start, size) for a in faces]), start
 
 
-@functools.partial(jax.jit, static_argnames=("config", "pattern"))
-def _hessian_values(q, params, geometry, config, pattern):
-    """CSR values of the exact Hessian [N/m], element blocks summed inside one XLA program."""
-    return pattern.assemble_values(_element_hessians(q, params, geometry, config))
+@functools.partial(jax.jit, static_argnames=("config", "size"))
+def _face_hessians(q, params, geometry, config, start, size):
+    """The 18×18 Hessians [N/m] of ``size`` faces from face ``start`` (see :func:`_face_chunk`)."""
+    return _face_chunk(*_face_hessian_kernel(q, params, geometry, config), start, size)[0]
+
+
+_contact_hessians_jit = jax.jit(_contact_hessians, static_argnames=("config",))
+
+
+@functools.partial(jax.jit, static_argnames=("config", "nnz"))
+def _hessian_values(q, params, geometry, config, maps, nnz):
+    """CSR values of the exact Hessian [N/m] (a pattern's ``maps`` and ``nnz``), element blocks
+    summed inside one XLA program.
+
+    The face Hessians are computed in balanced chunks of at most ``FACE_HESSIAN_CHUNK`` faces and
+    each chunk is scattered at once: the (F, 18, 18) array of all of them (207 MB at 80k faces)
+    never exists, the autodiff intermediates stay small, and chunks that fit in cache are faster
+    too (0.72 → 0.52 s at 20k faces on 2 cores against one vmap over all faces).
+    """
+    data = assemble_values(maps[1:], nnz, _contact_hessians(q, params, geometry, config))
+    kernel, faces = _face_hessian_kernel(q, params, geometry, config)
+    n_faces = faces[0].shape[0]
+    n_chunks = -(-n_faces // FACE_HESSIAN_CHUNK)
+    chunk = -(-n_faces // n_chunks)  # balanced: the last chunk overlaps by fewer than n_chunks faces
+    face_maps = maps[0].reshape(n_faces, -1)
+
+    def add_chunk(k, data):
+        hessians, start = _face_chunk(kernel, faces, k * chunk, chunk)
+        fresh = start + jnp.arange(chunk) >= k * chunk  # rows an earlier chunk did not add
+        hessians = jnp.where(fresh[:, None, None], hessians, 0.0)
+        rows = jax.lax.dynamic_slice_in_dim(face_maps, start, chunk)
+        return data.at[rows.reshape(-1)].add(hessians.reshape(-1))
+
+    return jax.lax.fori_loop(0, n_chunks, add_chunk, data)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
@@ -529,10 +569,18 @@ class ShellModel:
         if project:
             # The eigenvalue clamp runs in NumPy: a vmapped jnp.linalg.eigh (a LAPACK custom call)
             # inside this XLA:CPU program never returned on 2-core machines (see docs/shell3d.md).
-            blocks = _element_hessians_jit(q, params, self.geometry, self._jit_config)
-            data = self.pattern.assemble_projected([np.asarray(b) for b in blocks])
+            n_faces = self.mesh.n_faces
+            size = -(-n_faces // -(-n_faces // PROJECTION_CHUNK))  # balanced chunks
+
+            def face_chunks():
+                for start in range(0, n_faces, size):
+                    chunk = _face_hessians(q, params, self.geometry, self._jit_config, start, size)
+                    yield np.asarray(chunk)[start - min(start, n_faces - size) :]
+
+            contact = _contact_hessians_jit(q, params, self.geometry, self._jit_config)
+            data = self.pattern.assemble_projected([face_chunks()] + [np.asarray(b) for b in contact])
         else:
-            data = _hessian_values(q, params, self.geometry, self._jit_config, self.pattern)
+            data = _hessian_values(q, params, self.geometry, self._jit_config, self.pattern.maps, self.pattern.nnz)
         mat = self.pattern.matrix(data)
         rank_one = None
         if self.config.gas != "prescribed":

@@ -17,6 +17,7 @@ them gives a solution that is zero on them.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 import zlib
 
 import jax
@@ -78,30 +79,31 @@ class SparsityPattern:
 
     def assemble_values(self, element_matrices) -> jax.Array:
         """CSR values (JAX, traceable) from element matrices, one (n_e, k, k) array per family."""
-        data = jnp.zeros(self.nnz, dtype=jnp.float64)
-        for m, values in zip(self.maps, element_matrices):
-            data = data.at[m].add(values.reshape(-1))
-        return data
+        return assemble_values(self.maps, self.nnz, element_matrices)
 
     def assemble_projected(self, element_matrices) -> np.ndarray:
         """CSR values (host) of the sum of the nearest positive semi-definite element matrices.
 
-        Each symmetric element matrix (one (n_e, k, k) NumPy array per family) has its negative
-        eigenvalues clamped to zero before the sum, so the assembled matrix is PSD: Newton's
-        fallback when the exact Hessian gives no descent direction.
+        Each symmetric element matrix has its negative eigenvalues clamped to zero before the
+        sum, so the assembled matrix is PSD: Newton's fallback when the exact Hessian gives no
+        descent direction. ``element_matrices``: one entry per family, an (n_e, k, k) NumPy array
+        or an iterable of its consecutive row chunks (so that a caller can stream them).
         """
         data = np.zeros(self.nnz)
-        for m, values in zip(self.maps, element_matrices):
-            m = np.asarray(m).reshape(len(values), -1)
-            # In chunks: eigh and its products hold ~5 copies of the element matrices (1 GiB at
-            # 80k faces at once).
-            for start in range(0, len(values), _PROJECTION_CHUNK):
-                chunk = values[start : start + _PROJECTION_CHUNK]
+        for m, family in zip(self.maps, element_matrices):
+            m = np.asarray(m)
+            chunks = family
+            if isinstance(family, np.ndarray):
+                # eigh and its products hold ~5 copies of what they are given: bound them.
+                chunks = (family[i : i + _PROJECTION_CHUNK] for i in range(0, len(family), _PROJECTION_CHUNK))
+            start = 0
+            for chunk in chunks:
                 sym = 0.5 * (chunk + np.swapaxes(chunk, -1, -2))
                 w, v = np.linalg.eigh(sym)
                 clamped = (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
-                rows = m[start : start + _PROJECTION_CHUNK].ravel()
+                rows = m[start * chunk[0].size : (start + len(chunk)) * chunk[0].size]
                 data += np.bincount(rows, weights=clamped.ravel(), minlength=self.nnz)
+                start += len(chunk)
         return data
 
     def matrix(self, data) -> sp.csr_matrix:
@@ -110,6 +112,21 @@ class SparsityPattern:
         data[self.fixed_entries] = 0.0
         data[self.fixed_diagonal] = 1.0
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_dofs, self.n_dofs))
+
+
+def assemble_values(maps, nnz: int, element_matrices) -> jax.Array:
+    """CSR values (JAX, traceable): the element matrices (one (n_e, k, k) array per family)
+    scattered through a pattern's ``maps`` into ``nnz`` entries.
+
+    Inside a jitted function, pass ``maps`` as an argument rather than closing over a pattern:
+    captured, they become constants of the XLA program (99 MB at 80k faces, copied by the
+    compiler and into the compilation cache), and the assembly ran slower (0.50 against 0.32 s at
+    20k faces, docs/shell3d.md).
+    """
+    data = jnp.zeros(nnz, dtype=jnp.float64)
+    for m, values in zip(maps, element_matrices):
+        data = data.at[m].add(values.reshape(-1))
+    return data
 
 
 def _index_dtype(size: int):
@@ -307,14 +324,17 @@ class _Cholesky:
         except ArithmeticError:  # not positive definite (CHOLMOD reports the failing column)
             analysis.owner = None
             return False
-        analysis.owner = self
+        # A weak reference: a strong one would make a cycle (factor ↔ analysis) that keeps an
+        # evicted analysis (its CHOLMOD factor: 0.5 GiB at 80k faces) alive until Python's cycle
+        # collector happens to run.
+        analysis.owner = weakref.ref(self)
         return True
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         import cvxopt
         from cvxopt import cholmod
 
-        if self._analysis.owner is not self:
+        if self._analysis.owner is None or self._analysis.owner() is not self:
             self._refactorize()
         b = cvxopt.matrix(np.asfortranarray(rhs.reshape(rhs.shape[0], -1)))
         cholmod.solve(self._analysis.symbolic, b)
@@ -328,7 +348,7 @@ class _CholeskyAnalysis:
     template: object
     lower_map: np.ndarray  # CCS values of the lower triangle = csr.data[lower_map]
     symbolic: object
-    owner: object = None
+    owner: object = None  # weak reference to the _Cholesky whose numbers the factor holds
 
     def values_of(self, matrix: sp.csr_matrix):
         import cvxopt
@@ -354,18 +374,17 @@ class _CholeskyAnalysis:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class _Ordering:
-    """A symmetric permutation of one sparsity pattern, with the CSC scatter map it induces."""
+    """A symmetric permutation of one sparsity pattern (and its Cholesky analysis, once built)."""
 
     perm: np.ndarray  # new position k holds old index perm[k]
-    indptr: np.ndarray
-    indices: np.ndarray
-    data_map: np.ndarray  # permuted CSC data = csr.data[data_map]
     _cholesky: list = dataclasses.field(default_factory=list)  # lazily built _CholeskyAnalysis
 
     def permute(self, matrix: sp.csr_matrix) -> sp.csc_matrix:
-        """P A Pᵀ in CSC form for a matrix of the pattern this ordering was built for."""
-        n = matrix.shape[0]
-        return sp.csc_matrix((matrix.data[self.data_map], self.indices, self.indptr), shape=(n, n))
+        """P A Pᵀ in CSC form (for SuperLU, which is rarely used now: built per call rather than
+        keeping a scatter map of the size of the pattern for every cached ordering)."""
+        permuted = matrix[self.perm][:, self.perm].tocsc()
+        permuted.sort_indices()
+        return permuted
 
     def cholesky_analysis(self, matrix: sp.csr_matrix) -> _CholeskyAnalysis:
         """CHOLMOD's symbolic analysis of this pattern on this ordering (built on first use).
@@ -395,7 +414,7 @@ def _nested_dissection(matrix: sp.csr_matrix) -> _Ordering:
     sparsity pattern.
 
     The key is the pattern's checksum (a few ms against a factorization of seconds), so every
-    Newton iteration on one mesh reuses the ordering and the scatter map computed at its first.
+    Newton iteration on one mesh reuses the ordering (and its Cholesky analysis) from its first.
     """
     import pymetis
 
@@ -412,12 +431,7 @@ def _nested_dissection(matrix: sp.csr_matrix) -> _Ordering:
     else:
         perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(graph.indptr, graph.indices))
         perm = np.asarray(perm, dtype=np.int64)
-    # Scatter map: permute a matrix whose data are the CSR positions, then read them back.
-    positions = sp.csr_matrix((np.arange(1, matrix.nnz + 1, dtype=np.float64), matrix.indices, matrix.indptr), shape=(n, n))
-    permuted = positions[perm][:, perm].tocsc()
-    permuted.sort_indices()
-    ordering = _Ordering(perm=perm, indptr=permuted.indptr, indices=permuted.indices,
-                         data_map=permuted.data.astype(np.int64) - 1)  # fmt: skip
+    ordering = _Ordering(perm=perm)
     if len(_ORDERINGS) >= 16:
         _ORDERINGS.pop(next(iter(_ORDERINGS)))
     _ORDERINGS[key] = ordering
