@@ -6,10 +6,19 @@ import numpy as np
 import pytest
 
 from shelljax import NoConvergenceError
-from shelljax.solve import SparseSolver, SparsityPattern, implicit_equilibrium, newton
+from shelljax.solve import (
+    SparseSolver,
+    SparsityPattern,
+    element_positions,
+    implicit_equilibrium,
+    newton,
+    release_factorizations,
+)
 
 
-def test_pattern_assembles_the_dense_sum_and_folds_pins():
+def test_pattern_assembles_the_dense_sum_and_folds_pins(monkeypatch):
+    import shelljax.solve._sparse as sparse_module
+
     rng = np.random.default_rng(0)
     n = 7
     blocks = [rng.integers(0, n, size=(5, 3)), rng.integers(0, n, size=(4, 2))]
@@ -27,6 +36,9 @@ def test_pattern_assembles_the_dense_sum_and_folds_pins():
     dense[:, 2] = 0.0
     dense[2, 2] = 1.0
     np.testing.assert_allclose(mat, dense, rtol=1e-13, atol=1e-13)
+    monkeypatch.setattr(sparse_module, "_PROJECTION_CHUNK", 2)  # the host sum, in uneven chunks
+    host = sum(pattern.assemble_host(i, v) for i, v in enumerate(values))
+    np.testing.assert_allclose(pattern.matrix(host).toarray(), dense, rtol=1e-13, atol=1e-13)
 
 
 def test_projected_assembly_sums_clamped_element_matrices(monkeypatch):
@@ -184,6 +196,17 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
     # The first pattern still solves (its analysis is rebuilt).
     b = np.ones(30)
     np.testing.assert_allclose(SparseSolver(first, symmetric=True).solve(b), np.linalg.solve(first.toarray(), b), rtol=1e-10)
+    # release_factorizations frees the kept analysis too (the 3D engine calls it once its free
+    # shell is solved); a solver made before still solves, and a new one rebuilds the analysis.
+    kept = SparseSolver(second, symmetric=True)
+    analysis = weakref.ref(sparse_module._nested_dissection(second)._cholesky[0])
+    release_factorizations()
+    assert not sparse_module._ANALYSED and not sparse_module._nested_dissection(second)._cholesky
+    b = np.arange(31.0)
+    np.testing.assert_allclose(kept.solve(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
+    del kept
+    assert analysis() is None
+    np.testing.assert_allclose(SparseSolver(second, symmetric=True).solve(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
 
 
 def test_nodal_pattern_build_equals_the_entrywise_one():
@@ -201,8 +224,12 @@ def test_nodal_pattern_build_equals_the_entrywise_one():
     reference, built = _dof_pattern(blocks, n_dofs), _nodal_pattern(nodal, n_nodes)
     for ref, new in zip(reference[:3], built[:3]):
         np.testing.assert_array_equal(ref, new)
-    for ref, new in zip(reference[3], built[3]):
-        np.testing.assert_array_equal(ref, new)
+    # The compact maps (3 × 3 node blocks, one stride per row node) expand to the entrywise ones.
+    for blk, ref, new in zip(blocks, reference[3], built[3]):
+        k = blk.shape[1]
+        np.testing.assert_array_equal(element_positions(*ref, k), element_positions(*new, k))
+        assert ref[0].shape == (len(blk), k, k) and new[0].shape == (len(blk), k // 3, k // 3)
+        np.testing.assert_array_equal(np.asarray(element_positions(*map(jnp.asarray, new), k)), element_positions(*new, k))
     # A node in no element (here the last one, pinned) still gets its unit pivots.
     free = np.ones(n_dofs + 3, dtype=bool)
     free[-3:] = False

@@ -36,7 +36,7 @@ import numpy as np
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..physics import ATMOSPHERIC_PRESSURE
-from ..solve import continuation, implicit_equilibrium
+from ..solve import continuation, implicit_equilibrium, release_factorizations
 from ._mesh import ShellMesh, sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 from ._wrinkles import wrinkle_spectrum
@@ -245,6 +245,9 @@ class Indentation:
         self.rest_mismatch = float(np.max(np.linalg.norm(ref.x[:-3].reshape(-1, 3) - scan, axis=1)))
         self.q_reference = ref.x
         self.reference_volume = float(free_model.volume(jnp.asarray(ref.x)))
+        # The free shell is done with: its factor (0.5 GiB at 80k faces) would otherwise live on
+        # through the contact model's compilation, until that model's first factorization.
+        release_factorizations()
         if gas != "prescribed":
             self.base_params["reference_volume"] = jnp.asarray(self.reference_volume)
             self.base_params["atmospheric_pressure"] = jnp.asarray(ATMOSPHERIC_PRESSURE)

@@ -51,7 +51,7 @@ from ..physics import (
     prescribed_pressure_energy,
     sphere_gap,
 )
-from ..solve import SparseSolver, SparsityPattern, assemble_values, newton
+from ..solve import SparseSolver, SparsityPattern, assemble_values, element_positions, newton
 from ._energy import face_energy, face_volume, rest_geometry
 from ._mesh import ShellMesh
 
@@ -376,6 +376,12 @@ def _contact_hessians(q, params, geometry, config):
     return blocks
 
 
+def _balanced_chunk(n: int, most: int) -> int:
+    """Chunk size ≤ ``most`` that covers ``n`` items in the fewest chunks, the last one
+    overlapping the one before it by fewer than the number of chunks."""
+    return -(-n // -(-n // most))
+
+
 def _face_chunk(kernel, faces, start, size):
     """(Hessians of ``size`` consecutive faces from ``start``, the start used): a chunk that would
     overrun is shifted back to end at the last face, and the caller drops the overlap."""
@@ -405,15 +411,19 @@ def _hessian_values(q, params, geometry, config, maps, nnz):
     data = assemble_values(maps[1:], nnz, _contact_hessians(q, params, geometry, config))
     kernel, faces = _face_hessian_kernel(q, params, geometry, config)
     n_faces = faces[0].shape[0]
-    n_chunks = -(-n_faces // FACE_HESSIAN_CHUNK)
-    chunk = -(-n_faces // n_chunks)  # balanced: the last chunk overlaps by fewer than n_chunks faces
-    face_maps = maps[0].reshape(n_faces, -1)
+    chunk = _balanced_chunk(n_faces, FACE_HESSIAN_CHUNK)
+    n_chunks = -(-n_faces // chunk)
+    face_base, face_stride = maps[0]
 
     def add_chunk(k, data):
         hessians, start = _face_chunk(kernel, faces, k * chunk, chunk)
         fresh = start + jnp.arange(chunk) >= k * chunk  # rows an earlier chunk did not add
         hessians = jnp.where(fresh[:, None, None], hessians, 0.0)
-        rows = jax.lax.dynamic_slice_in_dim(face_maps, start, chunk)
+        rows = element_positions(
+            jax.lax.dynamic_slice_in_dim(face_base, start, chunk),
+            jax.lax.dynamic_slice_in_dim(face_stride, start, chunk),
+            hessians.shape[-1],
+        )
         return data.at[rows.reshape(-1)].add(hessians.reshape(-1))
 
     return jax.lax.fori_loop(0, n_chunks, add_chunk, data)
@@ -570,12 +580,19 @@ class ShellModel:
             # The eigenvalue clamp runs in NumPy: a vmapped jnp.linalg.eigh (a LAPACK custom call)
             # inside this XLA:CPU program never returned on 2-core machines (see docs/shell3d.md).
             n_faces = self.mesh.n_faces
-            size = -(-n_faces // -(-n_faces // PROJECTION_CHUNK))  # balanced chunks
+            size = _balanced_chunk(n_faces, FACE_HESSIAN_CHUNK)
 
             def face_chunks():
+                # JAX computes FACE_HESSIAN_CHUNK faces at a time (its autodiff intermediates for
+                # 8192 faces took 0.4 GiB at 80k faces); the host clamps batches of PROJECTION_CHUNK.
+                batch, count = [], 0
                 for start in range(0, n_faces, size):
                     chunk = _face_hessians(q, params, self.geometry, self._jit_config, start, size)
-                    yield np.asarray(chunk)[start - min(start, n_faces - size) :]
+                    batch.append(np.asarray(chunk)[start - min(start, n_faces - size) :])
+                    count += len(batch[-1])
+                    if count >= PROJECTION_CHUNK or start + size >= n_faces:
+                        yield np.concatenate(batch)
+                        batch, count = [], 0
 
             contact = _contact_hessians_jit(q, params, self.geometry, self._jit_config)
             data = self.pattern.assemble_projected([face_chunks()] + [np.asarray(b) for b in contact])
@@ -638,16 +655,16 @@ def _rest_jacobian_blocks(x, rest, stencil, thickness, young_modulus, poisson_ra
     blocks = jax.vmap(jac, in_axes=(0, 0, None, None, None))(
         x[stencil], rest[stencil], thickness, young_modulus, poisson_ratio
     )
-    return blocks.reshape(-1, 18 * 18)
+    return blocks.reshape(-1, 18, 18)
 
 
 def rest_jacobian_values(x, rest, stencil, params, pattern):
     """CSR values of ∂(∇ₓE)/∂X [N/m]: the forces' sensitivity to the rest vertices X (V, 3).
 
-    The per-face blocks are summed on the host (np.bincount): fusing the scatter into the same
+    The per-face blocks are summed on the host: fusing the scatter into the same
     XLA program as the batched jacfwd deadlocked XLA:CPU (jaxlib 0.10.2) on meshes of ~2k faces.
     """
     blocks = np.asarray(
         _rest_jacobian_blocks(x, rest, stencil, params["thickness"], params["young_modulus"], params["poisson_ratio"])
     )
-    return np.bincount(np.asarray(pattern.maps[0]), weights=blocks.ravel(), minlength=pattern.nnz)
+    return pattern.assemble_host(0, blocks)

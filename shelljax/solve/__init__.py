@@ -3,4 +3,4 @@
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
 from ._newton import NewtonResult, newton
-from ._sparse import SparseSolver, SparsityPattern, assemble_values
+from ._sparse import SparseSolver, SparsityPattern, assemble_values, element_positions, release_factorizations

@@ -16,6 +16,7 @@ them gives a solution that is zero on them.
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import weakref
 import zlib
@@ -38,8 +39,8 @@ class SparsityPattern:
 
     Built once per mesh topology (the symbolic part); every Newton iteration only recomputes the
     ``nnz`` values. ``blocks`` are the element dof index arrays, one ``(n_elements, k)`` int array
-    per element family; ``maps[i]`` sends the flattened ``(n_elements, k, k)`` values of family ``i``
-    to positions in the CSR data array.
+    per element family; ``maps[i]`` sends the ``(n_elements, k, k)`` values of family ``i`` to
+    positions in the CSR data array, in the compact form of :func:`element_positions`.
     """
 
     n_dofs: int
@@ -67,7 +68,7 @@ class SparsityPattern:
             n_dofs=n_dofs,
             indptr=indptr,
             indices=indices.astype(np.int32),
-            maps=tuple(jnp.asarray(m) for m in maps),
+            maps=tuple((jnp.asarray(base), jnp.asarray(stride)) for base, stride in maps),
             fixed_entries=fixed_entries,
             fixed_diagonal=fixed_diagonal,
             free=free,
@@ -90,8 +91,7 @@ class SparsityPattern:
         or an iterable of its consecutive row chunks (so that a caller can stream them).
         """
         data = np.zeros(self.nnz)
-        for m, family in zip(self.maps, element_matrices):
-            m = np.asarray(m)
+        for family_map, family in zip(self.maps, element_matrices):
             chunks = family
             if isinstance(family, np.ndarray):
                 # eigh and its products hold ~5 copies of what they are given: bound them.
@@ -101,10 +101,23 @@ class SparsityPattern:
                 sym = 0.5 * (chunk + np.swapaxes(chunk, -1, -2))
                 w, v = np.linalg.eigh(sym)
                 clamped = (v * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(v, -1, -2)
-                rows = m[start * chunk[0].size : (start + len(chunk)) * chunk[0].size]
-                data += np.bincount(rows, weights=clamped.ravel(), minlength=self.nnz)
+                self._add_host(data, family_map, start, clamped)
                 start += len(chunk)
         return data
+
+    def assemble_host(self, family: int, element_matrices: np.ndarray) -> np.ndarray:
+        """CSR values (host) of the (n_e, k, k) element matrices of family ``family`` alone,
+        summed in chunks, without ever expanding the whole family's map."""
+        data = np.zeros(self.nnz)
+        for start in range(0, len(element_matrices), _PROJECTION_CHUNK):
+            self._add_host(data, self.maps[family], start, element_matrices[start : start + _PROJECTION_CHUNK])
+        return data
+
+    def _add_host(self, data: np.ndarray, family_map, start: int, chunk: np.ndarray) -> None:
+        """data += the element matrices ``chunk`` of elements start, start + 1, … of a family."""
+        base, stride = (np.asarray(a)[start : start + len(chunk)] for a in family_map)
+        rows = element_positions(base, stride, chunk.shape[-1])
+        data += np.bincount(rows.ravel(), weights=chunk.ravel(), minlength=self.nnz)
 
     def matrix(self, data) -> sp.csr_matrix:
         """Host CSR matrix with the fixed dofs folded in (zero rows/cols, unit diagonal)."""
@@ -119,14 +132,35 @@ def assemble_values(maps, nnz: int, element_matrices) -> jax.Array:
     scattered through a pattern's ``maps`` into ``nnz`` entries.
 
     Inside a jitted function, pass ``maps`` as an argument rather than closing over a pattern:
-    captured, they become constants of the XLA program (99 MB at 80k faces, copied by the
-    compiler and into the compilation cache), and the assembly ran slower (0.50 against 0.32 s at
-    20k faces, docs/shell3d.md).
+    captured, they become constants of the XLA program (copied by the compiler and into the
+    compilation cache), and the assembly ran slower (0.50 against 0.32 s at 20k faces,
+    docs/shell3d.md).
     """
     data = jnp.zeros(nnz, dtype=jnp.float64)
-    for m, values in zip(maps, element_matrices):
-        data = data.at[m].add(values.reshape(-1))
+    for (base, stride), values in zip(maps, element_matrices):
+        data = data.at[element_positions(base, stride, values.shape[-1]).reshape(-1)].add(values.reshape(-1))
     return data
+
+
+def element_positions(base, stride, size: int):
+    """CSR positions (n_e, k, k) of the entries of ``k = size`` × ``k`` element matrices, from a
+    pattern's compact map of their family (NumPy or JAX arrays).
+
+    A map stores, per element, the position ``base`` (n_e, m, m) of entry (0, 0) of each of its
+    m × m node-pair blocks of b × b dofs (b = k / m: 3 for the shell models' nodal patterns, 1
+    otherwise) and the ``stride`` (n_e, m) between that block's rows (a CSR row's length):
+    entry (b i + r, b j + c) sits at base[i, j] + r stride[i] + c. The expanded map (k² integers
+    per element, 99 MB at 80k faces) exists only chunk by chunk.
+    """
+    n, m = base.shape[0], base.shape[1]
+    block = size // m
+    r = np.arange(block, dtype=np.int32)
+    positions = (
+        base[:, :, None, :, None]
+        + stride[:, :, None, None, None] * r[:, None, None]
+        + r
+    )
+    return positions.reshape(n, size, size)
 
 
 def _index_dtype(size: int):
@@ -147,8 +181,10 @@ def _dof_pattern(blocks, n_dofs: int):
     rows = unique // n_dofs
     indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n_dofs))])
     maps, start = [], 0
-    for k in keys:
-        maps.append(inverse[start : start + k.size].astype(_index_dtype(unique.size)))
+    dtype = _index_dtype(unique.size)
+    for blk, k in zip(blocks, keys):
+        positions = inverse[start : start + k.size].astype(dtype).reshape(blk.shape[0], blk.shape[1], blk.shape[1])
+        maps.append((positions, np.zeros(blk.shape, dtype=dtype)))  # 1 × 1 blocks: no stride
         start += k.size
     return indptr, unique % n_dofs, rows, maps
 
@@ -200,10 +236,8 @@ def _nodal_pattern(nodal, n_nodes: int):
         p = inverse[start : start + k.size].reshape(blk.shape[0], blk.shape[1], blk.shape[1])
         start += k.size
         base = (9 * ptr[first[p]] + 3 * rank[p]).astype(dtype)  # (n_e, m, m): row a = 0, col b = 0
-        stride = (3 * count[first[p]]).astype(dtype)
-        a = np.arange(3, dtype=dtype)
-        m = base[:, :, None, :, None] + a[None, None, :, None, None] * stride[:, :, None, :, None] + a
-        maps.append(m.reshape(blk.shape[0], 3 * blk.shape[1], 3 * blk.shape[1]).ravel())
+        stride = (3 * count[blk]).astype(dtype)  # (n_e, m): row length of node blk[e, i]'s rows
+        maps.append((base, stride))
     return indptr, indices, rows, maps
 
 
@@ -242,6 +276,8 @@ class SparseSolver:
             )
         if self._cholesky is None:
             self._lu = _superlu(ordering.permute(matrix))
+        if matrix.nnz >= _TRIM_MIN_NNZ:
+            _return_free_heap()
         self._rank_one = None
         if rank_one is not None:
             c, u = rank_one
@@ -273,6 +309,25 @@ class SparseSolver:
         out = np.empty_like(rhs)
         out[self._perm] = self._lu.solve(np.ascontiguousarray(rhs[self._perm]))
         return out
+
+
+#: Matrices from this many nonzeros on (≈ 10k shell faces) hand the allocator's free memory back
+#: to the OS after their factorization; below, the few ms it takes would be felt per iteration.
+_TRIM_MIN_NNZ = 1_000_000
+
+
+def _return_free_heap() -> None:
+    """glibc's ``malloc_trim(0)``: give the free pages inside the heap back to the OS.
+
+    Each Newton iteration allocates and frees tens of MB (CSR values, CHOLMOD's permuted copy and
+    workspace, the projection's batches); glibc keeps what it cannot return from the top of its
+    heaps, so over a long curve the resident size crept up by ≈ 0.1 GiB at 80k faces without more
+    being in use. A no-op where there is no glibc.
+    """
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
 
 
 def _superlu(permuted: sp.csc_matrix):
@@ -404,6 +459,16 @@ class _Ordering:
 
 _CHOLESKY_KEPT = 1
 _ANALYSED: list = []  # orderings holding a Cholesky analysis, oldest first
+
+
+def release_factorizations() -> None:
+    """Free every cached Cholesky analysis, and with it its factor storage (0.5 GiB at 80k faces).
+
+    For a caller done with a sparsity pattern: a later factorization of that pattern redoes its
+    symbolic analysis (orderings stay cached).
+    """
+    while _ANALYSED:
+        _ANALYSED.pop(0)._cholesky.clear()
 
 
 _ORDERINGS: dict = {}
