@@ -30,7 +30,7 @@ import scipy.sparse.linalg as spla
 from .._errors import NoConvergenceError
 
 
-_PROJECTION_CHUNK = 8192  # elements per eigenvalue-clamp batch
+_PROJECTION_CHUNK = 8192  # elements per host batch (eigenvalue clamp, host sum)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
