@@ -63,7 +63,8 @@ WRINKLE_RINGS = (0.1, 0.005)  # m: outer radius and width of the rings of the 3D
 CURVES_DESCRIPTION = (
     "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
     "--curves. SI units: force [N], w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
-    "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum)."
+    "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum); "
+    "observables: the 3D engine's own (shelljax.shell3d.observables: w0 = top-vertex drop, H, D_u, D_l, d [m])."
 )
 
 
@@ -84,9 +85,10 @@ def local_dimple_depth(reference: np.ndarray, deformed: np.ndarray, top: int, ba
     return float(dz[ring].mean() - dz[top])
 
 
-def _force_curve_checkpointed(sim, levels, checkpoint: Path | None):
-    """``Indentation.force_curve`` (same secant predictor and Newton steps), with the solved states
-    saved to ``checkpoint`` (npz) after every level so that a restarted process resumes there.
+def _curve_checkpointed(sim, levels, checkpoint: Path | None, control: str = "force"):
+    """``Indentation.force_curve`` or ``.curve`` (``control`` "force": ``levels`` [N]; "depth":
+    indenter travels [m]; same secant predictor and Newton steps), with the solved states saved to
+    ``checkpoint`` (npz) after every level so that a restarted process resumes there.
 
     Why: XLA's CPU runtime wedged mid-curve (a kernel never signalled completion) in 6 of 6 long runs on
     this box; the caller's watchdog kills such a process and a restart continues from the last level.
@@ -95,33 +97,24 @@ def _force_curve_checkpointed(sim, levels, checkpoint: Path | None):
     if checkpoint is not None and checkpoint.exists():
         saved = np.load(checkpoint)
         history += [(float(f), q) for f, q in zip(saved["forces"], saved["states"])]
-    for force in levels:
-        if force <= history[-1][0]:
+    solve_level = _solve_level if control == "force" else _solve_depth_level
+    for level in levels:
+        if level <= history[-1][0]:
             continue
-        _solve_level(sim, history, force, halvings=3)
+        solve_level(sim, history, level, halvings=3)
         _WATCHDOG["last"] = time.monotonic()
-        print(f"  level {force:.1f} N solved", flush=True)
+        print(f"  level {level:.4g} {'N' if control == 'force' else 'm'} solved", flush=True)
         if checkpoint is not None:
             np.savez(checkpoint, forces=[h[0] for h in history[1:]], states=np.stack([h[1] for h in history[1:]]))
     return [(f, q) for f, q in history[1:] if f in levels]
 
 
-def _solve_level(sim, history, force, halvings):
-    """Append the equilibrium at ``force`` [N] to ``history``; on a Newton failure, first solve the
-    midpoint from the last solved level (up to ``halvings`` times), as ``Indentation.curve`` sub-steps."""
-    from shelljax import NoConvergenceError
-
-    guess = sim._predict(history, force)
-    params = sim._params_for(guess, indenter_force=force)
-    try:
-        res = sim._step(sim.force_model, guess, params, f"indentation force {force:.4g} N")
-    except NoConvergenceError:
-        if halvings == 0:
-            raise
-        _solve_level(sim, history, 0.5 * (history[-1][0] + force), halvings - 1)
-        _solve_level(sim, history, force, halvings - 1)
-        return
-    history.append((force, np.asarray(res.x)))
+def _solve_depth_level(sim, history, depth, halvings):
+    """Append the equilibrium at indenter travel ``depth`` [m] to ``history`` (displacement
+    control, sub-steps as ``Indentation.curve``; ``halvings`` unused: no indenter to lose)."""
+    for d in sim._substeps(history[-1][0], depth):
+        res, _, _ = sim._depth_step(history, d)
+        history.append((d, np.asarray(res.x)))
 
 
 _WATCHDOG = {"last": time.monotonic()}
@@ -142,8 +135,23 @@ def _start_watchdog(limit: float):
     threading.Thread(target=watch, daemon=True).start()
 
 
-def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None) -> dict:
-    """3D force curve of one parameter set; returns a JSON-ready dict (SI)."""
+def run_with_restarts(cmd: list[str], restarts: int, label: str) -> bool:
+    """Run a child process that checkpoints per level; restart it (up to ``restarts`` times) when
+    it exits abnormally (the watchdog's exit after a wedged XLA run). True when it succeeded."""
+    import subprocess
+
+    for attempt in range(restarts + 1):
+        if subprocess.run(cmd).returncode == 0:
+            return True
+        print(f"{label}: child exited abnormally (attempt {attempt + 1}), restarting from its checkpoint", flush=True)
+    return False
+
+
+def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None,
+                forces: tuple[float, ...] = FORCES, travels: tuple[float, ...] | None = None) -> dict:
+    """3D force curve of one parameter set at ``forces`` [N] (after a 2.5 N start-up level), or,
+    when ``travels`` [m] are given, at those indenter travels (displacement control: past ≈ 15 N
+    force control can lose the indenter); returns a JSON-ready dict (SI)."""
     import shelljax.shell3d as s3
 
     pg, e, h = params
@@ -157,15 +165,20 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
     top = sim.top
     pole_edge = float(edge_len[np.any(ball.mesh.faces == top, axis=1)].mean())
     band = 0.6 * float(np.median(edge_len))
-    levels = (2.5,) + FORCES  # the 2.5 N level only eases the continuation
+    if travels is None:
+        levels = (2.5,) + tuple(f for f in forces if f > 2.5)  # the 2.5 N level only eases the continuation
+        solved = [(f, q) for f, q in _curve_checkpointed(sim, levels, checkpoint) if f in forces]
+    else:
+        solved = _curve_checkpointed(sim, tuple(travels), checkpoint, control="depth")
     out = []
-    for f, q in _force_curve_checkpointed(sim, levels, checkpoint):
-        if f < FORCES[0]:
-            continue
+    for level, q in solved:
         x = q[:-3].reshape(-1, 3)
         spectrum = s3.wrinkle_spectrum(reference, x, ball.mesh.faces, reference[top], max_radius=WRINKLE_RINGS[0],
                                        ring_width=WRINKLE_RINGS[1])  # fmt: skip
-        out.append({"force": f, "w0": local_dimple_depth(reference, x, top, band),
+        obs = s3.observables(sim, q, sim._params_for(q))
+        out.append({"force": level if travels is None else float(obs["force"]),
+                    "w0": local_dimple_depth(reference, x, top, band),
+                    "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "d")},
                     "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
                     "top_drop": float(reference[top, 2] - x[top, 2]),
                     "travel": float(sim.touch_center[2] - q[-1])})  # fmt: skip
@@ -177,6 +190,7 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         "equator_band": band, "force": [c["force"] for c in out], "w0": [c["w0"] for c in out],
         "top_drop": [c["top_drop"] for c in out], "travel": [c["travel"] for c in out],
         "wrinkle_mode": [c["wrinkle_mode"] for c in out], "wrinkle_amplitude": [c["wrinkle_amplitude"] for c in out],
+        "observables": [c["observables"] for c in out],
         "solve_seconds": time.perf_counter() - t0, "machine": f"{platform.machine()} ({platform.system()})",
     }  # fmt: skip
 
@@ -186,32 +200,44 @@ def load_curves(path: Path = CURVES_PATH) -> list[dict]:
     return json.loads(Path(path).read_text())["curves"]
 
 
-def draw_session(curve: dict, depth_noise: float, seed: int, *, manometer: bool = False, name: str = ""):
-    """One noisy :class:`shelljax.session.Session` from a noise-free ``curve`` (see module doc).
-
-    ``depth_noise`` [m] is the standard deviation per depth sample; ``seed`` makes it reproducible.
-    """
+def _session(curve: dict, force, depth, counts, *, name: str, notes: str, manometer: bool = False):
     from shelljax.session import Session
 
-    rng = np.random.default_rng(seed)
-    levels = np.asarray(curve["force"])
-    w_true = np.asarray(curve["w0"])
-    trial = np.repeat(np.arange(1, N_TRIALS + 1), levels.size)
-    level = np.tile(levels, N_TRIALS)
-    w = np.tile(w_true, N_TRIALS)
-    # The recorded force is the scale reading; the true force is the solved level.
-    force = np.round((level + rng.normal(0.0, FORCE_NOISE, level.size)) / FORCE_ROUNDING) * FORCE_ROUNDING
-    depth = np.round((w + rng.normal(0.0, depth_noise, w.size)) / DEPTH_ROUNDING) * DEPTH_ROUNDING
-    n_true = 1.33 * np.sqrt(curve["tau"])
-    counts = np.round(n_true + rng.normal(0.0, COUNT_NOISE, N_TRIALS))
+    trial = np.repeat(np.arange(1, N_TRIALS + 1), len(curve["force"]))
     return Session(
         source=Path(f"virtual/{name or 'session'}.toml"), object_name=name or "virtual ball",
         radius=curve["radius"], radius_std=0.0, thickness=curve["thickness"], thickness_std=0.0,
         poisson_ratio=curve["poisson_ratio"], trial=trial, force=force, depth=depth,
         wrinkle_counts=counts, manometer_gauge_pressure=curve["gauge_pressure"] if manometer else None,
         notes=f"virtual (3D engine, {curve['n_faces']} faces); truth P_g={curve['gauge_pressure']} Pa, "
-              f"E={curve['young_modulus']} Pa; depth noise {depth_noise} m; seed {seed}",
+              f"E={curve['young_modulus']} Pa; {notes}",
     )  # fmt: skip
+
+
+def draw_session(curve: dict, depth_noise: float, seed: int, *, manometer: bool = False, name: str = ""):
+    """One noisy :class:`shelljax.session.Session` from a noise-free ``curve`` (see module doc).
+
+    ``depth_noise`` [m] is the standard deviation per depth sample; ``seed`` makes it reproducible.
+    """
+    rng = np.random.default_rng(seed)
+    level = np.tile(np.asarray(curve["force"]), N_TRIALS)
+    w = np.tile(np.asarray(curve["w0"]), N_TRIALS)
+    # The recorded force is the scale reading; the true force is the solved level.
+    force = np.round((level + rng.normal(0.0, FORCE_NOISE, level.size)) / FORCE_ROUNDING) * FORCE_ROUNDING
+    depth = np.round((w + rng.normal(0.0, depth_noise, w.size)) / DEPTH_ROUNDING) * DEPTH_ROUNDING
+    n_true = 1.33 * np.sqrt(curve["tau"])
+    counts = np.round(n_true + rng.normal(0.0, COUNT_NOISE, N_TRIALS))
+    return _session(curve, force, depth, counts, name=name, manometer=manometer,
+                    notes=f"depth noise {depth_noise} m; seed {seed}")
+
+
+def noise_free_session(curve: dict, *, name: str = ""):
+    """The session of ``curve`` without any noise or rounding: exact forces and depths, and the
+    continuous count 1.33 τ^½ for every trial (what a fit of it gets wrong is the model's bias)."""
+    level = np.tile(np.asarray(curve["force"]), N_TRIALS)
+    depth = np.tile(np.asarray(curve["w0"]), N_TRIALS)
+    counts = np.full(N_TRIALS, 1.33 * np.sqrt(curve["tau"]))
+    return _session(curve, level, depth, counts, name=name, notes="no noise")
 
 
 def draw_sessions(curves: list[dict], *, realisations: int = 2, base_seed: int = 2026) -> list[tuple[dict, object]]:
@@ -258,16 +284,11 @@ def main():
         ap.error("nothing to do: pass --curves")
     sets = [int(s) for s in args.sets.split(",")] if args.sets else range(len(PARAMETER_SETS))
     if not args.child:
-        import subprocess
-
         for i in sets:
-            for attempt in range(args.restarts + 1):
-                cmd = [sys.executable, __file__, "--curves", "--child", "--sets", str(i), "--out", str(args.out),
-                       "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
-                       "--watchdog", str(args.watchdog)]  # fmt: skip
-                if subprocess.run(cmd).returncode == 0:
-                    break
-                print(f"set {i}: child exited abnormally (attempt {attempt + 1}), restarting from its checkpoint", flush=True)
+            cmd = [sys.executable, __file__, "--curves", "--child", "--sets", str(i), "--out", str(args.out),
+                   "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
+                   "--watchdog", str(args.watchdog)]  # fmt: skip
+            run_with_restarts(cmd, args.restarts, f"set {i}")
         return
     _start_watchdog(args.watchdog)
     data = json.loads(args.out.read_text()) if args.out.exists() else {"description": CURVES_DESCRIPTION, "curves": []}

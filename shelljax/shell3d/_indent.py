@@ -395,23 +395,28 @@ class Indentation:
         slip = [self._initial_slip()]
 
         def step(depth, _prev):
-            # Insert sub-steps where the user's levels are further apart than max_step.
-            d_prev = history[-1][0]
-            n_sub = max(1, int(math.ceil((depth - d_prev) / self.max_step - 1e-9)))
-            for k in range(1, n_sub + 1):
-                d = d_prev + (depth - d_prev) * k / n_sub
-                guess = self._predict(history, d)
-                guess[-3:] = self.touch_center - np.array([0.0, 0.0, d])
+            for d in self._substeps(history[-1][0], depth):
                 q_start = history[-1][1]
-                res, lagged, change = self._lagged_step(
-                    self.model, guess, self._params_for(guess), f"indentation depth {d:.4g} m", q_start
-                )
+                res, lagged, change = self._depth_step(history, d)
                 slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
                 history.append((d, res.x))
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
                                     res.factorizations)  # fmt: skip
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
+
+    def _substeps(self, d_prev: float, depth: float) -> list[float]:
+        """Travels [m] from ``d_prev`` to ``depth`` in sub-steps of at most ``max_step``."""
+        n_sub = max(1, int(math.ceil((depth - d_prev) / self.max_step - 1e-9)))
+        return [d_prev + (depth - d_prev) * k / n_sub for k in range(1, n_sub + 1)]
+
+    def _depth_step(self, history, depth: float):
+        """One displacement-controlled load step to travel ``depth`` [m] from the last state of
+        ``history`` [(travel, q)], secant-predicted: (NewtonResult, friction params, lag change)."""
+        guess = self._predict(history, depth)
+        guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
+        return self._lagged_step(self.model, guess, self._params_for(guess), f"indentation depth {depth:.4g} m",
+                                 history[-1][1])  # fmt: skip
 
     def force_curve(self, forces) -> list[IndentationState]:
         """Force-controlled continuation through increasing indenter ``forces`` [N]."""

@@ -1,0 +1,186 @@
+"""3D wrinkle counts against the axisymmetric count and n ≈ 1.33 τ^½ (issue 6, item 4).
+
+Pezzi-like ball (R = 0.13 m, P_g = 1.3 kPa, E = 2.34 MPa, ν = 0.4, prescribed gas, 8 mm finger,
+ground) with the wall thickness h chosen so that τ = P_g R² / √(E h B) = 10, 40, 100. For each τ,
+the 3D curve is displacement-controlled through the indenter travels of the axisymmetric curve at
+forces every 2.5 N, up to the first at which its dimple reaches −W(0) = w0 E h / (P_g R²) ≥
+``--depth`` (default 5: past the onset of hoop compression at 2.52, where the 3D wrinkles of the
+τ = 37 ball have grown well above the mesh's floor). At every level:
+
+* the 3D engine's dominant angular mode of the normal displacement and its amplitude
+  (``shelljax.shell3d.wrinkle_spectrum``, rings of 5 mm out to 10 cm around the indenter), on
+  ``ball(R, h, n, pole_refinement=6)`` meshes of every ``--faces`` size (the refinement study);
+* the axisymmetric engine's continuous count n (docs/axisym.md, *Wrinkle count*) at the 3D force;
+* 1.33 τ^½.
+
+``ball()`` meshes are built in six sectors around the poles, which shows up as a small mode-6
+(mode-12 on fine meshes) displacement under any poke (docs/shell3d.md, *Wrinkles*): a count is a
+wrinkle count only where its amplitude has grown well above that floor, and converged where the
+two finest meshes agree.
+
+Every (τ, faces) curve runs in a child process that checkpoints after each level, under a
+watchdog that restarts it when XLA's CPU runtime wedges (as ``make_virtual_sessions.py``);
+finished curves are kept in ``--out`` and a rerun skips them. A 48k-face curve takes 20–40 min on
+2 cores.
+
+    python experiments/report_wrinkles3d.py --out docs/bench/wrinkles3d.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from make_virtual_sessions import POISSON, RADIUS, _start_watchdog, run_with_restarts, solve_curve, tau  # noqa: E402
+
+GAUGE_PRESSURE = 1300.0  # [Pa]
+YOUNG_MODULUS = 2.34e6  # [Pa]
+REFERENCE_THICKNESS = 0.9e-3  # [m]: τ = 37 (the Pezzi-like ball)
+FORCE_STEP = 2.5  # [N]
+POLE_REFINEMENT = 6.0
+
+
+def thickness_for(target_tau: float) -> float:
+    """h [m] giving τ = ``target_tau`` at the Pezzi-like P_g, E, R (τ ∝ h⁻²)."""
+    return REFERENCE_THICKNESS * float(np.sqrt(tau(GAUGE_PRESSURE, YOUNG_MODULUS, REFERENCE_THICKNESS) / target_tau))
+
+
+def dimensionless_depth(w0, thickness):
+    """−W(0) = w0 E h / (P_g R²) [-] for dimple depths w0 [m]."""
+    return np.asarray(w0) * YOUNG_MODULUS * thickness / (GAUGE_PRESSURE * RADIUS**2)
+
+
+AXISYM_OBSERVABLES = {"w0": "top_drop", "H": "height", "D_u": "upper_diameter", "D_l": "contact_diameter",
+                      "d": "sunken_depth"}  # 3D observables name → axisymmetric CurveResult field
+
+
+def axisym_curve(thickness: float, forces, relax: bool = True) -> dict:
+    """Axisymmetric curve at ``forces`` [N] (default Setup, 101 elements): the local dimple depth
+    "w0" [m] and wrinkle count "n" [-], and the 3D engine's observables by their 3D names [m]."""
+    from shelljax.axisym import indentation_curves
+
+    res = indentation_curves(np.array([[GAUGE_PRESSURE, YOUNG_MODULUS, thickness, POISSON]]), np.asarray(forces),
+                             radius=RADIUS, relax=relax)  # fmt: skip
+    out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0]}
+    out.update({k: np.asarray(getattr(res, field))[0] for k, field in AXISYM_OBSERVABLES.items()})
+    return out
+
+
+def travels_for(thickness: float, depth: float) -> tuple[float, ...]:
+    """Indenter travels [m] of the axisymmetric curve at forces every FORCE_STEP, up to the first
+    force whose −W(0) ≥ ``depth``. The 3D curves are displacement-controlled: under force control
+    the 3D Newton loses the indenter past ≈ 15 N on thin walls (docs/estimators.md)."""
+    grid = FORCE_STEP * np.arange(1, 25)
+    curve = axisym_curve(thickness, grid)
+    reached = np.nonzero(dimensionless_depth(curve["w0"], thickness) >= depth)[0]
+    if reached.size == 0:
+        raise SystemExit(f"h = {thickness * 1e3:.3f} mm: −W(0) = {depth} not reached by {grid[-1]} N")
+    return tuple(float(t) for t in curve["travel"][: reached[0] + 1])
+
+
+def run_child(args):
+    """Solve one (τ, faces) 3D curve and append it to ``args.out``."""
+    import jax
+
+    jax.config.update("jax_cpu_enable_async_dispatch", False)  # see make_virtual_sessions.main
+    _start_watchdog(args.watchdog)
+    target_tau, faces = args.taus[0], args.faces[0]
+    h = thickness_for(target_tau)
+    travels = travels_for(h, args.depth)
+    ckpt = Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}_depth.npz")
+    curve = solve_curve((GAUGE_PRESSURE, YOUNG_MODULUS, h), faces, POLE_REFINEMENT, ckpt, travels=travels)
+    curve["target_tau"], curve["requested_faces"], curve["target_depth"] = target_tau, faces, args.depth
+    data = json.loads(args.out.read_text()) if args.out.exists() else {"runs": []}
+    data["runs"].append(curve)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(data, indent=1))
+
+
+def report(out: Path) -> dict:
+    """Print the wrinkle-count and cross-validation tables of every finished run in ``out``."""
+    data = json.loads(out.read_text())
+    # a deeper run of the same τ and mesh contains the shallower one's levels: keep the deepest
+    deepest = {}
+    for r in data["runs"]:
+        key = (r["target_tau"], r["requested_faces"])
+        if key not in deepest or r["target_depth"] > deepest[key]["target_depth"]:
+            deepest[key] = r
+    runs = sorted(deepest.values(), key=lambda r: (r["target_tau"], r["n_faces"]))
+    rows, cross = [], []
+    print("\n| τ | h [mm] | faces | F [N] | −W(0) (3D) | 3D mode | amplitude [mm] | axisym n | 1.33 τ^½ |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    for run in runs:
+        relaxed = axisym_curve(run["thickness"], run["force"])
+        scaling = 1.33 * np.sqrt(run["tau"])
+        for i, force in enumerate(run["force"]):
+            row = {"tau": run["tau"], "thickness": run["thickness"], "n_faces": run["n_faces"], "force": force,
+                   "W0_3d": float(dimensionless_depth(run["w0"][i], run["thickness"])),
+                   "mode_3d": run["wrinkle_mode"][i], "amplitude_3d": run["wrinkle_amplitude"][i],
+                   "n_axisym": float(relaxed["n"][i]), "n_scaling": float(scaling)}  # fmt: skip
+            rows.append(row)
+            print(f"| {row['tau']:.0f} | {1e3 * row['thickness']:.3f} | {row['n_faces']} | {force:.1f} | "
+                  f"{row['W0_3d']:.2f} | {row['mode_3d']} | {1e3 * row['amplitude_3d']:.2f} | "
+                  f"{row['n_axisym']:.2f} | {scaling:.2f} |")  # fmt: skip
+    print("\nCross-validation, 3D engine vs axisymmetric (relaxed / unrelaxed), relative difference axisym/3D − 1:")
+    print("| τ | faces | F [N] | " + " | ".join(f"{k} 3D [mm]" for k in AXISYM_OBSERVABLES) + " | "
+          + " | ".join(f"{k} relaxed / unrelaxed" for k in AXISYM_OBSERVABLES) + " |")  # fmt: skip
+    print("|---|---:|---:|" + "---:|" * (2 * len(AXISYM_OBSERVABLES)))
+    for run in runs:
+        if "observables" not in run:
+            continue
+        models = {"relaxed": axisym_curve(run["thickness"], run["force"]),
+                  "unrelaxed": axisym_curve(run["thickness"], run["force"], relax=False)}  # fmt: skip
+        for i, force in enumerate(run["force"]):
+            three_d = run["observables"][i]
+            diff = {m: {k: float(c[k][i] / three_d[k] - 1.0) for k in AXISYM_OBSERVABLES} for m, c in models.items()}
+            cross.append({"tau": run["tau"], "n_faces": run["n_faces"], "force": force, "shell3d": three_d,
+                          "axisym": {m: {k: float(c[k][i]) for k in AXISYM_OBSERVABLES} for m, c in models.items()},
+                          "rel_diff": diff})  # fmt: skip
+            print(f"| {run['tau']:.0f} | {run['n_faces']} | {force:.1f} | "
+                  + " | ".join(f"{1e3 * three_d[k]:.1f}" for k in AXISYM_OBSERVABLES) + " | "
+                  + " | ".join(f"{100 * diff['relaxed'][k]:+.1f} / {100 * diff['unrelaxed'][k]:+.1f} %"
+                               for k in AXISYM_OBSERVABLES) + " |")  # fmt: skip
+    data["rows"], data["cross_validation"] = rows, cross
+    out.write_text(json.dumps(data, indent=1))
+    return data
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--taus", type=float, nargs="+", default=[10.0, 40.0, 100.0])
+    ap.add_argument("--faces", type=int, nargs="+", default=[24000, 48000])
+    ap.add_argument("--depth", type=float, default=5.0, help="deepest −W(0) to reach (axisymmetric estimate)")
+    ap.add_argument("--out", type=Path, default=Path("wrinkles3d.json"))
+    ap.add_argument("--restarts", type=int, default=5)
+    ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")
+    ap.add_argument("--child", action="store_true", help="(internal) solve one (τ, faces) curve in this process")
+    args = ap.parse_args(argv)
+    import shelljax  # noqa: F401  (float64)
+
+    if args.child:
+        run_child(args)
+        return
+    for target_tau in args.taus:
+        for faces in args.faces:
+            done = json.loads(args.out.read_text())["runs"] if args.out.exists() else []
+            if any((r["target_tau"], r["requested_faces"], r.get("target_depth", 5.0)) == (target_tau, faces, args.depth)
+                   for r in done):  # fmt: skip
+                continue
+            t0 = time.perf_counter()
+            cmd = [sys.executable, __file__, "--child", "--taus", str(target_tau), "--faces", str(faces),
+                   "--depth", str(args.depth), "--out", str(args.out), "--watchdog", str(args.watchdog)]  # fmt: skip
+            ok = run_with_restarts(cmd, args.restarts, f"τ = {target_tau:g}, {faces} faces")
+            print(f"τ = {target_tau:g}, {faces} faces: {'done' if ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)",
+                  flush=True)  # fmt: skip
+    if args.out.exists():
+        report(args.out)
+
+
+if __name__ == "__main__":
+    main()
