@@ -131,3 +131,14 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     # so the Neo-Hookean answer differs at O(ε²) ≈ 6e-4 (measured 2.8e-4).
     scale = (signed_volume(np.asarray(sim.rest), ball.mesh.faces) / scan_volume) ** (1 / 3)
     assert scale == pytest.approx(1 / (1 + PG * R * (1 - NU) / (2 * E * H)), rel=1e-3)
+
+
+def test_depth_substeps_end_exactly_on_the_requested_level():
+    # Curves and checkpoints look levels up by value: the last sub-step must be the level itself,
+    # not d_prev + (depth − d_prev)·n/n rounded (it is, for 0.05142 after 0.03212).
+    stepper = dataclasses.make_dataclass("Stepper", ["max_step"])(max_step=0.003)
+    assert 0.03212 + (0.05142 - 0.03212) * 7 / 7 != 0.05142
+    for d_prev, depth in ((0.03212, 0.05142), (0.0, 0.0107), (0.1, 0.1)):
+        steps = s3.Indentation._substeps(stepper, d_prev, depth)
+        assert steps[-1] == depth
+        assert np.all(np.diff([d_prev, *steps]) <= 0.003 + 1e-15)

@@ -69,6 +69,15 @@ def test_session_drawing_is_reproducible(curves):
     np.testing.assert_allclose(a.depth / mvs.DEPTH_ROUNDING, np.round(a.depth / mvs.DEPTH_ROUNDING), atol=1e-9)
 
 
+def test_noise_free_session_is_the_curve_itself(curves):
+    c = curves[0]
+    s = mvs.noise_free_session(c, name="exact")
+    np.testing.assert_array_equal(s.force, np.tile(c["force"], mvs.N_TRIALS))
+    np.testing.assert_array_equal(s.depth, np.tile(c["w0"], mvs.N_TRIALS))
+    np.testing.assert_allclose(s.wrinkle_counts, 1.33 * np.sqrt(c["tau"]), rtol=1e-15)
+    assert s.wrinkle_counts.size == mvs.N_TRIALS and s.manometer_gauge_pressure is None
+
+
 def test_drawn_noise_matches_the_requested_level(curves):
     # Mean over many draws of the per-sample deviation from the truth: σ² + rounding²/12.
     sigma = 2e-3

@@ -408,7 +408,8 @@ class Indentation:
     def _substeps(self, d_prev: float, depth: float) -> list[float]:
         """Travels [m] from ``d_prev`` to ``depth`` in sub-steps of at most ``max_step``."""
         n_sub = max(1, int(math.ceil((depth - d_prev) / self.max_step - 1e-9)))
-        return [d_prev + (depth - d_prev) * k / n_sub for k in range(1, n_sub + 1)]
+        # the last one is ``depth`` itself, not a rounded d_prev + (depth − d_prev)·1
+        return [d_prev + (depth - d_prev) * k / n_sub for k in range(1, n_sub)] + [depth]
 
     def _depth_step(self, history, depth: float):
         """One displacement-controlled load step to travel ``depth`` [m] from the last state of
