@@ -64,7 +64,7 @@ CURVES_DESCRIPTION = (
     "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
     "--curves. SI units: force [N], w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
     "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum); "
-    "observables: the 3D engine's own (shelljax.shell3d.observables: w0 = top-vertex drop, H, D_u, D_l, d [m])."
+    "observables: the 3D engine's own (shelljax.shell3d.observables: w0 = top-vertex drop, H, D_u, D_l, D_l_mesh, d [m])."
 )
 
 
@@ -148,18 +148,36 @@ def run_with_restarts(cmd: list[str], restarts: int, label: str) -> bool:
     return False
 
 
+def _icosphere(thickness: float, n_triangles: int, seed: int = 0):
+    """Icosphere shell of ≈ ``n_triangles`` faces (20·4^k) with a seeded random vertex at the top."""
+    import trimesh
+
+    import shelljax.shell3d as s3
+
+    subdivisions = max(0, int(round(np.log(n_triangles / 20.0) / np.log(4.0))))
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=RADIUS)
+    top = np.random.default_rng(seed).integers(len(sphere.vertices))
+    sphere.apply_transform(trimesh.geometry.align_vectors(sphere.vertices[top], [0.0, 0.0, 1.0]))
+    return s3.Shell(s3.ShellMesh.from_arrays(sphere.vertices, sphere.faces, name="icosphere"), thickness)
+
+
 def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None,
-                forces: tuple[float, ...] = FORCES, travels: tuple[float, ...] | None = None) -> dict:
+                forces: tuple[float, ...] = FORCES, travels: tuple[float, ...] | None = None,
+                force_tolerance: float | None = None, mesh: str = "ball", max_newton_iterations: int = 60) -> dict:
     """3D force curve of one parameter set at ``forces`` [N] (after a 2.5 N start-up level), or,
     when ``travels`` [m] are given, at those indenter travels (displacement control: past ≈ 15 N
-    force control can lose the indenter); returns a JSON-ready dict (SI)."""
+    force control can lose the indenter); ``force_tolerance`` [N]: Newton's (None: the engine's
+    default 1e-8 E h L); ``mesh`` "ball" (``s3.ball``: rings about the poles, refined there) or
+    "icosphere" (uniform, no rings or sectors: ≈ ``n_triangles`` faces by subdivision, turned so
+    that a seeded random vertex is the top). Returns a JSON-ready dict (SI)."""
     import shelljax.shell3d as s3
 
     pg, e, h = params
-    ball = s3.ball(RADIUS, h, n_triangles, pole_refinement=pole_refinement)
+    ball = s3.ball(RADIUS, h, n_triangles, pole_refinement=pole_refinement) if mesh == "ball" else _icosphere(h, n_triangles)
     t0 = time.perf_counter()
     sim = s3.Indentation(ball, young_modulus=e, poisson_ratio=POISSON, gauge_pressure=pg, gas="prescribed",
-                         indenter_radius=0.008, ground=True, progress=False)  # fmt: skip
+                         indenter_radius=0.008, ground=True, progress=False, force_tolerance=force_tolerance,
+                         max_newton_iterations=max_newton_iterations)  # fmt: skip
     reference = sim.q_reference[:-3].reshape(-1, 3)
     edges = ball.mesh.vertices[ball.mesh.faces[:, [0, 1, 2]]] - ball.mesh.vertices[ball.mesh.faces[:, [1, 2, 0]]]
     edge_len = np.linalg.norm(edges, axis=-1)
@@ -179,7 +197,7 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         obs = s3.observables(sim, q, sim._params_for(q))
         out.append({"force": level if travels is None else float(obs["force"]),
                     "w0": local_dimple_depth(reference, x, top, band),
-                    "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "d")},
+                    "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "D_l_mesh", "d")},
                     "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
                     "top_drop": float(reference[top, 2] - x[top, 2]),
                     "travel": float(sim.touch_center[2] - q[-1])})  # fmt: skip
@@ -187,12 +205,12 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         "gauge_pressure": pg, "young_modulus": e, "thickness": h, "radius": RADIUS, "poisson_ratio": POISSON,
         "tau": float(tau(pg, e, h)), "gas": "prescribed", "indenter_radius": 0.008,
         "n_faces": int(ball.mesh.faces.shape[0]), "n_vertices": int(ball.mesh.n_vertices),
-        "pole_refinement": pole_refinement, "pole_edge": pole_edge, "median_edge": float(np.median(edge_len)),
+        "mesh": mesh, "pole_refinement": pole_refinement if mesh == "ball" else 1.0, "pole_edge": pole_edge, "median_edge": float(np.median(edge_len)),
         "equator_band": band, "force": [c["force"] for c in out], "w0": [c["w0"] for c in out],
         "top_drop": [c["top_drop"] for c in out], "travel": [c["travel"] for c in out],
         "wrinkle_mode": [c["wrinkle_mode"] for c in out], "wrinkle_amplitude": [c["wrinkle_amplitude"] for c in out],
         "observables": [c["observables"] for c in out],
-        "solve_seconds": time.perf_counter() - t0, "machine": f"{platform.machine()} ({platform.system()})",
+        "force_tolerance": sim.atol, "solve_seconds": time.perf_counter() - t0, "machine": f"{platform.machine()} ({platform.system()})",
     }  # fmt: skip
 
 

@@ -1,29 +1,34 @@
-"""3D wrinkle counts against the axisymmetric count and n ≈ 1.33 τ^½ (issue 6, item 4).
+"""3D wrinkle counts against the axisymmetric count and n ≈ 1.33 τ^½, and a full-size
+cross-validation of the two engines (issue 6, items 2 and 4).
 
 Pezzi-like ball (R = 0.13 m, P_g = 1.3 kPa, E = 2.34 MPa, ν = 0.4, prescribed gas, 8 mm finger,
 ground) with the wall thickness h chosen so that τ = P_g R² / √(E h B) = 10, 40, 100. For each τ,
 the 3D curve is displacement-controlled through the indenter travels of the axisymmetric curve at
-forces every 2.5 N, up to the first at which its dimple reaches −W(0) = w0 E h / (P_g R²) ≥
-``--depth`` (default 5: past the onset of hoop compression at 2.52, where the 3D wrinkles of the
-τ = 37 ball have grown well above the mesh's floor). At every level:
+forces every 2.5 N, up to the first at which its local dimple reaches −W(0) = w0 E h / (P_g R²)
+≥ ``--depth`` (past the onset of hoop compression at 2.52; the docs use 5 for τ = 40 and 100, 7
+for τ = 10, whose wrinkles appear later). At every level:
 
 * the 3D engine's dominant angular mode of the normal displacement and its amplitude
   (``shelljax.shell3d.wrinkle_spectrum``, rings of 5 mm out to 10 cm around the indenter), on
-  ``ball(R, h, n, pole_refinement=6)`` meshes of every ``--faces`` size (the refinement study);
+  ``ball(R, h, n, pole_refinement=6)`` meshes of every ``--faces`` size (the refinement study),
+  or on a uniform icosphere (``--mesh icosphere``: no rings or sectors, an independent mesh);
 * the axisymmetric engine's continuous count n (docs/axisym.md, *Wrinkle count*) at the 3D force;
-* 1.33 τ^½.
+* 1.33 τ^½;
+* the observables of both engines at the 3D force (top drop, H, D_u, D_l, d), the axisymmetric
+  one relaxed (default) and unrelaxed.
 
 ``ball()`` meshes are built in six sectors around the poles, which shows up as a small mode-6
-(mode-12 on fine meshes) displacement under any poke (docs/shell3d.md, *Wrinkles*): a count is a
-wrinkle count only where its amplitude has grown well above that floor, and converged where the
-two finest meshes agree.
+(mode 9 or 12 on finer meshes) displacement under any poke (docs/shell3d.md, *Wrinkles*): a count
+is a wrinkle count only where its amplitude has grown well above that floor, and converged where
+the meshes agree.
 
-Every (τ, faces) curve runs in a child process that checkpoints after each level, under a
-watchdog that restarts it when XLA's CPU runtime wedges (as ``make_virtual_sessions.py``);
-finished curves are kept in ``--out`` and a rerun skips them. A 48k-face curve takes 20–40 min on
-2 cores.
+Every curve runs in a child process that checkpoints after each level (``/tmp``), under a watchdog
+that restarts it when XLA's CPU runtime wedges (as ``make_virtual_sessions.py``); finished curves
+are kept in ``--out`` and a rerun skips them. Newton's tolerance is ``FORCE_TOLERANCE``.
 
-    python experiments/report_wrinkles3d.py --out docs/bench/wrinkles3d.json
+    python experiments/report_wrinkles3d.py --taus 40 100 --faces 24000 48000 --out wrinkles3d.json
+    python experiments/report_wrinkles3d.py --taus 10 --depth 7 --faces 24000 48000 --out wrinkles3d.json
+    python experiments/report_wrinkles3d.py --taus 100 --faces 20480 --mesh icosphere --out wrinkles3d.json
 """
 
 from __future__ import annotations
@@ -44,6 +49,12 @@ YOUNG_MODULUS = 2.34e6  # [Pa]
 REFERENCE_THICKNESS = 0.9e-3  # [m]: τ = 37 (the Pezzi-like ball)
 FORCE_STEP = 2.5  # [N]
 POLE_REFINEMENT = 6.0
+# [N]: 1e-5 of the forces here. The engine's default (1e-8 E h L ≈ 1e-5 N at τ = 10) sits at the
+# round-off floor of the deep states: Newton stalled at 2.2e-5 N on the τ = 10 ball at 55 mm.
+FORCE_TOLERANCE = 1e-4
+# Deep wrinkling states converge linearly (≈ 5 % per iteration at 2e-4 N on the τ = 100 icosphere
+# at 78 mm, where 60 iterations ran out)
+NEWTON_ITERATIONS = 250
 
 
 def thickness_for(target_tau: float) -> float:
@@ -56,19 +67,21 @@ def dimensionless_depth(w0, thickness):
     return np.asarray(w0) * YOUNG_MODULUS * thickness / (GAUGE_PRESSURE * RADIUS**2)
 
 
-AXISYM_OBSERVABLES = {"w0": "top_drop", "H": "height", "D_u": "upper_diameter", "D_l": "contact_diameter",
-                      "d": "sunken_depth"}  # 3D observables name → axisymmetric CurveResult field
+# compared observable → (its name in shelljax.shell3d.observables, its axisymmetric CurveResult field)
+COMPARED = {"top_drop": ("w0", "top_drop"), "H": ("H", "height"), "D_u": ("D_u", "upper_diameter"),
+            "D_l": ("D_l", "contact_diameter"), "D_l_mesh": ("D_l_mesh", "contact_diameter_mesh"),
+            "d": ("d", "sunken_depth")}
 
 
 def axisym_curve(thickness: float, forces, relax: bool = True) -> dict:
     """Axisymmetric curve at ``forces`` [N] (default Setup, 101 elements): the local dimple depth
-    "w0" [m] and wrinkle count "n" [-], and the 3D engine's observables by their 3D names [m]."""
+    "w0" [m], wrinkle count "n" [-], indenter "travel" [m] and the COMPARED observables [m]."""
     from shelljax.axisym import indentation_curves
 
     res = indentation_curves(np.array([[GAUGE_PRESSURE, YOUNG_MODULUS, thickness, POISSON]]), np.asarray(forces),
                              radius=RADIUS, relax=relax)  # fmt: skip
     out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0]}
-    out.update({k: np.asarray(getattr(res, field))[0] for k, field in AXISYM_OBSERVABLES.items()})
+    out.update({k: np.asarray(getattr(res, field))[0] for k, (_, field) in COMPARED.items()})
     return out
 
 
@@ -93,8 +106,9 @@ def run_child(args):
     target_tau, faces = args.taus[0], args.faces[0]
     h = thickness_for(target_tau)
     travels = travels_for(h, args.depth)
-    ckpt = Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}_depth.npz")
-    curve = solve_curve((GAUGE_PRESSURE, YOUNG_MODULUS, h), faces, POLE_REFINEMENT, ckpt, travels=travels)
+    ckpt = Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}{'' if args.mesh == 'ball' else '_' + args.mesh}_depth.npz")
+    curve = solve_curve((GAUGE_PRESSURE, YOUNG_MODULUS, h), faces, POLE_REFINEMENT, ckpt, travels=travels,
+                        force_tolerance=FORCE_TOLERANCE, mesh=args.mesh, max_newton_iterations=NEWTON_ITERATIONS)  # fmt: skip
     curve["target_tau"], curve["requested_faces"], curve["target_depth"] = target_tau, faces, args.depth
     data = json.loads(args.out.read_text()) if args.out.exists() else {"runs": []}
     data["runs"].append(curve)
@@ -108,10 +122,11 @@ def report(out: Path) -> dict:
     # a deeper run of the same τ and mesh contains the shallower one's levels: keep the deepest
     deepest = {}
     for r in data["runs"]:
-        key = (r["target_tau"], r["requested_faces"])
+        r.setdefault("mesh", "ball")
+        key = (r["target_tau"], r["requested_faces"], r["mesh"])
         if key not in deepest or r["target_depth"] > deepest[key]["target_depth"]:
             deepest[key] = r
-    runs = sorted(deepest.values(), key=lambda r: (r["target_tau"], r["n_faces"]))
+    runs = sorted(deepest.values(), key=lambda r: (r["target_tau"], r["mesh"], r["n_faces"]))
     rows, cross = [], []
     print("\n| τ | h [mm] | faces | F [N] | −W(0) (3D) | 3D mode | amplitude [mm] | axisym n | 1.33 τ^½ |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
@@ -119,33 +134,33 @@ def report(out: Path) -> dict:
         relaxed = axisym_curve(run["thickness"], run["force"])
         scaling = 1.33 * np.sqrt(run["tau"])
         for i, force in enumerate(run["force"]):
-            row = {"tau": run["tau"], "thickness": run["thickness"], "n_faces": run["n_faces"], "force": force,
+            row = {"tau": run["tau"], "thickness": run["thickness"], "n_faces": run["n_faces"], "mesh": run["mesh"], "force": force,
                    "W0_3d": float(dimensionless_depth(run["w0"][i], run["thickness"])),
                    "mode_3d": run["wrinkle_mode"][i], "amplitude_3d": run["wrinkle_amplitude"][i],
                    "n_axisym": float(relaxed["n"][i]), "n_scaling": float(scaling)}  # fmt: skip
             rows.append(row)
-            print(f"| {row['tau']:.0f} | {1e3 * row['thickness']:.3f} | {row['n_faces']} | {force:.1f} | "
+            print(f"| {row['tau']:.0f} | {1e3 * row['thickness']:.3f} | {row['n_faces']} {row['mesh']} | {force:.1f} | "
                   f"{row['W0_3d']:.2f} | {row['mode_3d']} | {1e3 * row['amplitude_3d']:.2f} | "
                   f"{row['n_axisym']:.2f} | {scaling:.2f} |")  # fmt: skip
     print("\nCross-validation, 3D engine vs axisymmetric (relaxed / unrelaxed), relative difference axisym/3D − 1:")
-    print("| τ | faces | F [N] | " + " | ".join(f"{k} 3D [mm]" for k in AXISYM_OBSERVABLES) + " | "
-          + " | ".join(f"{k} relaxed / unrelaxed" for k in AXISYM_OBSERVABLES) + " |")  # fmt: skip
-    print("|---|---:|---:|" + "---:|" * (2 * len(AXISYM_OBSERVABLES)))
+    print("| τ | faces | F [N] | " + " | ".join(f"{k} 3D [mm]" for k in COMPARED) + " | "
+          + " | ".join(f"{k} relaxed / unrelaxed" for k in COMPARED) + " |")  # fmt: skip
+    print("|---|---:|---:|" + "---:|" * (2 * len(COMPARED)))
     for run in runs:
-        if "observables" not in run:
+        if "observables" not in run or any(name not in run["observables"][0] for name, _ in COMPARED.values()):
             continue
         models = {"relaxed": axisym_curve(run["thickness"], run["force"]),
                   "unrelaxed": axisym_curve(run["thickness"], run["force"], relax=False)}  # fmt: skip
         for i, force in enumerate(run["force"]):
-            three_d = run["observables"][i]
-            diff = {m: {k: float(c[k][i] / three_d[k] - 1.0) for k in AXISYM_OBSERVABLES} for m, c in models.items()}
-            cross.append({"tau": run["tau"], "n_faces": run["n_faces"], "force": force, "shell3d": three_d,
-                          "axisym": {m: {k: float(c[k][i]) for k in AXISYM_OBSERVABLES} for m, c in models.items()},
+            three_d = {k: run["observables"][i][name] for k, (name, _) in COMPARED.items()}
+            diff = {m: {k: float(c[k][i] / three_d[k] - 1.0) for k in COMPARED} for m, c in models.items()}
+            cross.append({"tau": run["tau"], "n_faces": run["n_faces"], "mesh": run["mesh"], "force": force, "shell3d": three_d,
+                          "axisym": {m: {k: float(c[k][i]) for k in COMPARED} for m, c in models.items()},
                           "rel_diff": diff})  # fmt: skip
-            print(f"| {run['tau']:.0f} | {run['n_faces']} | {force:.1f} | "
-                  + " | ".join(f"{1e3 * three_d[k]:.1f}" for k in AXISYM_OBSERVABLES) + " | "
+            print(f"| {run['tau']:.0f} | {run['n_faces']} {run['mesh']} | {force:.1f} | "
+                  + " | ".join(f"{1e3 * three_d[k]:.1f}" for k in COMPARED) + " | "
                   + " | ".join(f"{100 * diff['relaxed'][k]:+.1f} / {100 * diff['unrelaxed'][k]:+.1f} %"
-                               for k in AXISYM_OBSERVABLES) + " |")  # fmt: skip
+                               for k in COMPARED) + " |")  # fmt: skip
     data["rows"], data["cross_validation"] = rows, cross
     out.write_text(json.dumps(data, indent=1))
     return data
@@ -156,6 +171,8 @@ def main(argv=None):
     ap.add_argument("--taus", type=float, nargs="+", default=[10.0, 40.0, 100.0])
     ap.add_argument("--faces", type=int, nargs="+", default=[24000, 48000])
     ap.add_argument("--depth", type=float, default=5.0, help="deepest −W(0) to reach (axisymmetric estimate)")
+    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere"],
+                    help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check)")
     ap.add_argument("--out", type=Path, default=Path("wrinkles3d.json"))
     ap.add_argument("--restarts", type=int, default=5)
     ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")
@@ -169,12 +186,13 @@ def main(argv=None):
     for target_tau in args.taus:
         for faces in args.faces:
             done = json.loads(args.out.read_text())["runs"] if args.out.exists() else []
-            if any((r["target_tau"], r["requested_faces"], r.get("target_depth", 5.0)) == (target_tau, faces, args.depth)
+            if any((r["target_tau"], r["requested_faces"], r["target_depth"], r.get("mesh", "ball")) == (target_tau, faces, args.depth, args.mesh)
                    for r in done):  # fmt: skip
                 continue
             t0 = time.perf_counter()
             cmd = [sys.executable, __file__, "--child", "--taus", str(target_tau), "--faces", str(faces),
-                   "--depth", str(args.depth), "--out", str(args.out), "--watchdog", str(args.watchdog)]  # fmt: skip
+                   "--depth", str(args.depth), "--out", str(args.out), "--watchdog", str(args.watchdog),
+                   "--mesh", args.mesh]  # fmt: skip
             ok = run_with_restarts(cmd, args.restarts, f"τ = {target_tau:g}, {faces} faces")
             print(f"τ = {target_tau:g}, {faces} faces: {'done' if ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)",
                   flush=True)  # fmt: skip

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import shelljax.shell3d as s3
-from shelljax import InvalidInputError
+from shelljax import InvalidInputError, NoConvergenceError
 from shelljax.physics import ATMOSPHERIC_PRESSURE
 from shelljax.shell3d._model import GRAVITY
 
@@ -33,6 +33,17 @@ def test_bad_inputs_raise_clear_errors(ball):
         s3.Indentation(ball, -1.0, NU, PG)
     with pytest.raises(InvalidInputError, match="gas"):
         s3.Indentation(ball, E, NU, PG, gas="steam", rest_shape="scan")
+    with pytest.raises(InvalidInputError, match="max_newton_iterations"):
+        s3.Indentation(ball, E, NU, PG, max_newton_iterations=0)
+
+
+def test_newton_iteration_limit_is_the_users(ball):
+    # One Newton iteration cannot converge a 4 mm poke from the unloaded shell: the error must say
+    # so with the limit the user set, not the default 60 (the rest state is not limited by it).
+    sim = s3.Indentation(ball, E, NU, PG, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
+                         progress=False, max_newton_iterations=1)  # fmt: skip
+    with pytest.raises(NoConvergenceError, match="after 1 iterations"):
+        sim.solve(depth=0.004)
 
 
 def test_sealed_gas_conserves_pv_and_forces_balance(sealed):

@@ -156,7 +156,9 @@ class Indentation:
     an equilibrium; can stall on coarse meshes at high pressure, then raises) or "scan" (take
     the scan as stress-free, i.e. inflate it a second time);
     ``force_tolerance`` [N]: Newton tolerance on the largest nodal force residual (default
-    1e-8 E h L, L the shell's size); ``max_step`` [m]: largest continuation step in depth;
+    1e-8 E h L, L the shell's size); ``max_newton_iterations``: Newton iterations per load step
+    before it raises (default 60; deep, wrinkling states can converge linearly and need more);
+    ``max_step`` [m]: largest continuation step in depth;
     ``friction`` μ [-] ≥ 0: Coulomb coefficient between shell and ground (default 0: frictionless;
     the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
     contact sticks (default activation_distance / 100); ``friction_iterations``: at most this many
@@ -179,6 +181,7 @@ class Indentation:
         activation_distance: float | None = None,
         rest_shape: str = "solve",
         force_tolerance: float | None = None,
+        max_newton_iterations: int = 60,
         max_step: float | None = None,
         progress: bool | None = None,
         friction: float = 0.0,
@@ -200,6 +203,10 @@ class Indentation:
             raise InvalidInputError(
                 f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
             )
+        if not (isinstance(max_newton_iterations, (int, np.integer)) and not isinstance(max_newton_iterations, bool)
+                and max_newton_iterations >= 1):
+            raise InvalidInputError(f"max_newton_iterations: must be an integer ≥ 1, got {max_newton_iterations!r}.")
+        self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.shell = shell
@@ -318,7 +325,7 @@ class Indentation:
     def _step(self, model, q_guess, params, label):
         q0 = self._feasible_start(q_guess, model)
         try:
-            res = model.solve(q0, params, atol=self.atol, name=label)
+            res = model.solve(q0, params, atol=self.atol, max_iter=self.max_newton_iterations, name=label)
         except NoConvergenceError:
             raise
         return res

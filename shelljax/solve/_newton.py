@@ -149,7 +149,8 @@ def newton(
         return NewtonResult(x=x, iterations=max_iter, history=history, energy=e, factorizations=factorizations)
     raise NoConvergenceError(
         f"{name}: residual {history[-1]:.3e} N above tolerance {atol:.3e} N after {max_iter} "
-        "iterations. Use smaller continuation steps or a larger max_iter.",
+        "iterations. Use smaller continuation steps or allow more iterations (max_iter; "
+        "shell3d.Indentation(max_newton_iterations=...)).",
         history,
     )
 

@@ -1,0 +1,26 @@
+"""Helpers of experiments/report_wrinkles3d.py (the 3D study itself takes an hour: docs/axisym.md)."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+import report_wrinkles3d as rw  # noqa: E402
+
+
+@pytest.mark.parametrize("target", [10.0, 40.0, 100.0])
+def test_thickness_sets_tau(target):
+    from shelljax.axisym import tau
+
+    h = rw.thickness_for(target)
+    # τ ∝ h⁻² exactly, so the rescaled thickness hits the target to round-off
+    assert float(tau(rw.GAUGE_PRESSURE, rw.YOUNG_MODULUS, h, rw.POISSON, rw.RADIUS)) == pytest.approx(target, rel=1e-12)
+
+
+def test_dimensionless_depth_is_vella_w0():
+    # −W(0) = w0 / (P_g R² / (E h)): a dimple of one P_g R²/(E h) is −W(0) = 1
+    h = rw.thickness_for(40.0)
+    unit = rw.GAUGE_PRESSURE * rw.RADIUS**2 / (rw.YOUNG_MODULUS * h)
+    np.testing.assert_allclose(rw.dimensionless_depth([unit, 2.52 * unit], h), [1.0, 2.52], rtol=1e-14)
