@@ -63,7 +63,8 @@ WRINKLE_RINGS = (0.1, 0.005)  # m: outer radius and width of the rings of the 3D
 CURVES_DESCRIPTION = (
     "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
     "--curves. SI units: force [N], w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
-    "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum); "
+    "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum), "
+    "mode_amplitude [m] its amplitude per mode in modes (summed in quadrature over the rings); "
     "observables: the 3D engine's own (shelljax.shell3d.observables: w0 = top-vertex drop, H, D_u, D_l, D_l_mesh, d [m])."
 )
 
@@ -199,6 +200,9 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
                     "w0": local_dimple_depth(reference, x, top, band),
                     "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "D_l_mesh", "d")},
                     "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
+                    # per mode, summed in quadrature over the rings (what ``count`` maximises)
+                    "mode_amplitude": np.sqrt(np.nansum(spectrum.amplitude**2, axis=0)).tolist(),
+                    "modes": spectrum.modes.tolist(),
                     "top_drop": float(reference[top, 2] - x[top, 2]),
                     "travel": float(sim.touch_center[2] - q[-1])})  # fmt: skip
     return {
@@ -209,7 +213,8 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
         "equator_band": band, "force": [c["force"] for c in out], "w0": [c["w0"] for c in out],
         "top_drop": [c["top_drop"] for c in out], "travel": [c["travel"] for c in out],
         "wrinkle_mode": [c["wrinkle_mode"] for c in out], "wrinkle_amplitude": [c["wrinkle_amplitude"] for c in out],
-        "observables": [c["observables"] for c in out],
+        "observables": [c["observables"] for c in out], "modes": out[0]["modes"] if out else [],
+        "mode_amplitude": [c["mode_amplitude"] for c in out],
         "force_tolerance": sim.atol, "solve_seconds": time.perf_counter() - t0, "machine": f"{platform.machine()} ({platform.system()})",
     }  # fmt: skip
 

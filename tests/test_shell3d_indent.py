@@ -153,3 +153,21 @@ def test_depth_substeps_end_exactly_on_the_requested_level():
         steps = s3.Indentation._substeps(stepper, d_prev, depth)
         assert steps[-1] == depth
         assert np.all(np.diff([d_prev, *steps]) <= 0.003 + 1e-15)
+
+
+def test_rim_refinement_on_ring_and_irregular_meshes():
+    from shelljax.shell3d._observables import _parabola_peak
+
+    # Ring mesh: rings of 6 vertices on z = 0.2 − (r − 0.05)²: the parabola recovers the peak
+    # between the rings exactly.
+    radii = np.array([0.046, 0.049, 0.053])
+    r = np.repeat(radii, 6)
+    z = 0.2 - (r - 0.05) ** 2
+    r_all, z_all = np.concatenate([r, r]), np.concatenate([z, 1e-4 + 0 * z])  # plus a lower half
+    rp, zp = _parabola_peak(r_all, z_all, 0.049)
+    assert rp == pytest.approx(0.05, abs=1e-12) and zp == pytest.approx(0.2, abs=1e-12)
+    # Irregular mesh (every radius distinct), a ground vertex at nearly the rim's radius: no
+    # refinement, the highest vertex is the rim (it extrapolated to z = 1.67 m before).
+    r_irr = np.array([0.04, 0.0497, 0.049, 0.05005, 0.06, 0.0498])
+    z_irr = np.array([0.19, 0.1999, 0.2001, 7e-5, 0.18, 8e-5])
+    assert _parabola_peak(r_irr, z_irr, 0.049) == (0.049, 0.2001)

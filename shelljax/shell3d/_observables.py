@@ -87,13 +87,27 @@ def observables(sim, q, params) -> dict:
     return out
 
 
+RING_MIN_VERTICES = 3  # a radius shared by fewer vertices is not a ring (irregular or wrinkled mesh)
+
+
 def _parabola_peak(r, z, r0):
-    """Peak (r*, z*) of z(r) from a parabola through the ring-averaged heights near r0."""
+    """Peak (r*, z*) of z(r) from a parabola through the ring heights near r0 (ring meshes).
+
+    Only the upper half of the shell is searched: a vertex near the ground can share the rim's
+    radius (on an icosphere the refinement then ran to H = 340 mm on a 260 mm ball). Without three
+    real rings there (irregular meshes, or rings split by wrinkles) the highest vertex is the rim.
+    """
+    fallback = (r0, float(z.max()))
+    upper = z > 0.5 * (z.max() + z.min())
+    r, z = r[upper], z[upper]
     rings = np.unique(np.round(r, 9))
     near = rings[np.argsort(np.abs(rings - r0))[:3]]
     if near.size < 3:
-        return r0, float(z.max())
-    zs = np.array([z[np.isclose(r, rv, atol=1e-9)].max() for rv in near])
+        return fallback
+    members = [np.isclose(r, rv, atol=1e-9) for rv in near]
+    if min(int(m.sum()) for m in members) < RING_MIN_VERTICES:
+        return fallback
+    zs = np.array([z[m].max() for m in members])
     a, b, c = np.polyfit(near, zs, 2)
     if a >= 0:
         return r0, float(zs.max())
