@@ -26,7 +26,8 @@ indenter on the vertical axis through the top vertex:
   vector from the axis to the vertex. Positive when the ground holds the contact patch back from
   spreading outward, negative when it holds it from sliding inward; 0 without friction.
 
-The rim radius is refined by a parabola through the ring heights around the highest vertex.
+On ring meshes the rim radius is refined by a parabola through the heights of the three rings
+nearest the highest vertex (upper half only); on other meshes the highest vertex is the rim.
 """
 
 from __future__ import annotations
