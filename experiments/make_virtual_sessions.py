@@ -107,8 +107,7 @@ def _curve_checkpointed(sim, levels, checkpoint: Path | None, control: str = "fo
         print(f"  level {level:.4g} {'N' if control == 'force' else 'm'} solved", flush=True)
         if checkpoint is not None:
             np.savez(checkpoint, forces=[h[0] for h in history[1:]], states=np.stack([h[1] for h in history[1:]]))
-    # a level solved by an earlier version may have been stored rounded (d_prev + (d − d_prev)·1)
-    return [(f, q) for f, q in history[1:] if any(abs(f - lv) <= 1e-9 * max(abs(lv), 1.0) for lv in levels)]
+    return [(f, q) for f, q in history[1:] if f in levels]
 
 
 def _solve_depth_level(sim, history, depth, halvings):

@@ -127,14 +127,17 @@ def report(out: Path) -> dict:
         if key not in deepest or r["target_depth"] > deepest[key]["target_depth"]:
             deepest[key] = r
     runs = sorted(deepest.values(), key=lambda r: (r["target_tau"], r["mesh"], r["n_faces"]))
+    # both axisymmetric hoop models at each run's 3D forces, solved once for both tables
+    axisym = [{"relaxed": axisym_curve(r["thickness"], r["force"]),
+               "unrelaxed": axisym_curve(r["thickness"], r["force"], relax=False)} for r in runs]  # fmt: skip
     rows, cross = [], []
     print("\nDominant mode (m ≥ 2) and the dominant one of m ≥ 3 with its growth since the first level "
           "(wrinkles grow; a mesh's pattern and the m = 2 ovalisation of a faceted mesh are there from the start):")
     print("| τ | h [mm] | faces | F [N] | −W(0) (3D) | 3D mode (amplitude [mm]) | m ≥ 3 (amplitude [mm], growth) "
           "| axisym n | 1.33 τ^½ |")  # fmt: skip
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    for run in runs:
-        relaxed = axisym_curve(run["thickness"], run["force"])
+    for run, models in zip(runs, axisym):
+        relaxed = models["relaxed"]
         scaling = 1.33 * np.sqrt(run["tau"])
         modes = np.asarray(run.get("modes", []))
         per_mode = np.asarray(run.get("mode_amplitude", []))  # (levels, modes) [m]
@@ -157,11 +160,9 @@ def report(out: Path) -> dict:
     print("| τ | faces | F [N] | " + " | ".join(f"{k} 3D [mm]" for k in COMPARED) + " | "
           + " | ".join(f"{k} relaxed / unrelaxed" for k in COMPARED) + " |")  # fmt: skip
     print("|---|---:|---:|" + "---:|" * (2 * len(COMPARED)))
-    for run in runs:
+    for run, models in zip(runs, axisym):
         if "observables" not in run or any(name not in run["observables"][0] for name, _ in COMPARED.values()):
             continue
-        models = {"relaxed": axisym_curve(run["thickness"], run["force"]),
-                  "unrelaxed": axisym_curve(run["thickness"], run["force"], relax=False)}  # fmt: skip
         for i, force in enumerate(run["force"]):
             three_d = {k: run["observables"][i][name] for k, (name, _) in COMPARED.items()}
             diff = {m: {k: float(c[k][i] / three_d[k] - 1.0) for k in COMPARED} for m, c in models.items()}
@@ -189,6 +190,8 @@ def main(argv=None):
     ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")
     ap.add_argument("--child", action="store_true", help="(internal) solve one (τ, faces) curve in this process")
     args = ap.parse_args(argv)
+    if min(args.taus) <= 0 or min(args.faces) < 20 or args.depth <= 0:
+        ap.error(f"--taus and --depth must be > 0 and --faces ≥ 20; got {args.taus}, {args.depth}, {args.faces}")
     import shelljax  # noqa: F401  (float64)
 
     if args.child:
