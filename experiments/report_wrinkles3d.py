@@ -183,8 +183,9 @@ def main(argv=None):
     ap.add_argument("--taus", type=float, nargs="+", default=[10.0, 40.0, 100.0])
     ap.add_argument("--faces", type=int, nargs="+", default=[24000, 48000])
     ap.add_argument("--depth", type=float, default=5.0, help="deepest −W(0) to reach (axisymmetric estimate)")
-    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere"],
-                    help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check)")
+    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere", "spiral"],
+                    help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check); "
+                         "spiral: no sectors, refined about the indenter")
     ap.add_argument("--out", type=Path, default=Path("wrinkles3d.json"))
     ap.add_argument("--restarts", type=int, default=5)
     ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")

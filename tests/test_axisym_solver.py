@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import shelljax.axisym._newton as newton
 from shelljax.axisym import Setup
+from shelljax.axisym._energy import Config, constrained_mask, enclosed_volume, split, total_energy
+from shelljax.axisym._hessian import hessian_at
 from shelljax.axisym._linalg import _inverse_4x4
-from shelljax.axisym._model import curve_single
+from shelljax.axisym._model import _params, curve_single, inflate
 
 
 def test_closed_form_block_inverse_matches_lapack():
@@ -16,6 +21,79 @@ def test_closed_form_block_inverse_matches_lapack():
     blocks = rng.normal(size=(50, 4, 4)) + 4.0 * np.eye(4)  # condition numbers ~1–10
     # float64 closed form vs LAPACK: agreement to a few hundred ulps of the inverse's size
     np.testing.assert_allclose(np.asarray(_inverse_4x4(blocks)), np.linalg.inv(blocks), rtol=0, atol=1e-13)
+
+
+def _dense(hess, mask):
+    """The structured Hessian as a dense matrix (fixed dofs: identity rows and columns)."""
+    m = hess.diag.shape[0]
+    n_x = 4 * m
+    dense = np.zeros((n_x + 1, n_x + 1))
+    for b in range(m):
+        dense[4 * b : 4 * b + 4, 4 * b : 4 * b + 4] = hess.diag[b]
+    for b in range(m - 1):
+        dense[4 * b : 4 * b + 4, 4 * b + 4 : 4 * b + 8] = hess.upper[b]
+        dense[4 * b + 4 : 4 * b + 8, 4 * b : 4 * b + 4] = np.asarray(hess.upper[b]).T
+    free_x = ~mask[:-1]
+    gas = float(hess.gas_sigma) * np.outer(hess.gas_grad, hess.gas_grad)
+    dense[:n_x, :n_x] += gas * np.outer(free_x, free_x)
+    dense[:n_x, -1] = dense[-1, :n_x] = hess.arrow
+    dense[-1, -1] = hess.corner
+    return dense
+
+
+@pytest.mark.parametrize(("loading", "gas"), [("sphere", "isothermal"), ("sphere", "prescribed"),
+                                             ("point", "prescribed"), ("none", "isothermal")])
+def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
+    # A wrinkled, indented state (15 N, both contacts active, relaxed hoop stress in the dimple)
+    # with a random perturbation, so that every term has a non-zero gradient and curvature.
+    setup = Setup(radius=0.13, n_elements=21, gas=gas)
+    params = (1300.0, 2.34e6, 9e-4, 0.4)
+    states = curve_single(setup, *params, np.array([5.0, 10.0, 15.0]), return_states=True)["state"]
+    r0, y_inflated, _, _ = inflate(setup, *params)
+    x_inflated, _ = split(y_inflated, len(setup.theta()))
+    cfg = Config(theta=setup.theta(), gas=gas, loading=loading, ground=loading != "none",
+                 pin_bottom=loading == "none", relax=True, hoop_capacity=setup.hoop_capacity)
+    p = _params(2.34e6, 9e-4, 0.4, r0, 1300.0, setup, force=15.0, ref_volume=enclosed_volume(x_inflated),
+                ground_z=x_inflated[0, 1])
+    y = states[-1] + 1e-4 * jnp.asarray(np.random.default_rng(0).normal(size=states[-1].shape))
+    mask = constrained_mask(cfg)
+    reference = np.array(jax.hessian(total_energy)(y, cfg, p))
+    reference[mask, :] = 0.0
+    reference[:, mask] = 0.0
+    reference[mask, mask] = 1.0
+    assembled = _dense(jax.tree_util.tree_map(np.asarray, hessian_at(y, cfg, p)), mask)
+    # Both are exact second derivatives evaluated in float64 by different operation orders: entries
+    # span 1e-3 … 1e9 N/m (contact penalty), so compare to round-off of the largest entry.
+    np.testing.assert_allclose(assembled, reference, rtol=0, atol=1e-12 * np.max(np.abs(reference)))
+    # not vacuous: the bending hinges fill the second-neighbour node blocks (a 10-wide band)
+    second_neighbour = [reference[2 * i : 2 * i + 2, 2 * i + 4 : 2 * i + 6] for i in range(2, len(y) // 2 - 4)]
+    assert all(np.any(block != 0.0) for block in second_neighbour)
+
+
+def test_contact_springs_model_the_penalty_of_a_node_entering_contact():
+    # The active-set model of a node predicted in contact with the indenter is the exact Hessian
+    # of k/2 (gap linearised)²: compare to the dense Hessian of that quadratic in (x_i, z_c).
+    setup = Setup(radius=0.13, n_elements=21)
+    cfg = Config(theta=setup.theta(), loading="sphere", ground=True, pin_bottom=False)
+    n = cfg.n_nodes
+    hess = jax.tree_util.tree_map(jnp.zeros_like, hessian_at(
+        jnp.concatenate([jnp.ones(2 * n), jnp.zeros(1)]), cfg,
+        _params(2.34e6, 9e-4, 0.4, 0.13, 1300.0, setup, ground_z=-1.0)))
+    rng = np.random.default_rng(1)
+    normal = rng.normal(size=(n, 2))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    k_indenter, k_ground = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    springs = newton._add_contact_springs(hess, jnp.asarray(k_ground), jnp.asarray(k_indenter), jnp.asarray(normal))
+
+    def model(v):  # Σ k/2 (n·Δx − n_z Δz_c)² + Σ k_g/2 Δz²
+        dx, dzc = split(v, n)
+        return 0.5 * jnp.sum(k_indenter * (jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) ** 2
+                             + k_ground * dx[:, 1] ** 2)
+
+    reference = np.asarray(jax.hessian(model)(jnp.zeros(2 * n + 1)))
+    springs = eqx.tree_at(lambda h: h.gas_grad, springs, jnp.zeros_like(springs.gas_grad))
+    np.testing.assert_allclose(_dense(jax.tree_util.tree_map(np.asarray, springs), np.zeros(2 * n + 1, bool)),
+                               reference, rtol=0, atol=1e-14)
 
 
 def _curve(setup):

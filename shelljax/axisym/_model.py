@@ -253,11 +253,17 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     zc_contact = x_inf[-1, 1] + setup.indenter_radius
     base = _params(young, thick, nu, r0, pressure, setup, ref_volume=volume_ref,
                    ground_z=ground_z, bending_scale=bending_scale)
-    # Start with both contacts slightly engaged so the first Hessian is non-singular.
-    nudge = 1e-4 * setup.radius
-    y_start = jnp.concatenate([(x_inf - jnp.array([0.0, nudge])).ravel(),
-                               (zc_contact - 2.0 * nudge)[None]])
     ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
+    # Start with both contacts slightly engaged so the first Hessian is non-singular, and the
+    # bottom already flattened on the ground as a membrane carries the first load F: the ball
+    # sinks by δ = F / (2π R P_g) (contact disc of area F / P_g). Without it the first load
+    # step grew the contact disc by about a node per Newton iteration.
+    nudge = 1e-4 * setup.radius
+    first_load = ramp[0] if len(setup.ramp) else forces[0]
+    sink = first_load / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
+    x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
+    x_start = x_start.at[:, 1].max(ground_z - nudge)
+    y_start = jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
     # `substeps` equal load steps per requested interval (only the last one is reported).
     m = setup.substeps
     start = ramp[-1:] if len(setup.ramp) else jnp.zeros(1)

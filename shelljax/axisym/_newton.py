@@ -20,19 +20,18 @@ from ._energy import (
     Config,
     Params,
     constrained_mask,
-    enclosed_volume,
-    gas_energy,
     ground_gaps,
-    local_energy,
+    indenter_gaps,
     node_rest_areas,
     rest_nodes,
     split,
     total_energy,
 )
 from ..physics import ATMOSPHERIC_PRESSURE
-from ._linalg import StructuredHessian, structured_hessian, structured_solve
+from ._hessian import hessian_at
+from ._linalg import StructuredHessian, structured_solve
 
-ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the ground contact set the step predicts
+ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the contact set the step predicts
 MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a contact-predicted step
 
 
@@ -64,50 +63,68 @@ def residual(y, cfg: Config, p: Params):
     return jax.grad(total_energy)(y, cfg, p) * _free(cfg, y.dtype)
 
 
-def hessian_at(y, cfg: Config, p: Params):
-    """Structured Hessian [N/m] of the total energy at y."""
-    n = cfg.n_nodes
-    vol_of = lambda yy: enclosed_volume(split(yy, n)[0])  # noqa: E731
-    volume = vol_of(y)
-    d_gas = jax.grad(gas_energy)(volume, cfg, p)
-    d2_gas = jax.grad(jax.grad(gas_energy))(volume, cfg, p)
-    band = lambda yy: local_energy(yy, cfg, p) + d_gas * vol_of(yy)  # noqa: E731
-    grad_v = jax.grad(vol_of)(y)[:-1]
-    return structured_hessian(jax.grad(band), y, constrained_mask(cfg), d2_gas, grad_v)
+def _add_contact_springs(hess: StructuredHessian, ground, indenter, normal):
+    """H + the springs of nodes predicted in contact: ``ground`` (n,) [N/m] on the nodes' z;
+    ``indenter`` (n,) [N/m] along the indenter normals ``normal`` (n, 2), on (x_i, z_c)."""
+    node = indenter[:, None, None] * (normal[:, :, None] * normal[:, None, :])
+    node = node.at[:, 1, 1].add(ground)
+    m = hess.diag.shape[0]
+    pairs = node.reshape(m, 2, 2, 2)  # block, node in block, 2×2
+    blocks = jnp.zeros((m, 4, 4)).at[:, :2, :2].set(pairs[:, 0]).at[:, 2:, 2:].set(pairs[:, 1])
+    arrow = -(indenter * normal[:, 1])[:, None] * normal  # ∂(x − c)/∂z_c = (0, −1)
+    corner = jnp.sum(indenter * normal[:, 1] ** 2)
+    return eqx.tree_at(lambda h: (h.diag, h.arrow, h.corner), hess,
+                       (hess.diag + blocks, hess.arrow + arrow.ravel(), hess.corner + corner))
 
 
-def _add_ground_springs(hess: StructuredHessian, springs):
-    """H + diag(springs) on the nodes' z unknowns; ``springs`` (n,) [N/m]."""
-    on_z = jnp.stack([jnp.zeros_like(springs), springs], axis=-1).reshape(hess.diag.shape[:2])
-    diag = hess.diag + on_z[:, :, None] * jnp.eye(4)[None]
-    return eqx.tree_at(lambda h: h.diag, hess, diag)
-
-
-def _ground_active_set_step(hess, g, y, cfg: Config, p: Params, free):
-    """Newton direction for the ground contact set that the step itself predicts.
+def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
+    """Newton direction for the contact set (ground and indenter) that the step itself predicts.
 
     The quadratic penalty's Hessian is k on a touching node and 0 on a free one, so a plain
     Newton step drives a node about to touch the ground deep into it: the line search then
     crawls (measured: 3–8 iterations of step length 1e-2 … 1e-4 each time the contact disc
-    grows by a node). As in a primal–dual active-set method, the step is recomputed with the
-    exact piecewise-quadratic penalty model of the free nodes it predicts in contact (spring k
-    and force k·gap added); the line search is unchanged, so this only changes the direction.
+    grows by a node). The same happens under the indenter, most of all on the first load step,
+    where only the pole touches it. As in a primal–dual active-set method, the step is
+    recomputed with the exact piecewise-quadratic penalty model of the free nodes it predicts in
+    contact (spring k along the contact normal and force k·gap added; the indenter gap
+    linearised); the line search is unchanged, so this only changes the direction.
     """
     n = cfg.n_nodes
-    x, _ = split(y, n)
-    gaps = ground_gaps(x, p)
+    x, zc = split(y, n)
     k_node = p.contact_stiffness * node_rest_areas(rest_nodes(cfg, p.rest_radius))
-    touching = gaps < 0.0
-    d = structured_solve(hess, -g) * free
-    for _ in range(ACTIVE_SET_PASSES):
+    zero = jnp.zeros(n, y.dtype)
+    ground_gap = ground_gaps(x, p) if cfg.ground else jnp.full(n, jnp.inf)
+    if cfg.loading == "sphere":
+        rel = x - jnp.stack([jnp.zeros_like(zc), zc])
+        normal = rel / jnp.sqrt(jnp.sum(rel**2, axis=-1))[:, None]
+        indenter_gap = indenter_gaps(x, zc, p)
+    else:
+        normal, indenter_gap = jnp.zeros((n, 2), y.dtype), jnp.full(n, jnp.inf)
+    free_z = free[1 : 2 * n : 2]
+    free_node = free[: 2 * n].reshape(n, 2)
+
+    def predicted(d):
         # Only touching nodes are added: dropping the springs of nodes the step lifts off can
         # leave the ball's vertical rigid mode unrestrained (singular H) near first contact.
-        predicted = ((gaps + split(d, n)[0][:, 1]) < 0.0) & ~touching
-        change = k_node * predicted.astype(y.dtype)
-        force = jnp.zeros_like(y).at[1 : 2 * n : 2].set(change * gaps) * free
-        d_pred = structured_solve(_add_ground_springs(hess, change * free[1 : 2 * n : 2]),
-                                  -(g + force)) * free
-        # The model's pull k·gap on a node still above the ground is not in the true gradient:
+        dx, dzc = split(d, n)
+        ground_hit = ((ground_gap + dx[:, 1]) < 0.0) & ~(ground_gap < 0.0)
+        indenter_hit = (((indenter_gap + jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) < 0.0)
+                        & ~(indenter_gap < 0.0))
+        return ground_hit, indenter_hit
+
+    def repredict(d):
+        ground_hit, indenter_hit = predicted(d)
+        k_ground = jnp.where(ground_hit, k_node, 0.0)
+        k_indenter = jnp.where(indenter_hit, k_node, 0.0)
+        pull_ground = k_ground * jnp.where(ground_hit, ground_gap, 0.0)
+        pull_indenter = k_indenter * jnp.where(indenter_hit, indenter_gap, 0.0)
+        node_force = jnp.stack([zero, pull_ground], -1) + pull_indenter[:, None] * normal
+        zc_force = -jnp.sum(pull_indenter * normal[:, 1])
+        force = jnp.concatenate([node_force.ravel(), zc_force[None]]) * free
+        springs = _add_contact_springs(hess, k_ground * free_z, k_indenter * free[-1],
+                                       normal * free_node)
+        d_pred = structured_solve(springs, -(g + force)) * free
+        # The model's pull k·gap on a node still clear of contact is not in the true gradient:
         # keep the predicted direction only if it still descends the true energy, by at least a
         # fraction of a Jacobi-scaled gradient step's rate. A node hovering at a gap where k·gap
         # equals its true load makes the model's step vanish (measured: 1e-17 m, Newton stuck
@@ -117,7 +134,11 @@ def _ground_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         # such degenerate steps.
         slope = g @ d_pred
         floor = MIN_DESCENT_FRACTION * (g @ (g / _jacobi_diagonal(hess)))
-        d = jnp.where(jnp.isfinite(slope) & (slope < -floor), d_pred, d)
+        return jnp.where(jnp.isfinite(slope) & (slope < -floor), d_pred, d)
+
+    d = structured_solve(hess, -g) * free
+    for _ in range(ACTIVE_SET_PASSES):
+        d = repredict(d)
     return d
 
 
@@ -142,7 +163,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     gas_scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * cfg.gas_volume_ratio
                  if cfg.gas == "isothermal" else 0.0)  # fmt: skip
     energy = lambda y: total_energy(y, cfg, p)  # noqa: E731
-    grad = lambda y: jax.grad(energy)(y) * free  # noqa: E731
+    energy_and_grad = jax.value_and_grad(energy)
 
     def cond(state):
         _, _, _, res, it, _, _ = state
@@ -151,8 +172,8 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     def body(state):
         y, g, e, _, it, hist, mu = state
         hess = _shift(hessian_at(y, cfg, p), mu)
-        if cfg.ground:
-            d = _ground_active_set_step(hess, g, y, cfg, p, free)
+        if cfg.ground or cfg.loading == "sphere":
+            d = _contact_active_set_step(hess, g, y, cfg, p, free)
         else:
             d = structured_solve(hess, -g) * free
         slope = g @ d
@@ -166,18 +187,20 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
         def accept(alpha, e_new):
             return jnp.isfinite(e_new) & (e_new <= e + 1e-4 * alpha * slope + tol_e)
 
+        # Each trial also returns its gradient (reverse mode computes the energy anyway): the
+        # accepted trial's gradient is the next residual, with no separate gradient pass.
         def ls_cond(s):
-            alpha, e_new, k = s
+            alpha, e_new, _, k = s
             return (~accept(alpha, e_new)) & (k < opts.max_backtracks)
 
         def ls_body(s):
-            alpha, _, k = s
+            alpha, _, _, k = s
             alpha = 0.5 * alpha
-            return alpha, energy(y + alpha * d), k + 1
+            return (alpha, *energy_and_grad(y + alpha * d), k + 1)
 
         alpha0 = jnp.minimum(1.0, opts.max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
-        alpha, e_new, backtracks = jax.lax.while_loop(
-            ls_cond, ls_body, (alpha0, energy(y + alpha0 * d), 0)
+        alpha, e_new, g_trial, backtracks = jax.lax.while_loop(
+            ls_cond, ls_body, (alpha0, *energy_and_grad(y + alpha0 * d), 0)
         )
         # Levenberg shift: where the Hessian is indefinite (a buckling dimple), the scaled
         # gradient step crawls (measured: 30+ iterations on soft balls); shifting the next
@@ -190,16 +213,17 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
                        jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu))
         y_new = jnp.where(accepted, y + alpha * d, y)
         e_new = jnp.where(accepted, e_new, e)
-        g_new = grad(y_new)
+        g_new = jnp.where(accepted, g_trial * free, g)
         res = jnp.max(jnp.abs(g_new))
         res = jnp.where(jnp.isfinite(res), res, jnp.inf)
         hist = hist.at[it].set(res)
         return y_new, g_new, e_new, res, it + 1, hist, mu
 
-    g0 = grad(y0)
+    e0, g0 = energy_and_grad(y0)
+    g0 = g0 * free
     res0 = jnp.max(jnp.abs(g0))
     hist0 = jnp.full((opts.max_iter,), jnp.nan, y0.dtype)
-    state = (y0, g0, energy(y0), res0, jnp.asarray(0), hist0, jnp.zeros((), y0.dtype))
+    state = (y0, g0, e0, res0, jnp.asarray(0), hist0, jnp.zeros((), y0.dtype))
     y, _, _, res, it, hist, _ = jax.lax.while_loop(cond, body, state)
     return y, res, it.astype(y.dtype), hist
 

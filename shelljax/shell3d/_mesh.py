@@ -145,6 +145,63 @@ def sphere_mesh(
     return mesh
 
 
+def spiral_sphere_mesh(
+    radius: float,
+    *,
+    top_spacing: float,
+    max_spacing: float,
+    bottom_spacing: float | None = None,
+    refined_arc: float = 0.0,
+    growth: float = 0.25,
+    name: str = "spiral sphere",
+) -> ShellMesh:
+    """Closed sphere mesh [m] with no rings or sectors, refined about the top (indenter) pole.
+
+    ``sphere_mesh``'s rings carry a 6-sector pattern that a poke excites (mode 6, 12, ...), so
+    wrinkle counts near those numbers cannot be told from the mesh. Here the vertices lie on a
+    golden-angle spiral whose density follows a target edge length s(θ): ``top_spacing`` [m] up
+    to the arc distance ``refined_arc`` [m] from the top pole, then growing at ``growth`` (edge
+    length per unit arc distance) up to ``max_spacing`` [m], and from ``bottom_spacing`` [m]
+    (default: ``top_spacing``) at the bottom pole. The triangulation is the sphere's Delaunay
+    one (the convex hull of points on a sphere), with one vertex at each pole.
+    """
+    from scipy.spatial import ConvexHull
+
+    bottom_spacing = top_spacing if bottom_spacing is None else bottom_spacing
+    if not (radius > 0 and 0 < top_spacing <= max_spacing and 0 < bottom_spacing <= max_spacing
+            and refined_arc >= 0 and growth > 0):
+        raise InvalidInputError(
+            f"spiral_sphere_mesh: need radius > 0 (got {radius}), 0 < top_spacing, bottom_spacing ≤ "
+            f"max_spacing (got {top_spacing}, {bottom_spacing}, {max_spacing}), refined_arc ≥ 0 "
+            f"(got {refined_arc}) and growth > 0 (got {growth})."
+        )
+    theta = np.linspace(0.0, np.pi, 20001)
+    arc_top, arc_bottom = radius * (np.pi - theta), radius * theta
+    spacing = np.minimum.reduce([
+        np.full_like(theta, max_spacing),
+        top_spacing + growth * np.maximum(arc_top - refined_arc, 0.0),
+        bottom_spacing + growth * arc_bottom,
+    ])
+    # vertices per unit polar angle for an equilateral lattice: area per vertex (√3/2) s²
+    density = 2.0 * np.pi * radius**2 * np.sin(theta) / (0.5 * np.sqrt(3.0) * spacing**2)
+    count = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(theta))])
+    n_inner = max(int(round(count[-1])) - 2, 4)
+    k = np.arange(1, n_inner + 1)
+    polar = np.interp(k / (n_inner + 1) * count[-1], count, theta)
+    azimuth = k * np.pi * (3.0 - np.sqrt(5.0))  # golden angle: no two points share a meridian
+    verts = np.concatenate([
+        [[0.0, 0.0, -radius]],
+        radius * np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)], -1),
+        [[0.0, 0.0, radius]],
+    ])
+    faces = ConvexHull(verts).simplices.astype(np.int64)
+    p = verts[faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", normal, p.mean(axis=1)) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    return ShellMesh.from_arrays(verts, faces, name=name)
+
+
 def _ring_sphere(radius, spacing_max, spacing_pole, growth, name) -> ShellMesh:
     thetas = _sphere_rings(radius, spacing_max, spacing_pole, growth)
     n_equator = (len(thetas) - 1) // 2
