@@ -161,25 +161,30 @@ def _icosphere(thickness: float, n_triangles: int, seed: int = 0):
     return s3.Shell(s3.ShellMesh.from_arrays(sphere.vertices, sphere.faces, name="icosphere"), thickness)
 
 
-SPIRAL_REFINED_ARC = 0.06  # [m] finest edges out to 6 cm of arc from the top pole (the wrinkled zone)
-SPIRAL_MAX_SPACING = 8e-3  # [m]
+RANDOM_MESH_REFINED_ARC = 0.06  # [m] finest edges out to 6 cm of arc from the top pole (the wrinkled zone)
+RANDOM_MESH_MAX_SPACING = 8e-3  # [m]
 
 
-def _spiral(thickness: float, n_triangles: int):
-    """Sector-free shell refined about the top pole (``s3.spiral_sphere_mesh``) of ≈ ``n_triangles``
-    faces: its top edge length is searched for the count (bottom pole edges twice as long)."""
+def _random_graded(thickness: float, n_triangles: int, seed: int = 0):
+    """Shell on ``s3.random_sphere_mesh`` (no rings, sectors or spirals), refined about the top
+    pole, of ≈ ``n_triangles`` faces: its top edge length is searched for the count (bottom pole
+    edges twice as long; F = 2V − 4 is fixed before the smoothing, so the search skips it)."""
     import shelljax.shell3d as s3
 
-    def mesh(top):
-        return s3.spiral_sphere_mesh(RADIUS, top_spacing=top, bottom_spacing=min(2.0 * top, SPIRAL_MAX_SPACING),
-                                     max_spacing=SPIRAL_MAX_SPACING, refined_arc=SPIRAL_REFINED_ARC,
-                                     growth=0.15, name="spiral")  # fmt: skip
+    def mesh(top, smoothing_iterations=25):
+        return s3.random_sphere_mesh(RADIUS, top_spacing=top, bottom_spacing=min(2.0 * top, RANDOM_MESH_MAX_SPACING),
+                                     max_spacing=RANDOM_MESH_MAX_SPACING, refined_arc=RANDOM_MESH_REFINED_ARC,
+                                     growth=0.15, seed=seed, smoothing_iterations=smoothing_iterations)  # fmt: skip
 
-    low, high = np.log(3e-4), np.log(SPIRAL_MAX_SPACING)
+    low, high = np.log(3e-4), np.log(RANDOM_MESH_MAX_SPACING)
     for _ in range(16):
         mid = 0.5 * (low + high)
-        low, high = (mid, high) if mesh(np.exp(mid)).n_faces > n_triangles else (low, mid)
-    return s3.Shell(mesh(np.exp(0.5 * (low + high))), thickness)
+        low, high = (mid, high) if mesh(np.exp(mid), 0).n_faces > n_triangles else (low, mid)
+    shell = s3.Shell(mesh(np.exp(0.5 * (low + high))), thickness)
+    if abs(shell.mesh.n_faces / n_triangles - 1.0) > 0.1:
+        raise SystemExit(f"random mesh: {n_triangles} faces is out of reach with edges of "
+                         f"{RANDOM_MESH_MAX_SPACING * 1e3:g} mm away from the poles (got {shell.mesh.n_faces})")
+    return shell
 
 
 def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None,
@@ -190,13 +195,13 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
     force control can lose the indenter); ``force_tolerance`` [N]: Newton's (None: the engine's
     default 1e-8 E h L); ``mesh`` "ball" (``s3.ball``: rings about the poles, refined there),
     "icosphere" (uniform, no rings or sectors: ≈ ``n_triangles`` faces by subdivision, turned so
-    that a seeded random vertex is the top) or "spiral" (no rings or sectors, refined about the
-    top: ``_spiral``). Returns a JSON-ready dict (SI)."""
+    that a seeded random vertex is the top) or "random" (no rings, sectors or spirals, refined
+    about the top: ``_random_graded``). Returns a JSON-ready dict (SI)."""
     import shelljax.shell3d as s3
 
     pg, e, h = params
     meshes = {"ball": lambda: s3.ball(RADIUS, h, n_triangles, pole_refinement=pole_refinement),
-              "icosphere": lambda: _icosphere(h, n_triangles), "spiral": lambda: _spiral(h, n_triangles)}
+              "icosphere": lambda: _icosphere(h, n_triangles), "random": lambda: _random_graded(h, n_triangles)}
     ball = meshes[mesh]()
     t0 = time.perf_counter()
     sim = s3.Indentation(ball, young_modulus=e, poisson_ratio=POISSON, gauge_pressure=pg, gas="prescribed",

@@ -11,7 +11,9 @@ for τ = 10, whose wrinkles appear later). At every level:
 * the 3D engine's dominant angular mode of the normal displacement and its amplitude
   (``shelljax.shell3d.wrinkle_spectrum``, rings of 5 mm out to 10 cm around the indenter), on
   ``ball(R, h, n, pole_refinement=6)`` meshes of every ``--faces`` size (the refinement study),
-  or on a uniform icosphere (``--mesh icosphere``: no rings or sectors, an independent mesh);
+  on a uniform icosphere (``--mesh icosphere``: no rings or sectors, an independent mesh), or on
+  ``random_sphere_mesh`` (``--mesh random``: seeded random vertices refined about the indenter,
+  no rings, sectors or spirals);
 * the axisymmetric engine's continuous count n (docs/axisym.md, *Wrinkle count*) at the 3D force;
 * 1.33 τ^½;
 * the observables of both engines at the 3D force (top drop, H, D_u, D_l, d), the axisymmetric
@@ -29,6 +31,7 @@ are kept in ``--out`` and a rerun skips them. Newton's tolerance is ``FORCE_TOLE
     python experiments/report_wrinkles3d.py --taus 40 100 --faces 24000 48000 --out wrinkles3d.json
     python experiments/report_wrinkles3d.py --taus 10 --depth 7 --faces 24000 48000 --out wrinkles3d.json
     python experiments/report_wrinkles3d.py --taus 100 --faces 20480 --mesh icosphere --out wrinkles3d.json
+    python experiments/report_wrinkles3d.py --taus 100 --depth 4.2 --faces 15500 23500 --mesh random --out wrinkles3d.json
 """
 
 from __future__ import annotations
@@ -183,9 +186,9 @@ def main(argv=None):
     ap.add_argument("--taus", type=float, nargs="+", default=[10.0, 40.0, 100.0])
     ap.add_argument("--faces", type=int, nargs="+", default=[24000, 48000])
     ap.add_argument("--depth", type=float, default=5.0, help="deepest −W(0) to reach (axisymmetric estimate)")
-    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere", "spiral"],
+    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere", "random"],
                     help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check); "
-                         "spiral: no sectors, refined about the indenter")
+                         "random: seeded random vertices, no rings, sectors or spirals, refined about the indenter")
     ap.add_argument("--out", type=Path, default=Path("wrinkles3d.json"))
     ap.add_argument("--restarts", type=int, default=5)
     ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")

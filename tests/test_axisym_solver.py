@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -41,6 +43,11 @@ def _dense(hess, mask):
     return dense
 
 
+@functools.lru_cache(maxsize=None)
+def _indented_states(setup):
+    return curve_single(setup, 1300.0, 2.34e6, 9e-4, 0.4, np.array([5.0, 10.0, 15.0]), return_states=True)["state"]
+
+
 @pytest.mark.parametrize(("loading", "gas"), [("sphere", "isothermal"), ("sphere", "prescribed"),
                                              ("point", "prescribed"), ("none", "isothermal")])
 def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
@@ -48,7 +55,7 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     # with a random perturbation, so that every term has a non-zero gradient and curvature.
     setup = Setup(radius=0.13, n_elements=21, gas=gas)
     params = (1300.0, 2.34e6, 9e-4, 0.4)
-    states = curve_single(setup, *params, np.array([5.0, 10.0, 15.0]), return_states=True)["state"]
+    states = _indented_states(setup)
     r0, y_inflated, _, _ = inflate(setup, *params)
     x_inflated, _ = split(y_inflated, len(setup.theta()))
     cfg = Config(theta=setup.theta(), gas=gas, loading=loading, ground=loading != "none",

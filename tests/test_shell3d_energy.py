@@ -31,6 +31,33 @@ def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
         s3.ShellMesh.from_arrays(mesh.vertices, bad)
 
 
+def test_random_sphere_mesh_is_closed_graded_and_seeded():
+    radius, top, coarse = 0.13, 4e-3, 16e-3
+    mesh = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03)
+    v, f = mesh.vertices, mesh.faces
+    # closed genus-0 surface on the sphere, outward oriented, a vertex at each pole
+    assert mesh.n_vertices - 3 * len(f) // 2 + len(f) == 2
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), radius, rtol=1e-12)
+    assert s3.signed_volume(v, f) > 0
+    assert np.isclose(v[:, 2].max(), radius) and np.isclose(v[:, 2].min(), -radius)
+    # edge lengths follow the requested spacing; single Delaunay edges of smoothed random points
+    # spread widely (0.2–2 × s), so compare medians
+    edges = v[f[:, [0, 1, 2]]] - v[f[:, [1, 2, 0]]]
+    length = np.linalg.norm(edges, axis=-1).ravel()
+    arc = radius * np.arccos(np.clip(np.repeat(v[f].mean(1)[:, 2], 3) / radius, -1, 1))
+    assert np.median(length[arc < 0.02]) == pytest.approx(top, rel=0.15)
+    assert np.median(length[np.abs(arc - 0.5 * np.pi * radius) < 0.02]) == pytest.approx(coarse, rel=0.15)
+    # every face's flap stencil has six distinct vertices (no valence-3 vertex)
+    assert all(len(set(row)) == 6 for row in mesh.stencil.tolist())
+    # seeded: the same seed gives the same mesh, another seed another one
+    again = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03)
+    other = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03, seed=1)
+    np.testing.assert_array_equal(again.vertices, v)
+    assert not (other.vertices.shape == v.shape and np.allclose(other.vertices, v))
+    with pytest.raises(InvalidInputError, match="random_sphere_mesh"):
+        s3.random_sphere_mesh(radius, top_spacing=0.02, max_spacing=0.01)
+
+
 def test_rest_curvature_of_sphere_converges_to_minus_identity_over_r():
     """ā⁻¹b̄ = −I/R on a sphere; the quadratic-patch curvature error is O(edge²)."""
     errs = []

@@ -14,7 +14,7 @@ Quick start (SI units)::
 
 from ._energy import face_energy, fundamental_forms, rest_geometry
 from ._indent import Indentation, IndentationState, Shell, ball, load
-from ._mesh import ShellMesh, signed_volume, sphere_mesh, spiral_sphere_mesh
+from ._mesh import ShellMesh, signed_volume, sphere_mesh, random_sphere_mesh
 from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 from ._observables import observables
 from ._rest import solve_rest_shape

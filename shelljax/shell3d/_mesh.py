@@ -145,7 +145,7 @@ def sphere_mesh(
     return mesh
 
 
-def spiral_sphere_mesh(
+def random_sphere_mesh(
     radius: float,
     *,
     top_spacing: float,
@@ -153,17 +153,21 @@ def spiral_sphere_mesh(
     bottom_spacing: float | None = None,
     refined_arc: float = 0.0,
     growth: float = 0.25,
-    name: str = "spiral sphere",
+    seed: int = 0,
+    smoothing_iterations: int = 25,
 ) -> ShellMesh:
-    """Closed sphere mesh [m] with no rings or sectors, refined about the top (indenter) pole.
+    """Closed sphere mesh [m] with no rings, sectors or spirals, refined about the top pole.
 
-    ``sphere_mesh``'s rings carry a 6-sector pattern that a poke excites (mode 6, 12, ...), so
-    wrinkle counts near those numbers cannot be told from the mesh. Here the vertices lie on a
-    golden-angle spiral whose density follows a target edge length s(θ): ``top_spacing`` [m] up
-    to the arc distance ``refined_arc`` [m] from the top pole, then growing at ``growth`` (edge
-    length per unit arc distance) up to ``max_spacing`` [m], and from ``bottom_spacing`` [m]
-    (default: ``top_spacing``) at the bottom pole. The triangulation is the sphere's Delaunay
-    one (the convex hull of points on a sphere), with one vertex at each pole.
+    ``sphere_mesh``'s rings carry a 6-sector pattern that a poke excites (modes 6, 12, ...), and a
+    golden-angle spiral of vertices carries its parastichies (measured: every leading mode of a
+    poked spiral mesh was a Fibonacci number, 5 … 55), so wrinkle counts near those numbers cannot
+    be told from the mesh. Here the vertices are seeded random points (no long-range order) whose
+    density follows a target edge length s(θ): ``top_spacing`` [m] up to the arc distance
+    ``refined_arc`` [m] from the top pole, then growing at ``growth`` (edge length per unit arc
+    distance) up to ``max_spacing`` [m], and from ``bottom_spacing`` [m] (default: ``top_spacing``)
+    at the bottom pole. Polar angles are stratified (the density is exact band by band), azimuths
+    uniform; ``smoothing_iterations`` half-steps to the neighbours' mean spread the clusters. The
+    triangulation is the sphere's Delaunay one (the convex hull), with one vertex at each pole.
     """
     from scipy.spatial import ConvexHull
 
@@ -171,11 +175,11 @@ def spiral_sphere_mesh(
     if not (radius > 0 and 0 < top_spacing <= max_spacing and 0 < bottom_spacing <= max_spacing
             and refined_arc >= 0 and growth > 0):
         raise InvalidInputError(
-            f"spiral_sphere_mesh: need radius > 0 (got {radius}), 0 < top_spacing, bottom_spacing ≤ "
+            f"random_sphere_mesh: need radius > 0 (got {radius}), 0 < top_spacing, bottom_spacing ≤ "
             f"max_spacing (got {top_spacing}, {bottom_spacing}, {max_spacing}), refined_arc ≥ 0 "
             f"(got {refined_arc}) and growth > 0 (got {growth})."
         )
-    theta = np.linspace(0.0, np.pi, 20001)
+    theta = np.linspace(0.0, np.pi, 20001)  # polar angle from the bottom pole [rad]
     arc_top, arc_bottom = radius * (np.pi - theta), radius * theta
     spacing = np.minimum.reduce([
         np.full_like(theta, max_spacing),
@@ -186,20 +190,42 @@ def spiral_sphere_mesh(
     density = 2.0 * np.pi * radius**2 * np.sin(theta) / (0.5 * np.sqrt(3.0) * spacing**2)
     count = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(theta))])
     n_inner = max(int(round(count[-1])) - 2, 4)
-    k = np.arange(1, n_inner + 1)
-    polar = np.interp(k / (n_inner + 1) * count[-1], count, theta)
-    azimuth = k * np.pi * (3.0 - np.sqrt(5.0))  # golden angle: no two points share a meridian
+    rng = np.random.default_rng(seed)
+    quantile = (np.arange(n_inner) + rng.uniform(0.0, 1.0, n_inner)) / n_inner
+    polar = np.interp(quantile * count[-1], count, theta)
+    azimuth = rng.uniform(0.0, 2.0 * np.pi, n_inner)
     verts = np.concatenate([
         [[0.0, 0.0, -radius]],
         radius * np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)], -1),
         [[0.0, 0.0, radius]],
     ])
+    for _ in range(smoothing_iterations):
+        faces = ConvexHull(verts).simplices
+        edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        total = np.zeros_like(verts)
+        valence = np.zeros(len(verts))
+        np.add.at(total, edges[:, 0], verts[edges[:, 1]])
+        np.add.at(valence, edges[:, 0], 1.0)
+        step = 0.5 * (total / valence[:, None] - verts)
+        step[[0, -1]] = 0.0  # the poles stay
+        verts = verts + step
+        verts *= radius / np.linalg.norm(verts, axis=1, keepdims=True)
     faces = ConvexHull(verts).simplices.astype(np.int64)
+    # A valence-3 vertex gives its faces' flap stencils a repeated vertex, and the bending's
+    # six-point curvature fit is then singular (measured: one face at 6× the sphere's curvature,
+    # an infinite energy in the rest-shape solve): drop such vertices (the poles never are).
+    for _ in range(10):
+        valence = np.bincount(faces.ravel(), minlength=len(verts))
+        keep = valence >= 4
+        if keep.all():
+            break
+        verts = verts[keep]
+        faces = ConvexHull(verts).simplices.astype(np.int64)
     p = verts[faces]
     normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     flip = np.einsum("ij,ij->i", normal, p.mean(axis=1)) < 0
     faces[flip] = faces[flip][:, ::-1]
-    return ShellMesh.from_arrays(verts, faces, name=name)
+    return ShellMesh.from_arrays(verts, faces, name=f"random sphere (seed {seed})")
 
 
 def _ring_sphere(radius, spacing_max, spacing_pole, growth, name) -> ShellMesh:
