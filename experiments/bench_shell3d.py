@@ -7,8 +7,8 @@ Ball R = 0.13 m, h = 0.9 mm, E = 2.34 MPa, ν = 0.4, P_g = 1300 Pa (sealed isoth
 indenter radius 8 mm, depths 2/7 … 2 cm. Each size runs in its own subprocess so that the peak
 resident memory (ru_maxrss) is per size. Reported: setup (mesh, rest shape, reference state,
 includes compiling the free-shell functions), cold curve (includes compiling the contact model),
-warm curve (median over repeats; compile ≈ cold − warm), Newton iterations and Hessian
-factorizations per level, peak RSS, the element-Hessian assembly throughput against the XLA
+warm curve (median over repeats; compile ≈ cold − warm), Newton iterations, Hessian
+factorizations and CG Hessian-vector products per level, peak RSS, the element-Hessian assembly throughput against the XLA
 cost-analysis flop count of that kernel, and one factorization + solve of the final Hessian.
 Not a test: numbers depend on the machine, which is named in the output.
 """
@@ -90,6 +90,7 @@ def run_one(n_triangles: int, repeats: int) -> dict:
         "compile_s_estimate": cold - float(np.median(warm)),
         "newton_iterations": [s.iterations for s in states],
         "factorizations": [s.factorizations for s in states],
+        "hessian_products": [s.products for s in states],
         "factorization_method": solver.method,
         "factorization_s": float(np.median(t_fact)),
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -127,7 +128,7 @@ def main(argv=None):
         rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
     print(f"machine: {machine}")
     hdr = (f"{'faces':>7} {'dofs':>7} {'setup[s]':>9} {'compile[s]':>10} {'curve[s]':>9} {'Newton its/level':>24} "
-           f"{'factorizations/level':>24} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'factor[ms]':>10} {'F(2cm)[N]':>9}")
+           f"{'factorizations/level':>24} {'CG products/level':>28} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'factor[ms]':>10} {'F(2cm)[N]':>9}")
     print(hdr)
     for r in rows:
         if "error" in r:
@@ -135,9 +136,10 @@ def main(argv=None):
             continue
         its = ",".join(str(i) for i in r["newton_iterations"])
         facts = ",".join(str(i) for i in r["factorizations"])
+        products = ",".join(str(i) for i in r.get("hessian_products", []))
         print(
             f"{r['faces']:>7} {r['dofs']:>7} {r['setup_s']:>9.1f} {r['compile_s_estimate']:>10.1f} {r['curve_warm_s']:>9.1f} "
-            f"{its:>24} {facts:>24} {r['peak_rss_mib']:>10.0f} {1e3 * r['hessian_assembly_s']:>12.1f} "
+            f"{its:>24} {facts:>24} {products:>28} {r['peak_rss_mib']:>10.0f} {1e3 * r['hessian_assembly_s']:>12.1f} "
             f"{r['hessian_gflops_per_s']:>8.2f} {1e3 * r['factorization_s']:>10.1f} {r['final_force_N']:>9.3f}"
         )
     path = Path(args.out)

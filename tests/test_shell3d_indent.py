@@ -110,7 +110,10 @@ def test_export_and_plot(sealed, tmp_path):
 
 
 def test_equilibrium_force_gradients_match_central_differences(ball):
-    sim = s3.Indentation(ball, E, NU, PG, indenter_radius=0.01, rest_shape="scan", progress=False)
+    # Central differences of F need primal solves far below the default force tolerance (≈ 5e-6 N
+    # here, about the F difference of a 1e-3 relative step × 2e-3): 1e-10 N.
+    sim = s3.Indentation(ball, E, NU, PG, indenter_radius=0.01, rest_shape="scan", progress=False,
+                         force_tolerance=1e-10)  # fmt: skip
     force = sim.force_function(depth=0.005)
     theta = {"gauge_pressure": jnp.asarray(PG), "young_modulus": jnp.asarray(E), "thickness": jnp.asarray(H)}
     grad = jax.grad(force)(theta)
@@ -119,7 +122,7 @@ def test_equilibrium_force_gradients_match_central_differences(ball):
         fp = float(force(dict(theta, **{key: theta[key] + step})))
         fm = float(force(dict(theta, **{key: theta[key] - step})))
         fd = (fp - fm) / (2 * step)
-        # Central differences: truncation O(rel²) ≈ 1e-6 relative; solver noise atol/F/rel ≈ 1e-6.
+        # Central differences: truncation O(rel²) ≈ 1e-6 relative; solver noise atol/ΔF ≈ 4e-8.
         np.testing.assert_allclose(float(grad[key]), fd, rtol=1e-4)
         tangent = {k: jnp.asarray(float(k == key)) for k in theta}
         _, jvp = jax.jvp(force, (theta,), (tangent,))
@@ -171,3 +174,35 @@ def test_rim_refinement_on_ring_and_irregular_meshes():
     r_irr = np.array([0.04, 0.0497, 0.049, 0.05005, 0.06, 0.0498])
     z_irr = np.array([0.19, 0.1999, 0.2001, 7e-5, 0.18, 8e-5])
     assert _parabola_peak(r_irr, z_irr, 0.049) == (0.049, 0.2001)
+
+
+def test_newton_start_keeps_the_converged_contact_gaps(sealed):
+    """Vertices in the barrier's range keep their last converged gap (not ĝ/4: Newton on a log
+    barrier started far above its equilibrium gap takes damped iterations, see _feasible_start);
+    new penetrations go to ĝ/4; every other vertex stays where the predictor put it."""
+    q_prev = sealed.solve(depth=0.004).q
+    ghat = sealed.activation_distance
+    guess = q_prev.copy()
+    guess[-1] -= 1e-3  # the indenter 1 mm deeper: its contact vertices now penetrate
+    # and the nearest vertex outside its range is pushed halfway into it
+    x_prev = q_prev[:-3].reshape(-1, 3)
+    outside = np.linalg.norm(x_prev - q_prev[-3:], axis=1) - sealed.indenter_radius >= ghat
+    k = int(np.flatnonzero(outside)[np.argmin(np.linalg.norm(x_prev[outside] - q_prev[-3:], axis=1))])
+    guess[3 * k : 3 * k + 3] = guess[-3:] + 0.5 * (x_prev[k] - guess[-3:])
+    start = sealed._feasible_start(guess, sealed.model, q_prev)
+
+    def gaps(q):
+        x = q[:-3].reshape(-1, 3)
+        return np.linalg.norm(x - q[-3:], axis=1) - sealed.indenter_radius, x[:, 2]
+
+    (ind_prev, ground_prev), (ind_guess, ground_guess), (ind, ground) = gaps(q_prev), gaps(guess), gaps(start)
+    touching = ind_prev < ghat
+    assert touching.sum() >= 1 and (ground_prev < ghat).sum() >= 3
+    np.testing.assert_allclose(ind[touching], ind_prev[touching], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(ground[ground_prev < ghat], ground_prev[ground_prev < ghat], rtol=1e-9, atol=1e-15)
+    fresh = ~touching & (ind_guess < 0.25 * ghat)
+    assert fresh[k]
+    np.testing.assert_allclose(ind[fresh], 0.25 * ghat, rtol=1e-9)
+    moved = touching | fresh | (ground_prev < ghat) | (ground_guess < 0.25 * ghat)
+    np.testing.assert_array_equal(start.reshape(-1)[:-3].reshape(-1, 3)[~moved], guess[:-3].reshape(-1, 3)[~moved])
+    assert ind.min() > 0 and ground.min() > 0

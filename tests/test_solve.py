@@ -141,6 +141,49 @@ def test_newton_reuses_factorizations_only_while_they_contract():
     assert np.sum(ratios >= REUSE_CONTRACTION) >= reused_steps - 1
 
 
+def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_same_minimum():
+    energy, grad, hess, b = _quartic_problem(40)
+    free = np.ones(b.size, dtype=bool)
+
+    def operator(x):
+        matrix = hess(x, False)[0]
+        return lambda v: matrix @ v
+
+    exact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
+    inexact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, hessian_operator=operator)
+    assert np.max(np.abs(grad(inexact.x))) <= 1e-12
+    # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
+    np.testing.assert_allclose(inexact.x, exact.x, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
+    # A factorization preconditions the steps after it while CG converges on it: fewer are made.
+    assert inexact.factorizations < exact.factorizations
+    assert inexact.products >= inexact.iterations - inexact.factorizations > 0
+    # Handed to a nearby problem (5 % more load), it is all that problem needs either.
+    shifted = lambda x: grad(x) - 0.05 * b  # noqa: E731
+    energy_shifted = lambda x: energy(x) - 0.05 * b @ x  # noqa: E731
+    again = newton(energy_shifted, shifted, hess, inexact.x, free, atol=1e-12, hessian_operator=operator,
+                   factorization=inexact.last_factorization)  # fmt: skip
+    assert np.max(np.abs(shifted(again.x))) <= 1e-12
+    assert again.factorizations == 0 and again.last_factorization is inexact.last_factorization
+
+
+def test_preconditioned_cg_gives_up_on_a_poor_preconditioner_or_negative_curvature():
+    from shelljax.solve._newton import CG_MAX_ITERATIONS, _preconditioned_cg
+
+    rng = np.random.default_rng(3)
+    spectrum = np.logspace(0, 6, 200)  # condition number 1e6: unpreconditioned CG needs far more steps
+    g = rng.normal(size=spectrum.size)
+    d, used = _preconditioned_cg(lambda v: spectrum * v, lambda r: r, g, 1e-8)
+    assert d is None and used == CG_MAX_ITERATIONS
+    d, used = _preconditioned_cg(lambda v: spectrum * v, lambda r: r / spectrum, g, 1e-8)
+    np.testing.assert_allclose(d, -g / spectrum, rtol=1e-10)  # exact preconditioner: one product
+    assert used == 1
+    # A gradient along a direction of negative curvature: no CG step, a factorization decides.
+    indefinite = np.where(np.arange(spectrum.size) == 7, -1.0, spectrum)
+    along = np.where(np.arange(spectrum.size) == 7, 1.0, 0.0)
+    d, used = _preconditioned_cg(lambda v: indefinite * v, lambda r: r / np.abs(indefinite), along, 1e-8)
+    assert d is None and used == 1
+
+
 def test_cholesky_and_lu_paths_agree_with_dense_solves():
     import scipy.sparse as sp
 

@@ -92,7 +92,8 @@ class IndentationState:
     tangential displacement along the ground accumulated over the load steps at whose end it
     touched the ground (gap < activation distance), with or without friction. ``factorizations``:
     Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
-    a factorization while it keeps converging fast).
+    a factorization while it keeps converging fast); ``products``: the Hessian-vector products of
+    its conjugate-gradient steps (:func:`shelljax.solve.newton`).
     """
 
     sim: "Indentation"
@@ -104,6 +105,7 @@ class IndentationState:
     friction_lag_change: float = 0.0
     ground_slip: np.ndarray | None = None
     factorizations: int = 0
+    products: int = 0
 
     @property
     def vertices(self) -> np.ndarray:
@@ -274,6 +276,7 @@ class Indentation:
         self.model = ShellModel(mesh, self.rest, cfg, fixed)
         self._fixed = fixed
         self._force_model = None
+        self._kept_factorization = (None, None)
 
     def with_friction(self, friction: float, slip_tolerance: float | None = None) -> "Indentation":
         """The same simulation (shell, rest shape, reference state, settings) with another ground
@@ -305,29 +308,55 @@ class Indentation:
         p.update({k: jnp.asarray(v) for k, v in extra.items()})
         return p
 
-    def _feasible_start(self, q, model):
-        """Move penetrating vertices back outside the bodies so the barrier energy is finite."""
+    def _feasible_start(self, q, model, q_prev=None):
+        """Newton's start from the guess ``q``: the barrier energy finite and near equilibrium.
+
+        A vertex that was within the barrier's range ĝ of a body in the converged state
+        ``q_prev`` gets back the gap it had there; any other vertex closer than ĝ/4 to a body (or
+        inside it) is put at ĝ/4. Why not ĝ/4 for all: vertices pressed by the indenter sit at
+        gaps of a few µm (ĝ/100 and less), and Newton on a log barrier started far above its
+        equilibrium gap g* can only take steps of length ≈ g*/g (longer ones cross the body),
+        which cost 4–5 damped iterations of the whole shell per load step. A vertex's contact
+        force changes little from one load step to the next, and so does its gap.
+        """
         if model.config.contact.kind != "barrier":
             return q
         q = q.copy()
         x = q[:-3].reshape(-1, 3)
-        eps = 0.25 * self.activation_distance
+        ghat = self.activation_distance
+        floor = 0.25 * ghat
+        x_prev = None if q_prev is None else q_prev[:-3].reshape(-1, 3)
+
+        def place(gap, gap_prev):
+            """Target gap of each vertex, or NaN where it stays."""
+            target = np.where(gap < floor, floor, np.nan)
+            if gap_prev is not None:
+                target = np.where(gap_prev < ghat, np.maximum(gap_prev, 1e-6 * ghat), target)
+            return target
+
         c = q[-3:]
         d = x - c
         dist = np.linalg.norm(d, axis=1)
-        inside = dist < self.indenter_radius + eps
-        x[inside] = c + d[inside] / dist[inside, None] * (self.indenter_radius + eps)
-        if model.config.contact.planes:
-            x[:, 2] = np.maximum(x[:, 2], eps)
+        gap_prev = None if x_prev is None else np.linalg.norm(x_prev - q_prev[-3:], axis=1) - self.indenter_radius
+        target = place(dist - self.indenter_radius, gap_prev)
+        moved = np.isfinite(target)
+        x[moved] = c + d[moved] / dist[moved, None] * (self.indenter_radius + target[moved, None])
+        for point, normal in model.config.contact.planes:
+            point, normal = np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64)
+            gap = (x - point) @ normal
+            target = place(gap, None if x_prev is None else (x_prev - point) @ normal)
+            moved = np.isfinite(target)
+            x[moved] += (target[moved] - gap[moved])[:, None] * normal
         q[:-3] = x.ravel()
         return q
 
-    def _step(self, model, q_guess, params, label):
-        q0 = self._feasible_start(q_guess, model)
-        try:
-            res = model.solve(q0, params, atol=self.atol, max_iter=self.max_newton_iterations, name=label)
-        except NoConvergenceError:
-            raise
+    def _step(self, model, q_guess, params, label, q_prev=None):
+        q0 = self._feasible_start(q_guess, model, q_prev)
+        # The last load step's last factorization preconditions this one (same model only).
+        kept_model, kept = self._kept_factorization
+        res = model.solve(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
+                          factorization=kept if kept_model is model else None, name=label)  # fmt: skip
+        self._kept_factorization = (model, res.last_factorization)
         return res
 
     def _lagged_step(self, model, q_guess, params, label, q_start):
@@ -336,13 +365,13 @@ class Indentation:
         Returns (NewtonResult, friction params dict, relative lag change of the normal forces).
         """
         if not model.config.contact.has_friction:
-            return self._step(model, q_guess, params, label), {}, 0.0
+            return self._step(model, q_guess, params, label, q_start), {}, 0.0
         lagged = {
             "friction_anchor": np.array(q_start[:-3].reshape(-1, 3)),
             "friction_normal_force": model.plane_normal_forces(q_start),
         }
-        res = self._step(model, q_guess, {**params, **lagged}, label)
-        iterations, factorizations = res.iterations, res.factorizations
+        res = self._step(model, q_guess, {**params, **lagged}, label, q_start)
+        iterations, factorizations, products = res.iterations, res.factorizations, res.products
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.x)
             change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
@@ -350,10 +379,11 @@ class Indentation:
             if change < FRICTION_LAG_TOLERANCE or k == self.friction_iterations:
                 break
             lagged = {**lagged, "friction_normal_force": current}
-            res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})")
+            res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})", res.x)
             iterations += res.iterations
             factorizations += res.factorizations
-        res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations)
+            products += res.products
+        res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations, products=products)
         return res, lagged, change
 
     def _accumulate_slip(self, slip, q_start, q_end):
@@ -408,7 +438,7 @@ class Indentation:
                 slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
                 history.append((d, res.x))
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.factorizations)  # fmt: skip
+                                    res.factorizations, res.products)  # fmt: skip
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
 
@@ -443,7 +473,7 @@ class Indentation:
             history.append((force, res.x))
             depth = float(self.touch_center[2] - res.x[-1])
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.factorizations)  # fmt: skip
+                                    res.factorizations, res.products)  # fmt: skip
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 
@@ -480,7 +510,7 @@ class Indentation:
             return p
 
         def solve_host(theta):
-            q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal")
+            q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal", cache["q"])
             cache["q"] = q.x
             return q.x
 

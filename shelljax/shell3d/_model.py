@@ -324,6 +324,17 @@ def _search_energy(q, params, geometry, config):
 _gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))
 
 
+@functools.partial(jax.jit, static_argnames=("config",))
+def _linearized_gradient(q, params, geometry, config) -> jax.tree_util.Partial:
+    """v ↦ H(q) v [N], the exact Hessian (sealed gas's rank-one part included) at q as a linear
+    map, with the primal's intermediates computed once: each product then costs ≈ 13 ms at 20k
+    faces instead of ≈ 35 ms for a jvp of the gradient."""
+    return jax.linearize(lambda y: jax.grad(total_energy)(y, params, geometry, config), q)[1]
+
+
+_apply_linear = jax.jit(lambda linear, v: linear(v))
+
+
 #: Faces per vectorized chunk of the element-Hessian kernel.
 FACE_HESSIAN_CHUNK = 1024
 #: Faces per chunk of the PSD-projected Hessian (its eigenvalue clamp runs on the host).
@@ -572,6 +583,11 @@ class ShellModel:
     def host_gradient(self, q, params) -> np.ndarray:
         return np.asarray(_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config))
 
+    def host_hessian_operator(self, q, params):
+        """v ↦ H(q) v [N] (host arrays; unmasked, exact) for displacements v (3V + 3,) [m]."""
+        linear = _linearized_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config)
+        return lambda v: np.asarray(_apply_linear(linear, jnp.asarray(v)))
+
     def host_hessian(self, q, params, project: bool = False):
         """(CSR Hessian with pins folded in, rank-one part or None)."""
         q = jnp.asarray(q)
@@ -605,8 +621,12 @@ class ShellModel:
             rank_one = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank_one
 
-    def solve(self, q0, params, *, atol: float, max_iter: int = 60, name: str = "shell Newton"):
-        """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]; NewtonResult."""
+    def solve(self, q0, params, *, atol: float, max_iter: int = 60, factorization=None, name: str = "shell Newton"):
+        """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]; NewtonResult.
+
+        Steps are inexact Newton steps (CG on exact Hessian-vector products) preconditioned by a
+        kept factorization, ``factorization`` (e.g. the previous load step's
+        ``last_factorization``) first: :func:`shelljax.solve.newton`."""
         params = self._host_params(params)
         return newton(
             lambda q: self.host_energy(q, params),
@@ -616,6 +636,8 @@ class ShellModel:
             self.free,
             atol=atol,
             max_iter=max_iter,
+            hessian_operator=lambda q: self.host_hessian_operator(q, params),
+            factorization=factorization,
             name=name,
         )
 
