@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import InvalidInputError, NoConvergenceError
+from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE
 from ..solve import continuation, implicit_equilibrium, release_factorizations
 from ._mesh import ShellMesh, sphere_mesh
