@@ -123,7 +123,9 @@ def _random_state(mesh, rng, scale=0.02):
 
 
 @pytest.mark.parametrize("gas", ["prescribed", "isothermal", "adiabatic"])
-def test_gradient_and_sparse_hessian_match_central_differences(gas):
+def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch):
+    import shelljax.shell3d._model as model_module
+
     rng = np.random.default_rng(3)
     mesh = s3.sphere_mesh(1.0, 120)
     contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
@@ -152,6 +154,12 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas):
     fd_h = (model.host_gradient(q + eps * v, params) - model.host_gradient(q - eps * v, params)) / (2 * eps)
     np.testing.assert_allclose(hv, fd_h, rtol=1e-6, atol=1e-6 * np.abs(fd_h).max())
     assert (rank_one is None) == (gas == "prescribed")
+    # Newton's CG products, from a stored linearization (meshes up to the threshold) or by jvp
+    # (above it), are the assembled Hessian's by another route: equal up to summation round-off.
+    for max_faces in (mesh.n_faces, mesh.n_faces - 1):
+        monkeypatch.setattr(model_module, "LINEARIZED_PRODUCT_MAX_FACES", max_faces)
+        product = model.host_hessian_operator(q, params)(v)
+        np.testing.assert_allclose(product, hv, rtol=0, atol=1e-9 * np.abs(hv).max())
 
 
 def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):

@@ -335,6 +335,19 @@ def _linearized_gradient(q, params, geometry, config) -> jax.tree_util.Partial:
 _apply_linear = jax.jit(lambda linear, v: linear(v))
 
 
+@functools.partial(jax.jit, static_argnames=("config",))
+def _hessian_vector_product(q, params, geometry, config, v):
+    """H(q) v [N] by forward-over-reverse differentiation: nothing kept between products."""
+    return jax.jvp(lambda y: jax.grad(total_energy)(y, params, geometry, config), (q,), (v,))[1]
+
+
+#: Above this many faces the Hessian-vector products of Newton's CG are jvps (≈ 35 ms at 20k
+#: faces) instead of products of a stored linearization (≈ 13 ms): the linearization keeps the
+#: gradient's intermediates, ≈ 9 kB per face, and took the 80k-face benchmark from 1673 to
+#: 2262 MiB peak RSS (docs/shell3d.md).
+LINEARIZED_PRODUCT_MAX_FACES = 40_000
+
+
 #: Faces per vectorized chunk of the element-Hessian kernel.
 FACE_HESSIAN_CHUNK = 1024
 #: Faces per chunk of the PSD-projected Hessian (its eigenvalue clamp runs on the host).
@@ -585,7 +598,10 @@ class ShellModel:
 
     def host_hessian_operator(self, q, params):
         """v ↦ H(q) v [N] (host arrays; unmasked, exact) for displacements v (3V + 3,) [m]."""
-        linear = _linearized_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config)
+        q, params = jnp.asarray(q), self._host_params(params)
+        if self.mesh.n_faces > LINEARIZED_PRODUCT_MAX_FACES:
+            return lambda v: np.asarray(_hessian_vector_product(q, params, self.geometry, self._jit_config, jnp.asarray(v)))
+        linear = _linearized_gradient(q, params, self.geometry, self._jit_config)
         return lambda v: np.asarray(_apply_linear(linear, jnp.asarray(v)))
 
     def host_hessian(self, q, params, project: bool = False):
