@@ -3,8 +3,10 @@
 Two stages (SI units throughout):
 
 1. ``--curves``: for each parameter set of ``PARAMETER_SETS`` (ball of inflated radius R = 0.13 m,
-   ν = 0.4, prescribed gauge pressure), a force-controlled 3D indentation (``shelljax.shell3d``,
-   8 mm finger, rigid ground) at 5–15 N in 2.5 N steps (the paper: 5–20 N; see FORCES). The local dimple depth
+   ν = 0.4, prescribed gauge pressure), a 3D indentation (``shelljax.shell3d``, 8 mm finger, rigid
+   ground) at the paper's 5–20 N in 2.5 N steps (FORCES). Each level is solved under displacement
+   control at the indenter travel whose force matches it to FORCE_MATCH (``_force_levels_by_travel``:
+   force control lost the indenter past 15 N). The local dimple depth
    w0 = Δz(equator) − Δz(top pole) [m] (both vertical displacements from the inflated reference
    state, the axisymmetric engine's definition) is computed from the vertices and written, with the
    mesh size and each level's wrinkle spectrum (dominant angular mode of the normal displacement and
@@ -37,9 +39,18 @@ ROOT = Path(__file__).resolve().parents[1]
 CURVES_PATH = ROOT / "shelljax" / "data" / "virtual" / "curves.json"
 RADIUS = 0.13  # m
 POISSON = 0.4
-# N: the paper's protocol steps (2.5 N) but only to 15 N — the 3D engine's force-controlled Newton
-# lost the indenter contact (residual = F) at 17.5–20 N on 3 of 3 sets tried (docs/estimators.md).
-FORCES = tuple(5.0 + 2.5 * i for i in range(5))
+FORCES = tuple(5.0 + 2.5 * i for i in range(7))  # N: the paper's protocol, 5–20 N in 2.5 N steps
+# N: a level's 3D force matches its target to this; the sessions' force noise is 10× larger. At
+# 1 mN the search stalled on set 0: states 0.01 mm of travel apart differed by 1–3 mN, the force's
+# scatter at Newton's tolerance (FORCE_TOLERANCE per vertex).
+FORCE_MATCH = 5e-3
+# [N]: Newton's tolerance for the 3D curves, 1e-5 of the forces here. The engine's default
+# (1e-8 E h L ≈ 1e-5 N at τ = 10) sits at the round-off floor of the deep states: Newton stalled at
+# 2.2e-5 N on the τ = 10 ball at 55 mm (experiments/report_wrinkles3d.py).
+FORCE_TOLERANCE = 1e-4
+# Deep wrinkling states converge linearly (≈ 5 % per iteration at 2e-4 N on the τ = 100 icosphere
+# at 78 mm, where 60 iterations ran out)
+NEWTON_ITERATIONS = 250
 # (P_g [Pa], E [Pa], h [m]); τ = P R² / √(E h B) between ~25 and ~200 (the axisym fit's range).
 PARAMETER_SETS = (
     (1300.0, 2.34e6, 0.9e-3),
@@ -62,7 +73,8 @@ COUNT_NOISE = 1.0  # wrinkles, reading noise per trial
 WRINKLE_RINGS = (0.1, 0.005)  # m: outer radius and width of the rings of the 3D wrinkle spectrum
 CURVES_DESCRIPTION = (
     "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
-    "--curves. SI units: force [N], w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
+    "--curves. SI units: force [N] (the indenter force of the displacement-controlled state found for each of the "
+    "paper's 5-20 N levels, within 5 mN), w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
     "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum), "
     "mode_amplitude [m] its amplitude per mode in modes (summed in quadrature over the rings); "
     "observables: the 3D engine's own (shelljax.shell3d.observables: w0 = top-vertex drop, H, D_u, D_l, D_l_mesh, d [m])."
@@ -86,36 +98,101 @@ def local_dimple_depth(reference: np.ndarray, deformed: np.ndarray, top: int, ba
     return float(dz[ring].mean() - dz[top])
 
 
-def _curve_checkpointed(sim, levels, checkpoint: Path | None, control: str = "force"):
-    """``Indentation.force_curve`` or ``.curve`` (``control`` "force": ``levels`` [N]; "depth":
-    indenter travels [m]; same secant predictor and Newton steps), with the solved states saved to
-    ``checkpoint`` (npz) after every level so that a restarted process resumes there.
+def _load_checkpoint(checkpoint: Path | None) -> list[tuple[float, float, np.ndarray]]:
+    """Solved (travel [m], force [N], state) triples saved by an earlier run, by travel."""
+    if checkpoint is None or not checkpoint.exists():
+        return []
+    saved = np.load(checkpoint)
+    if "travels" not in saved:
+        raise SystemExit(f"{checkpoint}: a checkpoint of an older version of this script (no travels); delete it")
+    return [(float(t), float(f), q) for t, f, q in zip(saved["travels"], saved["forces"], saved["states"])]
+
+
+def _save_checkpoint(checkpoint: Path | None, solved) -> None:
+    _WATCHDOG["last"] = time.monotonic()
+    if checkpoint is not None:
+        np.savez(checkpoint, travels=[s[0] for s in solved], forces=[s[1] for s in solved],
+                 states=np.stack([s[2] for s in solved]))  # fmt: skip
+
+
+def _solve_travel(sim, solved, travel: float, halvings: int = 3):
+    """Equilibrium at indenter ``travel`` [m], started from the solved states just below it (the
+    secant predictor and Newton of ``Indentation.curve``, in its sub-steps); the new
+    (travel, force, state) triples are added to ``solved`` (kept sorted by travel). A step whose
+    Newton fails is retried as two half steps, up to ``halvings`` times."""
+    import shelljax.shell3d as s3
+    from shelljax import NoConvergenceError
+
+    below = [s for s in solved if s[0] < travel]
+    history = [(0.0, sim.q_reference)] + [(t, q) for t, _, q in below]
+    for d in sim._substeps(history[-1][0], travel):
+        try:
+            res, _, _ = sim._depth_step(history[-2:], d)
+        except NoConvergenceError:
+            if halvings == 0:
+                raise
+            print(f"  travel {d * 1e3:.3f} mm: Newton failed, halving the step", flush=True)
+            _solve_travel(sim, solved, 0.5 * (history[-1][0] + d), halvings - 1)
+            _solve_travel(sim, solved, d, halvings - 1)
+            history = [(0.0, sim.q_reference)] + [(t, q) for t, _, q in solved if t <= d]
+            continue
+        history.append((d, np.asarray(res.x)))
+        force = float(s3.observables(sim, res.x, sim._params_for(res.x))["force"])
+        solved.append((d, force, history[-1][1]))
+        solved.sort(key=lambda s: s[0])
+    return solved
+
+
+def _force_levels_by_travel(sim, forces, checkpoint: Path | None, max_solves: int = 40):
+    """[(force [N], state)] at each of ``forces`` (increasing), solved under displacement control.
+
+    Why not force control: its Newton lost the indenter (residual = F) past 15 N on 3 of 3 balls
+    tried. F(travel) increases smoothly, so
+    each level is found by secant steps on the travel (at most ``sim.max_step`` forward), then
+    regula falsi inside the bracket, until |F − target| ≤ FORCE_MATCH. Every solved state is
+    checkpointed (a restarted run reuses them). Raises RuntimeError when a level takes more than
+    ``max_solves`` solves.
+    """
+    solved = _load_checkpoint(checkpoint)
+    out = []
+    for target in forces:
+        for _ in range(max_solves):
+            hit = [s for s in solved if abs(s[1] - target) <= FORCE_MATCH]
+            if hit:
+                out.append((hit[0][1], hit[0][2]))
+                print(f"  level {target:.4g} N solved (travel {hit[0][0] * 1e3:.3f} mm)", flush=True)
+                break
+            lower = [s for s in solved if s[1] < target]
+            upper = [s for s in solved if s[1] > target]
+            if upper:  # bracketed: regula falsi between the nearest states on either side
+                (ta, fa, _), (tb, fb, _) = (lower[-1] if lower else (0.0, 0.0, None)), upper[0]
+                travel = ta + (target - fa) * (tb - ta) / (fb - fa)
+            else:  # secant extrapolation of the last two states (first touch: F = 0), at most one step
+                (ta, fa), (tb, fb) = ([(0.0, 0.0), (0.0, 0.0)] + [s[:2] for s in lower])[-2:]
+                slope = (fb - fa) / (tb - ta) if tb > ta and fb > fa else 0.0
+                travel = tb + min((target - fb) / slope if slope > 0 else np.inf, sim.max_step)
+            _solve_travel(sim, solved, travel)
+            _save_checkpoint(checkpoint, solved)
+        else:
+            raise RuntimeError(f"force level {target} N: no state within {FORCE_MATCH} N after {max_solves} solves")
+    return out
+
+
+def _curve_checkpointed(sim, travels, checkpoint: Path | None):
+    """[(travel [m], state)] of ``Indentation.curve`` through ``travels`` (same secant predictor and
+    Newton steps), with the solved states saved to ``checkpoint`` (npz) after every level so that a
+    restarted process resumes there.
 
     Why: XLA's CPU runtime wedged mid-curve (a kernel never signalled completion) in 6 of 6 long runs on
     this box; the caller's watchdog kills such a process and a restart continues from the last level.
     """
-    history = [(0.0, sim.q_reference)]
-    if checkpoint is not None and checkpoint.exists():
-        saved = np.load(checkpoint)
-        history += [(float(f), q) for f, q in zip(saved["forces"], saved["states"])]
-    solve_level = _solve_level if control == "force" else _solve_depth_level
-    for level in levels:
-        if level <= history[-1][0]:
-            continue
-        solve_level(sim, history, level, halvings=3)
-        _WATCHDOG["last"] = time.monotonic()
-        print(f"  level {level:.4g} {'N' if control == 'force' else 'm'} solved", flush=True)
-        if checkpoint is not None:
-            np.savez(checkpoint, forces=[h[0] for h in history[1:]], states=np.stack([h[1] for h in history[1:]]))
-    return [(f, q) for f, q in history[1:] if f in levels]
-
-
-def _solve_depth_level(sim, history, depth, halvings):
-    """Append the equilibrium at indenter travel ``depth`` [m] to ``history`` (displacement
-    control, sub-steps as ``Indentation.curve``; ``halvings`` unused: no indenter to lose)."""
-    for d in sim._substeps(history[-1][0], depth):
-        res, _, _ = sim._depth_step(history, d)
-        history.append((d, np.asarray(res.x)))
+    solved = _load_checkpoint(checkpoint)
+    for travel in travels:
+        if not any(s[0] == travel for s in solved):
+            _solve_travel(sim, solved, travel)
+            _save_checkpoint(checkpoint, solved)
+            print(f"  level {travel:.4g} m solved", flush=True)
+    return [(t, q) for t, _, q in solved if t in travels]
 
 
 _WATCHDOG = {"last": time.monotonic()}
@@ -190,9 +267,9 @@ def _random_graded(thickness: float, n_triangles: int, seed: int = 0):
 def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Path | None = None,
                 forces: tuple[float, ...] = FORCES, travels: tuple[float, ...] | None = None,
                 force_tolerance: float | None = None, mesh: str = "ball", max_newton_iterations: int = 60) -> dict:
-    """3D force curve of one parameter set at ``forces`` [N] (after a 2.5 N start-up level), or,
-    when ``travels`` [m] are given, at those indenter travels (displacement control: past ≈ 15 N
-    force control can lose the indenter); ``force_tolerance`` [N]: Newton's (None: the engine's
+    """3D force curve of one parameter set at ``forces`` [N] (each within FORCE_MATCH, see
+    ``_force_levels_by_travel``), or, when ``travels`` [m] are given, at those indenter travels
+    (both displacement-controlled); ``force_tolerance`` [N]: Newton's (None: the engine's
     default 1e-8 E h L); ``mesh`` "ball" (``s3.ball``: rings about the poles, refined there),
     "icosphere" (uniform, no rings or sectors: ≈ ``n_triangles`` faces by subdivision, turned so
     that a seeded random vertex is the top) or "random" (no rings, sectors or spirals, refined
@@ -214,17 +291,16 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Pa
     pole_edge = float(edge_len[np.any(ball.mesh.faces == top, axis=1)].mean())
     band = 0.6 * float(np.median(edge_len))
     if travels is None:
-        levels = (2.5,) + tuple(f for f in forces if f > 2.5)  # the 2.5 N level only eases the continuation
-        solved = [(f, q) for f, q in _curve_checkpointed(sim, levels, checkpoint) if f in forces]
+        solved = _force_levels_by_travel(sim, tuple(forces), checkpoint)
     else:
-        solved = _curve_checkpointed(sim, tuple(travels), checkpoint, control="depth")
+        solved = _curve_checkpointed(sim, tuple(travels), checkpoint)
     out = []
-    for level, q in solved:
+    for _, q in solved:
         x = q[:-3].reshape(-1, 3)
         spectrum = s3.wrinkle_spectrum(reference, x, ball.mesh.faces, reference[top], max_radius=WRINKLE_RINGS[0],
                                        ring_width=WRINKLE_RINGS[1])  # fmt: skip
         obs = s3.observables(sim, q, sim._params_for(q))
-        out.append({"force": level if travels is None else float(obs["force"]),
+        out.append({"force": float(obs["force"]),
                     "w0": local_dimple_depth(reference, x, top, band),
                     "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "D_l_mesh", "d")},
                     "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
@@ -349,8 +425,9 @@ def main():
         p = PARAMETER_SETS[i]
         t0 = time.perf_counter()
         try:
-            ckpt = Path(f"/tmp/shelljax_virtual_set{i}_{args.n_triangles}.npz")
-            c = solve_curve(p, args.n_triangles, args.pole_refinement, ckpt)
+            ckpt = Path(f"/tmp/shelljax_virtual_set{i}_{args.n_triangles}_travel.npz")
+            c = solve_curve(p, args.n_triangles, args.pole_refinement, ckpt, force_tolerance=FORCE_TOLERANCE,
+                            max_newton_iterations=NEWTON_ITERATIONS)
         except Exception as err:  # record and continue: one failed set must not lose the others
             print(f"set {i} {p}: FAILED ({type(err).__name__}: {str(err)[:200]})", flush=True)
             continue

@@ -193,7 +193,7 @@ CALIBRATION_SET = 0  # the only 3D curve c_w was chosen on (the Pezzi-like ball,
 
 
 def _relax_vs_3d():
-    """w0 of the three hoop models against the bundled converged 3D curves (12k faces, 5–15 N).
+    """w0 of the three hoop models against the bundled converged 3D curves (12k faces, 5–20 N).
 
     Set 0 calibrated the wrinkled hoop capacity c_w (scan below); every other set is held out.
     """
@@ -215,12 +215,12 @@ def _relax_vs_3d():
         err = {m: errors(c, **kw) for m, kw in RELAX_MODELS.items()}
         rows.append(dict(set=c["set"], tau=c["tau"], held_out=c["set"] != CALIBRATION_SET,
                          **{m: e.tolist() for m, e in err.items()}))
-    print(f"\n## Calibration of c_w on 3D set {CALIBRATION_SET}: w0 error vs the 3D curve at 5 … 15 N")
-    print("| c_w | w0 error at 5 … 15 N | rms |\n|---|---|---|")
+    print(f"\n## Calibration of c_w on 3D set {CALIBRATION_SET}: w0 error vs the 3D curve at 5 … 20 N")
+    print("| c_w | w0 error at 5 … 20 N | rms |\n|---|---|---|")
     for x in scan:
         print(f"| {x['hoop_capacity']:.1f} | " + ", ".join(f"{100 * v:+.2f}" for v in x["errors"])
               + f" % | {100 * x['rms']:.2f} % |")
-    print("\n## w0 vs the converged 3D engine (axisymmetric / 3D − 1 at 5 … 15 N)")
+    print("\n## w0 vs the converged 3D engine (axisymmetric / 3D − 1 at 5 … 20 N)")
     print("| set | τ | role | " + " | ".join(RELAX_MODELS) + " |\n|---|---|---|---|---|---|")
     for x in rows:
         print(f"| {x['set']} | {x['tau']:.0f} | {'held out' if x['held_out'] else 'calibration'} | "

@@ -45,19 +45,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_virtual_sessions import POISSON, RADIUS, _start_watchdog, run_with_restarts, solve_curve, tau  # noqa: E402
+from make_virtual_sessions import (  # noqa: E402
+    FORCE_TOLERANCE, NEWTON_ITERATIONS, POISSON, RADIUS, _start_watchdog, run_with_restarts, solve_curve, tau,
+)
 
 GAUGE_PRESSURE = 1300.0  # [Pa]
 YOUNG_MODULUS = 2.34e6  # [Pa]
 REFERENCE_THICKNESS = 0.9e-3  # [m]: τ = 37 (the Pezzi-like ball)
 FORCE_STEP = 2.5  # [N]
 POLE_REFINEMENT = 6.0
-# [N]: 1e-5 of the forces here. The engine's default (1e-8 E h L ≈ 1e-5 N at τ = 10) sits at the
-# round-off floor of the deep states: Newton stalled at 2.2e-5 N on the τ = 10 ball at 55 mm.
-FORCE_TOLERANCE = 1e-4
-# Deep wrinkling states converge linearly (≈ 5 % per iteration at 2e-4 N on the τ = 100 icosphere
-# at 78 mm, where 60 iterations ran out)
-NEWTON_ITERATIONS = 250
 
 
 def thickness_for(target_tau: float) -> float:

@@ -89,3 +89,15 @@ def test_implicit_gradient_matches_central_differences():
         assert abs(jac[0, j] / fd[0] - 1.0) < 1e-3, (j, jac[0, j], fd[0])
         # wrinkle count: piecewise smooth (interpolated sign change of N_θ), measured ~1e-4
         assert abs(jac[1, j] / fd[1] - 1.0) < 1e-2, (j, jac[1, j], fd[1])
+
+
+def test_walls_meeting_is_not_a_converged_state():
+    # The Pezzi ball's top pole reaches the bottom wall between 40 and 45 N (docs/axisym.md); the
+    # model has no self-contact, so past it the top passes through the bottom onto the ground and
+    # w0 stalls at ≈ 217 mm. Such a level must never count as a solved ball.
+    res = indentation_curves(PEZZI, (20.0, 60.0), radius=RADIUS, raise_on_failure=False, **KW)
+    gap = np.asarray(res.wall_gap)[0]
+    assert gap[0] > 0.1 and bool(res.converged[0, 0])  # 20 N: the walls are ≈ 16 cm apart
+    assert gap[1] < PEZZI[2] and not bool(res.converged[0, 1])
+    with pytest.raises(shelljax.NoConvergenceError, match="top wall onto the bottom wall"):
+        indentation_curves(PEZZI, (20.0, 60.0), radius=RADIUS, **KW)

@@ -21,7 +21,8 @@ def curves():
 def test_curves_cover_the_protocol(curves):
     assert len(curves) >= 5
     for c in curves:
-        np.testing.assert_allclose(c["force"], mvs.FORCES, atol=1e-6)  # force control hits each level
+        # the paper's 5–20 N; the travel search stops within FORCE_MATCH (10× below the force noise)
+        np.testing.assert_allclose(c["force"], mvs.FORCES, rtol=0, atol=mvs.FORCE_MATCH)
         assert c["radius"] == mvs.RADIUS and c["poisson_ratio"] == mvs.POISSON
         # Mesh-converged generator: w0 moves ≤ 0.13 % from 12k to 24k faces (docs/estimators.md).
         assert c["n_faces"] > 12000
@@ -113,8 +114,84 @@ def test_wrinkling_relaxation_matches_held_out_3d_curve(curves):
         res = indentation_curves(params, c["force"], radius=c["radius"], indenter_radius=c["indenter_radius"], **kw)
         return np.asarray(res.w0[0]) / w3d - 1.0
 
-    # 1.5 %: measured ≤ 0.9 % at every level, plus the 3D mesh error (≤ 0.13 % per doubling) and
-    # headroom for solver tolerances. The limiting models miss by +6.4 % (tension field) and
-    # −3.3 % (no relaxation) at 15 N, so the bound cannot pass by accident.
-    assert np.all(np.abs(error()) < 0.015)
+    # 2 %: issue 6's cross-validation target; measured ≤ 1.4 % at every level of 5–20 N (−1.4 % at
+    # 20 N). The limiting models miss by +8.8 % (tension field) and −8.5 % (no relaxation) at 20 N,
+    # and the previous c_w = 2.5 by −2.8 %, so the bound cannot pass by accident.
+    assert np.all(np.abs(error()) < 0.02)
     assert error(hoop_capacity=0.0)[-1] > 0.04
+    assert error(relax=False)[-1] < -0.04
+
+
+class _FakeIndentation:
+    """Stands in for shell3d.Indentation in the level search: the state is the travel itself and
+    F(travel) [N] is a smooth stiffening law; Newton "fails" on steps longer than ``max_newton_step``."""
+
+    def __init__(self, max_newton_step=np.inf):
+        from shelljax.shell3d import Indentation
+
+        self.q_reference = np.zeros(1)
+        self.max_step = 5e-3
+        self.max_newton_step = max_newton_step
+        self._substeps = Indentation._substeps.__get__(self)
+        self.solves = 0
+
+    @staticmethod
+    def force(q):
+        t = float(q[0])
+        return 150.0 * t + 2000.0 * t**2  # N for t in m: 5 N at ≈ 27 mm, 20 N at ≈ 68 mm
+
+    def _params_for(self, q):
+        return {}
+
+    def _depth_step(self, history, depth):
+        from types import SimpleNamespace
+
+        from shelljax import NoConvergenceError
+
+        self.solves += 1
+        if depth - history[-1][0] > self.max_newton_step:
+            raise NoConvergenceError("fake: step too long", [1.0])
+        return SimpleNamespace(x=np.array([depth])), {}, 0.0
+
+
+@pytest.fixture
+def fake_force(monkeypatch):
+    import shelljax.shell3d as s3
+
+    monkeypatch.setattr(s3, "observables", lambda sim, q, params: {"force": _FakeIndentation.force(q)})
+
+
+def test_force_levels_by_travel_hit_every_level(fake_force, tmp_path):
+    sim = _FakeIndentation()
+    ckpt = tmp_path / "levels.npz"
+    levels = mvs._force_levels_by_travel(sim, mvs.FORCES, ckpt)
+    forces = np.array([f for f, _ in levels])
+    np.testing.assert_allclose(forces, mvs.FORCES, atol=mvs.FORCE_MATCH)
+    # the state returned is the one whose force was recorded
+    np.testing.assert_array_equal(forces, [_FakeIndentation.force(q) for _, q in levels])
+    # 68 mm of travel in 5 mm steps is 14 solves; secant steps on a smooth F find each level in a
+    # few more (a bisection to 1 mN would take ≈ 12 per level)
+    assert sim.solves <= 14 + 3 * len(mvs.FORCES)
+    # a restarted run finds every level in its checkpoint without solving again
+    again = _FakeIndentation()
+    resumed = mvs._force_levels_by_travel(again, mvs.FORCES, ckpt)
+    assert again.solves == 0
+    np.testing.assert_array_equal([f for f, _ in resumed], forces)
+
+
+def test_force_levels_by_travel_halve_failed_steps(fake_force):
+    sim = _FakeIndentation(max_newton_step=2e-3)  # every 5 mm step fails twice before it succeeds
+    levels = mvs._force_levels_by_travel(sim, (5.0, 10.0), None)
+    np.testing.assert_allclose([f for f, _ in levels], (5.0, 10.0), atol=mvs.FORCE_MATCH)
+    # with no halvings left the failure surfaces instead of a state at the wrong force
+    from shelljax import NoConvergenceError
+
+    with pytest.raises(NoConvergenceError):
+        mvs._force_levels_by_travel(_FakeIndentation(max_newton_step=1e-4), (5.0,), None)
+
+
+def test_checkpoint_of_an_older_format_is_refused(tmp_path):
+    old = tmp_path / "old.npz"
+    np.savez(old, forces=[5.0], states=np.zeros((1, 3)))  # the force-controlled format: no travels
+    with pytest.raises(SystemExit, match="older version"):
+        mvs._load_checkpoint(old)

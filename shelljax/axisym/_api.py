@@ -29,8 +29,10 @@ class CurveResult(eqx.Module):
     ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N];
     ``min_hoop_tension`` [N/m] most compressive unrelaxed hoop stress resultant of the upper
     half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
-    annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``residual`` [N] worst
-    Newton residual up to this level; ``converged`` (bool); ``rest_radius`` [m] (batch,).
+    annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``wall_gap`` [m] top pole
+    height above the bottom pole; ``residual`` [N] worst Newton residual up to this level;
+    ``converged`` (bool): Newton met ``atol`` up to this level and the walls have not met
+    (``wall_gap`` > h: self-contact is not modelled); ``rest_radius`` [m] (batch,).
     """
 
     force: Float[Array, "b k"]
@@ -49,6 +51,7 @@ class CurveResult(eqx.Module):
     compressive_inner_radius: Float[Array, "b k"]
     compressive_outer_radius: Float[Array, "b k"]
     wrinkle_count: Float[Array, "b k"]
+    wall_gap: Float[Array, "b k"]
     residual: Float[Array, "b k"]
     converged: Bool[Array, "b k"]
     rest_radius: Float[Array, " b"]
@@ -63,7 +66,7 @@ def _one(setup: Setup, theta, forces):
     fields.update(
         force=forces,
         wrinkle_count=n,
-        converged=jnp.isfinite(out["residual"]) & (out["residual"] <= setup.atol),
+        converged=jnp.isfinite(out["residual"]) & (out["residual"] <= setup.atol) & (out["wall_gap"] > thick),
     )
     return fields
 
@@ -155,6 +158,15 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
         if not conv.all():
             bad = np.argwhere(~conv)
             b, k = bad[0]
+            if float(res.wall_gap[b, k]) <= p[b, 2]:
+                raise NoConvergenceError(
+                    f"axisymmetric curve: at force {f[k]} N the indenter pushed the top wall onto the "
+                    f"bottom wall of params[{b}] = {p[b].tolist()} (top pole {float(res.wall_gap[b, k]):.3g} m "
+                    "above the bottom pole, thickness h larger); self-contact is not modelled, so this "
+                    f"and larger forces have no ball state ({len(bad)} (batch, force) entries failed). "
+                    "Fix: use smaller forces, or pass raise_on_failure=False and drop the unconverged levels.",
+                    history=np.asarray(res.residual[b]).tolist(),
+                )
             raise NoConvergenceError(
                 f"axisymmetric Newton did not converge for {len(bad)} (batch, force) entries; "
                 f"first: params[{b}] = {p[b].tolist()}, force {f[k]} N. Try more elements "

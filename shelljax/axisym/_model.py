@@ -27,6 +27,10 @@ Observables per force level (all SI; "inflated" = the pressurized state before i
 * ``sunken_depth`` d [m]: depth of the sunken region, ridge height − top-pole height (≥ 0).
 * ``pressure`` [Pa], ``volume`` [m³]: gauge pressure and enclosed volume.
 * ``ground_reaction`` [N]: total ground contact force (global balance: equals F).
+* ``wall_gap`` [m]: height of the top pole above the bottom pole (mid-surface to mid-surface).
+  The indenter pushes the upper wall onto the lower one when it falls below the thickness h;
+  self-contact is not modelled, so past that the state is not a ball's (the top passes through
+  the bottom wall onto the ground) and :mod:`._api` reports the level as not converged.
 """
 
 from __future__ import annotations
@@ -223,6 +227,7 @@ def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
         ),
         contact_diameter_mesh=2.0 * _contact_radius(x, gaps),
         sunken_depth=z_max - x[-1, 1],
+        wall_gap=x[-1, 1] - x[0, 1],
         pressure=gauge_pressure_at(volume, cfg, p),
         volume=volume,
         ground_reaction=jnp.sum(k_node * jnp.maximum(-gaps, 0.0)),
