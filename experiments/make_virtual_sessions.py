@@ -140,7 +140,6 @@ def _solve_travel(sim, solved, travel: float, halvings: int = 3):
         force = float(s3.observables(sim, res.x, sim._params_for(res.x))["force"])
         solved.append((d, force, history[-1][1]))
         solved.sort(key=lambda s: s[0])
-    return solved
 
 
 def _force_levels_by_travel(sim, forces, checkpoint: Path | None, max_solves: int = 40):
