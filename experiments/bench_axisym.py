@@ -53,7 +53,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--large", type=int, default=1024, help="batch size timed for the 1e5 estimate")
     ap.add_argument("--n-elements", type=int, default=101)
-    ap.add_argument("--chunk", type=int, default=4, help="vmapped chunk size (0: whole batch)")
+    ap.add_argument("--chunk", type=int, default=16, help="vmapped chunk size (0: whole batch)")
     ap.add_argument("--workers", type=int, default=None,
                     help="host threads for the batches (default: every CPU core; 1 on a GPU)")
     args = ap.parse_args(argv)

@@ -72,14 +72,16 @@ COMPARED = {"top_drop": ("w0", "top_drop"), "H": ("H", "height"), "D_u": ("D_u",
             "d": ("d", "sunken_depth")}
 
 
-def axisym_curve(thickness: float, forces, relax: bool = True) -> dict:
+def axisym_curve(thickness: float, forces, relax: bool = True, raise_on_failure: bool = True) -> dict:
     """Axisymmetric curve at ``forces`` [N] (default Setup, 101 elements): the local dimple depth
-    "w0" [m], wrinkle count "n" [-], indenter "travel" [m] and the COMPARED observables [m]."""
+    "w0" [m], wrinkle count "n" [-], indenter "travel" [m], the COMPARED observables [m] and
+    "converged" [bool] per force."""
     from shelljax.axisym import indentation_curves
 
     res = indentation_curves(np.array([[GAUGE_PRESSURE, YOUNG_MODULUS, thickness, POISSON]]), np.asarray(forces),
-                             radius=RADIUS, relax=relax)  # fmt: skip
-    out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0]}
+                             radius=RADIUS, relax=relax, raise_on_failure=raise_on_failure)  # fmt: skip
+    out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0],
+           "converged": np.asarray(res.converged)[0]}
     out.update({k: np.asarray(getattr(res, field))[0] for k, (_, field) in COMPARED.items()})
     return out
 
@@ -89,10 +91,13 @@ def travels_for(thickness: float, depth: float) -> tuple[float, ...]:
     force whose −W(0) ≥ ``depth``. The 3D curves are displacement-controlled: under force control
     the 3D Newton loses the indenter past ≈ 15 N on thin walls (docs/estimators.md)."""
     grid = FORCE_STEP * np.arange(1, 25)
-    curve = axisym_curve(thickness, grid)
-    reached = np.nonzero(dimensionless_depth(curve["w0"], thickness) >= depth)[0]
-    if reached.size == 0:
-        raise SystemExit(f"h = {thickness * 1e3:.3f} mm: −W(0) = {depth} not reached by {grid[-1]} N")
+    # thin walls meet the ground well inside the grid (no ball state past it): only the levels up
+    # to the requested depth are used, and they must have converged
+    curve = axisym_curve(thickness, grid, raise_on_failure=False)
+    reached = np.nonzero(curve["converged"] & (dimensionless_depth(curve["w0"], thickness) >= depth))[0]
+    if reached.size == 0 or not curve["converged"][: reached[0] + 1].all():
+        raise SystemExit(f"h = {thickness * 1e3:.3f} mm: −W(0) = {depth} not reached by a converged level "
+                         f"of the {grid[0]}..{grid[-1]} N grid")
     return tuple(float(t) for t in curve["travel"][: reached[0] + 1])
 
 

@@ -79,11 +79,14 @@ def _batched(setup: Setup, params, forces, chunk: int):
         return one(params)
     # Chunks of `chunk` curves run one after the other (lax.map): a vmapped while_loop runs
     # until its slowest member converges, and small chunks keep the work arrays in cache.
+    # Equal chunks of at most `chunk`: the padding (copies of the last row) stays below one
+    # curve per chunk instead of up to a whole chunk.
     n_chunks = -(-b // chunk)
-    pad = n_chunks * chunk - b
+    size = -(-b // n_chunks)
+    pad = n_chunks * size - b
     padded = jnp.concatenate([params, jnp.broadcast_to(params[-1:], (pad, 4))], axis=0)
-    out = jax.lax.map(one, padded.reshape(n_chunks, chunk, 4))
-    return jax.tree_util.tree_map(lambda v: v.reshape((n_chunks * chunk,) + v.shape[2:])[:b], out)
+    out = jax.lax.map(one, padded.reshape(n_chunks, size, 4))
+    return jax.tree_util.tree_map(lambda v: v.reshape((n_chunks * size,) + v.shape[2:])[:b], out)
 
 
 def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0) -> CurveResult:
@@ -130,7 +133,7 @@ def _check(params, forces, radius):
 
 
 def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
-                       chunk: int = 4, workers: int | None = None, **setup_kwargs) -> CurveResult:
+                       chunk: int = 16, workers: int | None = None, **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
@@ -141,7 +144,8 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
 
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
     ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: batch members
-    solved together (vmapped) per sequential chunk; 4 is fastest on 2 CPU cores. ``workers``:
+    solved together (vmapped) per sequential chunk (at most this many; equal chunks);
+    16 is fastest on 2 CPU cores (6.3 against 8.3 ms per curve for 4, one thread). ``workers``:
     host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
     GPU; see ``shelljax._parallel``). For use inside jit/vmap/grad call
     :func:`indentation_curves_raw`.

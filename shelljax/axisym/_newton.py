@@ -38,8 +38,9 @@ MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a co
 class SolverOptions(tuple):
     """(atol [N], max_iter, max_backtracks, max_step [m]) as a hashable tuple (static under jit).
 
-    ``max_step`` caps the largest coordinate change of one Newton step: it keeps the indenter
-    from tunnelling through the shell (a penalty contact cannot stop a jump past it).
+    ``max_step`` caps one Newton step: the nodes' motion relative to a spherical indenter
+    (``_step_cap``), or the largest coordinate change without one. It keeps the indenter from
+    tunnelling through the shell (a penalty contact cannot stop a jump past it).
     """
 
     def __new__(cls, atol: float = 1e-7, max_iter: int = 60, max_backtracks: int = 30,
@@ -142,6 +143,27 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
     return d
 
 
+def _step_cap(d, y, cfg: Config, p: Params, max_step):
+    """Largest step length α ≤ 1 along ``d`` allowed by ``max_step`` [m].
+
+    Under a spherical indenter the cap is on the nodes' motion relative to the indenter, and
+    only for nodes within reach of it: α |Δx_i − Δc| ≤ max(max_step, gap_i). A node can pass
+    through the sphere only by moving relative to it by more than its gap, so this keeps the
+    indenter from tunnelling as the old cap on every coordinate did, while letting the shell
+    and the indenter translate together. That cap truncated the good first Newton step of
+    every 2.5 N load step (≈ 11 mm of indenter travel against an 8 mm cap, measured on the
+    Pezzi-like ball) and cost 1–2 iterations per level.
+    """
+    if cfg.loading != "sphere":
+        return jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
+    n = cfg.n_nodes
+    x, zc = split(y, n)
+    dx, dzc = split(d, n)
+    relative = jnp.sqrt(jnp.sum((dx - jnp.stack([jnp.zeros_like(dzc), dzc])) ** 2, axis=-1))
+    allowed = jnp.maximum(max_step, indenter_gaps(x, zc, p))
+    return jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300)))
+
+
 def _jacobi_diagonal(hess: StructuredHessian):
     """|diag H| as a flat vector (the scaling of the gradient fallback step), floored at 1e-30."""
     diag = jnp.concatenate([jnp.diagonal(hess.diag, axis1=1, axis2=2).ravel(), hess.corner[None]])
@@ -198,7 +220,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
             alpha = 0.5 * alpha
             return (alpha, *energy_and_grad(y + alpha * d), k + 1)
 
-        alpha0 = jnp.minimum(1.0, opts.max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
+        alpha0 = _step_cap(d, y, cfg, p, opts.max_step)
         alpha, e_new, g_trial, backtracks = jax.lax.while_loop(
             ls_cond, ls_body, (alpha0, *energy_and_grad(y + alpha0 * d), 0)
         )
