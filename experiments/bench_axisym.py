@@ -36,6 +36,12 @@ def _params(n, seed=0):
     )
 
 
+def _work(result):
+    """(fraction of curves converged at every level [-], median Newton iterations per curve [-])."""
+    return (float(np.mean(np.all(result.converged, axis=1))),
+            float(np.median(np.sum(result.iterations, axis=1))))
+
+
 def _time(fn, repeats):
     out = fn()
     jax.block_until_ready(out)  # compile + warm
@@ -64,7 +70,7 @@ def main(argv=None):
 
     one = _params(1)
     t1, r1 = _time(lambda: indentation_curves_raw(one, forces, setup), args.repeats)
-    rows.append(("single 7-level curve", 1, t1, t1, float(np.mean(np.all(r1.converged, axis=1))), "< 0.020 s"))
+    rows.append(("single 7-level curve", 1, t1, t1, *_work(r1), "< 0.020 s"))
 
     workers = cpu_workers() if args.workers is None else args.workers
 
@@ -74,18 +80,15 @@ def main(argv=None):
 
     b64 = _params(64, 1)
     t64_one, r64 = _time(lambda: batch(b64, 1), args.repeats)
-    rows.append(("vmapped batch, 1 thread", 64, t64_one, t64_one / 64,
-                 float(np.mean(np.all(r64.converged, axis=1))), ""))
+    rows.append(("vmapped batch, 1 thread", 64, t64_one, t64_one / 64, *_work(r64), ""))
     t64, r64 = _time(lambda: batch(b64, workers), args.repeats)
-    rows.append((f"vmapped batch, {workers} threads", 64, t64, t64 / 64,
-                 float(np.mean(np.all(r64.converged, axis=1))), "< 0.5 s"))
+    rows.append((f"vmapped batch, {workers} threads", 64, t64, t64 / 64, *_work(r64), "< 0.5 s"))
 
     big = _params(args.large, 2)
     tl, rl = _time(lambda: batch(big, workers), max(1, args.repeats // 3))
-    rows.append((f"large batch, {workers} threads", args.large, tl, tl / args.large,
-                 float(np.mean(np.all(rl.converged, axis=1))), ""))
+    rows.append((f"large batch, {workers} threads", args.large, tl, tl / args.large, *_work(rl), ""))
     t_1e5 = tl / args.large * 1e5
-    rows.append(("1e5 curves (extrapolated)", 100000, t_1e5, tl / args.large, None, "< 120 s"))
+    rows.append(("1e5 curves (extrapolated)", 100000, t_1e5, tl / args.large, None, None, "< 120 s"))
 
     device = jax.devices()[0]
     machine = dict(
@@ -96,13 +99,15 @@ def main(argv=None):
     )
     print(f"machine: {machine}")
     print(f"{'case':28s} {'batch':>7s} {'median [s]':>11s} {'per curve [ms]':>15s} "
-          f"{'conv. frac':>10s} {'target':>10s}")
-    for name, n, t, per, conv, target in rows:
-        print(f"{name:28s} {n:7d} {t:11.4f} {per * 1e3:15.3f} {'' if conv is None else f'{conv:.3f}':>10s} {target:>10s}")
+          f"{'conv. frac':>10s} {'Newton its/curve':>16s} {'target':>10s}")
+    for name, n, t, per, conv, its, target in rows:
+        print(f"{name:28s} {n:7d} {t:11.4f} {per * 1e3:15.3f} {'' if conv is None else f'{conv:.3f}':>10s} "
+              f"{'' if its is None else f'{its:g}':>16s} {target:>10s}")
     with open(args.out, "w") as fh:
         json.dump(dict(machine=machine, rows=[
-            dict(case=a, batch=b, median_s=c, per_curve_s=d, converged=e, target=f)
-            for a, b, c, d, e, f in rows
+            dict(case=a, batch=b, median_s=c, per_curve_s=d, converged=e, median_newton_iterations_per_curve=f,
+                 target=g)
+            for a, b, c, d, e, f, g in rows
         ]), fh, indent=2)
     print(f"wrote {args.out}")
 

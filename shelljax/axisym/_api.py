@@ -8,7 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from .._errors import InvalidInputError, NoConvergenceError
 from .._parallel import map_batch
@@ -31,6 +31,7 @@ class CurveResult(eqx.Module):
     half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
     annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``wall_gap`` [m] top pole
     height above the bottom pole; ``residual`` [N] worst Newton residual up to this level;
+    ``iterations`` [-] Newton iterations of this level's load steps;
     ``converged`` (bool): Newton met ``atol`` up to this level and the walls have not met
     (``wall_gap`` > h: self-contact is not modelled); ``rest_radius`` [m] (batch,).
     """
@@ -53,6 +54,7 @@ class CurveResult(eqx.Module):
     wrinkle_count: Float[Array, "b k"]
     wall_gap: Float[Array, "b k"]
     residual: Float[Array, "b k"]
+    iterations: Int[Array, "b k"]
     converged: Bool[Array, "b k"]
     rest_radius: Float[Array, " b"]
 
