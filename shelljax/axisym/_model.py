@@ -114,8 +114,9 @@ class Setup(eqx.Module):
         return tuple(float(t) for t in unit_polar_angles(n_el, self.grading))
 
     def options(self) -> SolverOptions:
-        # Newton steps capped at one indenter radius: on 128 balls (P_g, E, h × e^±0.5) a cap of
-        # 2a let the indenter tunnel through the shell on some, a/2 cost 20 % more iterations.
+        # Newton steps capped at one indenter radius of motion relative to the indenter
+        # (_newton._step_cap): on 128 balls (P_g, E, h × e^±0.5) a cap of 2a let the indenter
+        # tunnel through the shell on some, a/2 cost 20 % more iterations.
         return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
 
 
@@ -311,7 +312,7 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
     # Newton iterations of each level's load steps (the ramp's go to the first level)
     done = jnp.cumsum(obs["iterations"])[n_ramp + m - 1 :: m]
-    out["iterations"] = jnp.diff(done, prepend=0)
+    out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
     out["rest_radius"] = r0
     out["inflation_residual"] = res_inf
     return out
