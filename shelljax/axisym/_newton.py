@@ -146,9 +146,10 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
 def _step_cap(d, y, cfg: Config, p: Params, max_step):
     """Largest step length α ≤ 1 along ``d`` allowed by ``max_step`` [m].
 
-    Under a spherical indenter the cap is on the nodes' motion relative to the indenter, and
-    only for nodes within reach of it: α |Δx_i − Δc| ≤ max(max_step, gap_i). A node can pass
-    through the sphere only by moving relative to it by more than its gap, so this keeps the
+    Under a spherical indenter the cap is on each node's motion relative to the indenter, and
+    a node farther away than ``max_step`` may move up to its gap: α |Δx_i − Δc| ≤
+    max(max_step, gap_i). A node can pass through the sphere only by moving relative to it by
+    more than its gap, so this keeps the
     indenter from tunnelling as the old cap on every coordinate did, while letting the shell
     and the indenter translate together. That cap truncated the good first Newton step of
     every 2.5 N load step (≈ 11 mm of indenter travel against an 8 mm cap, measured on the
