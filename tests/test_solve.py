@@ -167,13 +167,21 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
 
 
 def test_preconditioned_cg_gives_up_on_a_poor_preconditioner_or_negative_curvature():
-    from shelljax.solve._newton import CG_MAX_ITERATIONS, _preconditioned_cg
+    from shelljax.solve._newton import CG_EXTRAPOLATE_AFTER, CG_MAX_ITERATIONS, _preconditioned_cg
 
     rng = np.random.default_rng(3)
     spectrum = np.logspace(0, 6, 200)  # condition number 1e6: unpreconditioned CG needs far more steps
     g = rng.normal(size=spectrum.size)
     d, used = _preconditioned_cg(lambda v: spectrum * v, lambda r: r, g, 1e-8)
-    assert d is None and used == CG_MAX_ITERATIONS
+    # hopeless at its rate so far: given up at the first extrapolation, not after the whole budget
+    assert d is None and used == CG_EXTRAPOLATE_AFTER < CG_MAX_ITERATIONS
+    # A preconditioned spectrum in [1, 2.25] contracts CG's residual by ≈ (√2.25 − 1)/(√2.25 + 1)
+    # = 0.2 a product: on course for 1e-4 within the budget, so it is not given up on.
+    mild = np.linspace(1.0, 2.25, spectrum.size)
+    d, used = _preconditioned_cg(lambda v: mild * spectrum * v, lambda r: r / spectrum, g, 1e-4)
+    assert CG_EXTRAPOLATE_AFTER < used <= CG_MAX_ITERATIONS
+    # the error of the step is at most the relative residual 1e-4 over the smallest eigenvalue 1 (scaled)
+    np.testing.assert_allclose(d, -g / (mild * spectrum), atol=1e-4 * np.linalg.norm(g))
     d, used = _preconditioned_cg(lambda v: spectrum * v, lambda r: r / spectrum, g, 1e-8)
     np.testing.assert_allclose(d, -g / spectrum, rtol=1e-10)  # exact preconditioner: one product
     assert used == 1
@@ -329,3 +337,25 @@ def _fold(mat, free):
     d = sp.diags(free.astype(float))
     out = (d @ mat @ d + sp.diags((~free).astype(float))).tocsr()
     return out, None
+
+
+def test_newton_runs_with_single_threaded_blas_and_restores_it():
+    # OpenBLAS threads spinning after CG's dot products slowed the XLA work between them 1.6×
+    # (solve/_newton.py): inside the loop NumPy's BLAS must run on one thread, outside as before.
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+    before = blas_threads()
+    energy, grad, hess, b = _quartic_problem(10)
+    seen = []
+
+    def watched_energy(x):
+        seen.append(blas_threads())
+        return energy(x)
+
+    result = newton(watched_energy, grad, hess, np.zeros(b.size), np.ones(b.size, dtype=bool), atol=1e-10)
+    assert np.max(np.abs(grad(result.x))) <= 1e-10
+    assert seen and all(threads and max(threads) == 1 for threads in seen)
+    assert blas_threads() == before

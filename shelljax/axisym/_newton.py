@@ -113,8 +113,8 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
                         & ~(indenter_gap < 0.0))
         return ground_hit, indenter_hit
 
-    def repredict(d):
-        ground_hit, indenter_hit = predicted(d)
+    def repredict(d, hits):
+        ground_hit, indenter_hit = hits
         k_ground = jnp.where(ground_hit, k_node, 0.0)
         k_indenter = jnp.where(indenter_hit, k_node, 0.0)
         pull_ground = k_ground * jnp.where(ground_hit, ground_gap, 0.0)
@@ -137,9 +137,22 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         floor = MIN_DESCENT_FRACTION * (g @ (g / _jacobi_diagonal(hess)))
         return jnp.where(jnp.isfinite(slope) & (slope < -floor), d_pred, d)
 
+    # A pass whose predicted contact set is the one the current direction was solved with would
+    # reproduce it: stop there (under vmap, once no curve of the batch changes its set), which
+    # saves the two re-solves on most steps near equilibrium.
+    def changed(state):
+        d, passes, hits = state
+        new = predicted(d)
+        return (passes < ACTIVE_SET_PASSES) & jnp.any((new[0] != hits[0]) | (new[1] != hits[1]))
+
+    def one_pass(state):
+        d, passes, _ = state
+        hits = predicted(d)
+        return repredict(d, hits), passes + 1, hits
+
+    none = jnp.zeros(n, bool)
     d = structured_solve(hess, -g) * free
-    for _ in range(ACTIVE_SET_PASSES):
-        d = repredict(d)
+    d, _, _ = jax.lax.while_loop(changed, one_pass, (d, 0, (none, none)))
     return d
 
 

@@ -28,6 +28,11 @@ previous step's last factorization). On a 20k-face shell a product and a solve c
 against ≈ 550 ms for an assembly and a factorization, and the Hessian of the last load step's
 equilibrium preconditions the next one well: the solver refactorizes where the Hessian has moved
 (new contacts, buckling), not on every load step.
+
+The loop runs with the BLAS of NumPy limited to one thread (threadpoolctl). Its dot products on
+CG's vectors woke OpenBLAS's second thread, which then spins for a while after each call, on the
+core that XLA's products and gradients use: on the 20k-face curve the same iterations took 21.9 s
+with the default two threads and 13.5 s with one (2-core VM, docs/shell3d.md).
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ import dataclasses
 from collections.abc import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .._errors import NoConvergenceError
 from ._sparse import SparseSolver
@@ -52,6 +58,11 @@ CG_FORCING_MIN = 1e-6
 #: A kept factorization that needs more products than this is refactorized at the current iterate
 #: (a product and a solve cost ≈ 1/17 of an assembly and a factorization at 20k faces).
 CG_MAX_ITERATIONS = 12
+#: From this many products on, CG gives up as soon as its mean contraction per product so far,
+#: extrapolated, would not reach the forcing tolerance within CG_MAX_ITERATIONS: a poor
+#: preconditioner is then replaced after 4 products instead of 12 (20k-face curve: 353 → 248
+#: products for 5 → 7 factorizations; giving up from 3 or 5 products on cost as much, docs/shell3d.md).
+CG_EXTRAPOLATE_AFTER = 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +104,14 @@ def newton(
     and ``rank_one = (c, u)`` for an extra c u uᵀ. ``reuse_factorization``: try the last
     factorization before a new one (module docstring). Raises NoConvergenceError with the history.
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _newton(energy, gradient, hessian, x0, free, atol=atol, max_iter=max_iter, max_halvings=max_halvings,
+                       armijo=armijo, reuse_factorization=reuse_factorization, hessian_operator=hessian_operator,
+                       factorization=factorization, name=name)  # fmt: skip
+
+
+def _newton(energy, gradient, hessian, x0, free, *, atol, max_iter, max_halvings, armijo, reuse_factorization,
+            hessian_operator, factorization, name) -> NewtonResult:
     free = np.asarray(free, dtype=bool)
     x = np.array(x0, dtype=np.float64)
     e = float(energy(x))
@@ -177,7 +196,12 @@ def newton(
         x, e = x_try, e_try
         g = np.where(free, gradient(x), 0.0)
         history.append(float(np.max(np.abs(g))))
-        forcing = float(np.clip(0.9 * (np.linalg.norm(g) / gnorm) ** 2, CG_FORCING_MIN, CG_FORCING_MAX))
+        # Never solve for more than the stopping test needs: a linear residual of atol/2 in the
+        # 2-norm is below atol in every component (measured: the last step of a load step
+        # otherwise asked for 1e-3 … 1e-4 and exhausted CG on 6e-5 N against an atol of 5e-6 N).
+        gnew = float(np.linalg.norm(g))
+        forcing = max(0.9 * (gnew / gnorm) ** 2, 0.5 * atol / max(gnew, 1e-300))
+        forcing = float(np.clip(forcing, CG_FORCING_MIN, CG_FORCING_MAX))
         full_step = alpha == 1.0
         if hessian_operator is not None:  # a preconditioner: kept while CG converges with it
             reusable = (reusable if reused else solver) if reuse_factorization else None
@@ -198,14 +222,16 @@ def newton(
 
 def _preconditioned_cg(product, precondition, g, forcing):
     """(d, products): CG on H d = −g preconditioned by ``precondition`` (≈ H⁻¹), to
-    ``forcing`` ‖g‖₂; d is None where it did not converge in ``CG_MAX_ITERATIONS`` products or
-    met a direction of non-positive curvature (then a factorization at x decides the step)."""
+    ``forcing`` ‖g‖₂; d is None where it did not converge in ``CG_MAX_ITERATIONS`` products, is
+    not on course to (``CG_EXTRAPOLATE_AFTER``), or met a direction of non-positive curvature
+    (then a factorization at x decides the step)."""
     residual = -g
     z = precondition(residual)
     direction = z
     rz = float(residual @ z)
     d = np.zeros_like(g)
-    target = forcing * float(np.linalg.norm(g))
+    start = float(np.linalg.norm(g))
+    target = forcing * start
     for k in range(1, CG_MAX_ITERATIONS + 1):
         hp = product(direction)
         curvature = float(direction @ hp)
@@ -214,12 +240,22 @@ def _preconditioned_cg(product, precondition, g, forcing):
         a = rz / curvature
         d = d + a * direction
         residual = residual - a * hp
-        if float(np.linalg.norm(residual)) <= target:
+        remaining = float(np.linalg.norm(residual))
+        if remaining <= target:
             return d, k
+        if k >= CG_EXTRAPOLATE_AFTER and not _on_course(start, remaining, target, k):
+            return None, k
         z = precondition(residual)
         rz, rz_old = float(residual @ z), rz
         direction = z + (rz / rz_old) * direction
     return None, CG_MAX_ITERATIONS
+
+
+def _on_course(start: float, remaining: float, target: float, used: int) -> bool:
+    """Whether CG, having contracted its residual from ``start`` to ``remaining`` in ``used``
+    products, reaches ``target`` within ``CG_MAX_ITERATIONS`` products at the same mean rate."""
+    rate = (remaining / start) ** (1.0 / used)
+    return rate < 1.0 and used + np.log(target / remaining) / np.log(rate) <= CG_MAX_ITERATIONS
 
 
 def _identity_like(mat):
