@@ -218,3 +218,89 @@ def test_element_energy_derivatives_match_central_differences():
         e = jnp.zeros(18).at[i].set(eps)
         np.testing.assert_allclose(g[i], (f(y + e) - f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-9 * float(jnp.abs(g).max()))
         np.testing.assert_allclose(hess[:, i], (grad_f(y + e) - grad_f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-7 * float(jnp.abs(hess).max()))
+
+
+def _ipc_barrier_derivatives(gap, ghat, kappa):
+    """φ'(g), φ''(g) of φ = −κ (g − ĝ)² ln(g/ĝ), by hand (independent of the model's autodiff)."""
+    s, log = gap - ghat, np.log(gap / ghat)
+    slope = -kappa * (2 * s * log + s**2 / gap)
+    curvature = -kappa * (2 * log + 4 * s / gap - s**2 / gap**2)
+    return slope, curvature
+
+
+def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_product(monkeypatch):
+    """Newton's matrix scales a ground barrier's φ'' by λ̂/λ_b ∈ [0.01, 1] (λ_b = −φ', λ̂ = λ_b +
+    ∂E/∂z the load on the vertex); it is the Hessian at equilibrium, and CG's products agree."""
+    import shelljax.shell3d._model as model_module
+
+    rng = np.random.default_rng(11)
+    mesh = s3.sphere_mesh(1.0, 120)
+    ghat, ground = 0.05, -1.02
+    contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, ground), (0.0, 0.0, 1.0)),), activation_distance=ghat)
+    cfg = ModelConfig(mesh.n_vertices, contact=contact)
+    model = ShellModel(mesh, mesh.vertices, cfg, np.zeros(3 * mesh.n_vertices + 3, dtype=bool))
+    x = _random_state(mesh, rng)
+    low = np.argsort(x[:, 2])[:6]
+    x[low, 2] = ground + ghat * np.array([1e-7, 1e-6, 1e-5, 1e-3, 0.3, 0.9])  # barrier far over- to under-pressed
+    x[:, 2] = np.maximum(x[:, 2], ground + 1e-7 * ghat)
+    c = x[int(np.argmax(x[:, 2]))] + np.array([0.0, 0.0, 0.32])
+    q = np.concatenate([x.ravel(), c])
+    params = _params(indenter_center=c)
+    g = model.host_gradient(q, params)
+    hessian = model.host_hessian(q, params)[0].toarray()
+    newton_matrix = model.host_hessian(q, params, gradient=g)[0].toarray()
+
+    gap = x[:, 2] - ground
+    kappa = np.asarray(model_module._contact_stiffness(model.geometry, contact))
+    slope, curvature = _ipc_barrier_derivatives(np.minimum(gap, ghat), ghat, kappa)
+    pressed = gap < ghat
+    floor = model_module.BARRIER_SOFTENING_FLOOR
+    factor = np.where(pressed, np.clip(1.0 + g[2:-3:3] / np.where(pressed, -slope, 1.0), floor, 1.0), 1.0)
+    expected = hessian.copy()
+    zdofs = 3 * np.arange(mesh.n_vertices) + 2
+    expected[zdofs, zdofs] += (factor - 1.0) * np.where(pressed, curvature, 0.0)
+    scale = np.abs(hessian).max()
+    # Only the ground's zz entries change, by the closed-form amount; round-off of the largest entry.
+    np.testing.assert_allclose(newton_matrix, expected, rtol=0, atol=1e-12 * scale)
+    assert np.sum(factor == floor) >= 2 and np.all(np.diag(newton_matrix - hessian) <= 0.0)  # softened, never stiffened
+    # At equilibrium (zero gradient) Newton's matrix is the Hessian, bit for bit.
+    np.testing.assert_array_equal(model.host_hessian(q, params, gradient=np.zeros_like(g))[0].toarray(), hessian)
+    # CG's products (stored linearization, and jvp above the face threshold) apply the same matrix.
+    v = rng.normal(size=q.size)
+    for max_faces in (mesh.n_faces, mesh.n_faces - 1):
+        monkeypatch.setattr(model_module, "LINEARIZED_PRODUCT_MAX_FACES", max_faces)
+        product = model.host_hessian_operator(q, params, g)(v)
+        np.testing.assert_allclose(product, newton_matrix @ v, rtol=0, atol=1e-9 * np.abs(newton_matrix @ v).max())
+
+
+def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
+    """A ball poked 5 mm deep, its ground-contact vertices then pushed to 1e-4 of their equilibrium
+    gaps: with the true Hessian a Newton step can at most double a log barrier's gap (≈ 13
+    iterations from 1e-4), with Newton's softened matrix the gaps come back in a few."""
+    from shelljax.solve import newton
+
+    ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=600)
+    sim = s3.Indentation(ball, 2.34e6, 0.4, 1300.0, progress=False)
+    state = sim.solve(depth=0.005)
+    model, params = sim.model, sim._params_for(state.q)
+    x = state.vertices.copy()
+    touching = x[:, 2] < sim.activation_distance
+    assert touching.sum() >= 3
+    x[touching, 2] *= 1e-4
+    start = np.concatenate([x.ravel(), state.indenter_center])
+    softened = model.solve(start, params, atol=sim.atol)
+    plain = newton(
+        lambda y: model.host_energy(y, params),
+        lambda y: model.host_gradient(y, params),
+        lambda y, project: model.host_hessian(y, params, project),
+        start, model.free, atol=sim.atol, max_iter=60,
+        hessian_operator=lambda y: model.host_hessian_operator(y, params),
+    )  # fmt: skip
+    # Same equilibrium: all three stop at max |force| ≤ atol ≈ 5.5e-6 N, which the softest
+    # stiffness of a vertex (its membrane's, E h ≈ 2e3 N/m) turns into ≤ 3e-9 m.
+    np.testing.assert_allclose(softened.x, plain.x, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(softened.x, state.q, rtol=0, atol=1e-8)
+    print(f"Newton iterations from 1e-4 of the ground gaps: {plain.iterations} with the Hessian, "
+          f"{softened.iterations} with the softened matrix")
+    assert plain.iterations >= 10, plain.iterations  # the crawl this guards against is there
+    assert softened.iterations <= plain.iterations // 2, (softened.iterations, plain.iterations)

@@ -400,6 +400,76 @@ def _contact_hessians(q, params, geometry, config):
     return blocks
 
 
+#: Smallest factor on a barrier's stiffness along its gap gradient in Newton's matrix
+#: (:func:`_barrier_softening`). A vertex that nothing presses (λ̂ ≤ 0) gets it; where the barrier
+#: alone holds a rigid mode (the ball's vertical translation in force control), Newton's step in
+#: that mode is then at most 1/floor too long for the line search. With 1e-4 the force-controlled
+#: 2000-face poke of tests/test_axisym_vs_shell3d.py stalled on its first level (residual 0.625 N,
+#: the indenter force, for 60 iterations).
+BARRIER_SOFTENING_FLOOR = 1e-2
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _barrier_softening(q, gradient, geometry, config) -> Float[Array, "V 3 3"]:
+    """Per vertex, the 3×3 correction [N/m] that turns the Hessian into Newton's matrix: the
+    planes' barrier stiffness φ'' n nᵀ scaled down; ``gradient`` [N] is ∇E at q.
+
+    A log barrier pressing a vertex harder than its load needs (gap far below equilibrium) has a
+    stiffness φ'' ≈ λ_b / gap, with λ_b = −φ' its force, so a Newton step can at most double the
+    gap: from 0.04 µm to 36 µm took 11 iterations on the first load step of the 20k-face curve.
+    The primal–dual remedy of interior-point methods scales φ'' by λ̂ / λ_b, where λ̂ = λ_b + n·∇E
+    is the force the rest of the model presses the vertex with (the dual estimate that balances
+    it). With φ'' ≈ λ_b / gap this is λ̂ / gap, and the step of a vertex under a fixed load reaches
+    its equilibrium gap in one go. The factor is clipped to [``BARRIER_SOFTENING_FLOOR``, 1]: a
+    barrier is never stiffened, and at equilibrium (∇E = 0 on free dofs) the factor is 1, so the
+    converged state and Newton's final rate are those of the true Hessian. A softer barrier keeps
+    the matrix positive definite wherever the true one is, so the steps still descend the energy.
+
+    Planes only: softening the indenter's barrier too made the first load step of the 20k-face
+    curve slower (25 against 16 Newton iterations; its steps were cut 8–64× by the line search),
+    where the planes alone brought it to 13 (docs/shell3d.md).
+    """
+    x, _ = _split(q, config)
+    vertex_gradient = gradient[: x.size].reshape(x.shape)
+    k = _contact_stiffness(geometry, config.contact)
+    slope = jax.vmap(jax.grad(_contact_potential), in_axes=(0, 0, None))
+    curvature = jax.vmap(jax.grad(jax.grad(_contact_potential)), in_axes=(0, 0, None))
+    blocks = jnp.zeros((config.n_vertices, 3, 3))
+    for point, normal in config.contact.planes:
+        normal = jnp.asarray(normal)
+        gap = plane_gap(x, jnp.asarray(point), normal)
+        push = -slope(gap, k, config.contact)
+        pressed = push > 0.0
+        ratio = 1.0 + (vertex_gradient @ normal) / jnp.where(pressed, push, 1.0)
+        factor = jnp.where(pressed, jnp.clip(ratio, BARRIER_SOFTENING_FLOOR, 1.0), 1.0)
+        blocks = blocks + ((factor - 1.0) * curvature(gap, k, config.contact))[:, None, None] * jnp.outer(normal, normal)
+    return blocks
+
+
+def _softens(config: ModelConfig) -> bool:
+    """Whether Newton's matrix differs from the Hessian (:func:`_barrier_softening`)."""
+    return config.contact.kind == "barrier" and bool(config.contact.planes)
+
+
+def _softened_contact_hessians(q, params, geometry, config, gradient=None):
+    """:func:`_contact_hessians`, with :func:`_barrier_softening` at ``gradient`` [N] unless None."""
+    blocks = _contact_hessians(q, params, geometry, config)
+    if gradient is not None and _softens(config):
+        # Each plane's block is its vertex's own 3×3: the first one takes the corrections of all.
+        first = len(blocks) - len(config.contact.planes)
+        blocks[first] = blocks[first] + _barrier_softening(q, gradient, geometry, config)
+    return blocks
+
+
+def _plus_vertex_blocks(product, blocks, v):
+    """product + the (V, 3, 3) vertex ``blocks`` applied to v (3V + 3,) (the indenter dofs untouched)."""
+    vertex = jnp.einsum("vij,vj->vi", blocks, v[:-3].reshape(-1, 3))
+    return product + jnp.concatenate([vertex.reshape(-1), jnp.zeros(3)])
+
+
+_apply_linear_softened = jax.jit(lambda linear, blocks, v: _plus_vertex_blocks(linear(v), blocks, v))
+
+
 def _balanced_chunk(n: int, most: int) -> int:
     """Chunk size ≤ ``most`` that covers ``n`` items in the fewest chunks, the last one
     overlapping the one before it by fewer than the number of chunks."""
@@ -419,20 +489,21 @@ def _face_hessians(q, params, geometry, config, start, size):
     return _face_chunk(*_face_hessian_kernel(q, params, geometry, config), start, size)[0]
 
 
-_contact_hessians_jit = jax.jit(_contact_hessians, static_argnames=("config",))
+_contact_hessians_jit = jax.jit(_softened_contact_hessians, static_argnames=("config",))
 
 
 @functools.partial(jax.jit, static_argnames=("config", "nnz"))
-def _hessian_values(q, params, geometry, config, maps, nnz):
+def _hessian_values(q, params, geometry, config, maps, nnz, gradient=None):
     """CSR values of the exact Hessian [N/m] (a pattern's ``maps`` and ``nnz``), element blocks
-    summed inside one XLA program.
+    summed inside one XLA program; with ``gradient`` [N] at q, Newton's matrix
+    (:func:`_barrier_softening`).
 
     The face Hessians are computed in balanced chunks of at most ``FACE_HESSIAN_CHUNK`` faces and
     each chunk is scattered at once: the (F, 18, 18) array of all of them (207 MB at 80k faces)
     never exists, the autodiff intermediates stay small, and chunks that fit in cache are faster
     too (0.72 → 0.52 s at 20k faces on 2 cores against one vmap over all faces).
     """
-    data = assemble_values(maps[1:], nnz, _contact_hessians(q, params, geometry, config))
+    data = assemble_values(maps[1:], nnz, _softened_contact_hessians(q, params, geometry, config, gradient))
     kernel, faces = _face_hessian_kernel(q, params, geometry, config)
     n_faces = faces[0].shape[0]
     chunk = _balanced_chunk(n_faces, FACE_HESSIAN_CHUNK)
@@ -596,18 +667,31 @@ class ShellModel:
     def host_gradient(self, q, params) -> np.ndarray:
         return np.asarray(_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config))
 
-    def host_hessian_operator(self, q, params):
-        """v ↦ H(q) v [N] (host arrays; unmasked, exact) for displacements v (3V + 3,) [m]."""
+    def host_hessian_operator(self, q, params, gradient=None):
+        """v ↦ H(q) v [N] (host arrays; unmasked, exact) for displacements v (3V + 3,) [m]; with
+        the ``gradient`` [N] at q, Newton's matrix (:func:`_barrier_softening`) instead of H."""
         q, params = jnp.asarray(q), self._host_params(params)
+        blocks = None
+        if gradient is not None and _softens(self.config):
+            blocks = _barrier_softening(q, jnp.asarray(gradient), self.geometry, self._jit_config)
         if self.mesh.n_faces > LINEARIZED_PRODUCT_MAX_FACES:
-            return lambda v: np.asarray(_hessian_vector_product(q, params, self.geometry, self._jit_config, jnp.asarray(v)))
-        linear = _linearized_gradient(q, params, self.geometry, self._jit_config)
-        return lambda v: np.asarray(_apply_linear(linear, jnp.asarray(v)))
+            def product(v):
+                hv = _hessian_vector_product(q, params, self.geometry, self._jit_config, v)
+                return hv if blocks is None else _plus_vertex_blocks(hv, blocks, v)
+        else:
+            linear = _linearized_gradient(q, params, self.geometry, self._jit_config)
+            if blocks is None:
+                product = lambda v: _apply_linear(linear, v)  # noqa: E731
+            else:
+                product = lambda v: _apply_linear_softened(linear, blocks, v)  # noqa: E731
+        return lambda v: np.asarray(product(jnp.asarray(v)))
 
-    def host_hessian(self, q, params, project: bool = False):
-        """(CSR Hessian with pins folded in, rank-one part or None)."""
+    def host_hessian(self, q, params, project: bool = False, gradient=None):
+        """(CSR Hessian with pins folded in, rank-one part or None); with the ``gradient`` [N] at
+        q, Newton's matrix (:func:`_barrier_softening`) instead of the Hessian."""
         q = jnp.asarray(q)
         params = self._host_params(params)
+        gradient = None if gradient is None else jnp.asarray(gradient)
         if project:
             # The eigenvalue clamp runs in NumPy: a vmapped jnp.linalg.eigh (a LAPACK custom call)
             # inside this XLA:CPU program never returned on 2-core machines (see docs/shell3d.md).
@@ -626,10 +710,10 @@ class ShellModel:
                         yield np.concatenate(batch)
                         batch, count = [], 0
 
-            contact = _contact_hessians_jit(q, params, self.geometry, self._jit_config)
+            contact = _contact_hessians_jit(q, params, self.geometry, self._jit_config, gradient)
             data = self.pattern.assemble_projected([face_chunks()] + [np.asarray(b) for b in contact])
         else:
-            data = _hessian_values(q, params, self.geometry, self._jit_config, self.pattern.maps, self.pattern.nnz)
+            data = _hessian_values(q, params, self.geometry, self._jit_config, self.pattern.maps, self.pattern.nnz, gradient)
         mat = self.pattern.matrix(data)
         rank_one = None
         if self.config.gas != "prescribed":
@@ -642,17 +726,29 @@ class ShellModel:
 
         Steps are inexact Newton steps (CG on exact Hessian-vector products) preconditioned by a
         kept factorization, ``factorization`` (e.g. the previous load step's
-        ``last_factorization``) first: :func:`shelljax.solve.newton`."""
+        ``last_factorization``) first: :func:`shelljax.solve.newton`. Newton's matrix is the
+        Hessian with the planes' barriers softened where they press harder than the load
+        (:func:`_barrier_softening`); it equals the Hessian at equilibrium."""
         params = self._host_params(params)
+        # Newton's matrix needs the gradient at the iterate (barrier softening): keep the last one.
+        last = {}
+
+        def gradient(q):
+            last["q"], last["g"] = q, self.host_gradient(q, params)
+            return last["g"]
+
+        def gradient_at(q):
+            return last["g"] if last.get("q") is q else self.host_gradient(q, params)
+
         return newton(
             lambda q: self.host_energy(q, params),
-            lambda q: self.host_gradient(q, params),
-            lambda q, project: self.host_hessian(q, params, project),
+            gradient,
+            lambda q, project: self.host_hessian(q, params, project, gradient_at(q)),
             q0,
             self.free,
             atol=atol,
             max_iter=max_iter,
-            hessian_operator=lambda q: self.host_hessian_operator(q, params),
+            hessian_operator=lambda q: self.host_hessian_operator(q, params, gradient_at(q)),
             factorization=factorization,
             name=name,
         )
