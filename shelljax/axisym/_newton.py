@@ -140,19 +140,19 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
     # A pass whose predicted contact set is the one the current direction was solved with would
     # reproduce it: stop there (under vmap, once no curve of the batch changes its set), which
     # saves the two re-solves on most steps near equilibrium.
+    # The state carries the set d was solved with and the set d predicts.
     def changed(state):
-        d, passes, hits = state
-        new = predicted(d)
-        return (passes < ACTIVE_SET_PASSES) & jnp.any((new[0] != hits[0]) | (new[1] != hits[1]))
+        _, passes, (used_ground, used_indenter), (ground_hit, indenter_hit) = state
+        return (passes < ACTIVE_SET_PASSES) & jnp.any((ground_hit != used_ground) | (indenter_hit != used_indenter))
 
     def one_pass(state):
-        d, passes, _ = state
-        hits = predicted(d)
-        return repredict(d, hits), passes + 1, hits
+        d, passes, _, hits = state
+        d = repredict(d, hits)
+        return d, passes + 1, hits, predicted(d)
 
     none = jnp.zeros(n, bool)
     d = structured_solve(hess, -g) * free
-    d, _, _ = jax.lax.while_loop(changed, one_pass, (d, 0, (none, none)))
+    d, _, _, _ = jax.lax.while_loop(changed, one_pass, (d, 0, (none, none), predicted(d)))
     return d
 
 

@@ -427,7 +427,7 @@ def _barrier_softening(q, gradient, geometry, config) -> Float[Array, "V 3 3"]:
 
     Planes only: softening the indenter's barrier too made the first load step of the 20k-face
     curve slower (25 against 16 Newton iterations; its steps were cut 8–64× by the line search),
-    where the planes alone brought it to 13 (docs/shell3d.md).
+    where the planes alone brought it to 13–14 (docs/shell3d.md).
     """
     x, _ = _split(q, config)
     vertex_gradient = gradient[: x.size].reshape(x.shape)
