@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 
 from . import __version__
 from ._errors import ShelljaxError
+from ._memory_mappings import release_compiled_programs_if_crowded
 from .config import ExperimentConfig, load_config
 from .estimate import (
     PAPER_KS,
@@ -197,6 +198,7 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
                                    model_curves=model_curves)  # fmt: skip
             entry["figures"].append(str(fig.relative_to(run_dir)))
         results["sessions"].append(entry)
+        release_compiled_programs_if_crowded()  # each object compiles its own engine
 
     if calibration is not None:
         results["calibration"] = {

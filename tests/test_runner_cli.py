@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from shelljax import InvalidInputError
+from shelljax._memory_mappings import memory_mappings
 from shelljax.cli import main
 from shelljax.config import bundled_data_dir, load_config
 from shelljax.runner import run_experiment, summary_table
@@ -119,6 +120,31 @@ def test_run_directories_are_fresh(tmp_path):
     first = run_experiment(config, output_dir=tmp_path, progress=False)
     second = run_experiment(config, output_dir=tmp_path, progress=False)
     assert first != second and (first / "results.json").is_file() and (second / "results.json").is_file()
+
+
+def test_memory_mappings_reads_this_process_and_the_kernel_limit():
+    mappings = memory_mappings()
+    if sys.platform.startswith("linux"):
+        count, limit = mappings
+        assert 0 < count < limit
+    else:
+        assert mappings is None
+
+
+def test_runner_releases_compiled_programs_after_a_session_only_when_crowded(tmp_path, monkeypatch):
+    # Past half of vm.max_map_count (65 530 on Linux by default) the runner clears JAX's caches
+    # after a session, below it keeps them: a jitted function's cache tells which happened.
+    import jax
+
+    import shelljax._memory_mappings as mappings_module
+
+    compiled = jax.jit(lambda x: x + 1.0)
+    config = paper_variant(tmp_path, ["closed-form"], ["bundled:sessions/pezzi.toml"])
+    for count, cached_after in ((32_765, 1), (32_766, 0)):
+        compiled(1.0)
+        monkeypatch.setattr(mappings_module, "memory_mappings", lambda: (count, 65_530))
+        run_experiment(config, output_dir=tmp_path, progress=False)
+        assert compiled._cache_size() == cached_after, count
 
 
 def test_estimate_json_on_stdout(capsys):
