@@ -48,6 +48,12 @@ def _indented_states(setup):
     return curve_single(setup, 1300.0, 2.34e6, 9e-4, 0.4, np.array([5.0, 10.0, 15.0]), return_states=True)["state"]
 
 
+# Jitted: run op by op, the dense autodiff Hessian compiled ≈ 900 single-operation programs
+# (≈ 45 s of the suite's time from an empty compilation cache).
+_dense_autodiff_hessian = jax.jit(jax.hessian(total_energy), static_argnums=1)
+_assembled_hessian = jax.jit(hessian_at, static_argnums=1)
+
+
 @pytest.mark.parametrize(("loading", "gas"), [("sphere", "isothermal"), ("sphere", "prescribed"),
                                              ("point", "prescribed"), ("none", "isothermal")])
 def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
@@ -64,11 +70,11 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
                 ground_z=x_inflated[0, 1])
     y = states[-1] + 1e-4 * jnp.asarray(np.random.default_rng(0).normal(size=states[-1].shape))
     mask = constrained_mask(cfg)
-    reference = np.array(jax.hessian(total_energy)(y, cfg, p))
+    reference = np.array(_dense_autodiff_hessian(y, cfg, p))
     reference[mask, :] = 0.0
     reference[:, mask] = 0.0
     reference[mask, mask] = 1.0
-    assembled = _dense(jax.tree_util.tree_map(np.asarray, hessian_at(y, cfg, p)), mask)
+    assembled = _dense(jax.tree_util.tree_map(np.asarray, _assembled_hessian(y, cfg, p)), mask)
     # Both are exact second derivatives evaluated in float64 by different operation orders: entries
     # span 1e-3 … 1e9 N/m (contact penalty), so compare to round-off of the largest entry.
     np.testing.assert_allclose(assembled, reference, rtol=0, atol=1e-12 * np.max(np.abs(reference)))
@@ -161,3 +167,35 @@ def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
     assert np.all(residuals() <= setup.atol)
     monkeypatch.setattr(newton, "MIN_DESCENT_FRACTION", 0.0)  # the former rule (read at trace time)
     assert residuals()[-1] > 1e-2  # stuck at ≈ 0.14 N
+
+
+def test_tied_loop_carries_let_vmap_batch_a_loop_body_once():
+    # vmap batches a while_loop body until the set of batched carries stops growing; nested loops
+    # multiply those passes (docs/axisym.md, *Solver*). Tied to a batched value, a counter is
+    # batched from the start and the body is batched once, with the same result. A custom_vmap
+    # rule inside the body counts the passes.
+    from shelljax.axisym._tracing import tied_to
+
+    def run(tie):
+        passes = []
+
+        @jax.custom_batching.custom_vmap
+        def halve(x):
+            return 0.5 * x
+
+        @halve.def_vmap
+        def _(axis_size, in_batched, x):
+            passes.append(in_batched)
+            return 0.5 * x, in_batched[0]
+
+        def halve_below_one(x):
+            k = tied_to(x, jnp.asarray(0)) if tie else jnp.asarray(0)
+            return jax.lax.while_loop(lambda s: s[0] > 1.0, lambda s: (halve(s[0]), s[1] + 1), (x, k))
+
+        out = jax.vmap(halve_below_one)(jnp.asarray([3.0, 40.0]))
+        return len(passes), out
+
+    (untied, out_untied), (tied, out_tied) = run(False), run(True)
+    assert (untied, tied) == (2, 1)
+    np.testing.assert_array_equal(out_tied[0], out_untied[0])
+    np.testing.assert_array_equal(out_tied[1], [2, 6])

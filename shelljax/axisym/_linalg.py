@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._tracing import tied_to
+
 
 class StructuredHessian(eqx.Module):
     """H = [[A + σ g gᵀ, b], [bᵀ, c]] with A block tridiagonal.
@@ -85,7 +87,7 @@ def _block_tridiagonal_solve(diag, upper, rhs):
         d_b_new = _matmul(schur_inverse, r_b - _matmul(l_b, d_prev))
         return (c_b, d_b_new), (c_b, d_b_new)
 
-    init = (jnp.zeros((4, 4), diag.dtype), jnp.zeros_like(rhs[0]))
+    init = tied_to(rhs, jnp.zeros((4, 4), diag.dtype), jnp.zeros_like(rhs[0]))
     _, (cs, ds) = jax.lax.scan(forward, init, (diag, low, up, rhs))
 
     def backward(x_next, blocks):
@@ -93,7 +95,7 @@ def _block_tridiagonal_solve(diag, upper, rhs):
         x_b = d_b - _matmul(c_b, x_next)
         return x_b, x_b
 
-    _, xs = jax.lax.scan(backward, jnp.zeros_like(rhs[0]), (cs, ds), reverse=True)
+    _, xs = jax.lax.scan(backward, tied_to(rhs, jnp.zeros_like(rhs[0])), (cs, ds), reverse=True)
     return xs
 
 

@@ -57,6 +57,7 @@ from ._energy import (
 from ._geometry import unit_polar_angles
 from ._inflation import inflation_stretch
 from ._linalg import structured_solve
+from ._tracing import tied_to
 from ._newton import SolverOptions, equilibrium, hessian_at
 
 
@@ -304,7 +305,7 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
             obs.update(state=y)
         return (y, y_prev, force, f_prev), obs
 
-    init = (y_start, y_start, jnp.asarray(0.0), jnp.asarray(0.0))
+    init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)))
     _, obs = jax.lax.scan(step, init, schedule)
     n_ramp = len(setup.ramp)
     out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}

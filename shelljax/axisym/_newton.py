@@ -30,6 +30,7 @@ from ._energy import (
 from ..physics import ATMOSPHERIC_PRESSURE
 from ._hessian import hessian_at
 from ._linalg import StructuredHessian, structured_solve
+from ._tracing import tied_to
 
 ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the contact set the step predicts
 MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a contact-predicted step
@@ -150,9 +151,9 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         d = repredict(d, hits)
         return d, passes + 1, hits, predicted(d)
 
-    none = jnp.zeros(n, bool)
     d = structured_solve(hess, -g) * free
-    d, _, _, _ = jax.lax.while_loop(changed, one_pass, (d, 0, (none, none), predicted(d)))
+    passes, none = tied_to(d, jnp.asarray(0), jnp.zeros(n, bool))
+    d, _, _, _ = jax.lax.while_loop(changed, one_pass, (d, passes, (none, none), predicted(d)))
     return d
 
 
@@ -224,7 +225,9 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
             return jnp.isfinite(e_new) & (e_new <= e + 1e-4 * alpha * slope + tol_e)
 
         # Each trial also returns its gradient (reverse mode computes the energy anyway): the
-        # accepted trial's gradient is the next residual, with no separate gradient pass.
+        # accepted trial's gradient is the next residual, with no separate gradient pass. The
+        # loop starts at 2·alpha0 with no trial made (energy +inf, count −1), so its body makes the
+        # first trial too: one copy of the energy and gradient for XLA to compile, not two.
         def ls_cond(s):
             alpha, e_new, _, k = s
             return (~accept(alpha, e_new)) & (k < opts.max_backtracks)
@@ -236,7 +239,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
 
         alpha0 = _step_cap(d, y, cfg, p, opts.max_step)
         alpha, e_new, g_trial, backtracks = jax.lax.while_loop(
-            ls_cond, ls_body, (alpha0, *energy_and_grad(y + alpha0 * d), 0)
+            ls_cond, ls_body, (2.0 * alpha0, *tied_to(y, jnp.asarray(jnp.inf, e.dtype), jnp.zeros_like(g), jnp.asarray(-1)))
         )
         # Levenberg shift: where the Hessian is indefinite (a buckling dimple), the scaled
         # gradient step crawls (measured: 30+ iterations on soft balls); shifting the next
@@ -259,7 +262,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     g0 = g0 * free
     res0 = jnp.max(jnp.abs(g0))
     hist0 = jnp.full((opts.max_iter,), jnp.nan, y0.dtype)
-    state = (y0, g0, e0, res0, jnp.asarray(0), hist0, jnp.zeros((), y0.dtype))
+    state = (y0, g0, e0, res0, *tied_to(y0, jnp.asarray(0), hist0, jnp.zeros((), y0.dtype)))
     y, _, _, res, it, hist, _ = jax.lax.while_loop(cond, body, state)
     return y, res, it.astype(y.dtype), hist
 
