@@ -12,6 +12,7 @@ import pytest
 
 from shelljax import InvalidInputError
 from shelljax.estimate import AxisymForwardModel, fit_session
+from shelljax.estimate._problem import jacobian
 from shelljax.session import Session
 
 FORCES = jnp.asarray(np.tile(np.arange(5.0, 20.01, 2.5), 3))
@@ -82,6 +83,16 @@ def test_fit_recovers_parameters_of_its_own_model(model):
     assert abs(result.predicted_wrinkle_count - counts[0]) < 0.5
     modulus = result.estimates["young_modulus"]
     assert modulus.ci95[0] < e < modulus.ci95[1]
+    # The fit reports what Levenberg–Marquardt linearised at the point it accepted last; recomputed
+    # independently at the returned optimum (forward-mode Jacobian, a fresh forward solve) it must
+    # be the same point: engine round-off between two compiled programs is ~1e-12 relative, which
+    # (JᵀJ)⁻¹ amplifies by its condition number (≈ 1e4 here): 1e-6 leaves a wide margin.
+    u = jnp.asarray(result.u)
+    jac = np.asarray(jacobian(result.problem, u))
+    np.testing.assert_allclose(result.covariance, np.linalg.inv(jac.T @ jac), rtol=1e-6)
+    residual = np.asarray(result.problem.residuals(u))
+    assert result.chi2 == pytest.approx(float(residual @ residual), rel=1e-9)
+    np.testing.assert_allclose(result.predicted_depth, np.asarray(result.problem.predict(u)[0]), rtol=1e-10)
 
 
 def test_sealed_gas_volume_comes_from_the_session_mesh():

@@ -117,16 +117,21 @@ class InverseProblem(eqx.Module):
         above any fit's, so Levenberg–Marquardt rejects the trial step and shrinks its trust
         region (a NaN would stop it); :meth:`forward_ok` tells a real optimum from such a point.
         """
+        return self.residuals_and_prediction(u)[0]
+
+    def residuals_and_prediction(self, u, args=None):
+        """(:meth:`residuals`, (predicted depths [m], wrinkle count [-], :meth:`forward_ok`))
+        from one evaluation of the forward model."""
         depth, count, converged = self.predict(u)
         parts = [(depth - self.depth) / self.depth_noise, (count - self.counts) / COUNT_NOISE]
         parts += [jnp.atleast_1d(r) for r in self._prior_residuals(u)]
         r = jnp.concatenate(parts)
-        return jnp.where(converged & jnp.all(jnp.isfinite(r)), r, FAILED_RESIDUAL)
+        r = jnp.where(converged & jnp.all(jnp.isfinite(r)), r, FAILED_RESIDUAL)
+        return r, (depth, count, converged & jnp.all(jnp.isfinite(depth)) & jnp.isfinite(count))
 
     def forward_ok(self, u) -> Bool[Array, ""]:
         """Whether the forward model converged at ``u`` with finite predictions."""
-        depth, count, converged = self.predict(u)
-        return converged & jnp.all(jnp.isfinite(depth)) & jnp.isfinite(count)
+        return self.residuals_and_prediction(u)[1][2]
 
     def log_posterior(self, u_and_noise: Float[Array, " d1"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """Log posterior (up to a constant) of (u, log σ_w); returns (log p, forward converged)."""
