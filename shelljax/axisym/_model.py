@@ -57,8 +57,8 @@ from ._energy import (
 from ._geometry import unit_polar_angles
 from ._inflation import inflation_stretch
 from ._linalg import structured_solve
-from ._tracing import tied_to
 from ._newton import SolverOptions, equilibrium, hessian_at
+from ._tracing import tied_to
 
 
 class Setup(eqx.Module):

@@ -238,9 +238,8 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
             return (alpha, *energy_and_grad(y + alpha * d), k + 1)
 
         alpha0 = _step_cap(d, y, cfg, p, opts.max_step)
-        alpha, e_new, g_trial, backtracks = jax.lax.while_loop(
-            ls_cond, ls_body, (2.0 * alpha0, *tied_to(y, jnp.asarray(jnp.inf, e.dtype), jnp.zeros_like(g), jnp.asarray(-1)))
-        )
+        no_trial = tied_to(y, jnp.asarray(jnp.inf, e.dtype), jnp.zeros_like(g), jnp.asarray(-1))
+        alpha, e_new, g_trial, backtracks = jax.lax.while_loop(ls_cond, ls_body, (2.0 * alpha0, *no_trial))
         # Levenberg shift: where the Hessian is indefinite (a buckling dimple), the scaled
         # gradient step crawls (measured: 30+ iterations on soft balls); shifting the next
         # Hessians until Newton descends again, and relaxing the shift after clean steps,

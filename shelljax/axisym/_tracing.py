@@ -1,10 +1,10 @@
 """Loop carries that vmap treats as batched from the start.
 
-``jax.vmap`` of a ``while_loop`` or ``scan`` first finds which carries are batched by re-tracing
-the body until that set stops growing; a counter or constant starts unbatched, so the body is
-traced once more. Nested loops multiply these passes (the curve's scan holds the Newton loop,
-which holds the line search, the contact passes and two block-Thomas scans): tying every initial
-carry to a batched value lets each body be traced once.
+``jax.vmap`` of a ``while_loop`` or ``scan`` finds which carries are batched by batching the body
+again until that set stops growing; a counter or constant starts unbatched, so the body is batched
+once more. Nested loops multiply these passes (the curve's scan holds the Newton loop, which holds
+the line search, the contact passes and two block-Thomas scans): tying every initial carry to a
+batched value lets vmap batch each body once.
 """
 
 from __future__ import annotations
