@@ -87,8 +87,8 @@ def test_fit_recovers_parameters_of_its_own_model(model):
     # independently at the returned optimum (forward-mode Jacobian, a fresh forward solve) it must
     # be the same point. Two compiled programs differ by engine round-off (measured on a held-out
     # Pezzi session: Jacobian 4e-13, residuals 5e-12 relative), which (JᵀJ)⁻¹ amplifies by at most
-    # its condition number: 1e-6 holds below 1e6. The iterate before the optimum (optimistix's
-    # sol.aux) gave depths 2.6e-10 relative off: 1e-10 tells the two apart.
+    # its condition number: 1e-6 holds below 1e6. On that session the iterate before the optimum
+    # (optimistix's sol.aux) gave depths 2.6e-10 relative off, which the 1e-10 check would catch.
     u = jnp.asarray(result.u)
     jac = np.asarray(jacobian(result.problem, u))
     np.testing.assert_allclose(result.covariance, np.linalg.inv(jac.T @ jac), rtol=1e-6)
