@@ -68,15 +68,15 @@ def residual(y, cfg: Config, p: Params):
 def _add_contact_springs(hess: StructuredHessian, ground, indenter, normal):
     """H + the springs of nodes predicted in contact: ``ground`` (n,) [N/m] on the nodes' z;
     ``indenter`` (n,) [N/m] along the indenter normals ``normal`` (n, 2), on (x_i, z_c)."""
-    node = indenter[:, None, None] * (normal[:, :, None] * normal[:, None, :])
-    node = node.at[:, 1, 1].add(ground)
-    m = hess.diag.shape[0]
-    pairs = node.reshape(m, 2, 2, 2)  # block, node in block, 2×2
-    blocks = jnp.zeros((m, 4, 4)).at[:, :2, :2].set(pairs[:, 0]).at[:, 2:, 2:].set(pairs[:, 1])
+    node = [[indenter * normal[:, a] * normal[:, b] for b in range(2)] for a in range(2)]
+    node[1][1] = node[1][1] + ground
+    # block k holds nodes 2k (dofs 0, 1) and 2k + 1 (dofs 2, 3)
+    diag = tuple(tuple(hess.diag[i][j] + node[i % 2][j % 2][i // 2 :: 2] if i // 2 == j // 2 else hess.diag[i][j]
+                       for j in range(4)) for i in range(4))
     arrow = -(indenter * normal[:, 1])[:, None] * normal  # ∂(x − c)/∂z_c = (0, −1)
     corner = jnp.sum(indenter * normal[:, 1] ** 2)
     return eqx.tree_at(lambda h: (h.diag, h.arrow, h.corner), hess,
-                       (hess.diag + blocks, hess.arrow + arrow.ravel(), hess.corner + corner))
+                       (diag, hess.arrow + arrow.ravel(), hess.corner + corner))
 
 
 def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
@@ -181,13 +181,14 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
 
 def _jacobi_diagonal(hess: StructuredHessian):
     """|diag H| as a flat vector (the scaling of the gradient fallback step), floored at 1e-30."""
-    diag = jnp.concatenate([jnp.diagonal(hess.diag, axis1=1, axis2=2).ravel(), hess.corner[None]])
+    diag = jnp.concatenate([jnp.stack([hess.diag[i][i] for i in range(4)], -1).ravel(), hess.corner[None]])
     return jnp.maximum(jnp.abs(diag), 1e-30)
 
 
 def _shift(hess: StructuredHessian, mu):
     """H + μ |diag H| (Levenberg shift, Jacobi-scaled so it is unit-free)."""
-    diag = hess.diag + mu * jnp.abs(hess.diag) * jnp.eye(4)[None]
+    diag = tuple(tuple(entry + mu * jnp.abs(entry) if i == j else entry for j, entry in enumerate(row))
+                 for i, row in enumerate(hess.diag))
     return eqx.tree_at(lambda h: (h.diag, h.corner), hess,
                        (diag, hess.corner + mu * jnp.abs(hess.corner)))
 
