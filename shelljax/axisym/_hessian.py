@@ -181,8 +181,8 @@ def _membrane_and_gas_entries(x, x0, cfg: Config, p: Params, d_gas):
 # --- hinge Hessians as arrays of 6×6 blocks -----------------------------------------------------
 # Written entry by entry too, the bending Hessian took ≈ 40 instead of 85 µs a curve (batch of 16,
 # per call), but it had 3.5× the HLO instructions and compiled in 2.1 s instead of 0.7 s, twice in
-# every curve program and more under autodiff. Each ``Setup``, batch shape and derivative compiles its own
-# program, and the test suite (two thirds compilation) has no room for it (docs/axisym.md).
+# every curve program and more under autodiff. Each ``Setup``, batch shape and derivative compiles
+# its own program, and the test suite (two thirds compilation) has no room for it (docs/axisym.md).
 
 def _block_outer(u, v):
     return u[..., :, None] * v[..., None, :]
@@ -213,10 +213,9 @@ def _block_direction_derivatives(t):
 
 
 def _block_length_derivatives(t):
-    """|t| [m], its gradient t̂ (…, 2) and Hessian (I − t̂t̂ᵀ)/|t| (…, 2, 2) [1/m]."""
-    length = jnp.sqrt(jnp.sum(t**2, axis=-1))
-    unit = t / length[..., None]
-    return length, unit, (jnp.eye(2) - _block_outer(unit, unit)) / length[..., None, None]
+    """``_length_derivatives`` of t (…, 2) as arrays: |t| [m], t̂ (…, 2), (I − t̂t̂ᵀ)/|t| (…, 2, 2) [1/m]."""
+    length, unit, curv = _length_derivatives(t[..., 0], t[..., 1])
+    return length, jnp.stack(unit, -1), jnp.stack([jnp.stack(row, -1) for row in curv], -2)
 
 
 def _hinge_measures(xe):

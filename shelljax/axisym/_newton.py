@@ -71,8 +71,8 @@ def _add_contact_springs(hess: StructuredHessian, ground, indenter, normal):
     node = [[indenter * normal[:, a] * normal[:, b] for b in range(2)] for a in range(2)]
     node[1][1] = node[1][1] + ground
     # block k holds nodes 2k (dofs 0, 1) and 2k + 1 (dofs 2, 3)
-    diag = tuple(tuple(hess.diag[i][j] + node[i % 2][j % 2][i // 2 :: 2] if i // 2 == j // 2 else hess.diag[i][j]
-                       for j in range(4)) for i in range(4))
+    diag = tuple(tuple(entry + node[i % 2][j % 2][i // 2 :: 2] if i // 2 == j // 2 else entry
+                       for j, entry in enumerate(row)) for i, row in enumerate(hess.diag))
     arrow = -(indenter * normal[:, 1])[:, None] * normal  # ∂(x − c)/∂z_c = (0, −1)
     corner = jnp.sum(indenter * normal[:, 1] ** 2)
     return eqx.tree_at(lambda h: (h.diag, h.arrow, h.corner), hess,
