@@ -182,6 +182,30 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
     assert float(predicted["iterations"].sum()) <= 0.85 * float(plain["iterations"].sum())
 
 
+def test_nearby_guesses_change_the_path_not_the_equilibrium():
+    setup = Setup(radius=0.13, n_elements=61)
+    forces = np.array([5.0, 10.0, 15.0])
+    pezzi = np.array([1300.0, 2.34e6, 9e-4, 0.4])
+    cold = jax.jit(lambda theta: curve_single(setup, *theta, forces, return_states=True))
+    warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, forces, nearby_guesses=guesses))
+    alone = cold(pezzi)
+    neighbour = cold(pezzi * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
+    started_near = warm(pezzi, neighbour["state"][:, None])
+    # Both satisfy max|∂E/∂y| ≤ 1e-7 N; with a dimple stiffness of ~250 N/m that pins w0 to
+    # ≈ 4e-10 m of its 20–45 mm, ≈ 2e-8 relative: 1e-7 leaves room for the two Newton paths'
+    # own rounding without letting any other equilibrium pass.
+    np.testing.assert_allclose(np.asarray(started_near["w0"]), np.asarray(alone["w0"]), rtol=1e-7)
+    # 5–7 Newton iterations a level from the previous level, 2 from the neighbour (measured)
+    assert float(started_near["iterations"].sum()) <= 0.6 * float(alone["iterations"].sum())
+    # The lowest-energy guess wins: the equilibrium itself needs no iteration ...
+    at_rest = warm(pezzi, jnp.stack([neighbour["state"], alone["state"]], axis=1))
+    assert np.all(np.asarray(at_rest["iterations"]) == 0)
+    # ... and a missing one (NaN) is never taken: the usual path, step for step.
+    unknown = warm(pezzi, jnp.full_like(neighbour["state"][:, None], jnp.nan))
+    np.testing.assert_array_equal(np.asarray(unknown["iterations"]), np.asarray(alone["iterations"]))
+    np.testing.assert_allclose(np.asarray(unknown["w0"]), np.asarray(alone["w0"]), rtol=1e-12)
+
+
 def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
     # A hammer surrogate node (sealed gas, E ≈ 198 MPa, τ ≈ 9): at the fourth level a ground node
     # hovers 4 nm above the plane, where the contact-predicted model's pull k·gap cancels its

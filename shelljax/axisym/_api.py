@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._errors import InvalidInputError, NoConvergenceError
+from .._hilbert import hilbert_order
 from .._parallel import map_batch
 from ._model import Setup, curve_single
 from ._wrinkles import wrinkle_count
@@ -59,9 +60,12 @@ class CurveResult(eqx.Module):
     rest_radius: Float[Array, " b"]
 
 
-def _one(setup: Setup, theta, forces):
+def _one(setup: Setup, theta, forces, nearby_guesses=None):
+    """(CurveResult fields, (equilibrium states (1 + k, n_y) [m]: inflated, then each level;
+    inflation residual [N])) of one parameter set."""
     pressure, young, thick, nu = theta[0], theta[1], theta[2], theta[3]
-    out = curve_single(setup, pressure, young, thick, nu, forces)
+    out = curve_single(setup, pressure, young, thick, nu, forces, return_states=True,
+                       nearby_guesses=nearby_guesses)
     n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
                       young, thick, nu, setup.radius)
     fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
@@ -70,34 +74,78 @@ def _one(setup: Setup, theta, forces):
         wrinkle_count=n,
         converged=jnp.isfinite(out["residual"]) & (out["residual"] <= setup.atol) & (out["wall_gap"] > thick),
     )
-    return fields
+    return fields, (out["state"], out["inflation_residual"])
+
+
+def _walk_coordinates(params):
+    """(log P_g, log E, log h, ν) [-]: coordinates in which equal steps change a curve about
+    equally, for the Hilbert walk and the slopes learnt along it; ν last (often held fixed)."""
+    return jnp.column_stack([jnp.log(params[:, :3]), params[:, 3]])
 
 
 @functools.partial(jax.jit, static_argnums=(0, 3))
 def _batched(setup: Setup, params, forces, chunk: int):
-    one = jax.vmap(lambda th: _one(setup, th, forces))
     b = params.shape[0]
     if chunk <= 0 or b <= chunk:
-        return one(params)
-    # Chunks of `chunk` curves run one after the other (lax.map): a vmapped while_loop runs
-    # until its slowest member converges, and small chunks keep the work arrays in cache.
-    # Equal chunks of at most `chunk`: the padding (copies of the last row) stays below one
-    # curve per chunk instead of up to a whole chunk.
-    n_chunks = -(-b // chunk)
-    size = -(-b // n_chunks)
-    pad = n_chunks * size - b
-    padded = jnp.concatenate([params, jnp.broadcast_to(params[-1:], (pad, 4))], axis=0)
-    out = jax.lax.map(one, padded.reshape(n_chunks, size, 4))
-    return jax.tree_util.tree_map(lambda v: v.reshape((n_chunks * size,) + v.shape[2:])[:b], out)
+        return jax.vmap(lambda th: _one(setup, th, forces))(params)[0]
+    # `chunk` lanes, vmapped, each walking its own stretch of the batch's Hilbert ordering, one
+    # curve after the other (lax.scan): the inflation and every level of a curve start from the
+    # lowest-energy of the usual start, the lane's last converged state there and that state
+    # extrapolated to the new parameters (``curve_single``'s nearby_guesses). A vmapped
+    # while_loop runs until its slowest member converges: few lanes waste little.
+    coords = _walk_coordinates(params)
+    order = hilbert_order(coords)
+    steps = -(-b // chunk)
+
+    def lanes(v):
+        # (b, …) → (steps, chunk, …) in walk order, the last lane padded with the walk's last row
+        walked = v[order]
+        walked = jnp.concatenate([walked, jnp.broadcast_to(walked[-1:], (chunk * steps - b,) + v.shape[1:])])
+        return walked.reshape((chunk, steps) + v.shape[1:]).swapaxes(0, 1)
+
+    def solve_step(walk, step_in):
+        # walk: per lane and solve (the inflation, then the k levels) the last converged state
+        # (1 + k, n_y) [m], its coordinates (1 + k, 4) and the slope d state / d coordinates
+        # (1 + k, n_y, 4) [m] learnt along the way (Broyden's update: the secant condition
+        # along each step, the slope unchanged across it). The unextrapolated state stays a
+        # guess: on 5 % of the levels (80 curves, one lane) the extrapolation landed
+        # millimetres off (force residuals of 1e3–1e4 N), and without the plain state those
+        # levels restarted from the previous level (5 Newton iterations).
+        states, anchors, slopes = walk
+        thetas, here = step_in
+        delta = here[:, None, :] - anchors
+        predicted = states + jnp.einsum("lkyc,lkc->lky", slopes, delta)
+        fields, (solved, inflation_residual) = jax.vmap(
+            lambda theta, guesses: _one(setup, theta, forces, guesses))(thetas, jnp.stack([states, predicted], axis=2))
+        solved = jax.lax.stop_gradient(solved)  # the walk only guesses: no derivative through it
+        good = jnp.concatenate([(inflation_residual <= setup.atol)[:, None], fields["converged"]], axis=1)[..., None]
+        sq = jnp.sum(delta**2, axis=-1, keepdims=True)
+        learn = good & (sq > 0.0) & jnp.all(jnp.isfinite(predicted), axis=-1, keepdims=True)
+        update = (solved - predicted)[..., None] * (delta / jnp.where(sq > 0.0, sq, 1.0))[:, :, None, :]
+        slopes = jnp.where(learn[..., None], slopes + update, slopes)
+        states = jnp.where(good, solved, states)
+        anchors = jnp.where(good, here[:, None, :], anchors)
+        return (states, anchors, slopes), fields
+
+    n_levels, n_unknowns = 1 + forces.shape[0], 2 * len(setup.theta()) + 1
+    start = (jnp.full((chunk, n_levels, n_unknowns), jnp.nan), jnp.zeros((chunk, n_levels, 4)),
+             jnp.zeros((chunk, n_levels, n_unknowns, 4)))
+    _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords)))
+    unwalk = jnp.zeros(b, order.dtype).at[order].set(jnp.arange(b, dtype=order.dtype))
+    return jax.tree_util.tree_map(
+        lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
 def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0) -> CurveResult:
     """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
 
     ``params`` (batch, 4): columns P_g [Pa], E [Pa], h [m], ν [-]; ``forces`` (k,) [N].
-    ``chunk`` > 0 solves the batch in sequential vmapped chunks of that size (throughput on
-    CPUs); 0 vmaps the whole batch at once. Differentiable in ``params`` (implicit
-    differentiation of every equilibrium).
+    ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
+    a stretch of the batch ordered along a Hilbert curve and starting every curve from its
+    predecessor's equilibria (throughput on CPUs: 12–13 instead of 37 Newton iterations a
+    curve when 10⁵ parameter sets fill a ±15 % box); 0 vmaps the whole batch at once, every
+    curve from scratch. The results agree to the Newton tolerance either way (w0 to ≈ 3e-8
+    relative). Differentiable in ``params`` (implicit differentiation of every equilibrium).
     """
     return CurveResult(**_batched(setup, jnp.asarray(params, jnp.float64),
                                   jnp.asarray(forces, jnp.float64), int(chunk)))
@@ -135,7 +183,7 @@ def _check(params, forces, radius):
 
 
 def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
-                       chunk: int = 16, workers: int | None = None, **setup_kwargs) -> CurveResult:
+                       chunk: int = 8, workers: int | None = None, **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
@@ -145,9 +193,10 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     ``contact_stiffness`` [N/m³], ``atol`` [N], ...).
 
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
-    ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: batch members
-    solved together (vmapped) per sequential chunk (at most this many; equal chunks);
-    16 is fastest on 2 CPU cores (6.3 against 8.3 ms per curve for 4, one thread). ``workers``:
+    ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: vmapped lanes
+    per host thread, each solving its share of the batch curve after curve from the previous
+    curve's equilibria (:func:`indentation_curves_raw`); 8 lanes: 2.2 ms per curve on one
+    thread (2048 curves), as fast as 4, against 2.4 ms for 16. ``workers``:
     host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
     GPU; see ``shelljax._parallel``). For use inside jit/vmap/grad call
     :func:`indentation_curves_raw`.

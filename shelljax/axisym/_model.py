@@ -129,11 +129,12 @@ def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_vo
                   f(bending_scale))
 
 
-def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0):
+def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses=None):
     """Inflated (pre-indentation) state of the discrete sphere.
 
     Returns (rest radius R0 [m], inflated unknowns y [m], residual [N], iterations). The bottom
-    pole height is pinned at −R (rigid mode); nothing touches the ball.
+    pole height is pinned at −R (rigid mode); nothing touches the ball. Newton starts from the
+    lowest-energy of the continuous sphere's stretch and ``guesses`` (c, n_y) [m] (NaN: none).
     """
     lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale)
     r0 = setup.radius / lam
@@ -141,6 +142,8 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0):
                  pin_bottom=True, relax=False)
     p = _params(young, thick, nu, r0, pressure, setup, bending_scale=bending_scale)
     y0 = jnp.concatenate([lam * rest_nodes(cfg, r0).ravel(), jnp.zeros(1)])
+    if guesses is not None:
+        y0 = jnp.concatenate([y0[None], jax.lax.stop_gradient(guesses)])
     y, res, it, _ = equilibrium(cfg, setup.options(), p, y0)
     return r0, y, res, it
 
@@ -243,14 +246,24 @@ def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
 
 
 def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
-                 return_states: bool = False):
+                 return_states: bool = False, nearby_guesses=None):
     """One force-controlled curve (unbatched, traceable). ``forces`` (k,) [N], increasing.
 
     Returns a dict of (k,) arrays: the observables, ``residual`` [N], ``iterations`` (Newton
-    iterations of the level's load steps) and ``rest_radius`` [m] (scalar).
+    iterations of the level's load steps) and ``rest_radius`` [m] (scalar); with
+    ``return_states`` also ``state`` (1 + k, n_y) [m], the equilibrium unknowns of the inflated
+    ball and of each level.
+
+    ``nearby_guesses`` (1 + k, c, n_y) [m]: for the inflation and each level, c guesses of the
+    state taken from curves with nearby parameters at the same forces (their states, or states
+    extrapolated from them; NaN: none). Each Newton solve starts from the guess of lowest
+    energy, the usual start (the previous level's state) included: the state of a curve 0.5 %
+    away in (P_g, E, h) cuts the Newton iterations per level from 5–7 to ≈ 2. The result does
+    not depend on the guesses beyond the tolerance ``atol``, and no derivative flows through them.
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
-    r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale)
+    r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale,
+                                    None if nearby_guesses is None else nearby_guesses[0])
     n = len(setup.theta())
     x_inf, _ = split(y_inf, n)
     cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
@@ -281,7 +294,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     schedule = jnp.concatenate([ramp, sub.ravel()])
     opts = setup.options()
 
-    def step(carry, force):
+    def step(carry, level):
+        force, nearby = level
         y_prev, y_prev2, f_prev, f_prev2 = carry
         if setup.predictor == "tangent":
             # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
@@ -298,6 +312,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
             w = jnp.clip(w, 0.0, 1.0)
             guess = y_prev + w * (y_prev - y_prev2)
         p = eqx.tree_at(lambda q: q.force, base, force)
+        if nearby_guesses is not None:
+            guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
         y, res, it, _ = equilibrium(cfg, opts, p, guess)
         obs = observables(cfg, p, y, y_inf, zc_contact)
         obs.update(residual=res, iterations=it)
@@ -306,8 +322,14 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
         return (y, y_prev, force, f_prev), obs
 
     init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)))
-    _, obs = jax.lax.scan(step, init, schedule)
     n_ramp = len(setup.ramp)
+    nearby = None
+    if nearby_guesses is not None:
+        # The guesses are at the requested forces: only the last sub-step of each level gets
+        # them (NaN guesses are never chosen).
+        nearby = jnp.full((schedule.shape[0],) + nearby_guesses.shape[1:], jnp.nan)
+        nearby = nearby.at[n_ramp + m - 1 :: m].set(nearby_guesses[1:])
+    _, obs = jax.lax.scan(step, init, (schedule, nearby))
     out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}
     # a level counts as converged only if every load step before it converged
     out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
@@ -316,6 +338,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
     out["rest_radius"] = r0
     out["inflation_residual"] = res_inf
+    if return_states:
+        out["state"] = jnp.concatenate([y_inf[None], out["state"]])
     return out
 
 
