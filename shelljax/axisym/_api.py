@@ -77,7 +77,7 @@ def _one(setup: Setup, theta, forces, nearby_guesses=None):
     return fields, (out["state"], out["inflation_residual"])
 
 
-def _walk_coordinates(params):
+def _walk_coordinates(params: Float[Array, "b 4"]) -> Float[Array, "b 4"]:
     """(log P_g, log E, log h, ν) [-]: coordinates in which equal steps change a curve about
     equally, for the Hilbert walk and the slopes learnt along it; ν last (often held fixed)."""
     return jnp.column_stack([jnp.log(params[:, :3]), params[:, 3]])
