@@ -93,7 +93,7 @@ def _batched(setup: Setup, params, forces, chunk: int):
     # lowest-energy of the usual start, the lane's last converged state there and that state
     # extrapolated to the new parameters (``curve_single``'s nearby_guesses). A vmapped
     # while_loop runs until its slowest member converges: few lanes waste little.
-    coords = _walk_coordinates(params)
+    coords = jax.lax.stop_gradient(_walk_coordinates(params))  # they only order and guess
     order = hilbert_order(coords)
     steps = -(-b // chunk)
 
