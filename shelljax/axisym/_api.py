@@ -115,10 +115,12 @@ def _batched(setup: Setup, params, forces, chunk: int):
         thetas, here = step_in
         delta = here[:, None, :] - anchors
         predicted = states + jnp.einsum("lkyc,lkc->lky", slopes, delta)
+        guesses = jnp.stack([states, predicted], axis=2)
         fields, (solved, inflation_residual) = jax.vmap(
-            lambda theta, guesses: _one(setup, theta, forces, guesses))(thetas, jnp.stack([states, predicted], axis=2))
+            lambda theta, nearby: _one(setup, theta, forces, nearby))(thetas, guesses)
         solved = jax.lax.stop_gradient(solved)  # the walk only guesses: no derivative through it
-        good = jnp.concatenate([(inflation_residual <= setup.atol)[:, None], fields["converged"]], axis=1)[..., None]
+        inflated = (inflation_residual <= setup.atol)[:, None]
+        good = jnp.concatenate([inflated, fields["converged"]], axis=1)[..., None]
         sq = jnp.sum(delta**2, axis=-1, keepdims=True)
         learn = good & (sq > 0.0) & jnp.all(jnp.isfinite(predicted), axis=-1, keepdims=True)
         update = (solved - predicted)[..., None] * (delta / jnp.where(sq > 0.0, sq, 1.0))[:, :, None, :]
