@@ -10,7 +10,8 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax.physics import ATMOSPHERIC_PRESSURE
-from shelljax.shell3d._model import GRAVITY
+from shelljax.shell3d._model import BARRIER_STEP_FRACTION, GRAVITY, body_gaps
+from shelljax.solve import SparseSolver
 
 from _balance import net_vertical_residual
 
@@ -212,3 +213,42 @@ def test_newton_start_keeps_the_converged_contact_gaps(sealed):
     moved = touching | fresh | (ground_prev < ghat) | (ground_guess < 0.25 * ghat)
     np.testing.assert_array_equal(start.reshape(-1)[:-3].reshape(-1, 3)[~moved], guess[:-3].reshape(-1, 3)[~moved])
     assert ind.min() > 0 and ground.min() > 0
+
+
+def test_line_search_projection_stops_only_the_vertices_a_step_would_drive_into_a_body(sealed):
+    """Newton's first step of a 4 mm poke from the resting ball drives a few vertices through
+    the ground. The line search's projection (ShellModel.feasible_trial) stops exactly those
+    short, at BARRIER_STEP_FRACTION of their gap, lets every other vertex take the whole step,
+    and the projected full step is feasible and lowers the energy: it is accepted without
+    halving, where the plain step is infeasible and would be halved as a whole."""
+    model = sealed.model
+    guess = sealed.q_reference.copy()
+    guess[-3:] = sealed.touch_center - np.array([0.0, 0.0, 0.004])
+    q = sealed._feasible_start(guess, model, sealed.q_reference)
+    params = sealed._params_for(q)
+    free = model.free
+    g = np.where(free, model.host_gradient(q, params), 0.0)
+    mat, rank_one = model.host_hessian(q, params, False, model.host_gradient(q, params))
+    step = np.where(free, -SparseSolver(mat, rank_one, symmetric=True, definite=True).solve(g), 0.0)
+    trial = q + step
+    assert not np.isfinite(model.host_energy(trial, params))  # plain Newton would have to halve
+
+    projected = model.feasible_trial(q, trial)
+    ghat = model.config.contact.activation_distance
+    start, plain, after = body_gaps(q, model.config), body_gaps(trial, model.config), body_gaps(projected, model.config)
+    stopped = np.zeros(model.config.n_vertices, dtype=bool)
+    for g0, g1, g2 in zip(start, plain, after):
+        hit = (g1 < BARRIER_STEP_FRACTION * g0) & (g1 < ghat)
+        stopped |= hit
+        # relative to the gap: moving a vertex along the sphere's normal repeats |x − c| − r in
+        # floating point (≈ 1e-17 m against gaps ≥ 1e-6 m)
+        np.testing.assert_allclose(g2[hit], BARRIER_STEP_FRACTION * g0[hit], rtol=1e-9)
+        assert g2.min() > 0.0
+    assert 1 <= stopped.sum() < 0.05 * stopped.size
+    moved = np.repeat(stopped, 3)
+    np.testing.assert_array_equal(projected[:-3][~moved], trial[:-3][~moved])
+    np.testing.assert_array_equal(projected[-3:], trial[-3:])
+    np.testing.assert_array_equal(projected[~free], trial[~free])
+
+    e0, e1 = model.host_energy(q, params), model.host_energy(projected, params)
+    assert e1 <= e0 + 1e-4 * min(float(g @ (projected - q)), 0.0)  # the line search's Armijo test

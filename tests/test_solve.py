@@ -166,6 +166,65 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
     assert again.factorizations == 0 and again.last_factorization is inexact.last_factorization
 
 
+def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minimum():
+    """A spring chain x₀…x₄ pushed toward a wall by a force on x₄, its first bead on a log
+    barrier (x₀ > 0), started far above the equilibrium gap μ/push. Newton's quadratic model of
+    the barrier overshoots into x₀ < 0, so the plain line search meets infeasible trial points
+    and halves; with a projection that keeps x₀ ≥ 30 % of its value, no trial point is
+    infeasible and Newton reaches the same minimum."""
+    import scipy.sparse as sp
+
+    n, stiffness, mu, push = 5, 10.0, 1e-6, 1.0
+    infeasible = []
+
+    def energy(x):
+        if x[0] <= 0.0:
+            infeasible.append(x.copy())
+            return np.inf
+        springs = np.diff(x) - 0.1
+        return 0.5 * stiffness * springs @ springs - mu * np.log(x[0]) + push * x[-1]
+
+    def grad(x):
+        tension = stiffness * (np.diff(x) - 0.1)
+        g = np.zeros(n)
+        g[:-1] -= tension
+        g[1:] += tension
+        g[0] -= mu / x[0]
+        g[-1] += push
+        return g
+
+    def hess(x, project):
+        main = np.full(n, 2 * stiffness)
+        main[0] = main[-1] = stiffness
+        main[0] += mu / x[0] ** 2
+        off = -stiffness * np.ones(n - 1)
+        return sp.diags([off, main, off], [-1, 0, 1], format="csr"), None
+
+    trials = []
+
+    def keep_gap(x, x_trial):
+        out = x_trial.copy()
+        out[0] = max(x_trial[0], 0.3 * x[0])
+        trials.append(out)
+        return out
+
+    start = 0.1 * np.arange(n) + 0.5
+    free = np.ones(n, dtype=bool)
+    plain = newton(energy, grad, hess, start, free, atol=1e-10, reuse_factorization=False)
+    assert len(infeasible) > 0
+    infeasible.clear()
+    projected = newton(energy, grad, hess, start, free, atol=1e-10, reuse_factorization=False, project=keep_gap)
+    assert infeasible == [] and len(trials) >= projected.iterations
+    for res in (plain, projected):
+        assert np.max(np.abs(grad(res.x))) <= 1e-10
+    # At the minimum every spring carries the push, compressed by its whole rest length 0.1, so
+    # all beads sit at x₀ = μ/push. The barrier (μ/x₀² = 1e6 N/m) holds x₀; the rest is a
+    # fixed–free chain of 4 springs, smallest eigenvalue 4k sin²(π/18) ≈ 1.2 N/m, so
+    # |x − x*| ≤ √5 · 1e-10 N / 1.2 N/m ≈ 2e-10 m.
+    np.testing.assert_allclose(projected.x, mu / push, atol=5e-10)
+    np.testing.assert_allclose(plain.x, mu / push, atol=5e-10)
+
+
 def test_preconditioned_cg_gives_up_on_a_poor_preconditioner_or_negative_curvature():
     from shelljax.solve._newton import CG_EXTRAPOLATE_AFTER, CG_MAX_ITERATIONS, _preconditioned_cg
 

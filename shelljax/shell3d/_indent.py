@@ -38,7 +38,7 @@ from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE
 from ..solve import continuation, implicit_equilibrium, release_factorizations
 from ._mesh import ShellMesh, sphere_mesh
-from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from ._model import ContactConfig, ModelConfig, ShellModel, body_gaps, place_at_gaps, rigid_mode_pins
 from ._wrinkles import wrinkle_spectrum
 from ._observables import observables as _observables
 from ._rest import solve_rest_scale, solve_rest_shape
@@ -321,34 +321,17 @@ class Indentation:
         """
         if model.config.contact.kind != "barrier":
             return q
-        q = q.copy()
-        x = q[:-3].reshape(-1, 3)
         ghat = self.activation_distance
         floor = 0.25 * ghat
-        x_prev = None if q_prev is None else q_prev[:-3].reshape(-1, 3)
+        gaps_prev = None if q_prev is None else body_gaps(q_prev, model.config)
 
-        def place(gap, gap_prev):
-            """Target gap of each vertex, or NaN where it stays."""
-            target = np.where(gap < floor, floor, np.nan)
-            if gap_prev is not None:
-                target = np.where(gap_prev < ghat, np.maximum(gap_prev, 1e-6 * ghat), target)
-            return target
+        def target(body, gap):
+            goal = np.where(gap < floor, floor, np.nan)
+            if gaps_prev is not None:
+                goal = np.where(gaps_prev[body] < ghat, np.maximum(gaps_prev[body], 1e-6 * ghat), goal)
+            return goal
 
-        c = q[-3:]
-        d = x - c
-        dist = np.linalg.norm(d, axis=1)
-        gap_prev = None if x_prev is None else np.linalg.norm(x_prev - q_prev[-3:], axis=1) - self.indenter_radius
-        target = place(dist - self.indenter_radius, gap_prev)
-        moved = np.isfinite(target)
-        x[moved] = c + d[moved] / dist[moved, None] * (self.indenter_radius + target[moved, None])
-        for point, normal in model.config.contact.planes:
-            point, normal = np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64)
-            gap = (x - point) @ normal
-            target = place(gap, None if x_prev is None else (x_prev - point) @ normal)
-            moved = np.isfinite(target)
-            x[moved] += (target[moved] - gap[moved])[:, None] * normal
-        q[:-3] = x.ravel()
-        return q
+        return place_at_gaps(q, model.config, target)
 
     def _step(self, model, q_guess, params, label, q_prev=None):
         q0 = self._feasible_start(q_guess, model, q_prev)

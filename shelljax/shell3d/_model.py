@@ -325,11 +325,12 @@ _gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _linearized_gradient(q, params, geometry, config) -> jax.tree_util.Partial:
-    """v ↦ H(q) v [N], the exact Hessian (sealed gas's rank-one part included) at q as a linear
-    map, with the primal's intermediates computed once: each product then costs ≈ 13 ms at 20k
-    faces instead of ≈ 35 ms for a jvp of the gradient."""
-    return jax.linearize(lambda y: jax.grad(total_energy)(y, params, geometry, config), q)[1]
+def _linearized_gradient(q, params, geometry, config) -> tuple[Array, jax.tree_util.Partial]:
+    """(∇E(q) [N], v ↦ H(q) v [N]): the gradient and the exact Hessian (sealed gas's rank-one part
+    included) at q as a linear map, with the primal's intermediates computed once: each product
+    then costs ≈ 13 ms at 20k faces instead of ≈ 35 ms for a jvp of the gradient, and the
+    gradient comes with the linearization (≈ 7 ms at 20k faces, as much as the gradient alone)."""
+    return jax.linearize(lambda y: jax.grad(total_energy)(y, params, geometry, config), q)
 
 
 _apply_linear = jax.jit(lambda linear, v: linear(v))
@@ -557,6 +558,55 @@ def _rank_one(q, params, geometry, config):
     return c2, jnp.concatenate([dvol, jnp.zeros(3)])
 
 
+#: The line search's projection (:meth:`ShellModel.feasible_trial`) keeps at least this fraction
+#: of its gap to a body for every vertex within the barrier's range. A log barrier's Newton model
+#: overshoots wherever a vertex starts far above its equilibrium gap, and halving the whole step
+#: until no vertex crossed made the first 2–10 iterations of every load step take 1/4 … 1/64
+#: steps. On the 20k-face curve 0.3 took 42 Newton iterations and 183 CG products against 55 and
+#: 265 without; 0.1 made more factorizations (12 against 5) and 0.5 more products (201)
+#: (docs/shell3d.md, *Benchmark*).
+BARRIER_STEP_FRACTION = 0.3
+
+
+def _body_gap_and_normal(x, c, config: ModelConfig, body: int):
+    """Gap [m] (V,) of every vertex to rigid body ``body`` (0: the indenter, if any, then the
+    planes in order) and the unit direction (V, 3) in which it grows (host arrays)."""
+    contact = config.contact
+    if contact.indenter_radius is not None:
+        if body == 0:
+            offset = x - c
+            distance = np.linalg.norm(offset, axis=1)
+            return distance - contact.indenter_radius, offset / distance[:, None]
+        body -= 1
+    point, normal = (np.asarray(a, dtype=np.float64) for a in contact.planes[body])
+    return (x - point) @ normal, np.broadcast_to(normal, x.shape)
+
+
+def n_bodies(config: ModelConfig) -> int:
+    """Number of rigid bodies (indenter and planes) the shell can touch."""
+    return (config.contact.indenter_radius is not None) + len(config.contact.planes)
+
+
+def place_at_gaps(q, config: ModelConfig, target) -> np.ndarray:
+    """A copy of state ``q`` [m] with vertices moved along the bodies' normals to the gaps
+    ``target(body, gap)`` [m] (NaN where a vertex stays), body after body (host)."""
+    q = np.array(q, dtype=np.float64)
+    x, c = q[: 3 * config.n_vertices].reshape(-1, 3), q[3 * config.n_vertices :]
+    for body in range(n_bodies(config)):
+        gap, normal = _body_gap_and_normal(x, c, config, body)
+        goal = target(body, gap)
+        moved = np.isfinite(goal)
+        x[moved] += (goal[moved] - gap[moved])[:, None] * normal[moved]
+    return q
+
+
+def body_gaps(q, config: ModelConfig) -> list:
+    """Gaps [m] (V,) of every vertex to each rigid body (:func:`_body_gap_and_normal`'s order)."""
+    q = np.asarray(q, dtype=np.float64)
+    x, c = q[: 3 * config.n_vertices].reshape(-1, 3), q[3 * config.n_vertices :]
+    return [_body_gap_and_normal(x, c, config, body)[0] for body in range(n_bodies(config))]
+
+
 def _check_config(config: ModelConfig) -> None:
     if config.gas not in GAS_MODELS:
         raise InvalidInputError(f"gas: unknown model {config.gas!r}; use one of {GAS_MODELS}.")
@@ -667,19 +717,29 @@ class ShellModel:
     def host_gradient(self, q, params) -> np.ndarray:
         return np.asarray(_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config))
 
-    def host_hessian_operator(self, q, params, gradient=None):
+    def _linearizes(self) -> bool:
+        return self.mesh.n_faces <= LINEARIZED_PRODUCT_MAX_FACES
+
+    def host_gradient_linearized(self, q, params):
+        """(gradient [N] as a host array, its linearization for :meth:`host_hessian_operator`)."""
+        gradient, linear = _linearized_gradient(jnp.asarray(q), self._host_params(params), self.geometry, self._jit_config)
+        return np.asarray(gradient), linear
+
+    def host_hessian_operator(self, q, params, gradient=None, linear=None):
         """v ↦ H(q) v [N] (host arrays; unmasked, exact) for displacements v (3V + 3,) [m]; with
-        the ``gradient`` [N] at q, Newton's matrix (:func:`_barrier_softening`) instead of H."""
+        the ``gradient`` [N] at q, Newton's matrix (:func:`_barrier_softening`) instead of H.
+        ``linear``: the linearization at q from :meth:`host_gradient_linearized`, if at hand."""
         q, params = jnp.asarray(q), self._host_params(params)
         blocks = None
         if gradient is not None and _softens(self.config):
             blocks = _barrier_softening(q, jnp.asarray(gradient), self.geometry, self._jit_config)
-        if self.mesh.n_faces > LINEARIZED_PRODUCT_MAX_FACES:
+        if not self._linearizes():
             def product(v):
                 hv = _hessian_vector_product(q, params, self.geometry, self._jit_config, v)
                 return hv if blocks is None else _plus_vertex_blocks(hv, blocks, v)
         else:
-            linear = _linearized_gradient(q, params, self.geometry, self._jit_config)
+            if linear is None:
+                linear = _linearized_gradient(q, params, self.geometry, self._jit_config)[1]
             if blocks is None:
                 product = lambda v: _apply_linear(linear, v)  # noqa: E731
             else:
@@ -730,16 +790,25 @@ class ShellModel:
         Hessian with the planes' barriers softened where they press harder than the load
         (:func:`_barrier_softening`); it equals the Hessian at equilibrium."""
         params = self._host_params(params)
-        # Newton's matrix needs the gradient at the iterate (barrier softening): keep the last one.
+        # Newton's matrix needs the gradient at the iterate (barrier softening) and CG its
+        # linearization, which computes the gradient anyway: keep the last of both.
         last = {}
 
         def gradient(q):
-            last["q"], last["g"] = q, self.host_gradient(q, params)
+            if self._linearizes():
+                last["q"], (last["g"], last["linear"]) = q, self.host_gradient_linearized(q, params)
+            else:
+                last["q"], last["g"] = q, self.host_gradient(q, params)
             return last["g"]
 
         def gradient_at(q):
             return last["g"] if last.get("q") is q else self.host_gradient(q, params)
 
+        def hessian_operator(q):
+            linear = last.get("linear") if last.get("q") is q else None
+            return self.host_hessian_operator(q, params, gradient_at(q), linear)
+
+        barrier = self.config.contact.kind == "barrier" and n_bodies(self.config) > 0
         return newton(
             lambda q: self.host_energy(q, params),
             gradient,
@@ -748,10 +817,26 @@ class ShellModel:
             self.free,
             atol=atol,
             max_iter=max_iter,
-            hessian_operator=lambda q: self.host_hessian_operator(q, params, gradient_at(q)),
+            hessian_operator=hessian_operator,
             factorization=factorization,
+            project=self.feasible_trial if barrier else None,
             name=name,
         )
+
+    def feasible_trial(self, q, q_trial) -> np.ndarray:
+        """``q_trial`` [m] with every vertex whose gap to a body would fall below
+        ``BARRIER_STEP_FRACTION`` of its gap at ``q`` (and below the barrier's range ĝ) put at that
+        fraction, along the body's normal; pinned dofs as in ``q_trial``. Newton's line search
+        projection with barrier contact: the vertices the step would drive into (or nearly
+        into) a body stop short, everything else moves the whole way."""
+        config = self.config
+        start_gaps = body_gaps(q, config)
+
+        def target(body, gap):
+            floor = BARRIER_STEP_FRACTION * start_gaps[body]
+            return np.where((gap < floor) & (gap < config.contact.activation_distance), floor, np.nan)
+
+        return np.where(self.free, place_at_gaps(q_trial, config, target), q_trial)
 
     def linear_response(self, q, params, load) -> np.ndarray:
         """Displacement [m] solving H u = load [N] at state q (exact Hessian; pins held)."""

@@ -3,7 +3,10 @@
 Convergence is measured in force units: the largest free component of the energy gradient [N]
 (for positions in m and energies in J). A backtracking line search on the energy rejects any
 trial point whose energy is not finite, which is how contact barriers stay feasible (the energy
-callback returns +inf for a penetrating configuration).
+callback returns +inf for a penetrating configuration). A caller with such barriers can also pass
+``project``, which maps each trial point to a feasible one near it (a projected search path, as
+in projected Newton methods for bounds): a step that only a few barrier vertices would overshoot
+then moves everything else the whole way instead of being halved as a whole.
 
 Each iteration first tries the exact Hessian (quadratic convergence); if it is not positive
 definite (its Cholesky factorization fails) or its step is not a descent direction, it retries
@@ -95,6 +98,7 @@ def newton(
     reuse_factorization: bool = True,
     hessian_operator: Callable | None = None,
     factorization=None,
+    project: Callable | None = None,
     name: str = "Newton",
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` to max |∇E| ≤ ``atol`` [N] over the ``free`` dofs.
@@ -102,16 +106,19 @@ def newton(
     ``energy(x) -> float`` [J] (+inf where infeasible); ``gradient(x) -> (n,)`` [N];
     ``hessian(x, project: bool) -> (csr_matrix, rank_one | None)`` with the fixed dofs folded in
     and ``rank_one = (c, u)`` for an extra c u uᵀ. ``reuse_factorization``: try the last
-    factorization before a new one (module docstring). Raises NoConvergenceError with the history.
+    factorization before a new one (module docstring). ``project(x, x_trial) -> x_trial'``: the
+    line search's trial points become ``project(x, x + α d)`` and its sufficient-decrease test
+    uses the first-order change ∇E·(x_trial' − x) of the projected point. Raises
+    NoConvergenceError with the history.
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _newton(energy, gradient, hessian, x0, free, atol=atol, max_iter=max_iter, max_halvings=max_halvings,
                        armijo=armijo, reuse_factorization=reuse_factorization, hessian_operator=hessian_operator,
-                       factorization=factorization, name=name)  # fmt: skip
+                       factorization=factorization, project=project, name=name)  # fmt: skip
 
 
 def _newton(energy, gradient, hessian, x0, free, *, atol, max_iter, max_halvings, armijo, reuse_factorization,
-            hessian_operator, factorization, name) -> NewtonResult:
+            hessian_operator, factorization, project, name) -> NewtonResult:
     free = np.asarray(free, dtype=bool)
     x = np.array(x0, dtype=np.float64)
     e = float(energy(x))
@@ -173,9 +180,13 @@ def _newton(energy, gradient, hessian, x0, free, *, atol, max_iter, max_halvings
         gnorm = float(np.linalg.norm(g))
         for _ in range(max_halvings):
             x_try = x + alpha * step
+            predicted = alpha * slope
+            if project is not None:
+                x_try = project(x, x_try)
+                predicted = min(float(g @ (x_try - x)), 0.0)
             e_try = float(energy(x_try))
             if np.isfinite(e_try):
-                if e_try <= e + armijo * alpha * slope:
+                if e_try <= e + armijo * predicted:
                     accepted = True
                 elif abs(e_try - e) <= 1e-11 * max(abs(e), 1e-300):
                     # Energy differences below round-off: accept if the residual decreases.
