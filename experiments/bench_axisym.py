@@ -21,14 +21,18 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
 
-import shelljax  # noqa: F401  (x64)
-from shelljax._parallel import cpu_workers, map_batch
-from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+
+import shelljax  # noqa: E402, F401  (x64)
+from shelljax._parallel import cpu_workers, map_batch  # noqa: E402
+from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw  # noqa: E402
 
 
 def _params(n, seed=0):

@@ -17,16 +17,20 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
-import shelljax
-from shelljax.config import bundled_data_dir
-from shelljax.estimate import ConvergenceWarning, estimate_session, fit_session, sample_posterior
-from shelljax.estimate import forward_model_for
-from shelljax.session import load_session
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+
+import shelljax  # noqa: E402
+from shelljax.config import bundled_data_dir  # noqa: E402
+from shelljax.estimate import ConvergenceWarning, estimate_session, fit_session, sample_posterior  # noqa: E402
+from shelljax.estimate import forward_model_for  # noqa: E402
+from shelljax.session import load_session  # noqa: E402
 
 
 def _exact_seconds_per_evaluation(session, model, walkers, repeats=3):

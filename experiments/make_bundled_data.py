@@ -22,10 +22,13 @@ Run:  python experiments/make_bundled_data.py
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import tomli_w
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
 
 DATA = Path(__file__).resolve().parents[1] / "shelljax" / "data"
 SESSIONS = DATA / "sessions"

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the checkout's shelljax, not an installed one
 CURVES_PATH = ROOT / "shelljax" / "data" / "virtual" / "curves.json"
 RADIUS = 0.13  # m
 POISSON = 0.4

@@ -17,14 +17,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
 
-import shelljax  # noqa: F401
-from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw, tau
-from shelljax.axisym._shallow import (
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+
+import shelljax  # noqa: E402, F401
+from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw, tau  # noqa: E402
+from shelljax.axisym._shallow import (  # noqa: E402
     pinch_linear_stiffness,
     pinch_observables,
     pinch_setup,

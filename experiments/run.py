@@ -5,8 +5,11 @@ entry point.
 """
 
 import sys
+from pathlib import Path
 
-from shelljax.cli import main
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+
+from shelljax.cli import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main(["run", *sys.argv[1:]]))
