@@ -227,8 +227,9 @@ def test_line_search_projection_stops_only_the_vertices_a_step_would_drive_into_
     q = sealed._feasible_start(guess, model, sealed.q_reference)
     params = sealed._params_for(q)
     free = model.free
-    g = np.where(free, model.host_gradient(q, params), 0.0)
-    mat, rank_one = model.host_hessian(q, params, False, model.host_gradient(q, params))
+    gradient = model.host_gradient(q, params)
+    g = np.where(free, gradient, 0.0)
+    mat, rank_one = model.host_hessian(q, params, False, gradient)
     step = np.where(free, -SparseSolver(mat, rank_one, symmetric=True, definite=True).solve(g), 0.0)
     trial = q + step
     assert not np.isfinite(model.host_energy(trial, params))  # plain Newton would have to halve
