@@ -12,7 +12,7 @@ import tomli_w
 
 from shelljax import InvalidInputError
 from shelljax.geometry import make_ball_mesh
-from shelljax.session import load_session
+from shelljax.session import SHAPE_OBSERVABLES, load_session, write_session
 
 FORCES = [5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0]
 BASE = {
@@ -150,3 +150,159 @@ def _holey_ball():
     mesh = make_ball_mesh(0.2, subdivisions=3)
     mesh.update_faces(np.arange(len(mesh.faces)) > 3)
     return mesh
+
+
+# The paper's evaluation rig: the deformed ball's shape at some (trial, force) points, in mm.
+SHAPE_CSV = """trial,force,height,upper_diameter,contact_diameter,sunken_depth
+1,5,250.5,40.0,60.5,2.0
+1,10,248.0,,70.0,
+2,10,247.5,55.0,71.0,0
+"""
+
+
+def shape_session(tmp_path: Path, shape: dict, csv_text: str | None = None) -> Path:
+    if csv_text is not None:
+        (tmp_path / "shape.csv").write_text(csv_text)
+    return write(tmp_path, variant(shape=shape))
+
+
+def test_shape_from_csv_keeps_missing_cells_as_nan(tmp_path):
+    s = load_session(shape_session(tmp_path, {"length_unit": "mm", "shape_csv": "shape.csv"}, SHAPE_CSV))
+    np.testing.assert_array_equal(s.shape_trial, [1, 1, 2])
+    assert s.shape_trial.dtype == s.trial.dtype
+    np.testing.assert_array_equal(s.shape_force, [5.0, 10.0, 10.0])
+    assert tuple(s.shape) == SHAPE_OBSERVABLES
+    np.testing.assert_allclose(s.shape["height"], [0.2505, 0.248, 0.2475])
+    np.testing.assert_allclose(s.shape["upper_diameter"], [0.04, np.nan, 0.055])
+    np.testing.assert_allclose(s.shape["sunken_depth"], [2e-3, np.nan, 0.0])
+    assert str(tmp_path / "shape.csv") in s.input_files
+
+
+def test_shape_inline_with_a_subset_of_observables(tmp_path):
+    shape = {"length_unit": "cm", "force_unit": "mN", "trial": [1, 2], "force": [5000.0, 10000.0],
+             "contact_diameter": [6.0, 7.0]}  # fmt: skip
+    s = load_session(shape_session(tmp_path, shape))
+    np.testing.assert_array_equal(s.shape_trial, [1, 2])
+    np.testing.assert_allclose(s.shape_force, [5.0, 10.0])
+    assert list(s.shape) == ["contact_diameter"]
+    np.testing.assert_allclose(s.shape["contact_diameter"], [0.06, 0.07])
+
+
+def test_session_without_shape_has_none(tmp_path):
+    s = load_session(write(tmp_path, BASE))
+    assert s.shape is None and s.shape_trial is None and s.shape_force is None
+
+
+_INLINE = {"trial": [1, 2], "force": [5.0, 10.0], "height": [0.25, 0.24]}
+
+
+@pytest.mark.parametrize(
+    "shape, pattern",
+    [
+        ({**_INLINE, "hieght": [0.2, 0.2]}, r"field 'shape.hieght': unknown key"),
+        ({**_INLINE, "shape_csv": "shape.csv"}, r"field 'shape': give exactly one of shape_csv or inline.*'trial'"),
+        ({"length_unit": "m"}, r"field 'shape': give exactly one of shape_csv or inline.*neither"),
+        ({**_INLINE, "height": [0.25]}, r"field 'shape': arrays differ in length \(trial 2, force 2, height 1\)"),
+        ({"trial": [1], "force": [5.0]}, r"field 'shape': no observable given"),
+        ({"force": [5.0], "height": [0.2]}, r"field 'shape.trial': missing"),
+        ({**_INLINE, "height": [0.25, math.nan]}, r"field 'shape.height\[1\]'.*value nan is not finite"),
+        ({**_INLINE, "height": [0.25, 0.0]}, r"field 'shape.height\[1\]'.*value 0.0 must be positive"),
+        ({**_INLINE, "sunken_depth": [0.0, -0.01]}, r"field 'shape.sunken_depth\[1\]'.*value -0.01 must be non-negative"),
+        ({**_INLINE, "force": [5.0, -10.0]}, r"field 'shape.force\[1\]'.*value -10.0 must be positive"),
+        ({**_INLINE, "trial": [1, 3]}, r"field 'shape.trial\[1\]'.*trial id 3 is not among the \[indentation\] trial ids \[1, 2\]"),
+        ({**_INLINE, "trial": [1, 1.5]}, r"field 'shape.trial\[1\]'.*trial id 1.5 is not an integer"),
+        ({**_INLINE, "height": [250.0, 240.0]}, r"field 'shape.height\[0\]'.*250 m is implausibly large.*length_unit"),
+        ({**_INLINE, "length_unit": "inch"}, r"field 'shape.length_unit'.*unknown length unit 'inch'"),
+        ({**_INLINE, "height": []}, r"field 'shape.height'.*expected a non-empty array"),
+        ({"shape_csv": "absent.csv"}, r"field 'shape.shape_csv'.*absent.csv does not exist"),
+    ],
+)
+def test_bad_shape_is_named(tmp_path, shape, pattern):
+    path = shape_session(tmp_path, shape)
+    with pytest.raises(InvalidInputError, match=pattern) as info:
+        load_session(path)
+    assert str(path) in str(info.value) and "Fix:" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "csv_text, pattern",
+    [
+        ("trial,force,height,height\n1,5,250,250\n", r"header column 'height' appears 2 times"),
+        ("trial,height\n1,250\n", r"header \['trial', 'height'\] has no 'force' column"),
+        ("trial,force\n1,5\n", r"has no observable column"),
+        ("trial,force,hight\n1,5,250\n", r"header column 'hight' is unknown"),
+        ("trial,force,height\n1,5,250\n1,10\n", r"shape.csv, line 3: expected 3 cells \(trial,force,height\), got 2"),
+        ("trial,force,height\n1,5,250\n1,10,tall\n", r"shape.csv, line 3, column 'height': 'tall' is not a number"),
+        ("trial,force,height\n1,,250\n", r"shape.csv, line 2, column 'force': '' is not a number"),
+        ("trial,force,height,sunken_depth\n1,5,250,\n1,10,240,\n", r"column 'sunken_depth' is empty in every row"),
+        (
+            "trial,force,height,sunken_depth\n1,5,250,2\n1,10,,\n",
+            r"field 'shape\[1\]'.*line 3.*\(trial 1, force 10\) has no measured observable",
+        ),
+        ("trial,force,height\n1,5,250\n1,10,nan\n", r"field 'shape.height\[1\]'.*\(in shape.csv, line 3\) value nan is not finite"),
+        ("trial,force,height\n1,5,250\n7,10,240\n", r"field 'shape.trial\[1\]'.*line 3.*trial id 7 is not among"),
+        ("trial,force,height\n", r"no shape points"),
+    ],
+)
+def test_bad_shape_csv_is_named(tmp_path, csv_text, pattern):
+    path = shape_session(tmp_path, {"length_unit": "mm", "shape_csv": "shape.csv"}, csv_text)
+    with pytest.raises(InvalidInputError, match=pattern) as info:
+        load_session(path)
+    assert "Fix:" in str(info.value)
+
+
+def _written_session_arguments() -> dict:
+    rng = np.random.default_rng(0)
+    forces = np.array(FORCES * 2)
+    return dict(
+        object_name="written-ball", radius=0.13, radius_std=0.002, thickness=0.9e-3,
+        thickness_std=5e-5, trial=np.repeat([1, 2], 7), force=forces,
+        depth=forces * 3e-3 * (1 + 0.01 * rng.standard_normal(forces.size)), wrinkle_counts=[8, 9],
+        manometer_gauge_pressure=1300.0, mass=0.85, poisson_ratio=0.45, notes="written by a test",
+    )  # fmt: skip
+
+
+def test_write_session_round_trips_with_shape(tmp_path):
+    args = _written_session_arguments()
+    shape = {"trial": [1, 1, 2], "force": [5.0, 10.0, 10.0], "height": [0.2505, 0.2480, 0.2475],
+             "sunken_depth": [2e-3, np.nan, 0.0]}  # fmt: skip
+    written = write_session(tmp_path / "w.toml", **args, shape=shape)
+    s = load_session(tmp_path / "w.toml")
+    assert (tmp_path / "w_shape.csv").is_file() and str(tmp_path / "w_shape.csv") in s.input_files
+    assert s.source == written.source == tmp_path / "w.toml"
+    for name in ("radius", "radius_std", "thickness", "thickness_std", "manometer_gauge_pressure", "mass",
+                 "poisson_ratio", "notes"):  # fmt: skip
+        assert getattr(s, name) == args[name], name
+    assert s.object_name == args["object_name"]
+    np.testing.assert_array_equal(s.trial, args["trial"])
+    np.testing.assert_array_equal(s.force, args["force"])
+    np.testing.assert_array_equal(s.depth, args["depth"])  # exact: floats are written in full
+    np.testing.assert_array_equal(s.wrinkle_counts, args["wrinkle_counts"])
+    np.testing.assert_array_equal(s.shape_trial, shape["trial"])
+    np.testing.assert_array_equal(s.shape_force, shape["force"])
+    assert list(s.shape) == ["height", "sunken_depth"]
+    np.testing.assert_array_equal(s.shape["height"], shape["height"])
+    np.testing.assert_array_equal(s.shape["sunken_depth"], shape["sunken_depth"])  # NaN stays NaN
+
+
+def test_write_session_without_shape_writes_no_csv(tmp_path):
+    s = write_session(tmp_path / "w.toml", **_written_session_arguments())
+    assert s.shape is None and list(tmp_path.iterdir()) == [tmp_path / "w.toml"]
+
+
+@pytest.mark.parametrize(
+    "shape, pattern",
+    [
+        ({"trial": [1], "force": [5.0], "hieght": [0.2]}, r"argument 'shape': unknown key 'hieght'"),
+        ({"trial": [1], "force": [5.0]}, r"argument 'shape': no observable"),
+        ({"trial": [1, 2], "force": [5.0], "height": [0.2, 0.2]}, r"argument 'shape': arrays differ in length"),
+        ({"trial": [1, 1], "force": [5.0, 10.0], "height": [0.2, np.nan], "sunken_depth": [0.0, np.nan]},
+         r"field 'shape\[1\]'.*has no measured observable"),
+        ({"trial": [3], "force": [5.0], "height": [0.2]}, r"field 'shape.trial\[0\]'.*trial id 3 is not among"),
+    ],
+)
+def test_write_session_rejects_bad_shape_and_writes_nothing(tmp_path, shape, pattern):
+    with pytest.raises(InvalidInputError, match=pattern) as info:
+        write_session(tmp_path / "w.toml", **_written_session_arguments(), shape=shape)
+    assert "Fix:" in str(info.value) and ".write_session-" not in str(info.value)
+    assert list(tmp_path.iterdir()) == []

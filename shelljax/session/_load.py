@@ -16,20 +16,24 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._schema import DEFAULT_POISSON_RATIO, Session
+from ._schema import DEFAULT_POISSON_RATIO, SHAPE_OBSERVABLES, Session
 from ._units import QUANTITY_UNITS
 
 SCHEMA_VERSION = 1
 
 _TOP_KEYS = {
     "schema_version", "object", "notes", "poisson_ratio", "mass", "mass_unit",
-    "manometer_gauge_pressure", "pressure_unit", "geometry", "wall", "indentation", "wrinkles",
+    "manometer_gauge_pressure", "pressure_unit", "geometry", "wall", "indentation", "wrinkles", "shape",
 }  # fmt: skip
 _GEOMETRY_KEYS = {"radius", "radius_std", "mesh", "poke_point", "fit_radius", "length_unit"}
 _WALL_KEYS = {"thickness", "thickness_std", "thickness_unit"}
 _INDENTATION_KEYS = {"force_unit", "depth_unit", "trials_csv", "trial", "force", "depth"}
 _WRINKLE_KEYS = {"counts", "onset_depth"}
 _CSV_COLUMNS = ("trial", "force", "depth")
+_SHAPE_KEYS = {"length_unit", "force_unit", "shape_csv", "trial", "force", *SHAPE_OBSERVABLES}
+_SHAPE_COLUMNS = ("trial", "force", *SHAPE_OBSERVABLES)
+# Nothing in the rig is this large: a larger shape length is millimetres read as metres.
+_SHAPE_MAX_LENGTH = 50.0  # [m]
 MIN_FORCE_LEVELS = 3
 
 
@@ -106,14 +110,14 @@ def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str) 
     if bad_finite.size:
         i = bad_finite[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where}value {values[i]!r} is not finite",
+            f"{field}[{i}]", f"{where}value {float(values[i])!r} is not finite",
             "re-measure or delete that sample (the whole row, in every column)",
         )  # fmt: skip
     bad_sign = np.flatnonzero(values <= 0)
     if bad_sign.size:
         i = bad_sign[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where}value {values[i]!r} must be positive "
+            f"{field}[{i}]", f"{where}value {float(values[i])!r} must be positive "
             f"({bad_sign.size} non-positive samples)",
             f"{field} is a magnitude: write |value|; drop samples taken before contact",
         )  # fmt: skip
@@ -319,6 +323,7 @@ def load_session(path: str | Path) -> Session:
             onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
             _check_samples(reader, "wrinkles.onset_depth", onset_depth, "")
             onset_depth = onset_depth * depth_scale
+    shape_trial, shape_force, shape = _read_shape(reader, data, trial, input_files)
 
     return Session(
         source=path, object_name=object_name.strip(), radius=float(radius),
@@ -326,9 +331,183 @@ def load_session(path: str | Path) -> Session:
         thickness_std=float(thickness_std), poisson_ratio=float(poisson_ratio), trial=trial,
         force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
         manometer_gauge_pressure=manometer, mass=mass, mesh_path=mesh_path, poke_point=poke_point,
-        fit_radius=fit_radius, fit_rms_residual=fit_rms, enclosed_volume=mesh_volume, notes=notes,
+        fit_radius=fit_radius, fit_rms_residual=fit_rms, enclosed_volume=mesh_volume,
+        shape_trial=shape_trial, shape_force=shape_force, shape=shape, notes=notes,
         input_files=input_files,
     )  # fmt: skip
+
+
+# A shape column: the values as written and which of them were measured (False: an empty CSV cell).
+_ShapeColumns = dict[str, tuple[np.ndarray, np.ndarray]]
+
+
+def _read_shape(reader: _Reader, data: dict, trial: np.ndarray, input_files: dict):
+    """The optional [shape] table in SI: (trial ids, forces [N], observables [m], NaN = not measured).
+
+    All three are None when the session has no [shape] table.
+    """
+    table = reader.table(data, "shape", _SHAPE_KEYS, required=False)
+    if table is None:
+        return None, None, None
+    length_scale = reader.unit(table, "length_unit", "length", "m", "shape.")
+    force_scale = reader.unit(table, "force_unit", "force", "N", "shape.")
+    inline = [k for k in _SHAPE_COLUMNS if k in table]
+    if ("shape_csv" in table) == bool(inline):
+        given = f"shape_csv together with inline '{inline[0]}'" if inline else "neither"
+        raise reader.fail(
+            "shape", f"give exactly one of shape_csv or inline arrays (got {given})",
+            "write shape_csv = \"file.csv\" or inline trial, force and observable arrays, not both",
+        )  # fmt: skip
+    if "shape_csv" in table:
+        if not isinstance(table["shape_csv"], str) or not table["shape_csv"].strip():
+            raise reader.fail("shape.shape_csv", f"expected a file name, got {table['shape_csv']!r}", 'write shape_csv = "file.csv"')
+        csv_path = reader.path.parent / table["shape_csv"]
+        columns, lines = _read_shape_csv(reader, csv_path)
+        input_files[str(csv_path)] = file_sha256(csv_path)
+        where = [f"(in {csv_path.name}, line {n}) " for n in lines]
+    else:
+        columns = _inline_shape_columns(reader, table)
+        where = [""] * columns["trial"][0].size
+    return _check_shape(reader, columns, where, np.unique(trial), length_scale, force_scale)
+
+
+def _inline_shape_columns(reader: _Reader, table: dict) -> _ShapeColumns:
+    for key in ("trial", "force"):
+        if key not in table:
+            raise reader.fail(f"shape.{key}", "missing", "give inline trial, force and observable arrays, or shape_csv")
+    names = [k for k in _SHAPE_COLUMNS if k in table]
+    if len(names) == 2:
+        raise reader.fail("shape", "no observable given", f"add at least one of {', '.join(SHAPE_OBSERVABLES)}")
+    values = {k: reader.array(table, k, "shape.") for k in names}
+    if len({v.size for v in values.values()}) > 1:
+        sizes = ", ".join(f"{k} {v.size}" for k, v in values.items())
+        raise reader.fail(
+            "shape", f"arrays differ in length ({sizes})",
+            "give one value per shape point in every array; to leave a point unmeasured use "
+            "shape_csv with an empty cell",
+        )  # fmt: skip
+    return {k: (v, np.ones(v.size, dtype=bool)) for k, v in values.items()}
+
+
+def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, list[int]]:
+    """Columns of a shape CSV (an empty observable cell = not measured) and each row's line number."""
+    if not csv_path.is_file():
+        raise reader.fail(
+            "shape.shape_csv", f"file {csv_path} does not exist",
+            "put the CSV beside the session file or fix the path (relative to the TOML)",
+        )  # fmt: skip
+    with csv_path.open(newline="") as handle:
+        rows = list(csv.reader(handle))
+    header = [c.strip() for c in rows[0]] if rows else []
+    fix_header = (
+        f"the first line names trial, force and at least one of {', '.join(SHAPE_OBSERVABLES)}, "
+        "each once (units are set in the session's [shape] table)"
+    )  # fmt: skip
+    for name in header:
+        if name not in _SHAPE_COLUMNS:
+            raise InvalidInputError(f"{csv_path}: header column {name!r} is unknown (header {header!r}). Fix: {fix_header}")
+        if header.count(name) > 1:
+            raise InvalidInputError(f"{csv_path}: header column {name!r} appears {header.count(name)} times. Fix: {fix_header}")
+    for name in ("trial", "force"):
+        if name not in header:
+            raise InvalidInputError(f"{csv_path}: header {header!r} has no {name!r} column. Fix: {fix_header}")
+    if len(header) == 2:
+        raise InvalidInputError(f"{csv_path}: header {header!r} has no observable column. Fix: {fix_header}")
+    values: dict[str, list[float]] = {name: [] for name in header}
+    measured: dict[str, list[bool]] = {name: [] for name in header}
+    lines = []
+    for line_number, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise InvalidInputError(
+                f"{csv_path}, line {line_number}: expected {len(header)} cells ({','.join(header)}), "
+                f"got {len(row)}: {row!r}. Fix: complete or delete the row (leave a cell empty, not "
+                "absent, where an observable was not measured)"
+            )  # fmt: skip
+        for name, cell in zip(header, row):
+            cell = cell.strip()
+            if not cell and name in SHAPE_OBSERVABLES:
+                values[name].append(math.nan)
+                measured[name].append(False)
+                continue
+            try:
+                values[name].append(float(cell))
+            except ValueError:
+                fix = "write a plain decimal number" + ("" if name in ("trial", "force") else ", or leave it empty if not measured")
+                raise InvalidInputError(
+                    f"{csv_path}, line {line_number}, column '{name}': {cell!r} is not a number. Fix: {fix}"
+                ) from None
+            measured[name].append(True)
+        lines.append(line_number)
+    if not lines:
+        raise InvalidInputError(f"{csv_path}: no shape points. Fix: add rows '{','.join(header)}'")
+    for name in header:
+        if not any(measured[name]):
+            raise InvalidInputError(
+                f"{csv_path}: column '{name}' is empty in every row. Fix: fill in its measured values "
+                "or delete the column"
+            )  # fmt: skip
+    columns = {name: (np.asarray(values[name], dtype=np.float64), np.asarray(measured[name])) for name in header}
+    return columns, lines
+
+
+def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], trial_ids: np.ndarray,
+                 length_scale: float, force_scale: float):  # fmt: skip
+    """Validate parsed shape columns (values as written) and convert them to SI."""
+    for name, (values, measured) in columns.items():
+        field = f"shape.{name}"
+        bad = np.flatnonzero(measured & ~np.isfinite(values))
+        if bad.size:
+            i = bad[0]
+            raise reader.fail(
+                f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} is not finite",
+                "write the measured value; in shape_csv leave the cell empty if it was not measured",
+            )  # fmt: skip
+        if name == "trial":
+            bad = np.flatnonzero(values != np.round(values))
+            if bad.size:
+                i = bad[0]
+                raise reader.fail(
+                    f"{field}[{i}]", f"{where[i]}trial id {float(values[i])!r} is not an integer", "number trials 1, 2, 3, ..."
+                )  # fmt: skip
+            bad = np.flatnonzero(~np.isin(values, trial_ids))
+            if bad.size:
+                i = bad[0]
+                raise reader.fail(
+                    f"{field}[{i}]", f"{where[i]}trial id {float(values[i]):g} is not among the [indentation] "
+                    f"trial ids {trial_ids.tolist()}",
+                    "give the id of the indentation trial during which the shape was measured",
+                )  # fmt: skip
+            continue
+        zero_ok = name == "sunken_depth"  # no dimple yet: the poke point is the highest point
+        bad = np.flatnonzero(measured & ((values < 0) if zero_ok else (values <= 0)))
+        if bad.size:
+            i = bad[0]
+            sign = "non-negative" if zero_ok else "positive"
+            raise reader.fail(
+                f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} must be {sign}",
+                f"{name} is a {'force magnitude' if name == 'force' else 'length'}: write |value|",
+            )  # fmt: skip
+        bad = np.flatnonzero(measured & (values * length_scale > _SHAPE_MAX_LENGTH))
+        if name != "force" and bad.size:
+            i = bad[0]
+            raise reader.fail(
+                f"{field}[{i}]", f"{where[i]}{values[i] * length_scale:g} m is implausibly large",
+                "if you wrote millimetres, set length_unit = \"mm\" in [shape]",
+            )  # fmt: skip
+    unmeasured = np.flatnonzero(~np.any([columns[k][1] for k in columns if k in SHAPE_OBSERVABLES], axis=0))
+    if unmeasured.size:
+        i = unmeasured[0]
+        raise reader.fail(
+            f"shape[{i}]", f"{where[i]}shape point {i} (trial {columns['trial'][0][i]:g}, force "
+            f"{columns['force'][0][i]:g}) has no measured observable",
+            "fill in what was measured at that point or delete the row",
+        )  # fmt: skip
+    shape_trial = columns["trial"][0].astype(np.int64)
+    shape_force = columns["force"][0] * force_scale
+    shape = {k: columns[k][0] * length_scale for k in SHAPE_OBSERVABLES if k in columns}
+    return shape_trial, shape_force, shape
 
 
 def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_files: dict):

@@ -9,6 +9,12 @@ import numpy as np
 
 DEFAULT_POISSON_RATIO = 0.4  # the paper's assumption (Section 3.4): rubbers sit at 0.3-0.4
 
+# The deformed-shape observables of the paper's evaluation rig (docs/session-format.md), all [m]:
+# height H of the ball's highest point above the ground, diameter D_u of the ridge circle around
+# the dimple, diameter D_l of the ground contact disc, depth d of the sunken region (ridge height
+# minus the poke point's height).
+SHAPE_OBSERVABLES = ("height", "upper_diameter", "contact_diameter", "sunken_depth")
+
 
 @dataclasses.dataclass(frozen=True)
 class Session:
@@ -31,6 +37,13 @@ class Session:
         mesh_path, poke_point [m], fit_radius [m]: mesh geometry, when R comes from a mesh.
         fit_rms_residual: rms distance of mesh vertices to the fitted sphere [m] (mesh only).
         enclosed_volume: volume enclosed by the mesh [m³] (watertight meshes only; the sealed gas).
+        shape_trial: trial id of each shape point, one of ``trial_ids`` (a shape point is the
+            deformed shape measured during one trial at one force); None without a [shape] table.
+        shape_force: indenter force F at each shape point [N]; None without a [shape] table.
+        shape: the measured deformed-shape observables, by name (those of ``SHAPE_OBSERVABLES``
+            that the file gives): height H, upper_diameter D_u, contact_diameter D_l and
+            sunken_depth d, each an array [m] with one value per shape point, NaN where it was
+            not measured at that point; None without a [shape] table.
         input_files: sha256 of every file the session was read from, by path.
     """
 
@@ -53,6 +66,9 @@ class Session:
     fit_radius: float | None = None
     fit_rms_residual: float | None = None
     enclosed_volume: float | None = None
+    shape_trial: np.ndarray | None = None
+    shape_force: np.ndarray | None = None
+    shape: dict[str, np.ndarray] | None = None
     notes: str = ""
     input_files: dict[str, str] = dataclasses.field(default_factory=dict)
 
