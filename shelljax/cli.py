@@ -1,4 +1,4 @@
-"""Command line: ``shelljax run``, ``estimate``, ``validate``, and the sensor commands ``acquire``,
+"""Command line: ``shelljax run``, ``estimate``, ``diagnose``, ``validate``, and the sensor commands ``acquire``,
 ``sensor-calibrate``, ``sensor-emulator`` (see docs/sensing.md)."""
 
 from __future__ import annotations
@@ -62,6 +62,47 @@ def _cmd_estimate(args) -> int:
     return 0
 
 
+def _cmd_diagnose(args) -> int:
+    from .diagnose import diagnose
+    from .report import jsonable, write_diagnosis
+
+    result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=args.gas,
+                      wrinkle_law=args.wrinkle_law, progress=not args.quiet and not args.json)  # fmt: skip
+    if args.out is not None:
+        written = write_diagnosis(result, args.out)
+        if not args.json:
+            print(f"written: {', '.join(str(p) for p in written)}")
+    if args.json:
+        json.dump(jsonable(result.report), sys.stdout, indent=2)
+        print()
+    else:
+        print(summary_text(result.report))
+    return 0
+
+
+def summary_text(report: dict) -> str:
+    """A few lines a person reads: verdict, ranking, gap before and after, misfit groups."""
+    lines = [f"verdict: {report['verdict']}"]
+    lines.append(f"{'model':>26s} {'elpd_loo':>10s} {'± se':>7s} {'Δ vs baseline':>14s} {'± se':>7s}  parameters")
+    for e in report["ranking"]:
+        if e["status"] != "ok":
+            lines.append(f"{e['effect']:>26s}  FAILED: {e['message']}")
+            continue
+        params = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
+                           for k, v in e.get("parameters", {}).items())  # fmt: skip
+        lines.append(f"{e['effect']:>26s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
+                     f"{e['delta_se']:7.2f}  {params}")  # fmt: skip
+    lines.append(f"gap (held-out rms of standardized residuals): {report['gap_before']['rms_standardized']:.3g} before, "
+                 f"{report['gap_after']['rms_standardized']:.3g} after, shrink {report['shrink']:.3g}x")  # fmt: skip
+    for name, g in report["gap_before"]["by_observable"].items():
+        after = report["gap_after"]["by_observable"][name]
+        lines.append(f"  {name:>18s}: rms {g['rms']:.3g} -> {after['rms']:.3g} {g['unit']} "
+                     f"({g['rms_percent']:.3g} % -> {after['rms_percent']:.3g} % of the measured value)")  # fmt: skip
+    misfit = report["where"]["misfit_groups"]
+    lines.append("baseline misfit (p < {:g}): {}".format(report["where"]["misfit_threshold_p"], ", ".join(misfit) or "none"))
+    return "\n".join(lines)
+
+
 def _cmd_validate(args) -> int:
     from .session import load_session
 
@@ -104,6 +145,22 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--no-surrogate", action="store_true",
                      help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
     est.set_defaults(func=_cmd_estimate)
+
+    diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
+                          "which candidate effect explains it, how far the gap shrinks")
+    diag.add_argument("sessions", nargs="+", help="session TOML files of one object (e.g. at several pressures)")
+    diag.add_argument("--out", default=None, help="directory for diagnosis.json and diagnosis.png (created)")
+    diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
+    diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
+                      help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
+    diag.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
+                      help="gas law of the baseline (default: the baseline's)")
+    diag.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
+                      help="wrinkle count: n = 1.33 tau^1/2 (scaling, as configs/paper.toml) or the engine's (mechanics)")
+    diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
+                      help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
+    diag.add_argument("--quiet", action="store_true", help="no progress bar")
+    diag.set_defaults(func=_cmd_diagnose)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")
     val.add_argument("sessions", nargs="+")

@@ -146,3 +146,84 @@ def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tup
     fig.savefig(trace_path)
     plt.close(fig)
     return [corner_path, trace_path]
+
+
+def plot_diagnosis(diagnosis, path: Path) -> Path:
+    """The sim-to-real diagnosis at a glance (``shelljax.diagnose.Diagnosis``).
+
+    Top left: held-out standardized depth residuals against force, per session, under the baseline
+    (filled) and the chosen model (open). Top right: held-out RMS of standardized residuals per
+    observable, regime and session, before and after, with misfit groups marked. Bottom left: each
+    candidate's elpd difference to the baseline ± 2 SE and its decision margin max(4 nats, 2 SE). Bottom right:
+    LOO-PIT histograms (uniform when the model predicts held-out trials well).
+    """
+    report, study = diagnosis.report, diagnosis.study
+    before, after = diagnosis.points_before, diagnosis.points_after
+    chosen = report["winner"]["effect"] if report["winner"] else "baseline"
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
+    ax = axes[0, 0]
+    depth = before["observable"] == "depth"
+    for i, s in enumerate(study.sessions):
+        sel = depth & (before["session"] == i)
+        label = Path(str(s.source)).stem
+        ax.plot(before["force"][sel], before["z"][sel], "o", color=f"C{i}", ms=4, label=label)
+        if chosen != "baseline":
+            ax.plot(before["force"][sel], after["z"][sel], "o", mfc="none", color=f"C{i}", ms=5)
+    ax.axhspan(-2, 2, color="0.9", zorder=0)
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_xlabel("recorded force F [N]")
+    ax.set_ylabel("held-out standardized depth residual [-]")
+    ax.set_title(f"WHERE: baseline (filled){'' if chosen == 'baseline' else f' vs {chosen} (open)'}", fontsize=9)
+    ax.legend(fontsize=6, ncol=2)
+
+    ax = axes[0, 1]
+    groups = [("obs", k, v) for k, v in report["where"]["by_observable"].items()]
+    groups += [("regime", k, v) for k, v in report["where"]["by_regime"].items()]
+    groups += [("session", Path(v["session"]).stem, v) for v in report["where"]["by_session"]]
+    after_where = report.get("where_after") or report["where"]
+    after_groups = [v for v in after_where["by_observable"].values()] + list(after_where["by_regime"].values()) + \
+        after_where["by_session"]
+    y = np.arange(len(groups))
+    ax.barh(y + 0.2, [g[2]["rms_standardized"] for g in groups], height=0.4, color="C3", label="baseline")
+    if chosen != "baseline":
+        ax.barh(y - 0.2, [g["rms_standardized"] for g in after_groups], height=0.4, color="C0", label=chosen)
+    for yi, g in zip(y, groups):
+        if g[2]["misfit"]:
+            ax.text(g[2]["rms_standardized"], yi + 0.2, f" p={g[2]['p_value']:.1g}", va="center", fontsize=6)
+    ax.axvline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_yticks(y, [f"{g[0]}: {g[1]}" for g in groups], fontsize=6)
+    ax.set_xlabel("held-out RMS of standardized residuals [-] (1 = noise)")
+    ax.set_title("WHERE: misfit by group", fontsize=9)
+    ax.legend(fontsize=7)
+
+    ax = axes[1, 0]
+    ranked = [e for e in report["ranking"] if e["effect"] != "baseline"]
+    y = np.arange(len(ranked))
+    for yi, e in zip(y, ranked):
+        if e["status"] != "ok":
+            ax.text(0, yi, "  fit failed", va="center", fontsize=7, color="C3")
+            continue
+        ax.errorbar(e["delta"], yi, xerr=2 * e["delta_se"], fmt="o", color="C2" if e["effect"] == chosen else "C0",
+                    capsize=3)  # fmt: skip
+        ax.plot(max(4.0, 2 * e["delta_se"]), yi, "|", color="C3", ms=10)
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_yticks(y, [e["effect"] for e in ranked], fontsize=7)
+    ax.set_xscale("symlog", linthresh=5)
+    ax.set_xlabel("Δ elpd_loo vs baseline [nats] (± 2 SE; red tick: margin to win)")
+    ax.set_title(f"WHICH: verdict = {report['verdict']}", fontsize=9)
+
+    ax = axes[1, 1]
+    bins = np.linspace(0, 1, 11)
+    ax.hist(before["pit"], bins=bins, histtype="step", color="C3", lw=1.5, label="baseline", density=True)
+    if chosen != "baseline":
+        ax.hist(after["pit"], bins=bins, histtype="step", color="C0", lw=1.5, label=chosen, density=True)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("LOO-PIT [-]")
+    ax.set_ylabel("density")
+    ax.set_title(f"HOW FAR: gap {report['gap_before']['rms_standardized']:.2f} → "
+                 f"{report['gap_after']['rms_standardized']:.2f} (shrink {report['shrink']:.2g}×)", fontsize=9)  # fmt: skip
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)

@@ -70,11 +70,33 @@ def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
     sol = optx.least_squares(problem.residuals_and_prediction, solver, u0, has_aux=True, max_steps=max_steps,
                              throw=False)  # fmt: skip
     # (sol.aux belongs to the iterate before the last accepted one; the state's to the optimum)
-    depth, count, forward_ok = sol.state.aux
+    *prediction, forward_ok = sol.state.aux
     accepted = sol.state.f_info
     return dict(u=sol.value, ok=sol.result == optx.RESULTS.successful, forward_ok=forward_ok, steps=sol.stats["num_steps"],
                 out_of_steps=sol.result == optx.RESULTS.nonlinear_max_steps_reached,
-                residual=accepted.residual, jacobian=accepted.jac.as_matrix(), depth=depth, count=count)  # fmt: skip
+                residual=accepted.residual, jacobian=accepted.jac.as_matrix(), prediction=tuple(prediction))  # fmt: skip
+
+
+def solve_least_squares(problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
+                        optimality_tol: float = OPTIMALITY_TOL):
+    """Levenberg–Marquardt on ``problem.residuals_and_prediction`` (whitened residuals, aux
+    ending in a forward-model-finite flag) from ``u0``.
+
+    Returns (the solve's outputs: u, residual, jacobian, steps, and the aux at the optimum;
+    converged; forward model finite; the χ² a Gauss–Newton step would still remove). Converged
+    as :func:`fit_session` documents.
+    """
+    out = _solve(problem, u0, rtol, atol, int(max_steps))
+    finite = bool(out["forward_ok"])
+    jac = np.asarray(out["jacobian"])
+    # optimistix also stops "successfully" after a step it rejected (e.g. the engine failed at the
+    # trial point): the χ² decrease a Gauss–Newton step still promises, ‖J δ‖² with δ the
+    # least-squares solution of J δ = r, tells an optimum from that (lstsq: J may be singular
+    # where the forward model failed and every residual is the same constant).
+    step = np.linalg.lstsq(jac, np.asarray(out["residual"]), rcond=None)[0]
+    promised_decrease = float(np.sum((jac @ step) ** 2))
+    converged = (bool(out["ok"]) or bool(out["out_of_steps"])) and finite and promised_decrease < optimality_tol
+    return out, converged, finite, promised_decrease
 
 
 def fit_session(
@@ -116,17 +138,9 @@ def fit_session(
             f"start (P_g = {start.gauge_pressure.value:.4g} Pa, E = {start_modulus:.4g} Pa); "
             "check the session's forces and geometry against the model's range"
         )
-    out = _solve(problem, u0, rtol, atol, int(max_steps))
+    out, converged, finite, promised_decrease = solve_least_squares(problem, u0, rtol, atol, max_steps)
     u, steps, residual = out["u"], out["steps"], out["residual"]
-    finite = bool(out["forward_ok"])
     jac = np.asarray(out["jacobian"])
-    # optimistix also stops "successfully" after a step it rejected (e.g. the engine failed at the
-    # trial point): the χ² decrease a Gauss–Newton step still promises, ‖J δ‖² with δ the
-    # least-squares solution of J δ = r, tells an optimum from that (lstsq: J may be singular
-    # where the forward model failed and every residual is the same constant).
-    step = np.linalg.lstsq(jac, np.asarray(residual), rcond=None)[0]
-    promised_decrease = float(np.sum((jac @ step) ** 2))
-    converged = (bool(out["ok"]) or bool(out["out_of_steps"])) and finite and promised_decrease < OPTIMALITY_TOL
     if not converged and (raise_on_failure or not finite):
         phys = {k: float(v) for k, v in problem.physical(u).items()}
         raise NoConvergenceError(
@@ -149,7 +163,7 @@ def fit_session(
     chi2 = float(residual @ residual)
     return FitResult(
         estimates=estimates, covariance=covariance, chi2=chi2, dof=int(residual.size - problem.ndim),
-        steps=int(steps), predicted_depth=np.asarray(out["depth"]), predicted_wrinkle_count=float(out["count"]),
+        steps=int(steps), predicted_depth=np.asarray(out["prediction"][0]), predicted_wrinkle_count=float(out["prediction"][1]),
         problem=problem, u=np.asarray(u), converged=converged,
     )  # fmt: skip
 

@@ -55,6 +55,19 @@ def depth_noise_from_scatter(force: np.ndarray, depth: np.ndarray) -> float:
     return float(max(np.sqrt(residual @ residual / max(depth.size - 2, 1)), DEPTH_NOISE_BOUNDS[0]))
 
 
+def count_log_likelihood(counts, predicted, noise=COUNT_NOISE):
+    """log P(k) [-] of each integer count k read off a continuous model count n [-]:
+    P(k) = Φ((k + ½ − n)/σ_n) − Φ((k − ½ − n)/σ_n), σ_n = ``noise`` [wrinkles]."""
+    upper = (counts + 0.5 - predicted) / noise
+    lower = (counts - 0.5 - predicted) / noise
+    # log(Φ(a) − Φ(b)) = log Φ(a) + log(1 − exp(log Φ(b) − log Φ(a))); mirrored (Φ(−b) − Φ(−a))
+    # when both bounds are positive, so the subtraction never happens near Φ = 1
+    flip = lower > 0
+    log_a = log_ndtr(jnp.where(flip, -lower, upper))
+    log_b = log_ndtr(jnp.where(flip, -upper, lower))
+    return log_a + jnp.log1p(-jnp.exp(jnp.minimum(log_b - log_a, -1e-300)))
+
+
 class InverseProblem(eqx.Module):
     """Data, forward model and priors of one session (see the module docstring for the layout).
 
@@ -146,14 +159,7 @@ class InverseProblem(eqx.Module):
         depth, count, converged = self.predict(u)
         noise = jnp.exp(log_noise)
         log_like = -0.5 * jnp.sum(((depth - self.depth) / noise) ** 2) - self.depth.size * log_noise
-        upper = (self.counts + 0.5 - count) / COUNT_NOISE
-        lower = (self.counts - 0.5 - count) / COUNT_NOISE
-        # log(Φ(a) − Φ(b)) = log Φ(a) + log(1 − exp(log Φ(b) − log Φ(a))); mirrored (Φ(−b) − Φ(−a))
-        # when both bounds are positive, so the subtraction never happens near Φ = 1
-        flip = lower > 0
-        log_a = log_ndtr(jnp.where(flip, -lower, upper))
-        log_b = log_ndtr(jnp.where(flip, -upper, lower))
-        log_like += jnp.sum(log_a + jnp.log1p(-jnp.exp(jnp.minimum(log_b - log_a, -1e-300))))
+        log_like += jnp.sum(count_log_likelihood(self.counts, count))
         # uniform priors in log P, log E, log σ_w are log-uniform in the physical values
         log_prior = -0.5 * sum((r**2 for r in self._prior_residuals(u)), jnp.zeros(()))
         lp = log_like + log_prior

@@ -1,0 +1,345 @@
+"""The diagnosis: WHERE the baseline misfits, WHICH candidate effect explains it, HOW FAR the gap shrinks.
+
+Decision rule (documented in docs/sim-to-real.md):
+
+* a candidate beats the baseline when its leave-one-trial-out expected log predictive density
+  exceeds the baseline's by Δ ≥ ``WIN_NATS`` = 4 nats *and* by ``WIN_SE`` = 2 standard errors of
+  the difference. 4 nats bounds false alarms: a candidate whose extra parameter is truly absent
+  gains in-sample χ²₁/2 and loses ≈ 1 nat out of sample, so it reaches Δ ≥ 4 only when χ²₁ ≥ 10
+  (p = 0.0016; ≈ 1.4 % for the best of 9 candidates). 2 SE guards against a gain carried by one
+  or two trials. A 4-SE margin would miss real effects: the SE comes from 9–16 trials whose gains
+  differ by pressure (an effect grows with the force or the pressure), so it is large even when
+  every trial gains (docs/sim-to-real.md);
+* the verdict is the best such candidate, or ``none``; it becomes ``unexplained`` when the chosen
+  model (the winner, or the baseline) still misfits: its held-out whitened residuals fail a χ²
+  test at p < ``MISFIT_P``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from scipy import stats
+
+from .._errors import InvalidInputError, NoConvergenceError
+from ..session import Session, load_session
+from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, LINEAR_SCALE, LOG_PARAMETERS, UNITS, check_effect_names, free_mask
+from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
+from ._model import GAS_EXPONENTS, WRINKLE_LAWS, physical, study_arrays
+from ._study import SHAPE_OBSERVABLES, Study, build_study
+
+WIN_SE = 2.0
+WIN_NATS = 4.0
+MISFIT_P = 1e-3
+BASELINES = {"estimator": "isothermal", "paper": "prescribed"}  # name → gas law
+OBSERVABLES = ("depth", "wrinkle_count") + SHAPE_OBSERVABLES
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`: ``report`` is the JSON contract (docs/sim-to-real.md);
+    ``study``, ``fits`` and ``scores`` (by effect name, "baseline" included), and the held-out residuals
+    of every data point under the baseline and the chosen model (``points_before``/``points_after``:
+    observable, session, force level, observed, held-out residual and std, z, whitened, pit)."""
+
+    report: dict
+    study: Study
+    fits: dict[str, CandidateFit]
+    scores: dict[str, LooScore]
+    points_before: dict
+    points_after: dict
+
+    @property
+    def verdict(self) -> str:
+        return self.report["verdict"]
+
+
+def _physical_value(name: str, u: float, data) -> float:
+    """Physical value of a global parameter at scaled value ``u`` (its reference from ``data``)."""
+    s = int(data.radius.shape[0])
+    vec = np.asarray(data.u_base).copy()
+    vec[s + GLOBAL_PARAMETERS.index(name)] = u
+    data_free = eqx.tree_at(lambda d: d.free, data, jnp.ones_like(data.free))
+    value = np.asarray(physical(jnp.asarray(vec), data_free)[name])
+    return float(np.mean(value)) if value.ndim else float(value)
+
+
+def _parameter_report(fit: CandidateFit, names: Sequence[str]) -> dict:
+    out = {}
+    s = int(fit.data.radius.shape[0])
+    for name in names:
+        index = s + GLOBAL_PARAMETERS.index(name)
+        u, std = laplace_interval(fit, index)
+        lo, hi = (_physical_value(name, u + k * 1.959963984540054 * std, fit.data) for k in (-1, 1))
+        value = _physical_value(name, u, fit.data)
+        out[name] = {"value": value, "ci95": [min(lo, hi), max(lo, hi)], "unit": UNITS[name]}
+    return out
+
+
+def _session_estimates(fit: CandidateFit) -> dict:
+    """P_g [Pa] per session and E [Pa], with 95 % intervals (log-normal, Laplace)."""
+    s = int(fit.data.radius.shape[0])
+    phys = {k: np.asarray(v) for k, v in physical(jnp.asarray(fit.u), fit.data).items()}
+    out = {"gauge_pressure": [], "young_modulus": None}
+    for i in range(s):
+        _, std = laplace_interval(fit, i)
+        value = float(phys["gauge_pressure"][i])
+        out["gauge_pressure"].append({"value": value, "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)],
+                                      "unit": "Pa"})  # fmt: skip
+    _, std = laplace_interval(fit, s + GLOBAL_PARAMETERS.index("young_modulus"))
+    value = float(phys["young_modulus"])
+    out["young_modulus"] = {"value": value, "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)], "unit": "Pa"}
+    return out
+
+
+def _points(study: Study, score: LooScore, regime: np.ndarray) -> dict:
+    """Per data row (depth, count, shape): observable, session, force level, regime, observed,
+    held-out residual (observed − predicted) and its std, z = residual/std, whitened residual
+    (independent N(0, 1) under the model) and LOO-PIT."""
+    observed = np.concatenate([study.depth, study.count, study.shape_value])
+    rows = {
+        "observable": np.array(["depth"] * study.depth.size + ["wrinkle_count"] * study.count.size
+                               + [SHAPE_OBSERVABLES[k] for k in study.shape_kind]),
+        "session": np.concatenate([study.depth_session, study.count_session, study.shape_session]),
+        "level": np.concatenate([study.level, np.full(study.count.size, np.nan), study.shape_force]),
+        "regime": np.concatenate([np.where(regime, "after_onset", "before_onset"),
+                                  np.full(study.count.size, "top_force"), np.full(study.shape_value.size, "shape")]),
+        "force": np.concatenate([study.force, np.full(study.count.size, np.nan), study.shape_force]),
+        "observed": observed, "residual": score.residual, "std": score.std, "z": score.residual / score.std,
+        "whitened": score.whitened, "pit": score.pit,
+    }  # fmt: skip
+    return rows
+
+
+def _group(points: dict, mask: np.ndarray, unit: str | None = None) -> dict:
+    z, w, pit = points["z"][mask], points["whitened"][mask], points["pit"][mask]
+    chi2 = float(np.sum(w**2))
+    out = {
+        "n": int(mask.sum()),
+        "rms_standardized": float(np.sqrt(np.mean(z**2))),
+        "mean_standardized": float(np.mean(z)),
+        "chi2": chi2,
+        "p_value": float(stats.chi2.sf(chi2, mask.sum())),
+        "loo_pit_ks_p_value": float(stats.kstest(pit, "uniform").pvalue) if mask.sum() >= 3 else None,
+    }
+    if unit is not None:
+        resid = points["residual"][mask]
+        rel = resid / np.where(points["observed"][mask] != 0, points["observed"][mask], np.nan)
+        out.update(rms=float(np.sqrt(np.mean(resid**2))), unit=unit, rms_percent=float(100 * np.sqrt(np.nanmean(rel**2))))
+    out["misfit"] = out["p_value"] < MISFIT_P
+    return out
+
+
+def _structure(study: Study, points: dict) -> dict:
+    """Depth residual [m] regressed on Legendre polynomials of force: offset, slope, curvature."""
+    sel = points["observable"] == "depth"
+    f = study.force
+    xi = (2 * f - f.min() - f.max()) / max(f.max() - f.min(), 1e-12)
+    design = np.stack([np.ones_like(xi), xi, 0.5 * (3 * xi**2 - 1)], axis=1)
+    resid = points["residual"][sel]
+    std = points["std"][sel]
+
+    def fit(mask):
+        a = design[mask] / std[mask, None]
+        coef, *_ = np.linalg.lstsq(a, resid[mask] / std[mask], rcond=None)
+        cov = np.linalg.pinv(a.T @ a)
+        se = np.sqrt(np.diag(cov))
+        return {name: {"value": float(c), "std": float(e), "z": float(c / e) if e > 0 else 0.0, "unit": "m"}
+                for name, c, e in zip(("offset", "slope", "curvature"), coef, se)}  # fmt: skip
+
+    out = {"basis": "Legendre polynomials of the force scaled to [-1, 1] over the study's forces",
+           "pooled": fit(np.ones(f.size, bool))}  # fmt: skip
+    out["by_session"] = [fit(study.depth_session == s) for s in range(study.n_sessions)]
+    return out
+
+
+def _where(study: Study, points: dict) -> dict:
+    units = {"depth": "m", "wrinkle_count": "1", **{k: "m" for k in SHAPE_OBSERVABLES}}
+    by_obs = {name: _group(points, points["observable"] == name, units[name])
+              for name in OBSERVABLES if np.any(points["observable"] == name)}  # fmt: skip
+    by_regime = {name: _group(points, points["regime"] == name)
+                 for name in ("before_onset", "after_onset") if np.any(points["regime"] == name)}  # fmt: skip
+    depth = points["observable"] == "depth"
+    by_level = [{"force": float(lv), "unit": "N", **_group(points, depth & np.isclose(points["level"], lv))}
+                for lv in np.unique(study.level)]  # fmt: skip
+    by_session = [{"session": str(s.source), **_group(points, points["session"] == i)}
+                  for i, s in enumerate(study.sessions)]  # fmt: skip
+    groups = ([f"observable:{k}" for k, v in by_obs.items() if v["misfit"]]
+              + [f"regime:{k}" for k, v in by_regime.items() if v["misfit"]]
+              + [f"force:{v['force']:.3g} N" for v in by_level if v["misfit"]]
+              + [f"session:{v['session']}" for v in by_session if v["misfit"]])  # fmt: skip
+    return {"by_observable": by_obs, "by_regime": by_regime, "by_force_level": by_level, "by_session": by_session,
+            "structure_along_force": _structure(study, points), "misfit_groups": groups,
+            "misfit_threshold_p": MISFIT_P}  # fmt: skip
+
+
+def _gap(points: dict) -> dict:
+    """Held-out gap: RMS of the standardized LOO residuals, overall and per observable."""
+    units = {"depth": "m", "wrinkle_count": "1", **{k: "m" for k in SHAPE_OBSERVABLES}}
+    out = {"rms_standardized": float(np.sqrt(np.mean(points["z"] ** 2))), "by_observable": {}}
+    for name in OBSERVABLES:
+        sel = points["observable"] == name
+        if sel.any():
+            g = _group(points, sel, units[name])
+            out["by_observable"][name] = {k: g[k] for k in ("rms_standardized", "rms", "unit", "rms_percent")}
+    return out
+
+
+def _data_for(base, effect: str | None, baseline_free: tuple[str, ...]):
+    n_sessions = int(base.radius.shape[0])
+    data = eqx.tree_at(lambda d: d.free, base, jnp.asarray(free_mask(n_sessions, baseline_free, effect)))
+    if effect == "wall_thickness":
+        index = n_sessions + GLOBAL_PARAMETERS.index("thickness")
+        data = eqx.tree_at(lambda d: d.prior_std, data, data.prior_std.at[index].set(FREE_THICKNESS_STD))
+    return data
+
+
+def diagnose(
+    sessions: Sequence[Session | str | Path],
+    *,
+    effects: Sequence[str] | None = None,
+    baseline: str = "estimator",
+    gas: str | None = None,
+    wrinkle_law: str = "scaling",
+    progress: Callable[[str], None] | bool = True,
+) -> Diagnosis:
+    """Diagnose the sim-to-real gap of the sessions of one object (see the module docstring).
+
+    ``effects``: candidate names (default: every one in :data:`EFFECTS`); ``baseline``:
+    "estimator" (the fitted estimator's sealed isothermal gas) or "paper" (the paper's prescribed
+    pressure); ``gas`` overrides the baseline's gas law ("prescribed", "isothermal", "adiabatic");
+    ``wrinkle_law``: "scaling" (n = 1.33 τ^½) or "mechanics" (the engine's count).
+
+    Raises:
+        InvalidInputError: sessions of several objects, an unknown effect, baseline, gas or
+            wrinkle law, or a study too small to rank.
+        NoConvergenceError: the baseline fit failed (a candidate's failure is reported in the
+            ranking instead).
+    """
+    effects = tuple(EFFECTS) if effects is None else check_effect_names(effects)
+    if baseline not in BASELINES:
+        raise InvalidInputError(f"unknown baseline {baseline!r}. Fix: choose from {', '.join(BASELINES)}")
+    gas = gas or BASELINES[baseline]
+    if gas not in GAS_EXPONENTS:
+        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
+    if wrinkle_law not in WRINKLE_LAWS:
+        raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
+    sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
+    study = build_study(sessions)
+    base = study_arrays(study, gas=gas)
+    baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
+        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+    report_progress = _progress_reporter(progress, 1 + len(effects))
+
+    fits, scores, ranking = {}, {}, []
+    report_progress("baseline")
+    fit = fit_candidate(_data_for(base, None, baseline_free), wrinkle_law, np.zeros(base.free.shape[0]))
+    if not fit.converged:
+        raise NoConvergenceError(f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
+                                 f"{fit.message}. Fix: check the sessions with `shelljax validate`")  # fmt: skip
+    fits["baseline"], scores["baseline"] = fit, loo_score(fit)
+    for effect in effects:
+        report_progress(effect)
+        data = _data_for(base, effect, baseline_free)
+        try:
+            fit = fit_candidate(data, wrinkle_law, fits["baseline"].u)
+        except NoConvergenceError as err:  # pragma: no cover - solve_least_squares does not raise
+            fit = dataclasses.replace(fits["baseline"], data=data, converged=False, message=str(err))
+        fits[effect] = fit
+        if fit.converged:
+            scores[effect] = loo_score(fit)
+    report_progress(None)
+
+    base_score = scores["baseline"]
+    for name in ("baseline",) + effects:
+        fit = fits[name]
+        entry = {"effect": name, "status": "ok" if name in scores else "failed"}
+        if name != "baseline":
+            entry["parameters"] = _parameter_report(fit, EFFECTS[name].parameters) if fit.converged else {}
+        if name not in scores:
+            entry.update(score=None, score_se=None, delta=None, delta_se=None, message=fit.message)
+        else:
+            sc = scores[name]
+            diff = sc.elpd - base_score.elpd
+            n = diff.size
+            entry.update(score=sc.total, score_se=float(math.sqrt(n * np.var(sc.elpd))), delta=float(diff.sum()),
+                         delta_se=float(math.sqrt(n * np.var(diff))), chi2=fit.chi2, steps=fit.steps)  # fmt: skip
+        ranking.append(entry)
+    ok = [e for e in ranking if e["status"] == "ok"]
+    ranking = sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
+    winners = [e for e in ranking if e["status"] == "ok" and e["effect"] != "baseline" and e["delta"] >= WIN_NATS
+               and e["delta"] >= WIN_SE * e["delta_se"]]  # fmt: skip
+    chosen = winners[0]["effect"] if winners else "baseline"
+
+    regime = fits["baseline"].prediction["wrinkled"]
+    points_before = _points(study, scores["baseline"], regime)
+    points_after = _points(study, scores[chosen], regime)
+    gap_before, gap_after = _gap(points_before), _gap(points_after)
+    misfit_p = float(stats.chi2.sf(np.sum(points_after["whitened"] ** 2), points_after["whitened"].size))
+    verdict = "unexplained" if misfit_p < MISFIT_P else ("none" if chosen == "baseline" else chosen)
+
+    before_est, after_est = _session_estimates(fits["baseline"]), _session_estimates(fits[chosen])
+    report = {
+        "verdict": verdict,
+        "ranking": ranking,
+        "gap_before": gap_before,
+        "gap_after": gap_after,
+        "shrink": gap_before["rms_standardized"] / gap_after["rms_standardized"],
+        "where": _where(study, points_before),
+        "where_after": _where(study, points_after) if chosen != "baseline" else None,
+        "winner": None if chosen == "baseline" else {
+            "effect": chosen, "description": EFFECTS[chosen].description, "layer": EFFECTS[chosen].layer,
+            "parameters": _parameter_report(fits[chosen], EFFECTS[chosen].parameters),
+            "estimates_before": before_est, "estimates_after": after_est,
+            "gauge_pressure_shift_percent": [100 * (a["value"] / b["value"] - 1) for a, b in
+                                             zip(after_est["gauge_pressure"], before_est["gauge_pressure"])],
+            "young_modulus_shift_percent": 100 * (after_est["young_modulus"]["value"]
+                                                  / before_est["young_modulus"]["value"] - 1),
+        },  # fmt: skip
+        "misfit_p_value": misfit_p,
+        "decision": {"win_se": WIN_SE, "win_nats": WIN_NATS, "misfit_p": MISFIT_P,
+                     "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum"},  # fmt: skip
+        "baseline": {"name": baseline, "gas": gas, "wrinkle_law": wrinkle_law, "engine": "axisym",
+                     "indenter_radius": {"value": float(base.indenter_radius), "unit": "m"},
+                     "free": list(baseline_free), "estimates": before_est,
+                     "noise": {"depth_scatter_a": {"value": study.depth_noise[0], "unit": "m^2"},
+                               "depth_scatter_b": {"value": study.depth_noise[1], "unit": "1"},
+                               "trial_offset_std": {"value": study.trial_offset_std, "unit": "m"}}},  # fmt: skip
+        "sessions": [{"path": str(s.source), "object": s.object_name, "radius": {"value": s.radius, "unit": "m"},
+                      "manometer_gauge_pressure": None if s.manometer_gauge_pressure is None else
+                      {"value": s.manometer_gauge_pressure, "unit": "Pa"},
+                      "trials": int(s.trial_ids.size), "samples": int(s.depth.size),
+                      "shape_points": int(np.sum(study.shape_session == i))}
+                     for i, s in enumerate(study.sessions)],  # fmt: skip
+    }
+    return Diagnosis(report=report, study=study, fits=fits, scores=scores, points_before=points_before,
+                     points_after=points_after)
+
+
+def _progress_reporter(progress, total: int):
+    """A callable taking the stage's name (None: done): a tqdm bar, the caller's callable, or nothing."""
+    if callable(progress):
+        return progress
+    if not progress:
+        return lambda stage: None
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=total, desc="diagnose", unit="model")
+    state = {"started": False}
+
+    def update(stage):
+        if state["started"]:
+            bar.update(1)
+        state["started"] = True
+        if stage is None:
+            bar.close()
+        else:
+            bar.set_postfix_str(stage)
+
+    return update

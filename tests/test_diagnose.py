@@ -1,0 +1,126 @@
+"""The diagnosis end to end on studies made by its own forward model (an effect planted or not).
+
+The studies are generated through the diagnosis's joint model at known parameters, with the
+bundled sessions' noise (2 % proportional scatter, 0.5 mm per-trial offsets): the test checks the
+decision logic, the magnitude's interval, the gap, the JSON contract and the CLI. Blind studies on
+a finer "reality" are experiments/blind_gap_study.py's job (docs/sim-to-real.md).
+"""
+
+from __future__ import annotations
+
+import json
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from shelljax.cli import main
+from shelljax.diagnose import diagnose
+from shelljax.diagnose._effects import GLOBAL_PARAMETERS, free_mask
+from shelljax.diagnose._model import JointProblem, study_arrays
+from shelljax.diagnose._study import build_study
+from shelljax.session import load_session, write_session
+
+LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)
+PRESSURES = (900.0, 1200.0, 1500.0, 1800.0)  # [Pa]
+EFFECTS = ("depth_offset", "finger_compliance", "gas")
+OFFSET = 3e-3  # [m] planted depth offset
+
+
+def _write(directory, depths, counts, name="ball"):
+    paths = []
+    for k, (p, d, n) in enumerate(zip(PRESSURES, depths, counts)):
+        trial = np.repeat([1, 2, 3], LEVELS.size)
+        force = np.tile(LEVELS, 3) + np.random.default_rng(k).normal(0, 0.05, trial.size)
+        path = directory / f"s{k}.toml"
+        write_session(path, object_name=name, radius=0.13, radius_std=0.0026, thickness=0.9e-3, thickness_std=0.045e-3,
+                      trial=trial, force=np.round(force, 2), depth=d, wrinkle_counts=n, manometer_gauge_pressure=p,
+                      mass=0.4)  # fmt: skip
+        paths.append(path)
+    return paths
+
+
+def _study(directory, offset: float, seed: int):
+    """Sessions whose depths are the joint model's at P_g = manometer, E = 2.34 MPa, plus noise."""
+    template = _write(directory, [np.full(3 * LEVELS.size, 0.02)] * 4, [[7, 7, 7]] * 4)
+    study = build_study([load_session(p) for p in template])
+    data = study_arrays(study)
+    n_s = len(PRESSURES)
+    data = eqx.tree_at(lambda d: d.free, data, jnp.asarray(free_mask(n_s, ("young_modulus",), "depth_offset")))
+    u = np.zeros(data.free.shape[0])
+    u[n_s + GLOBAL_PARAMETERS.index("young_modulus")] = np.log(2.34e6 / float(data.start_modulus))
+    u[n_s + GLOBAL_PARAMETERS.index("depth_offset")] = offset / 1e-3
+    _, (pred, ok) = JointProblem(data, "scaling").residuals_and_prediction(jnp.asarray(u))
+    assert bool(ok)
+    rng = np.random.default_rng(seed)
+    depth = np.asarray(pred["depth"]) * (1 + rng.normal(0, 0.02, study.depth.size))
+    depth += np.repeat(rng.normal(0, 0.5e-3, 3 * n_s), LEVELS.size)  # one offset per trial
+    counts = np.round(np.asarray(pred["count"]) + rng.normal(0, 0.5, study.count.size))
+    return _write(directory, np.split(np.round(depth * 2e3) / 2e3, n_s), np.split(counts.astype(int), n_s))
+
+
+@pytest.fixture(scope="module")
+def studies(tmp_path_factory):
+    planted = _study(tmp_path_factory.mktemp("offset"), OFFSET, seed=3)
+    clean = _study(tmp_path_factory.mktemp("clean"), 0.0, seed=4)
+    return planted, diagnose(planted, effects=EFFECTS, progress=False), clean, diagnose(clean, effects=EFFECTS, progress=False)
+
+
+def test_a_planted_depth_offset_is_found_and_measured(studies):
+    _, found, _, _ = studies
+    report = found.report
+    assert report["verdict"] == "depth_offset"
+    best = report["ranking"][0]
+    assert best["effect"] == "depth_offset" and best["delta"] >= max(4.0, 2 * best["delta_se"])
+    interval = best["parameters"]["depth_offset"]["ci95"]
+    assert interval[0] <= OFFSET <= interval[1]
+    # the baseline misfits the depths; the winner brings the held-out gap to the noise (rms ≈ 1)
+    assert "observable:depth" in report["where"]["misfit_groups"]
+    assert report["gap_after"]["rms_standardized"] < 1.3 < report["gap_before"]["rms_standardized"]
+    assert report["shrink"] == pytest.approx(report["gap_before"]["rms_standardized"] / report["gap_after"]["rms_standardized"])
+    for shift in report["winner"]["gauge_pressure_shift_percent"]:
+        assert np.isfinite(shift)
+
+
+def test_an_effect_free_study_gets_no_effect(studies):
+    _, _, _, clean = studies
+    report = clean.report
+    assert report["verdict"] == "none"
+    assert report["misfit_p_value"] > 1e-3
+    assert report["winner"] is None and report["shrink"] == pytest.approx(1.0)
+    # every candidate is scored, none by the 4-nat / 2-SE margin
+    assert {e["effect"] for e in report["ranking"]} == {"baseline", *EFFECTS}
+    assert all(e["delta"] < max(4.0, 2 * e["delta_se"]) for e in report["ranking"] if e["effect"] != "baseline")
+
+
+def test_the_json_contract(studies):
+    _, found, _, _ = studies
+    report = json.loads(json.dumps(found.report, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+    assert {"verdict", "ranking", "gap_before", "gap_after", "shrink", "where", "baseline", "sessions"} <= set(report)
+    for entry in report["ranking"]:
+        assert {"effect", "score", "score_se", "status"} <= set(entry)
+        for value in entry.get("parameters", {}).values():
+            assert {"value", "ci95", "unit"} <= set(value)
+    where = report["where"]
+    assert {"by_observable", "by_regime", "by_force_level", "by_session", "structure_along_force", "misfit_groups"} <= set(where)
+    assert len(where["by_force_level"]) == LEVELS.size and len(where["by_session"]) == len(PRESSURES)
+    # a constant offset is the Legendre offset term of the baseline's held-out depth residuals
+    offset_term = where["structure_along_force"]["pooled"]["offset"]
+    assert offset_term["value"] == pytest.approx(OFFSET, rel=0.5) and offset_term["z"] > 4
+
+
+def test_cli_writes_the_diagnosis_and_refuses_bad_input(studies, tmp_path, capsys):
+    planted, _, clean, _ = studies
+    out = tmp_path / "diag"
+    assert main(["diagnose", *map(str, planted), "--effects", "depth_offset", "--out", str(out), "--quiet"]) == 0
+    assert "verdict: depth_offset" in capsys.readouterr().out
+    assert json.loads((out / "diagnosis.json").read_text())["verdict"] == "depth_offset"
+    assert (out / "diagnosis.png").stat().st_size > 10_000
+    assert main(["diagnose", *map(str, planted), "--effects", "finger_size", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown effect(s) 'finger_size'" in err and "finger_compliance" in err
+    other = _write(tmp_path, [np.full(3 * LEVELS.size, 0.02)] * 4, [[7, 7, 7]] * 4, name="another-ball")
+    assert main(["diagnose", str(planted[0]), str(other[1]), "--out", str(tmp_path / "mixed")]) == 2
+    assert "different objects" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "mixed").exists()
