@@ -2,7 +2,7 @@
 
 Each study is one random inflated ball (R, h, E, mass), measured at 3–4 pressures with manometer
 readings under the paper's protocol (5–20 N in 2.5 N steps, three trials, one wrinkle count a
-trial; half the studies also measure the deformed shape at 10 and 20 N), with realistic noise, and
+trial; three studies in four also measure the deformed shape at 10 and 20 N), with realistic noise, and
 with one effect of the library at a random magnitude, or none. "Reality" is a finer model than the
 diagnosis's: the axisymmetric engine at 201 meridian elements (the diagnosis uses 101), reached by
 similarity from its own reference radius (0.15 m; the diagnosis's is 0.2 m).
@@ -42,19 +42,20 @@ REALITY_ELEMENTS = 201
 POISSON = 0.4
 GRAVITY = 9.81
 INDENTER = 8e-3  # [m] the nominal finger
+MAX_REDRAWS = 5
 # effect: (parameter, sampler of its true value). Magnitudes are plausible and large enough to
 # move some observable by several noise std at the protocol's noise (docs/sim-to-real.md lists
 # the ranges); below that no method can attribute them, and "none" is the right answer.
 EFFECTS = {
     "none": (None, None),
-    "finger_compliance": ("finger_compliance", lambda r: r.uniform(0.15e-3, 0.5e-3)),
-    "depth_offset": ("depth_offset", lambda r: r.choice([-1, 1]) * r.uniform(2e-3, 6e-3)),
-    "force_sensor_gain": ("force_gain", lambda r: r.choice([r.uniform(0.7, 0.82), r.uniform(1.2, 1.35)])),
-    "force_sensor_nonlinearity": ("force_exponent", lambda r: r.choice([r.uniform(0.75, 0.87), r.uniform(1.13, 1.25)])),
-    "indenter_size": ("indenter_radius", lambda r: r.uniform(25e-3, 40e-3)),
-    "gas": ("gas_exponent", lambda r: r.uniform(0.0, 0.3)),
-    "material_stiffening": ("stiffening", lambda r: r.uniform(20.0, 40.0)),
-    "wall_thickness": ("thickness_factor", lambda r: r.choice([r.uniform(0.5, 0.65), r.uniform(1.5, 2.0)])),
+    "finger_compliance": ("finger_compliance", lambda r: r.uniform(0.3e-3, 1.0e-3)),
+    "depth_offset": ("depth_offset", lambda r: r.choice([-1, 1]) * r.uniform(3e-3, 8e-3)),
+    "force_sensor_gain": ("force_gain", lambda r: r.choice([r.uniform(0.6, 0.8), r.uniform(1.25, 1.6)])),
+    "force_sensor_nonlinearity": ("force_exponent", lambda r: r.choice([r.uniform(0.7, 0.82), r.uniform(1.18, 1.3)])),
+    "indenter_size": ("indenter_radius", lambda r: r.uniform(25e-3, 45e-3)),
+    "gas": ("gas_exponent", lambda r: r.uniform(0.0, 0.2)),
+    "material_stiffening": ("stiffening", lambda r: r.uniform(30.0, 60.0)),
+    "wall_thickness": ("thickness_factor", lambda r: r.choice([r.uniform(0.45, 0.6), r.uniform(1.7, 2.3)])),
     "self_weight": ("body_mass", None),  # the object's own mass, as the session states it
 }
 
@@ -161,6 +162,7 @@ def main():
     parser.add_argument("--effects", nargs="+", default=list(EFFECTS))
     parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "blind-gap-study.json"))
     args = parser.parse_args()
+    from shelljax import NoConvergenceError
     from shelljax.diagnose import diagnose
 
     rng = np.random.default_rng(args.seed)
@@ -170,9 +172,19 @@ def main():
     out = Path(args.out)
     for i, effect in enumerate(names):
         with tempfile.TemporaryDirectory() as tmp:
-            paths, label = make_study(rng, effect, Path(tmp), with_shape=bool(i % 2))
+            for _ in range(MAX_REDRAWS):
+                try:
+                    paths, label = make_study(rng, effect, Path(tmp), with_shape=i % 4 != 0)
+                    break
+                except NoConvergenceError as err:  # reality has no ball state there: draw another object
+                    print(f"    redrawn: {str(err).splitlines()[0][:100]}", flush=True)
             start = time.perf_counter()
-            diag = diagnose(paths, progress=False)  # the diagnosis sees the files only
+            try:
+                diag = diagnose(paths, progress=False)  # the diagnosis sees the files only
+            except NoConvergenceError as err:
+                results.append(dict(study=i, effect=effect, truth=label["truth"], verdict="failed", error=str(err)))
+                print(f"[{i + 1}/{len(names)}] {effect:>26s} -> FAILED: {str(err)[:120]}", flush=True)
+                continue
             seconds = time.perf_counter() - start
         report = diag.report
         parameter = EFFECTS[effect][0]
@@ -207,21 +219,23 @@ def summarize(results):
                  for t in sorted({r["effect"] for r in results})}  # fmt: skip
     with_effect = [r for r in results if r["effect"] != "none"]
     none = [r for r in results if r["effect"] == "none"]
-    mags = [r["magnitude"] for r in with_effect if r["magnitude"] is not None]
+    mags = [r["magnitude"] for r in with_effect if r.get("magnitude") is not None]
+    ok = [r for r in results if r["verdict"] != "failed"]
     rms = lambda xs: float(np.sqrt(np.mean(np.square(xs)))) if len(xs) else None  # noqa: E731
     return dict(
         studies=len(results), effects=len({r["effect"] for r in results}) - (1 if none else 0),
         attribution_accuracy=float(np.mean([r["verdict"] == r["effect"] for r in results])),
         attribution_accuracy_with_effect=float(np.mean([r["verdict"] == r["effect"] for r in with_effect])) if with_effect else None,
         false_alarm_rate=float(np.mean([r["verdict"] not in ("none",) for r in none])) if none else None,
-        median_shrink_with_effect=float(np.median([r["shrink"] for r in with_effect])) if with_effect else None,
+        median_shrink_with_effect=float(np.median([r.get("shrink", 1.0) for r in with_effect])) if with_effect else None,
+        failed=sum(r["verdict"] == "failed" for r in results),
         magnitude_coverage=float(np.mean([m["covered"] for m in mags])) if mags else None,
         magnitude_count=len(mags),
-        pressure_rms_error_percent_before=rms([e for r in results for e in r["pressure_error_before"]]),
-        pressure_rms_error_percent_after=rms([e for r in results for e in r["pressure_error_after"]]),
-        modulus_rms_error_percent_before=rms([r["modulus_error_before"] for r in results]),
-        modulus_rms_error_percent_after=rms([r["modulus_error_after"] for r in results]),
-        median_seconds=float(np.median([r["seconds"] for r in results])),
+        pressure_rms_error_percent_before=rms([e for r in ok for e in r["pressure_error_before"]]),
+        pressure_rms_error_percent_after=rms([e for r in ok for e in r["pressure_error_after"]]),
+        modulus_rms_error_percent_before=rms([r["modulus_error_before"] for r in ok]),
+        modulus_rms_error_percent_after=rms([r["modulus_error_after"] for r in ok]),
+        median_seconds=float(np.median([r["seconds"] for r in ok])) if ok else None,
         confusion=confusion,
     )  # fmt: skip
 

@@ -92,3 +92,40 @@ def test_unknown_effect_names_list_the_valid_ones():
                 "indenter_size", "gas", "material_stiffening", "wall_thickness", "self_weight"}  # fmt: skip
     assert required <= set(EFFECTS)
     assert all(1 <= len(e.parameters) <= 2 and e.layer in ("measurement", "contact", "physics") for e in EFFECTS.values())
+
+
+def test_leave_one_trial_out_score_equals_refits_of_a_linear_model():
+    """On a linear model the linearised score is exact: compare with explicit refits without each trial."""
+    from types import SimpleNamespace
+
+    from shelljax.diagnose._loo import CandidateFit, loo_score
+
+    rng = np.random.default_rng(5)
+    n_units, per_unit, n_params, n_prior = 5, 4, 3, 3
+    depth_unit = np.repeat(np.arange(n_units), per_unit)
+    # whitening of correlated trial blocks, as the study builds it
+    blocks = [np.linalg.inv(np.linalg.cholesky(np.eye(per_unit) * 0.3**2 + 0.2**2)) for _ in range(n_units)]
+    whitening = np.zeros((depth_unit.size, depth_unit.size))
+    for u, b in enumerate(blocks):
+        whitening[np.ix_(depth_unit == u, depth_unit == u)] = b
+    constant = np.array([np.sum(np.log(np.diag(b))) - 0.5 * per_unit * np.log(2 * np.pi) for b in blocks])
+    data = SimpleNamespace(depth=np.zeros(depth_unit.size), depth_unit=depth_unit, count_unit=np.arange(n_units),
+                           shape_unit=np.zeros(0, int), whitening=whitening, count=np.zeros(n_units),
+                           shape_std=np.zeros(0), depth_unit_constant=constant, n_units=n_units)  # fmt: skip
+    n_rows = depth_unit.size + n_units + n_prior
+    jac = rng.normal(size=(n_rows, n_params))
+    y = rng.normal(size=n_rows)
+    u_hat = np.linalg.lstsq(jac, y, rcond=None)[0]
+    resid = jac @ u_hat - y  # r(u) = J u − y, optimum of ½‖r‖²
+    fit = CandidateFit(data=data, u=u_hat, jacobian=jac, residual=resid, covariance=np.linalg.inv(jac.T @ jac),
+                       chi2=float(resid @ resid), steps=0, converged=True, message="", prediction={})  # fmt: skip
+    score = loo_score(fit)
+    units = np.concatenate([depth_unit, np.arange(n_units), np.full(n_prior, -1)])
+    for i in range(n_units):
+        keep, out = units != i, units == i
+        u_minus = np.linalg.lstsq(jac[keep], y[keep], rcond=None)[0]
+        cov = np.eye(out.sum()) + jac[out] @ np.linalg.inv(jac[keep].T @ jac[keep]) @ jac[out].T
+        e = jac[out] @ u_minus - y[out]
+        log_density = -0.5 * e @ np.linalg.solve(cov, e) - 0.5 * np.linalg.slogdet(cov)[1] - 0.5 * np.log(2 * np.pi)
+        # (the unit's count row is a unit-variance normal: its 2π term; the depth block's is in `constant`)
+        assert score.elpd[i] == pytest.approx(log_density + constant[i], abs=1e-9)

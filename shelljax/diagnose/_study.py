@@ -211,8 +211,12 @@ def _shape_points(sessions, unit_of):
     return si.astype(int), unit.astype(int), kind.astype(int), force, value, std
 
 
-def build_study(sessions: Sequence[Session]) -> Study:
-    """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`)."""
+def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None) -> Study:
+    """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`).
+
+    ``noise`` = (τ_t [m], (a [m²], b [-])) fixes the depth noise model instead of estimating it
+    from the replicates (e.g. a study's noise reused for a subset of its trials).
+    """
     sessions = tuple(sessions)
     if not sessions:
         raise InvalidInputError("no sessions given. Fix: pass the session TOML files of one object")
@@ -232,7 +236,7 @@ def build_study(sessions: Sequence[Session]) -> Study:
     # one protocol for the study: force levels are clustered over all sessions together
     all_levels = _levels(np.concatenate([s.force for s in sessions]))
     levels = np.split(all_levels, np.cumsum([s.force.size for s in sessions])[:-1])
-    tau, scatter = _anova(sessions, levels)
+    tau, scatter = _anova(sessions, levels) if noise is None else noise
     depth = np.concatenate([s.depth for s in sessions])
     if scatter is None:  # no replicated levels: model-free scatter about a line in force, per session
         from ..estimate._problem import depth_noise_from_scatter
