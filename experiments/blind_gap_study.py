@@ -40,7 +40,6 @@ N_TRIALS = 3
 REALITY_RADIUS = 0.15  # [m] the generator's engine radius (similarity to every R)
 REALITY_ELEMENTS = 201
 POISSON = 0.4
-GRAVITY = 9.81
 INDENTER = 8e-3  # [m] the nominal finger
 MAX_REDRAWS = 5
 # effect: (parameter, sampler of its true value). Magnitudes are plausible and large enough to
@@ -57,6 +56,7 @@ EFFECTS = {
     "material_stiffening": ("stiffening", lambda r: r.uniform(30.0, 60.0)),
     "wall_thickness": ("thickness_factor", lambda r: r.choice([r.uniform(0.45, 0.6), r.uniform(1.7, 2.3)])),
     "self_weight": ("body_mass", None),  # the object's own mass, as the session states it
+    "ground_friction": ("friction_coefficient", lambda r: r.uniform(0.3, 1.0)),
 }
 
 
@@ -75,16 +75,18 @@ def draw_object(rng):
 def reality_curves(obj, truth, pressure, true_forces):
     """Noise-free reality at increasing true forces [N]: w0 [m] and shape observables [m]."""
     from shelljax.axisym import CurvePhysics, indentation_curves, inflation_stretch
+    from shelljax.physics import STANDARD_GRAVITY
 
     scale = obj["radius"] / REALITY_RADIUS
     thickness = obj["thickness"] * truth.get("thickness_factor", 1.0)
     stretch = float(inflation_stretch(pressure, obj["radius"], thickness, obj["young_modulus"], POISSON))
     mass = truth.get("body_mass", 0.0)
-    areal_weight = mass * GRAVITY / (4 * math.pi * (obj["radius"] / stretch) ** 2)
+    areal_weight = mass * STANDARD_GRAVITY / (4 * math.pi * (obj["radius"] / stretch) ** 2)
     physics = CurvePhysics(
         indenter_radius=np.array([truth.get("indenter_radius", INDENTER) / scale]),
         gas_volume_ratio=np.ones(1), gas_exponent=np.array([truth.get("gas_exponent", 1.0)]),
         stiffening=np.array([truth.get("stiffening", 0.0)]), areal_weight=np.array([areal_weight]),
+        friction_coefficient=np.array([truth.get("friction_coefficient", 0.0)]),
     )  # fmt: skip
     params = np.array([[pressure, obj["young_modulus"], thickness / scale, POISSON]])
     curve = indentation_curves(params, np.asarray(true_forces) / scale**2, radius=REALITY_RADIUS,

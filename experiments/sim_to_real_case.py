@@ -119,21 +119,24 @@ SHAPE_VARIANTS = (  # label, CurvePhysics overrides / parameter changes, force f
     ("wall_thickness: h × 1.7", {"thickness_factor": 1.7}, 1.0),
     ("self_weight: m = 0.8 kg", {"body_mass": 0.8}, 1.0),
     ("force_sensor_gain: g = 1.25", {}, 1.25),
+    ("ground_friction: μ = 0.5", {"friction_coefficient": 0.5}, 1.0),
 )
 
 
 def shape_sensitivity(pressure=1300.0, force=20.0, radius=0.13, thickness=0.9e-3, young=2.34e6, nu=0.4):
     """Change [%] of H, D_u, D_l and d of the Pezzi-like ball at ``force`` [N] under each variant."""
     from shelljax.axisym import CurvePhysics, indentation_curves, inflation_stretch
+    from shelljax.physics import STANDARD_GRAVITY
 
     rows, keys = [], tuple(SHAPE_PAPER_ERROR)
     for label, change, factor in SHAPE_VARIANTS:
         h = thickness * change.get("thickness_factor", 1.0)
         stretch = float(inflation_stretch(pressure, radius, h, young, nu))
-        weight = change.get("body_mass", 0.0) * 9.81 / (4 * math.pi * (radius / stretch) ** 2)
+        weight = change.get("body_mass", 0.0) * STANDARD_GRAVITY / (4 * math.pi * (radius / stretch) ** 2)
         physics = CurvePhysics(indenter_radius=np.array([change.get("indenter_radius", 8e-3)]),
                                gas_volume_ratio=np.ones(1), gas_exponent=np.array([change.get("gas_exponent", 1.0)]),
-                               stiffening=np.array([change.get("stiffening", 0.0)]), areal_weight=np.array([weight]))  # fmt: skip
+                               stiffening=np.array([change.get("stiffening", 0.0)]), areal_weight=np.array([weight]),
+                               friction_coefficient=np.array([change.get("friction_coefficient", 0.0)]))  # fmt: skip
         curve = indentation_curves(np.array([[pressure, young, h, nu]]), np.array([5.0, force * factor]), radius=radius,
                                    gas="polytropic", physics=physics, workers=1)  # fmt: skip
         rows.append({"label": label, "values_m": {k: float(getattr(curve, k)[0, -1]) for k in keys}})

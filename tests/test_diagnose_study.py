@@ -89,7 +89,7 @@ def test_unknown_effect_names_list_the_valid_ones():
         check_effect_names(["gas", "finger_size"])
     assert check_effect_names(["gas"]) == ("gas",)
     required = {"finger_compliance", "depth_offset", "force_sensor_gain", "force_sensor_nonlinearity",
-                "indenter_size", "gas", "material_stiffening", "wall_thickness", "self_weight"}  # fmt: skip
+                "indenter_size", "gas", "material_stiffening", "wall_thickness", "self_weight", "ground_friction"}  # fmt: skip
     assert required <= set(EFFECTS)
     assert all(1 <= len(e.parameters) <= 2 and e.layer in ("measurement", "contact", "physics") for e in EFFECTS.values())
 

@@ -2,13 +2,15 @@
 
 Entry point for estimators: :func:`indentation_curves` (batched F → w(0) curves, observables,
 wrinkle count, ``converged`` flags; jit/vmap/implicit-grad via :func:`indentation_curves_raw`).
-See docs/axisym.md.
+Per-curve traced effects (finger radius, gas volume and exponent, Gent stiffening, self-weight,
+ground friction):
+:class:`CurvePhysics`. See docs/axisym.md.
 """
 
 from ._api import PAPER_FORCES, CurveResult, indentation_curves, indentation_curves_raw
 from ._energy import Config, Params, enclosed_volume, hoop_tension, rest_nodes, total_energy
-from ._inflation import inflation_stretch, neo_hookean_sphere_pressure
-from ._model import Setup, curve_single, inflate
+from ._inflation import gent_sphere_pressure, inflation_stretch, neo_hookean_sphere_pressure
+from ._model import CurvePhysics, Setup, curve_single, inflate
 from ._newton import SolverOptions, equilibrium
 from ._wrinkles import tau, vella_wrinkle_count, wrinkle_count, wrinkle_length
 from ._shallow import (

@@ -13,7 +13,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._errors import InvalidInputError, NoConvergenceError
 from .._hilbert import hilbert_order
 from .._parallel import map_batch
-from ._model import Setup, curve_single
+from ._model import CurvePhysics, Setup, curve_single
 from ._wrinkles import wrinkle_count
 
 PAPER_FORCES = (5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)  # [N], the paper's protocol
@@ -27,7 +27,8 @@ class CurveResult(eqx.Module):
     drop of the top pole (the 3D engine's w0); ``height`` H [m];
     ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_model``);
     ``contact_diameter_mesh`` [m] geometric edge; ``sunken_depth`` d [m];
-    ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N];
+    ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N] (F plus the wall's
+    weight with a self-weight, ``CurvePhysics.areal_weight``);
     ``min_hoop_tension`` [N/m] most compressive unrelaxed hoop stress resultant of the upper
     half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
     annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``wall_gap`` [m] top pole
@@ -60,12 +61,12 @@ class CurveResult(eqx.Module):
     rest_radius: Float[Array, " b"]
 
 
-def _one(setup: Setup, theta, forces, nearby_guesses=None):
+def _one(setup: Setup, theta, forces, physics: CurvePhysics, nearby_guesses=None):
     """(CurveResult fields, (equilibrium states (1 + k, n_y) [m]: inflated, then each level;
-    inflation residual [N])) of one parameter set."""
+    inflation residual [N])) of one parameter set and its (scalar) physics."""
     pressure, young, thick, nu = theta[0], theta[1], theta[2], theta[3]
     out = curve_single(setup, pressure, young, thick, nu, forces, return_states=True,
-                       nearby_guesses=nearby_guesses)
+                       nearby_guesses=nearby_guesses, physics=physics)
     n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
                       young, thick, nu, setup.radius)
     fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
@@ -84,15 +85,17 @@ def _walk_coordinates(params: Float[Array, "b 4"]) -> Float[Array, "b 4"]:
 
 
 @functools.partial(jax.jit, static_argnums=(0, 3))
-def _batched(setup: Setup, params, forces, chunk: int):
+def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
     b = params.shape[0]
     if chunk <= 0 or b <= chunk:
-        return jax.vmap(lambda th: _one(setup, th, forces))(params)[0]
+        return jax.vmap(lambda th, ph: _one(setup, th, forces, ph))(params, physics)[0]
     # `chunk` lanes, vmapped, each walking its own stretch of the batch's Hilbert ordering, one
     # curve after the other (lax.scan): the inflation and every level of a curve start from the
     # lowest-energy of the usual start, the lane's last converged state there and that state
     # extrapolated to the new parameters (``curve_single``'s nearby_guesses). A vmapped
-    # while_loop runs until its slowest member converges: few lanes waste little.
+    # while_loop runs until its slowest member converges: few lanes waste little. The physics
+    # rows travel with their parameter rows but stay out of the walk's coordinates: a guess
+    # from a neighbour with other physics is only a worse guess (the lowest energy one wins).
     coords = jax.lax.stop_gradient(_walk_coordinates(params))  # they only order and guess
     order = hilbert_order(coords)
     steps = -(-b // chunk)
@@ -112,12 +115,12 @@ def _batched(setup: Setup, params, forces, chunk: int):
         # millimetres off (force residuals of 1e3–1e4 N), and without the plain state those
         # levels restarted from the previous level (5 Newton iterations).
         states, anchors, slopes = walk
-        thetas, here = step_in
+        thetas, here, physics_rows = step_in
         delta = here[:, None, :] - anchors
         predicted = states + jnp.einsum("lkyc,lkc->lky", slopes, delta)
         guesses = jnp.stack([states, predicted], axis=2)
         fields, (solved, inflation_residual) = jax.vmap(
-            lambda theta, nearby: _one(setup, theta, forces, nearby))(thetas, guesses)
+            lambda theta, ph, nearby: _one(setup, theta, forces, ph, nearby))(thetas, physics_rows, guesses)
         solved = jax.lax.stop_gradient(solved)  # the walk only guesses: no derivative through it
         inflated = (inflation_residual <= setup.atol)[:, None]
         good = jnp.concatenate([inflated, fields["converged"]], axis=1)[..., None]
@@ -132,16 +135,21 @@ def _batched(setup: Setup, params, forces, chunk: int):
     n_levels, n_unknowns = 1 + forces.shape[0], 2 * len(setup.theta()) + 1
     start = (jnp.full((chunk, n_levels, n_unknowns), jnp.nan), jnp.zeros((chunk, n_levels, 4)),
              jnp.zeros((chunk, n_levels, n_unknowns, 4)))
-    _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords)))
+    walked_physics = jax.tree_util.tree_map(lanes, physics)
+    _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords), walked_physics))
     unwalk = jnp.zeros(b, order.dtype).at[order].set(jnp.arange(b, dtype=order.dtype))
     return jax.tree_util.tree_map(
         lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
-def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0) -> CurveResult:
+def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0,
+                           physics: CurvePhysics | None = None) -> CurveResult:
     """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
 
     ``params`` (batch, 4): columns P_g [Pa], E [Pa], h [m], ν [-]; ``forces`` (k,) [N].
+    ``physics``: per-curve traced effects (:class:`CurvePhysics`, every field (batch,); None:
+    ``CurvePhysics.defaults(setup, batch)``, today's physics); with or without it the same
+    program runs, and curves are differentiable in its values as in ``params``.
     ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
     a stretch of the batch ordered along a Hilbert curve and starting every curve from its
     predecessor's equilibria (throughput on CPUs: 12–13 instead of 37 Newton iterations a
@@ -149,8 +157,12 @@ def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0) -> Curv
     curve from scratch. The results agree to the Newton tolerance either way (w0 to ≈ 3e-8
     relative). Differentiable in ``params`` (implicit differentiation of every equilibrium).
     """
-    return CurveResult(**_batched(setup, jnp.asarray(params, jnp.float64),
-                                  jnp.asarray(forces, jnp.float64), int(chunk)))
+    params = jnp.asarray(params, jnp.float64)
+    if physics is None:
+        physics = CurvePhysics.defaults(setup, params.shape[0])
+    physics = jax.tree_util.tree_map(lambda v: jnp.broadcast_to(jnp.asarray(v, jnp.float64), params.shape[:1]),
+                                     physics)
+    return CurveResult(**_batched(setup, params, jnp.asarray(forces, jnp.float64), int(chunk), physics))
 
 
 def _check(params, forces, radius):
@@ -184,15 +196,43 @@ def _check(params, forces, radius):
     return p, f
 
 
+# (lowest allowed value, whether it is excluded) of each CurvePhysics field
+_PHYSICS_BOUNDS = {"indenter_radius": (0.0, True), "gas_volume_ratio": (0.0, True),
+                   "gas_exponent": (0.0, False), "stiffening": (-np.inf, False), "areal_weight": (0.0, False),
+                   "friction_coefficient": (0.0, False)}
+
+
+def _check_physics(physics: CurvePhysics, batch: int) -> np.ndarray:
+    """``physics`` as (batch, len(_PHYSICS_BOUNDS)) columns in field order, or InvalidInputError naming the field."""
+    columns = []
+    for name, (low, strict) in _PHYSICS_BOUNDS.items():
+        v = np.asarray(getattr(physics, name), dtype=float)
+        if v.shape not in ((), (batch,)):
+            raise InvalidInputError(
+                f"indentation_curves: physics.{name} has shape {v.shape}; expected () or ({batch},) "
+                "(one value per row of params)."
+            )
+        bad = ~np.isfinite(v) | ((v <= low) if strict else (v < low))
+        if np.any(bad):
+            raise InvalidInputError(
+                f"indentation_curves: physics.{name} must be finite and {'>' if strict else '>='} {low}; got "
+                f"{np.atleast_1d(v)[np.atleast_1d(bad)][:3]}. Fix: see CurvePhysics for its meaning and units."
+            )
+        columns.append(np.broadcast_to(v, (batch,)))
+    return np.stack(columns, axis=1)
+
+
 def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
-                       chunk: int = 8, workers: int | None = None, **setup_kwargs) -> CurveResult:
+                       chunk: int = 8, workers: int | None = None, physics: CurvePhysics | None = None,
+                       **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
     increasing positive forces (default: the paper's 5–20 N in 2.5 N steps); ``radius`` [m]:
     inflated radius R. Further keywords go to :class:`Setup` (``n_elements``, ``grading``,
-    ``gas`` = "prescribed" | "isothermal", ``relax``, ``indenter_radius`` [m],
-    ``contact_stiffness`` [N/m³], ``atol`` [N], ...).
+    ``gas`` = "prescribed" | "isothermal" | "polytropic", ``relax``, ``indenter_radius`` [m],
+    ``contact_stiffness`` [N/m³], ``atol`` [N], ...). ``physics``: per-curve effects
+    (:class:`CurvePhysics`, fields () or (batch,); None: the Setup's defaults).
 
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
     ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: vmapped lanes
@@ -204,12 +244,15 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     :func:`indentation_curves_raw`.
     """
     p, f = _check(params, forces, radius)
-    setup = Setup(radius=float(radius), **setup_kwargs)
-    if setup.gas not in ("prescribed", "isothermal"):
-        raise InvalidInputError(
-            f"indentation_curves: gas={setup.gas!r}; use 'prescribed' or 'isothermal'."
-        )
-    res = map_batch(lambda rows: indentation_curves_raw(rows, f, setup, chunk), p, workers)
+    setup = Setup(radius=float(radius), **setup_kwargs)  # raises InvalidInputError on a bad field
+    columns = _check_physics(CurvePhysics.defaults(setup) if physics is None else physics, p.shape[0])
+
+    def solve(rows):
+        # the physics columns travel with their params through map_batch's split
+        return indentation_curves_raw(rows[:, :4], f, setup, chunk,
+                                      CurvePhysics(**{name: rows[:, 4 + j] for j, name in enumerate(_PHYSICS_BOUNDS)}))
+
+    res = map_batch(solve, np.concatenate([p, columns], axis=1), workers)
     if raise_on_failure:
         conv = np.asarray(res.converged)
         if not conv.all():

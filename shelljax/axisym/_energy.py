@@ -3,12 +3,16 @@
 Unknowns ``y`` (2n + 1,): node coordinates (r_0, z_0, …, r_{n−1}, z_{n−1}) [m] followed by the
 indenter-centre height z_c [m]. The energy [J] is
 
-  membrane (2-point Gauss per linear element, principal stretches λ_s = L/L0, λ_θ = r/r0)
+  membrane (2-point Gauss per linear element, principal stretches λ_s = L/L0, λ_θ = r/r0;
+  compressible Neo-Hookean, Gent-stiffened by the traced ``stiffening``, 0 by default)
 + bending (per node, discrete meridional curvature from the turning angle of the polygon and
   hoop curvature sin ψ / r; poles use the isotropy M_θθ = M_ss)
-+ gas (prescribed gauge pressure or sealed isothermal ideal gas, V = Σ ∫ π r² dz, exact for
-  the polygon of revolution)
++ gas (prescribed gauge pressure, sealed isothermal ideal gas, or sealed polytropic gas of
+  traced exponent κ; V = Σ ∫ π r² dz, exact for the polygon of revolution)
 + rigid contact (indenter sphere on top and ground plane below: area-weighted penalty)
++ self-weight q ∫ z dA₀ with the ground (traced ``areal_weight`` q [Pa], 0 by default)
++ ground friction Σ_i μ λ̂_i f₀(|r_i − r̂_i|) (smoothed lagged Coulomb, traced μ, 0 by default;
+  ``ground_friction_energy``)
 + load potential F·z_c (force control: the indenter is a dof loaded by F [N] downwards).
 
 Material laws, gas and contact potentials are the shared ones in ``shelljax.physics``; the only
@@ -24,20 +28,24 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._errors import InvalidInputError
 from ..physics import (
     bending_density_invariants,
     bending_stiffness,
+    gent_membrane_invariants,
     isothermal_gas_energy,
     lame_constants_2d,
-    neo_hookean_membrane_invariants,
+    friction_energy,
     penalty_energy,
     plane_gap,
+    polytropic_gas_energy,
     prescribed_pressure_energy,
+    self_weight_energy,
     sphere_gap,
 )
 from ._geometry import gauss_points_2
 
-GAS_MODELS = ("prescribed", "isothermal")
+GAS_MODELS = ("prescribed", "isothermal", "polytropic")
 RELAX_WIDTH = 1e-3  # [-] smoothing width of the wrinkling switch, in units of stretch²
 # c_w [-]: hoop compression a wrinkled wall carries, in classical buckling resultants. Calibrated
 # on one 3D curve only (the Pezzi-like ball, τ = 37) over the paper's 5–20 N: its w0 rms error is
@@ -52,14 +60,16 @@ LOADINGS = ("none", "sphere", "point")
 class Config(eqx.Module):
     """Static (compile-time) description of one axisymmetric problem.
 
-    ``theta``: rest polar angles of the nodes [rad] (tuple, even count); ``gas``: "prescribed" or
-    "isothermal"; ``loading``: "none", "sphere" (rigid spherical indenter, force control) or
+    ``theta``: rest polar angles of the nodes [rad] (tuple, even count); ``gas``: "prescribed",
+    "isothermal" or "polytropic" (exponent ``Params.gas_exponent``); ``loading``: "none",
+    "sphere" (rigid spherical indenter, force control) or
     "point" (point force on the top pole); ``ground``: rigid plane under the bottom pole;
     ``pin_bottom``: fix z of the bottom pole (removes the vertical rigid mode when nothing
     else does); ``relax``: relaxation of compressive hoop stress (wrinkling), which saturates at
     ``hoop_capacity`` [-] times the classical buckling resultant (0: tension field);
-    ``gas_volume_ratio`` [-]: sealed gas volume over the ball's inflated volume (an object whose
-    locally spherical poke region belongs to a body of another volume, e.g. from its mesh).
+    ``gas_volume_ratio`` [-]: a static factor on the traced ``Params.gas_volume_ratio`` (the sealed
+    gas volume over the ball's inflated volume is their product; the curve API leaves this at 1
+    and passes each curve's ratio traced).
     """
 
     theta: tuple = eqx.field(static=True)
@@ -70,6 +80,10 @@ class Config(eqx.Module):
     relax: bool = eqx.field(static=True, default=False)
     gas_volume_ratio: float = eqx.field(static=True, default=1.0)
     hoop_capacity: float = eqx.field(static=True, default=0.0)
+
+    def __check_init__(self):
+        if self.gas not in GAS_MODELS:
+            raise InvalidInputError(f"Config: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(GAS_MODELS)}")
 
     @property
     def n_nodes(self) -> int:
@@ -84,7 +98,15 @@ class Params(eqx.Module):
     reference_volume V_ref [m³] (sealed gas only), force F [N], indenter_radius a [m],
     ground_z [m] (height of the ground plane), contact_stiffness k_c [N/m³] (contact pressure
     per unit penetration: penetration = contact pressure / k_c), bending_scale [-] (multiplies
-    the bending energy; 1 for physical shells, < 1 only to emulate large τ in shallow-shell checks).
+    the bending energy; 1 for physical shells, < 1 only to emulate large τ in shallow-shell checks),
+    gas_volume_ratio [-] (sealed gas volume over V_ref, times ``Config.gas_volume_ratio``),
+    gas_exponent κ [-] (gas = "polytropic" only: p V^κ constant; 0 prescribed, 1 isothermal,
+    1.4 adiabatic), stiffening s [-] (Gent stiffening 1/J_m of the membrane; 0: Neo-Hookean),
+    areal_weight q [Pa] (self-weight ρ h g per unit rest area along −z, with the ground only;
+    0: no gravity); ground friction (``ground_friction_energy``, with the ground only):
+    friction_coefficient μ [-] (0: frictionless), friction_anchor r̂ (n,) [m] (lagged node radii,
+    the slip origin), friction_normal_force λ̂ (n,) [N] (lagged ground contact force per node) and
+    friction_slip_tolerance ε [m] > 0 (slip below which a node sticks).
     """
 
     young_modulus: Float[Array, ""]
@@ -98,6 +120,15 @@ class Params(eqx.Module):
     ground_z: Float[Array, ""]
     contact_stiffness: Float[Array, ""]
     bending_scale: Float[Array, ""]
+    # the per-curve effects default to today's physics (CurvePhysics carries them in the curve API)
+    gas_volume_ratio: Float[Array, ""] = 1.0
+    gas_exponent: Float[Array, ""] = 1.0
+    stiffening: Float[Array, ""] = 0.0
+    areal_weight: Float[Array, ""] = 0.0
+    friction_coefficient: Float[Array, ""] = 0.0
+    friction_anchor: Float[Array, "n"] | float = 0.0
+    friction_normal_force: Float[Array, "n"] | float = 0.0
+    friction_slip_tolerance: Float[Array, ""] = 1e-6
 
 
 def rest_nodes(cfg: Config, rest_radius) -> Float[Array, "n 2"]:
@@ -130,7 +161,11 @@ def wrinkling_hoop_stretch_sq(lam_s_sq, hoop_resultant, p: Params):
     """Hoop stretch² λ_c² [-] at which the Neo-Hookean nominal hoop stress ∂W/∂λ_θ equals −N_c.
 
     From ∂W/∂λ_θ = h[β(λ_θ − 1/λ_θ) + α/2 (λ_s² λ_θ − 1/λ_θ)] = −N_c, a quadratic in λ_θ; with
-    N_c = 0 the natural (stress-free) hoop stretch of tension-field theory.
+    N_c = 0 the natural (stress-free) hoop stretch of tension-field theory. It stays the
+    Neo-Hookean closed form under Gent stiffening (``Params.stiffening`` s ≠ 0), whose hoop stress
+    is the shear part's times 1/(1 − s I): the switch to the wrinkled branch then sits where the
+    Gent hoop stress is −N_c up to that factor, O(s I) off with I ≈ 2–4 ε² for strains ε (≤ 1e-3
+    for s = 0.1 at 5 % strain). The relaxed energy stays smooth; only the switch point moves.
     """
     alpha, beta = lame_constants_2d(p.young_modulus, p.poisson_ratio)
     a = p.thickness * (beta + 0.5 * alpha * lam_s_sq)
@@ -155,7 +190,8 @@ def membrane_terms(x, x0, p: Params, relax: bool):
 
 
 def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float = 0.0):
-    """Neo-Hookean membrane energy per rest area [J/m²]; hoop-relaxed if asked.
+    """Neo-Hookean membrane energy per rest area [J/m²], Gent-stiffened by ``p.stiffening`` (the
+    shared ``physics.gent_membrane_invariants``; 0: Neo-Hookean); hoop-relaxed if asked.
 
     Relaxed: where the hoop stretch falls below λ_c (``wrinkling_hoop_stretch_sq``) the wall
     wrinkles and the energy continues linearly, W(λ_s, λ_c) + N_c (λ_c − λ_θ): a constant
@@ -183,8 +219,9 @@ def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float 
         collapse = jnp.minimum(jnp.log(lam_t_sq / COLLAPSE_HOOP_STRETCH**2), 0.0) ** 2
         wrinkle_work = wrinkle_work + jnp.where(upper, p.thickness * beta * collapse, 0.0)
         lam_t_sq = jnp.where(upper, relaxed, lam_t_sq)
-    dens = neo_hookean_membrane_invariants(
-        lam_s_sq + lam_t_sq, lam_s_sq * lam_t_sq, p.thickness, p.young_modulus, p.poisson_ratio
+    dens = gent_membrane_invariants(
+        lam_s_sq + lam_t_sq, lam_s_sq * lam_t_sq, p.thickness, p.young_modulus, p.poisson_ratio,
+        p.stiffening,
     ) + wrinkle_work
     # λ_θ = r / r0 < 0 means a node crossed the axis (an inverted, folded meridian); det C
     # only sees λ_θ², so forbid it explicitly: the line search rejects infinite energies.
@@ -253,12 +290,20 @@ def enclosed_volume(x):
     return jnp.pi * jnp.sum(dz * (ra**2 + ra * rb + rb**2)) / 3.0
 
 
+def gas_volume_ratio(cfg: Config, p: Params):
+    """Sealed gas volume over the reference volume [-]: the static and the traced factor."""
+    return cfg.gas_volume_ratio * p.gas_volume_ratio
+
+
 def gas_energy(volume, cfg: Config, p: Params):
     """Gas potential [J] of the enclosed volume [m³] (shared ``physics`` gas laws)."""
     if cfg.gas == "prescribed":
         return prescribed_pressure_energy(volume, p.gauge_pressure)
     # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
-    gas_volume = cfg.gas_volume_ratio * p.reference_volume
+    gas_volume = gas_volume_ratio(cfg, p) * p.reference_volume
+    if cfg.gas == "polytropic":
+        return polytropic_gas_energy(volume - p.reference_volume + gas_volume, gas_volume,
+                                     p.gauge_pressure, p.gas_exponent)
     return isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
 
 
@@ -278,8 +323,56 @@ def ground_gaps(x, p: Params):
     return plane_gap(x, origin, jnp.array([0.0, 1.0]))
 
 
+def rest_zone_areas(cfg: Config, rest_radius) -> Float[Array, " e"]:
+    """Rest area [m²] of the sphere zone each element spans, 2π R0² (cos θ_a − cos θ_b).
+
+    They sum to 4π R0² exactly, where the polygon of revolution's frustums fall short by
+    O(Δθ²): the wall's weight is that of the object's rest sphere.
+    """
+    cos = np.cos(np.asarray(cfg.theta))
+    return 2.0 * jnp.pi * rest_radius**2 * jnp.asarray(cos[:-1] - cos[1:])
+
+
+def weight_potential(x, x0, cfg: Config, p: Params):
+    """Self-weight potential q ∫ z dA₀ [J] (shared ``physics.self_weight_energy``).
+
+    Each element's zone area (``rest_zone_areas``) is spread over its two Gauss points in
+    proportion to their frustum areas, so the load is the consistent one of a linear element.
+    """
+    xi, wts = gauss_points_2()
+    r0_g = (1.0 - xi)[:, None] * x0[None, :-1, 0] + xi[:, None] * x0[None, 1:, 0]
+    z_g = (1.0 - xi)[:, None] * x[None, :-1, 1] + xi[:, None] * x[None, 1:, 1]
+    share = jnp.asarray(wts)[:, None] * r0_g
+    area = rest_zone_areas(cfg, p.rest_radius)[None, :] * share / jnp.sum(share, axis=0)
+    return jnp.sum(self_weight_energy(z_g, area, p.areal_weight))
+
+
+def ground_normal_forces(x, cfg: Config, p: Params) -> Float[Array, " n"]:
+    """Ground contact force [N] on each node: k_c × rest dual area × penetration."""
+    k_node = p.contact_stiffness * node_rest_areas(rest_nodes(cfg, p.rest_radius))
+    return k_node * jnp.maximum(-ground_gaps(x, p), 0.0)
+
+
+def ground_slip(x, p: Params) -> Float[Array, " n"]:
+    """Radial slip u_i = r_i − r̂_i [m] of each node since its lag anchor (the only tangential
+    motion on the ground an axisymmetric node has)."""
+    return x[:, 0] - p.friction_anchor
+
+
+def ground_friction_energy(x, p: Params):
+    """Smoothed lagged Coulomb friction of the ground, Σ_i μ λ̂_i f₀(|u_i|) [J].
+
+    The shared IPC potential ``physics.friction_energy`` (Li et al. 2020) with the radial slip u_i
+    (``ground_slip``) as a one-component tangential slip and the lagged normal forces λ̂_i; its
+    force is ≤ μ λ̂_i per node (the Coulomb cone) and a spring 2 μ λ̂_i / ε while |u_i| < ε.
+    """
+    slip = ground_slip(x, p)[:, None]
+    return jnp.sum(friction_energy(slip, p.friction_normal_force, p.friction_coefficient,
+                                   p.friction_slip_tolerance))
+
+
 def local_energy(y, cfg: Config, p: Params):
-    """All energy terms [J] except the gas: elasticity + contact + load potential."""
+    """All energy terms [J] except the gas: elasticity + contact + self-weight + load potential."""
     n = cfg.n_nodes
     x, zc = split(y, n)
     x0 = rest_nodes(cfg, p.rest_radius)
@@ -294,6 +387,11 @@ def local_energy(y, cfg: Config, p: Params):
         energy = energy + p.force * x[-1, 1]
     if cfg.ground:
         energy = energy + jnp.sum(penalty_energy(ground_gaps(x, p), k_node))
+        # Gravity only acts where the ground carries it: without a support (the inflation) the
+        # weight would be an unbalanced load.
+        energy = energy + weight_potential(x, x0, cfg, p)
+        # μ = 0 (the default) adds an exact zero: frictionless results are unchanged
+        energy = energy + ground_friction_energy(x, p)
     return energy
 
 

@@ -2,7 +2,8 @@
 
 Every term of ``_energy.local_energy`` is a sum of pointwise densities of a few local measures:
 the membrane of (λ_s, λ_θ) per Gauss point, the bending of (M_ss, M_θθ) per hinge, the contacts
-of one gap per node, the linearised gas of the element volumes. The chain rule gives each term's
+of one gap per node, the ground friction of one radial slip per node, the linearised gas of the
+element volumes. The chain rule gives each term's
 Hessian as Σ ∂²W/∂a∂b ∇a ∇bᵀ + Σ ∂W/∂a ∇²a. The pointwise derivatives of the densities come
 from autodiff of the shared physics laws (elementwise, so they vectorize over a batch); the
 gradients and Hessians of the measures are closed forms (a segment length, a node radius, the
@@ -34,6 +35,7 @@ from ._energy import (
     constrained_mask,
     enclosed_volume,
     gas_energy,
+    ground_friction_energy,
     ground_gaps,
     indenter_gaps,
     membrane_density,
@@ -287,6 +289,15 @@ def _penalty_derivatives(gaps, stiffness):
     return jax.jvp(grad, (gaps,), (jnp.ones_like(gaps),))
 
 
+def _friction_stiffness(x, p: Params):
+    """∂²D/∂r_i² [N/m] of the ground friction per node: D is a sum of per-node functions of the
+    radii alone, so its Hessian is this diagonal (2 μ λ̂/ε while sticking, 0 once sliding)."""
+    def energy_of_radii(r):
+        return ground_friction_energy(jnp.stack([r, x[:, 1]], -1), p)
+
+    return jax.jvp(jax.grad(energy_of_radii), (x[:, 0],), (jnp.ones_like(x[:, 0]),))[1]
+
+
 # --- assembly into node bands and 4×4 blocks ---------------------------------------------------
 
 def _pad(a, before, after):
@@ -368,6 +379,7 @@ def hessian_at(y, cfg: Config, p: Params) -> StructuredHessian:
     if cfg.ground:
         _, stiff = _penalty_derivatives(ground_gaps(x, p), k_node)
         d0[1][1] = d0[1][1] + stiff
+        d0[0][0] = d0[0][0] + _friction_stiffness(x, p)
     if cfg.loading == "sphere":
         force, stiff = _penalty_derivatives(indenter_gaps(x, zc, p), k_node)
         _, normal, curv = _length_derivatives(x[:, 0], x[:, 1] - zc)

@@ -2,7 +2,8 @@
 
 The given radius R [m] is the *inflated* radius at gauge pressure P_g [Pa]. For a sphere of rest
 radius R0 under uniform stretch λ the energy is 4πR0² W(λ; R0) − P_g (4/3)πR0³λ³, with W the
-shared Neo-Hookean membrane density (C = λ² I) plus the bending density (M = (λ − 1)/R0 · I).
+shared membrane density (C = λ² I; Neo-Hookean, Gent-stiffened by ``stiffening`` s [-], 0 by
+default) plus the bending density (M = (λ − 1)/R0 · I).
 Equilibrium ∂W/∂λ = P_g R0 λ² = P_g R λ is solved for λ by a fixed number of Newton steps
 (smooth, monotone; differentiable by unrolling), and R0 = R / λ.
 """
@@ -12,15 +13,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..physics import bending_density_invariants, neo_hookean_membrane_invariants
+from ..physics import bending_density_invariants, gent_membrane_invariants, lame_constants_2d
 
 
 def uniform_stretch_density(stretch, rest_radius, thickness, young_modulus, poisson_ratio,
-                            bending_scale=1.0):
-    """Energy per rest area [J/m²] of a sphere of rest radius R0 [m] under uniform stretch λ."""
+                            bending_scale=1.0, stiffening=0.0):
+    """Energy per rest area [J/m²] of a sphere of rest radius R0 [m] under uniform stretch λ [-]
+    (Gent ``stiffening`` s [-], 0: Neo-Hookean)."""
     lam2 = stretch**2
-    membrane = neo_hookean_membrane_invariants(
-        2.0 * lam2, lam2**2, thickness, young_modulus, poisson_ratio
+    membrane = gent_membrane_invariants(
+        2.0 * lam2, lam2**2, thickness, young_modulus, poisson_ratio, stiffening
     )
     m = (stretch - 1.0) / rest_radius
     bending = bending_density_invariants(2.0 * m, 2.0 * m**2, thickness, young_modulus,
@@ -29,13 +31,14 @@ def uniform_stretch_density(stretch, rest_radius, thickness, young_modulus, pois
 
 
 def inflation_stretch(gauge_pressure, radius, thickness, young_modulus, poisson_ratio,
-                      bending_scale=1.0, iterations: int = 30):
-    """Uniform stretch λ = R / R0 [-] of a Neo-Hookean sphere inflated to radius R [m] by P_g [Pa]."""
+                      bending_scale=1.0, iterations: int = 30, stiffening=0.0):
+    """Uniform stretch λ = R / R0 [-] of a Neo-Hookean sphere inflated to radius R [m] by P_g [Pa]
+    (Gent-stiffened by ``stiffening`` s [-]; 0: Neo-Hookean)."""
 
     def residual(lam):
         r0 = radius / lam
         dw = jax.grad(uniform_stretch_density)(lam, r0, thickness, young_modulus,
-                                               poisson_ratio, bending_scale)
+                                               poisson_ratio, bending_scale, stiffening)
         return dw - gauge_pressure * radius * lam
 
     # Small-strain start: λ − 1 ≈ P R (1 − ν) / (2 E h).
@@ -60,3 +63,19 @@ def neo_hookean_sphere_pressure(stretch, rest_radius, thickness, young_modulus, 
     return thickness * (2.0 * beta * (lam - 1.0 / lam) + alpha * (lam**3 - 1.0 / lam)) / (
         rest_radius * lam**2
     )
+
+
+def gent_sphere_pressure(stretch, rest_radius, thickness, young_modulus, poisson_ratio, stiffening):
+    """Closed-form membrane inflation law P_g(λ) [Pa] of the Gent-stiffened compressible sphere.
+
+    P = h [2β(λ − 1/λ)/(1 − s I) + α(λ³ − 1/λ)] / (R0 λ²), I = 2λ² − 2 − 4 ln λ: the Neo-Hookean
+    law with β → β/(1 − s I) (hand-derived from ``physics.gent_membrane_invariants`` with
+    C = λ² I; an independent check of the numerical inflation). ``stiffening`` s [-], λ [-],
+    R0 [m], h [m], E [Pa], ν [-].
+    """
+    alpha, beta = lame_constants_2d(young_modulus, poisson_ratio)
+    lam = stretch
+    invariant = 2.0 * lam**2 - 2.0 - 4.0 * jnp.log(lam)
+    return thickness * (
+        2.0 * beta * (lam - 1.0 / lam) / (1.0 - stiffening * invariant) + alpha * (lam**3 - 1.0 / lam)
+    ) / (rest_radius * lam**2)

@@ -22,11 +22,13 @@ Observables per force level (all SI; "inflated" = the pressurized state before i
 * ``contact_diameter`` D_l [m]: diameter of the ground contact disc, from the ground reaction
   and the gas pressure, D_l = 2 √(F_ground / (π P)): the flat disc carries the gas pressure
   and the membrane leaves the ground tangentially, so this equals the geometric disc while
-  being smooth in the parameters. ``contact_diameter_mesh`` [m] is the geometric edge (ground
+  being smooth in the parameters (with a self-weight q [Pa] the disc carries P + q, and
+  D_l = 2 √(F_ground / (π (P + q)))). ``contact_diameter_mesh`` [m] is the geometric edge (ground
   gap sign change, linear interpolation; resolution-limited by the local element size).
 * ``sunken_depth`` d [m]: depth of the sunken region, ridge height − top-pole height (≥ 0).
 * ``pressure`` [Pa], ``volume`` [m³]: gauge pressure and enclosed volume.
-* ``ground_reaction`` [N]: total ground contact force (global balance: equals F).
+* ``ground_reaction`` [N]: total ground contact force (global balance: equals F, plus the
+  wall's weight q · 4π R0² with a self-weight q = ``CurvePhysics.areal_weight``).
 * ``wall_gap`` [m]: height of the top pole above the bottom pole (mid-surface to mid-surface).
   The indenter pushes the upper wall onto the lower one when it falls below the thickness h;
   self-contact is not modelled, so past that the state is not a ball's (the top passes through
@@ -41,8 +43,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jaxtyping import Array, Float
+
 from .._errors import InvalidInputError
 from ._energy import (
+    GAS_MODELS,
     WRINKLED_HOOP_CAPACITY,
     Config,
     Params,
@@ -50,8 +55,10 @@ from ._energy import (
     gauge_pressure_at,
     ground_gaps,
     hoop_tension,
+    ground_normal_forces,
     node_rest_areas,
     rest_nodes,
+    rest_zone_areas,
     split,
 )
 from ._geometry import unit_polar_angles
@@ -61,16 +68,24 @@ from ._newton import SolverOptions, equilibrium, hessian_at
 from ._tracing import tied_to
 
 
+# ε / R [-]: the 3D engine's default slip tolerance (ĝ/100 = 4 µm on the 0.13 m ball, where
+# ĝ/100 … ĝ/800 agreed to 5 digits, docs/shell3d.md) in units of the radius, so similar balls
+# stay similar.
+FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
+
+
 class Setup(eqx.Module):
     """Static description of an indentation experiment on a ball (all lengths in m).
 
     ``radius`` R: inflated radius; ``n_elements``: meridian elements pole to pole (made odd);
     ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: "prescribed" (constant P_g,
-    the paper's model) or "isothermal" (sealed ideal gas, P_g is the gauge pressure before
-    indentation); ``relax``: relaxation of compressive hoop stress (wrinkled shell), which
+    the paper's model), "isothermal" (sealed ideal gas, P_g is the gauge pressure before
+    indentation) or "polytropic" (sealed gas with p V^κ constant, κ the traced
+    ``CurvePhysics.gas_exponent``); ``relax``: relaxation of compressive hoop stress (wrinkled shell), which
     saturates at ``hoop_capacity`` [-] classical buckling resultants E h²/(R0 √(3(1−ν²)))
     (default calibrated on a 3D curve, see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
-    ``indenter_radius`` a; ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
+    ``indenter_radius`` a (the default of the traced ``CurvePhysics.indenter_radius``, and the
+    Newton step cap); ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
     force solved first (load stepping; none by default: the flattened start below converges
     without, 4–5 Newton iterations a curve fewer); ``atol`` [N]: Newton tolerance on the
     out-of-balance force; ``max_iter``: Newton iterations per load step; ``predictor``:
@@ -79,7 +94,10 @@ class Setup(eqx.Module):
     ``substeps``: equal load steps per interval between requested forces (raise it when the
     requested forces are far apart; the paper's 2.5 N steps need 1); ``gas_volume_ratio`` [-]:
     with ``gas = "isothermal"``, the sealed gas volume over the ball's inflated volume 4/3 π R³
-    (1: a ball; an object's enclosed volume over 4/3 π R³ when only its poke region is a sphere).
+    (1: a ball; an object's enclosed volume over 4/3 π R³ when only its poke region is a sphere;
+    the default of the traced ``CurvePhysics.gas_volume_ratio``); ``friction_slip_tolerance`` ε
+    [m]: slip below which a node sticks to the ground under friction (``CurvePhysics.
+    friction_coefficient``; None: ``FRICTION_SLIP_TOLERANCE`` × R, the 3D engine's default scaled).
     """
 
     radius: float = eqx.field(static=True, default=0.13)
@@ -96,8 +114,19 @@ class Setup(eqx.Module):
     substeps: int = eqx.field(static=True, default=1)
     gas_volume_ratio: float = eqx.field(static=True, default=1.0)
     hoop_capacity: float = eqx.field(static=True, default=WRINKLED_HOOP_CAPACITY)
+    friction_slip_tolerance: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        if self.gas not in GAS_MODELS:
+            raise InvalidInputError(
+                f"Setup: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(GAS_MODELS)} "
+                "(the adiabatic gas is 'polytropic' with CurvePhysics.gas_exponent = 1.4)"
+            )
+        if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
+            raise InvalidInputError(
+                f"Setup: indenter_radius = {self.indenter_radius!r} must be a positive length [m]. "
+                "Fix: pass the finger's radius, e.g. 8e-3"
+            )
         if not (math.isfinite(self.hoop_capacity) and self.hoop_capacity >= 0):
             raise InvalidInputError(
                 f"Setup: hoop_capacity = {self.hoop_capacity!r} must be a number >= 0 (hoop compression "
@@ -109,6 +138,17 @@ class Setup(eqx.Module):
                 f"Setup: gas_volume_ratio = {self.gas_volume_ratio!r} must be a positive number "
                 "(sealed gas volume / 4/3 π R³). Fix: pass 1 for a ball"
             )
+        eps = self.friction_slip_tolerance
+        if eps is not None and not (math.isfinite(eps) and eps > 0):
+            raise InvalidInputError(
+                f"Setup: friction_slip_tolerance = {eps!r} must be a positive length [m]. "
+                f"Fix: None for the default {FRICTION_SLIP_TOLERANCE:.3g} × radius"
+            )
+
+    def slip_tolerance(self) -> float:
+        """Ground friction slip tolerance ε [m]."""
+        eps = self.friction_slip_tolerance
+        return FRICTION_SLIP_TOLERANCE * self.radius if eps is None else float(eps)
 
     def theta(self) -> tuple:
         n_el = self.n_elements + (1 - self.n_elements % 2)
@@ -121,26 +161,76 @@ class Setup(eqx.Module):
         return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
 
 
+class CurvePhysics(eqx.Module):
+    """Per-curve physical effects, traced: one compiled program serves every value.
+
+    Each field is a scalar for :func:`curve_single` and has shape (batch,) for
+    :func:`~shelljax.axisym.indentation_curves_raw`. ``indenter_radius`` a [m] (the finger);
+    ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, gases "isothermal" and
+    "polytropic"); ``gas_exponent`` κ [-] (gas "polytropic" only: p V^κ constant; 0 is the
+    prescribed gauge pressure, 1 isothermal, 1.4 adiabatic); ``stiffening`` s = 1/J_m [-] (Gent
+    stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
+    ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
+    ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
+    the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
+    default: frictionless). :meth:`defaults` gives today's physics.
+
+    Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
+    pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
+    ratio and μ (:meth:`similar`); its forces are scale² and its depths scale times as large (exactly
+    so with ``Setup.contact_stiffness`` [N/m³] ÷ scale too).
+    """
+
+    indenter_radius: Float[Array, "*batch"]
+    gas_volume_ratio: Float[Array, "*batch"]
+    gas_exponent: Float[Array, "*batch"]
+    stiffening: Float[Array, "*batch"]
+    areal_weight: Float[Array, "*batch"]
+    friction_coefficient: Float[Array, "*batch"] = 0.0
+
+    @classmethod
+    def defaults(cls, setup: Setup, batch: int | None = None) -> "CurvePhysics":
+        """``setup``'s finger and gas volume ratio, κ = 1, s = 0, q = 0, μ = 0: scalars, or (batch,)."""
+        shape = () if batch is None else (int(batch),)
+
+        def full(v):
+            return jnp.full(shape, v, dtype=jnp.float64)
+
+        return cls(indenter_radius=full(setup.indenter_radius), gas_volume_ratio=full(setup.gas_volume_ratio),
+                   gas_exponent=full(1.0), stiffening=full(0.0), areal_weight=full(0.0),
+                   friction_coefficient=full(0.0))  # fmt: skip
+
+    def similar(self, scale) -> "CurvePhysics":
+        """The physics of the similar ball with every length times ``scale`` [-]: a × scale."""
+        return eqx.tree_at(lambda c: c.indenter_radius, self, self.indenter_radius * scale)
+
+
 def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_volume=1.0,
-            ground_z=0.0, bending_scale=1.0):
+            ground_z=0.0, bending_scale=1.0, physics: CurvePhysics | None = None):
     f = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    physics = CurvePhysics.defaults(setup) if physics is None else physics
     return Params(f(young), f(thick), f(nu), f(rest_radius), f(pressure), f(ref_volume),
-                  f(force), f(setup.indenter_radius), f(ground_z), f(setup.contact_stiffness),
-                  f(bending_scale))
+                  f(force), f(physics.indenter_radius), f(ground_z), f(setup.contact_stiffness),
+                  f(bending_scale), f(physics.gas_volume_ratio), f(physics.gas_exponent),
+                  f(physics.stiffening), f(physics.areal_weight), f(physics.friction_coefficient),
+                  friction_slip_tolerance=f(setup.slip_tolerance()))
 
 
-def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses=None):
+def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses=None, stiffening=0.0):
     """Inflated (pre-indentation) state of the discrete sphere.
 
     Returns (rest radius R0 [m], inflated unknowns y [m], residual [N], iterations). The bottom
     pole height is pinned at −R (rigid mode); nothing touches the ball. Newton starts from the
     lowest-energy of the continuous sphere's stretch and ``guesses`` (c, n_y) [m] (NaN: none).
+    ``stiffening`` s [-]: Gent stiffening of the membrane (0: Neo-Hookean); the rest radius
+    R0 = R/λ comes from the same law.
     """
-    lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale)
+    lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale, stiffening=stiffening)
     r0 = setup.radius / lam
     cfg = Config(theta=setup.theta(), gas="prescribed", loading="none", ground=False,
                  pin_bottom=True, relax=False)
-    p = _params(young, thick, nu, r0, pressure, setup, bending_scale=bending_scale)
+    physics = eqx.tree_at(lambda c: c.stiffening, CurvePhysics.defaults(setup), jnp.asarray(stiffening, jnp.float64))
+    p = _params(young, thick, nu, r0, pressure, setup, bending_scale=bending_scale, physics=physics)
     y0 = jnp.concatenate([lam * rest_nodes(cfg, r0).ravel(), jnp.zeros(1)])
     if guesses is not None:
         y0 = jnp.concatenate([y0[None], jax.lax.stop_gradient(guesses)])
@@ -221,6 +311,8 @@ def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
     k_node = p.contact_stiffness * node_rest_areas(rest_nodes(cfg, p.rest_radius))
     n_theta, r_gauss = hoop_tension(x, rest_nodes(cfg, p.rest_radius), p)
     annulus = compressive_annulus(x, n_theta, r_gauss)
+    # the flat contact disc carries the gas pressure and its own weight
+    disc_pressure = gauge_pressure_at(volume, cfg, p) + p.areal_weight
     return dict(
         w0=dz_eq - dz_top,
         top_drop=-dz_top,
@@ -228,8 +320,7 @@ def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
         height=z_max - p.ground_z,
         upper_diameter=2.0 * r_max,
         contact_diameter=2.0 * jnp.sqrt(
-            jnp.sum(k_node * jnp.maximum(-gaps, 0.0))
-            / (jnp.pi * gauge_pressure_at(volume, cfg, p))
+            jnp.sum(k_node * jnp.maximum(-gaps, 0.0)) / (jnp.pi * disc_pressure)
         ),
         contact_diameter_mesh=2.0 * _contact_radius(x, gaps),
         sunken_depth=z_max - x[-1, 1],
@@ -246,13 +337,22 @@ def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
 
 
 def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
-                 return_states: bool = False, nearby_guesses=None):
+                 return_states: bool = False, nearby_guesses=None, physics: CurvePhysics | None = None):
     """One force-controlled curve (unbatched, traceable). ``forces`` (k,) [N], increasing.
+
+    ``physics``: the curve's traced effects (:class:`CurvePhysics` of scalars; None:
+    ``CurvePhysics.defaults(setup)``, today's physics). Curves are differentiable in them too.
 
     Returns a dict of (k,) arrays: the observables, ``residual`` [N], ``iterations`` (Newton
     iterations of the level's load steps) and ``rest_radius`` [m] (scalar); with
     ``return_states`` also ``state`` (1 + k, n_y) [m], the equilibrium unknowns of the inflated
-    ball and of each level.
+    ball and of each level, and the ground-friction lag each level was solved with:
+    ``friction_anchor`` (k, n) [m] (node radii r̂) and ``friction_normal_force`` (k, n) [N] (λ̂).
+
+    Ground friction (``physics.friction_coefficient`` μ > 0) is lagged per load step (ramp,
+    sub-steps and levels alike): each step takes the anchors r̂ and normal forces λ̂ from the
+    previous converged step, the first from the start state. The curve is then path dependent
+    (on the load steps), as a real poke is, and differentiable through the lag.
 
     ``nearby_guesses`` (1 + k, c, n_y) [m]: for the inflation and each level, c guesses of the
     state taken from curves with nearby parameters at the same forces (their states, or states
@@ -262,26 +362,30 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     not depend on the guesses beyond the tolerance ``atol``, and no derivative flows through them.
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
+    physics = CurvePhysics.defaults(setup) if physics is None else physics
     r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale,
-                                    None if nearby_guesses is None else nearby_guesses[0])
+                                    None if nearby_guesses is None else nearby_guesses[0],
+                                    stiffening=physics.stiffening)
     n = len(setup.theta())
     x_inf, _ = split(y_inf, n)
+    # The gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1.
     cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
-                 pin_bottom=False, relax=setup.relax, gas_volume_ratio=setup.gas_volume_ratio,
-                 hoop_capacity=setup.hoop_capacity)
+                 pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
     volume_ref = enclosed_volume(x_inf)
     ground_z = x_inf[0, 1]
-    zc_contact = x_inf[-1, 1] + setup.indenter_radius
+    zc_contact = x_inf[-1, 1] + physics.indenter_radius
     base = _params(young, thick, nu, r0, pressure, setup, ref_volume=volume_ref,
-                   ground_z=ground_z, bending_scale=bending_scale)
+                   ground_z=ground_z, bending_scale=bending_scale, physics=physics)
     ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
     # Start with both contacts slightly engaged so the first Hessian is non-singular, and the
-    # bottom already flattened on the ground as a membrane carries the first load F: the ball
-    # sinks by δ = F / (2π R P_g) (contact disc of area F / P_g). Without it the first load
-    # step grew the contact disc by about a node per Newton iteration.
+    # bottom already flattened on the ground as a membrane carries the first load F (and the
+    # wall's weight W): the ball sinks by δ = (F + W) / (2π R P_g) (contact disc of area
+    # (F + W) / P_g). Without it the first load step grew the contact disc by about a node per
+    # Newton iteration.
     nudge = 1e-4 * setup.radius
     first_load = ramp[0] if len(setup.ramp) else forces[0]
-    sink = first_load / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
+    weight = physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
+    sink = (first_load + weight) / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
     x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
     x_start = x_start.at[:, 1].max(ground_z - nudge)
     y_start = jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
@@ -294,12 +398,20 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     schedule = jnp.concatenate([ramp, sub.ravel()])
     opts = setup.options()
 
+    def lagged(q, force, lag):
+        # the step's force and its ground-friction lag (anchor radii, normal forces)
+        return eqx.tree_at(lambda c: (c.force, c.friction_anchor, c.friction_normal_force), q, (force, *lag))
+
+    def lag_of(y):
+        x, _ = split(y, n)
+        return x[:, 0], ground_normal_forces(x, cfg, base)
+
     def step(carry, level):
         force, nearby = level
-        y_prev, y_prev2, f_prev, f_prev2 = carry
+        y_prev, y_prev2, f_prev, f_prev2, lag = carry
         if setup.predictor == "tangent":
             # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
-            p_prev = eqx.tree_at(lambda q: q.force, base, f_prev)
+            p_prev = lagged(base, f_prev, lag)
             e_zc = jnp.zeros_like(y_prev).at[-1].set(1.0)
             dy_df = -structured_solve(hessian_at(y_prev, cfg, p_prev), e_zc)
             guess = y_prev + (force - f_prev) * dy_df
@@ -311,17 +423,23 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
             w = jnp.where(f_prev - f_prev2 > 0, (force - f_prev) / (f_prev - f_prev2), 0.0)
             w = jnp.clip(w, 0.0, 1.0)
             guess = y_prev + w * (y_prev - y_prev2)
-        p = eqx.tree_at(lambda q: q.force, base, force)
+        p = lagged(base, force, lag)
         if nearby_guesses is not None:
             guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
         y, res, it, _ = equilibrium(cfg, opts, p, guess)
         obs = observables(cfg, p, y, y_inf, zc_contact)
         obs.update(residual=res, iterations=it)
         if return_states:
-            obs.update(state=y)
-        return (y, y_prev, force, f_prev), obs
+            obs.update(state=y, friction_anchor=lag[0], friction_normal_force=lag[1])
+        return (y, y_prev, force, f_prev, lag_of(y)), obs
 
-    init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)))
+    # First step's lag: the start state's radii (the ball as it meets the ground) and its
+    # contact forces scaled to the step's ground reaction F + W. The start's penetration is the
+    # nudge, whose penalty forces (≈ k_c × nudge ≈ 1e3 × P_g per area) are no physical load;
+    # its contact disc spread evenly is the membrane's (a flat disc carrying the gas pressure).
+    anchor0, normal0 = lag_of(y_start)
+    normal0 = normal0 * (first_load + weight) / jnp.maximum(jnp.sum(normal0), 1e-300)
+    init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)), (anchor0, normal0))
     n_ramp = len(setup.ramp)
     nearby = None
     if nearby_guesses is not None:
@@ -343,4 +461,4 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     return out
 
 
-__all__ = ["Setup", "curve_single", "inflate", "observables"]
+__all__ = ["CurvePhysics", "Setup", "curve_single", "inflate", "observables"]

@@ -20,6 +20,7 @@ from ._energy import (
     Config,
     Params,
     constrained_mask,
+    gas_volume_ratio,
     ground_gaps,
     indenter_gaps,
     node_rest_areas,
@@ -175,7 +176,9 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     x, zc = split(y, n)
     dx, dzc = split(d, n)
     relative = jnp.sqrt(jnp.sum((dx - jnp.stack([jnp.zeros_like(dzc), dzc])) ** 2, axis=-1))
-    allowed = jnp.maximum(max_step, indenter_gaps(x, zc, p))
+    # A traced indenter radius smaller than the static cap shrinks it (a small sphere is
+    # tunnelled through by a shorter jump); a larger one keeps the static cap.
+    allowed = jnp.maximum(jnp.minimum(max_step, p.indenter_radius), indenter_gaps(x, zc, p))
     return jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300)))
 
 
@@ -198,8 +201,8 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     # A sealed gas's energy is computed from p_abs·V (≈ 1e5 Pa × the volume) and carries its
     # round-off: on large balls that noise (≈ 1e-12 J) hid the true decrease of Newton steps near
     # equilibrium and Newton stalled at 1e-5–1e-4 N; the line search tolerates noise of that size.
-    gas_scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * cfg.gas_volume_ratio
-                 if cfg.gas == "isothermal" else 0.0)  # fmt: skip
+    gas_scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
+                 * jnp.abs(gas_volume_ratio(cfg, p)) if cfg.gas in ("isothermal", "polytropic") else 0.0)  # fmt: skip
     energy = lambda y: total_energy(y, cfg, p)  # noqa: E731
     energy_and_grad = jax.value_and_grad(energy)
 

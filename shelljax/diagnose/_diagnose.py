@@ -29,7 +29,7 @@ from scipy import stats
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..session import Session, load_session
-from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, LINEAR_SCALE, LOG_PARAMETERS, UNITS, check_effect_names, free_mask
+from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
 from ._model import GAS_EXPONENTS, WRINKLE_LAWS, physical, study_arrays
 from ._study import SHAPE_OBSERVABLES, Study, build_study
@@ -120,10 +120,13 @@ def _points(study: Study, score: LooScore, regime: np.ndarray) -> dict:
 def _group(points: dict, mask: np.ndarray, unit: str | None = None) -> dict:
     z, w, pit = points["z"][mask], points["whitened"][mask], points["pit"][mask]
     chi2 = float(np.sum(w**2))
+    # standardized by the whole noise model: the whitened residuals (a trial's depths share its
+    # zero error, so dividing each by its marginal std would count that error once per sample)
     out = {
         "n": int(mask.sum()),
-        "rms_standardized": float(np.sqrt(np.mean(z**2))),
-        "mean_standardized": float(np.mean(z)),
+        "rms_standardized": float(np.sqrt(np.mean(w**2))),
+        "rms_marginal_z": float(np.sqrt(np.mean(z**2))),
+        "mean_marginal_z": float(np.mean(z)),
         "chi2": chi2,
         "p_value": float(stats.chi2.sf(chi2, mask.sum())),
         "loo_pit_ks_p_value": float(stats.kstest(pit, "uniform").pvalue) if mask.sum() >= 3 else None,
@@ -180,9 +183,10 @@ def _where(study: Study, points: dict) -> dict:
 
 
 def _gap(points: dict) -> dict:
-    """Held-out gap: RMS of the standardized LOO residuals, overall and per observable."""
+    """Held-out gap: RMS of the standardized (whitened) held-out residuals, √(χ²/n), overall and per
+    observable, with the RMS residual per observable in its unit and in % of the measured value."""
     units = {"depth": "m", "wrinkle_count": "1", **{k: "m" for k in SHAPE_OBSERVABLES}}
-    out = {"rms_standardized": float(np.sqrt(np.mean(points["z"] ** 2))), "by_observable": {}}
+    out = {"rms_standardized": float(np.sqrt(np.mean(points["whitened"] ** 2))), "by_observable": {}}
     for name in OBSERVABLES:
         sel = points["observable"] == name
         if sel.any():
@@ -246,11 +250,7 @@ def diagnose(
     fits["baseline"], scores["baseline"] = fit, loo_score(fit)
     for effect in effects:
         report_progress(effect)
-        data = _data_for(base, effect, baseline_free)
-        try:
-            fit = fit_candidate(data, wrinkle_law, fits["baseline"].u)
-        except NoConvergenceError as err:  # pragma: no cover - solve_least_squares does not raise
-            fit = dataclasses.replace(fits["baseline"], data=data, converged=False, message=str(err))
+        fit = fit_candidate(_data_for(base, effect, baseline_free), wrinkle_law, fits["baseline"].u)
         fits[effect] = fit
         if fit.converged:
             scores[effect] = loo_score(fit)

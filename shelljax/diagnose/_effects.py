@@ -18,6 +18,7 @@ per-session gauge pressures:
 | gas_exponent | κ₀ + 0.5 u | - | κ₀ (1 isothermal, 0 prescribed, 1.4 adiabatic) | normal(0, 2) |
 | stiffening | 10 u | - | 0 (Neo-Hookean) | normal(0, 3) |
 | body_mass | m_ref · e^u | kg | no gravity | normal(0, 0.1) with the session's mass, else (0, 1.5) |
+| friction_coefficient | 0.5 · e^u | - | frictionless ground | normal(0, 1.5) |
 
 The priors are weakly informative: a few times wider than any plausible value, so the data decide,
 and proper, so the posterior and its leave-one-out predictive densities exist.
@@ -33,20 +34,21 @@ from .._errors import InvalidInputError
 
 GLOBAL_PARAMETERS = (
     "young_modulus", "thickness", "radius", "finger_compliance", "depth_offset", "force_gain",
-    "force_exponent", "indenter_radius", "gas_exponent", "stiffening", "body_mass",
+    "force_exponent", "indenter_radius", "gas_exponent", "stiffening", "body_mass", "friction_coefficient",
 )  # fmt: skip
 UNITS = {
     "gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
     "finger_compliance": "m/N", "depth_offset": "m", "force_gain": "1", "force_exponent": "1",
-    "indenter_radius": "m", "gas_exponent": "1", "stiffening": "1", "body_mass": "kg",
+    "indenter_radius": "m", "gas_exponent": "1", "stiffening": "1", "body_mass": "kg", "friction_coefficient": "1",
 }  # fmt: skip
 LOG_PARAMETERS = frozenset({"gauge_pressure", "young_modulus", "thickness", "radius", "force_gain",
-                            "indenter_radius", "body_mass"})  # fmt: skip
+                            "indenter_radius", "body_mass", "friction_coefficient"})  # fmt: skip
 # (scale of u, prior std of u) of the effect parameters that are linear in u
 LINEAR_SCALE = {"finger_compliance": 1e-4, "depth_offset": 1e-3, "force_exponent": 0.1, "gas_exponent": 0.5,
                 "stiffening": 10.0}  # fmt: skip
 PRIOR_STD = {"finger_compliance": 10.0, "depth_offset": 10.0, "force_gain": 0.3, "force_exponent": 3.0,
-             "indenter_radius": 1.0, "gas_exponent": 2.0, "stiffening": 3.0}  # fmt: skip
+             "indenter_radius": 1.0, "gas_exponent": 2.0, "stiffening": 3.0, "friction_coefficient": 1.5}  # fmt: skip
+FRICTION_REFERENCE = 0.5  # [-] μ at u = 0: rubber on a table
 FREE_THICKNESS_STD = 0.5  # [-] prior std of log h under ``wall_thickness``: h within ×/÷ 2.7 at 2σ
 WEIGHED_MASS_STD = 0.1  # [-] prior std of log m when the session states the mass
 UNWEIGHED_MASS_STD = 1.5  # [-] ... and when it does not (m_ref = 0.5 kg then)
@@ -90,6 +92,9 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            "the wall thickness h is off its calliper value (the calliper prior is widened to ×/÷ 1.6 at 1σ)"),
     Effect("self_weight", "physics", ("body_mass",),
            "gravity on the object: its weight m g, spread over the wall, presses it on the ground"),
+    Effect("ground_friction", "contact", ("friction_coefficient",),
+           "Coulomb friction μ between the object and the ground (lagged, smoothed): the contact disc "
+           "cannot slide freely as it grows"),
 )}  # fmt: skip
 
 

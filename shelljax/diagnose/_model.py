@@ -30,8 +30,10 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch, vella_wrinkle_count
 from ..estimate._problem import FAILED_RESIDUAL, count_log_likelihood
+from ..physics import STANDARD_GRAVITY
 from ._effects import (
     FREE_THICKNESS_STD,
+    FRICTION_REFERENCE,
     GLOBAL_PARAMETERS,
     LINEAR_SCALE,
     LOG_PARAMETERS,
@@ -47,7 +49,6 @@ R_REF = 0.2  # [m] the engine's radius; every object is reached by similarity
 N_GRID = 12  # forces per curve
 GRID_SPAN = (0.6, 1.3)  # the grid covers [0.6 F_min, 1.3 F_max]: room for gain and exponent
 DEFAULT_INDENTER_RADIUS = 8e-3  # [m], the finger of the estimators' forward model
-GRAVITY = 9.81  # [m/s²]
 N_ELEMENTS = 101  # meridian elements, as the fitted estimator's forward model
 GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": 1.4}
 WRINKLE_LAWS = ("scaling", "mechanics")
@@ -144,8 +145,9 @@ def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array,
     s = data.start_pressure.shape[0]
     get = {name: u[s + i] for i, name in enumerate(GLOBAL_PARAMETERS)}
     out = {"gauge_pressure": data.start_pressure * jnp.exp(u[:s])}
-    refs = {"young_modulus": data.start_modulus, "thickness": data.thickness, "radius": 1.0,
-            "force_gain": 1.0, "indenter_radius": data.indenter_radius, "body_mass": data.mass_ref}  # fmt: skip
+    refs = {"young_modulus": data.start_modulus, "thickness": data.thickness, "radius": 1.0, "force_gain": 1.0,
+            "indenter_radius": data.indenter_radius, "body_mass": data.mass_ref,
+            "friction_coefficient": FRICTION_REFERENCE}  # fmt: skip
     for name in GLOBAL_PARAMETERS:
         if name in LOG_PARAMETERS:
             out[name] = refs[name] * jnp.exp(get[name])
@@ -154,8 +156,9 @@ def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array,
     out["radius"] = data.radius * out["radius"]  # per session
     out["force_exponent"] = 1.0 + out["force_exponent"]
     out["gas_exponent"] = data.gas_exponent + out["gas_exponent"]
-    # self-weight is on only when its parameter is free
-    out["body_mass"] = jnp.where(data.free[s + _INDEX["body_mass"]], out["body_mass"], 0.0)
+    # self-weight and ground friction are on only when their parameter is free
+    for name in ("body_mass", "friction_coefficient"):
+        out[name] = jnp.where(data.free[s + _INDEX[name]], out[name], 0.0)
     return out
 
 
@@ -176,7 +179,8 @@ def engine_inputs(phys, data: StudyArrays):
     physics = CurvePhysics(
         indenter_radius=phys["indenter_radius"] / scale, gas_volume_ratio=data.gas_volume_ratio * ones,
         gas_exponent=phys["gas_exponent"] * ones, stiffening=phys["stiffening"] * ones,
-        areal_weight=phys["body_mass"] * GRAVITY / rest_area,
+        areal_weight=phys["body_mass"] * STANDARD_GRAVITY / rest_area,
+        friction_coefficient=phys["friction_coefficient"] * ones,
     )  # fmt: skip
     return rows, physics
 

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._errors import InvalidInputError
-from ..estimate import estimate_session, modulus_from_wrinkles
+from ..estimate import PAPER_KS, modulus_from_wrinkles, pressure_slope
 from ..session import SHAPE_OBSERVABLES, Session
 
 DEPTH_NOISE_FLOOR = 1e-5  # [m]
@@ -252,8 +252,9 @@ def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, fl
     radius = np.array([s.radius for s in sessions])
     manometer = np.array([np.nan if s.manometer_gauge_pressure is None else s.manometer_gauge_pressure
                           for s in sessions])  # fmt: skip
-    closed = [estimate_session(s, bootstrap_samples=0) for s in sessions]
-    start_pressure = np.where(np.isfinite(manometer), manometer, [c.gauge_pressure.value for c in closed])
+    # start: the manometer where there is one, else the closed form's P_g with the paper's k_s
+    start_pressure = np.array([m if np.isfinite(m) else pressure_slope(s)[0].value / PAPER_KS
+                               for m, s in zip(manometer, sessions)])  # fmt: skip
     # E from the wrinkle law at the starting pressures (the manometer's where known, not k_s's)
     moduli = [modulus_from_wrinkles(p, s.radius, s.thickness, float(np.mean(s.wrinkle_counts)), s.poisson_ratio)
               for p, s in zip(start_pressure, sessions) if np.mean(s.wrinkle_counts) > 0]  # fmt: skip

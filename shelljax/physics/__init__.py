@@ -1,4 +1,4 @@
-"""Physics layer: material, gas and contact energies as pure JAX functions (SI units)."""
+"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions (SI units)."""
 
 from ._contact import (
     barrier_energy,
@@ -16,12 +16,17 @@ from ._gas import (
     adiabatic_gauge_pressure,
     isothermal_gas_energy,
     isothermal_gauge_pressure,
+    polytropic_gas_energy,
+    polytropic_gauge_pressure,
     prescribed_pressure_energy,
 )
+from ._gravity import STANDARD_GRAVITY, areal_weight_from_density, self_weight_energy
 from ._material import (
     bending_density,
     bending_density_invariants,
     bending_stiffness,
+    gent_membrane_invariants,
+    gent_shear_energy,
     lame_constants_2d,
     neo_hookean_membrane_density,
     neo_hookean_membrane_invariants,

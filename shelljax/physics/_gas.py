@@ -7,16 +7,30 @@ gauge pressure acting on the wall. All pressures in Pa, volumes in m³, energies
 * sealed isothermal: a fixed amount of ideal gas at constant temperature, atmosphere outside.
   Absolute pressure p = p₀ V₀ / V, so Π = −p₀ V₀ ln(V / V₀) + P_atm (V − V₀).
 * sealed adiabatic: p V^γ constant, Π = p₀ V₀ / (γ − 1) [(V₀ / V)^(γ−1) − 1] + P_atm (V − V₀).
+* sealed polytropic: p V^κ constant with the exponent κ a (traceable) value, so one compiled
+  program spans the three laws above: κ = 0 is the prescribed gauge pressure (Π = −P_g0 (V − V₀)),
+  κ = 1 the isothermal and κ = γ the adiabatic gas.
+  Π = −p₀ V₀ ∫₁^{V/V₀} u^(−κ) du + P_atm (V − V₀) = −p₀ V₀ L φ((1 − κ) L) + P_atm (V − V₀),
+  L = ln(V / V₀), φ(x) = (eˣ − 1)/x, which is analytic through κ = 1 (x = 0).
 
 Here p₀ = P_atm + P_g0 is the absolute pressure at the reference volume V₀.
 """
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 ATMOSPHERIC_PRESSURE = 101_325.0  # [Pa], standard atmosphere
 AIR_HEAT_CAPACITY_RATIO = 1.4  # [-], diatomic ideal gas
+
+# φ(x) = (eˣ − 1)/x = Σ xⁿ/(n + 1)! is evaluated by its Taylor series for |x| < 0.1, where the
+# closed form's derivatives lose digits (d²/dx² of expm1(x)/x cancels to ≈ eps/x² relative): the
+# 13 terms leave a remainder below 1e-19 in φ, φ' and φ'' there, and beyond 0.1 the closed form's
+# second derivative is good to ≈ 2e-14.
+_EXPREL_SERIES_LIMIT = 0.1
+_EXPREL_COEFFICIENTS = tuple(1.0 / math.factorial(n + 1) for n in range(13))
 
 
 def prescribed_pressure_energy(volume, gauge_pressure):
@@ -69,3 +83,51 @@ def adiabatic_gauge_pressure(
     return (atmospheric_pressure + reference_gauge_pressure) * (
         reference_volume / volume
     ) ** heat_capacity_ratio - atmospheric_pressure
+
+
+def _exprel(x):
+    """φ(x) = (eˣ − 1)/x [-] (1 at x = 0), with exact derivatives of every order through x = 0.
+
+    Both branches are evaluated on safe arguments (the series at 0, the closed form at 1), so the
+    branch ``jnp.where`` does not select is finite with finite derivatives: no NaN gradients.
+    """
+    x = jnp.asarray(x)
+    small = jnp.abs(x) < _EXPREL_SERIES_LIMIT
+    x_series = jnp.where(small, x, 0.0)
+    series = jnp.zeros_like(x_series)
+    for c in reversed(_EXPREL_COEFFICIENTS):
+        series = series * x_series + c
+    x_closed = jnp.where(small, 1.0, x)
+    return jnp.where(small, series, jnp.expm1(x_closed) / x_closed)
+
+
+def polytropic_gas_energy(
+    volume,
+    reference_volume,
+    reference_gauge_pressure,
+    exponent,
+    atmospheric_pressure=ATMOSPHERIC_PRESSURE,
+):
+    """Energy [J] of a sealed polytropic gas (p V^κ constant) at V [m³], gauge P_g0 [Pa] at V₀ [m³].
+
+    ``exponent`` κ [-] may be traced: 0 gives the prescribed gauge pressure (Π = −P_g0 (V − V₀)),
+    1 the isothermal law, 1.4 the adiabatic one of air. Smooth in V and κ, through κ = 1 included.
+    """
+    p0 = atmospheric_pressure + reference_gauge_pressure
+    log_ratio = jnp.log(volume / reference_volume)
+    return -p0 * reference_volume * log_ratio * _exprel(
+        (1.0 - exponent) * log_ratio
+    ) + atmospheric_pressure * (volume - reference_volume)
+
+
+def polytropic_gauge_pressure(
+    volume,
+    reference_volume,
+    reference_gauge_pressure,
+    exponent,
+    atmospheric_pressure=ATMOSPHERIC_PRESSURE,
+):
+    """Gauge pressure [Pa] of a sealed polytropic gas (exponent κ [-]) at V [m³]: p₀(V₀/V)^κ − P_atm."""
+    return (atmospheric_pressure + reference_gauge_pressure) * jnp.exp(
+        -exponent * jnp.log(volume / reference_volume)
+    ) - atmospheric_pressure
