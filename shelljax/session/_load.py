@@ -123,14 +123,19 @@ def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str) 
         )  # fmt: skip
 
 
-def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
+    """The rows of the CSV that ``field`` names, or an error saying the file is missing."""
     if not csv_path.is_file():
         raise reader.fail(
-            "indentation.trials_csv", f"file {csv_path} does not exist",
+            field, f"file {csv_path} does not exist",
             "put the CSV beside the session file or fix the path (relative to the TOML)",
         )  # fmt: skip
     with csv_path.open(newline="") as handle:
-        rows = list(csv.reader(handle))
+        return list(csv.reader(handle))
+
+
+def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rows = _csv_rows(reader, "indentation.trials_csv", csv_path)
     if not rows or [c.strip() for c in rows[0]] != list(_CSV_COLUMNS):
         header = rows[0] if rows else []
         raise InvalidInputError(
@@ -391,13 +396,7 @@ def _inline_shape_columns(reader: _Reader, table: dict) -> _ShapeColumns:
 
 def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, list[int]]:
     """Columns of a shape CSV (an empty observable cell = not measured) and each row's line number."""
-    if not csv_path.is_file():
-        raise reader.fail(
-            "shape.shape_csv", f"file {csv_path} does not exist",
-            "put the CSV beside the session file or fix the path (relative to the TOML)",
-        )  # fmt: skip
-    with csv_path.open(newline="") as handle:
-        rows = list(csv.reader(handle))
+    rows = _csv_rows(reader, "shape.shape_csv", csv_path)
     header = [c.strip() for c in rows[0]] if rows else []
     fix_header = (
         f"the first line names trial, force and at least one of {', '.join(SHAPE_OBSERVABLES)}, "
