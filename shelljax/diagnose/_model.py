@@ -4,9 +4,10 @@ E, h, R and the effect parameters are shared by the sessions; each has its own g
 Every candidate effect is a traced value of this one model (see ``_effects``), so one compiled
 program serves the baseline, every candidate and every object:
 
-* the engine runs at a fixed reference radius R_REF and reaches a session's radius R by exact
+* the engine runs at a fixed reference radius R_REF and reaches a session's radius R by
   similarity (lengths × s = R/R_REF, forces × s², pressures unchanged; ``estimate._forward``),
-  the finger's radius included;
+  the finger's radius included; only the contact penalty is not rescaled (its penetration,
+  contact pressure / 1e11 N/m³ ≈ 10 nm, is far below any measured length);
 * each session's curve is solved on one fixed grid of forces (reference frame) and interpolated
   at the true forces of its samples (the F–w(0) curve is smooth: the interpolation error is far
   below the depth noise).
