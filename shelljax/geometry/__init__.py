@@ -11,6 +11,7 @@ from ._mesh import (
     bundled_mesh_path,
     enclosed_volume,
     load_mesh,
+    signed_volume,
 )
 from ._primitives import (
     HAMMER_HANDLE_LENGTH,

@@ -66,7 +66,7 @@ def _boundary_and_nonmanifold_edges(mesh: trimesh.Trimesh) -> tuple[int, int]:
     return int(np.sum(counts == 1)), int(np.sum(counts > 2))
 
 
-def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Σ over faces of v0 · (v1 × v2) / 6: the divergence theorem on a closed triangle surface [m³].
 
     Exact for any closed, consistently wound polyhedron (origin anywhere); positive when the face
@@ -188,7 +188,7 @@ def load_mesh(
                 GeometryWarning,
                 stacklevel=2,
             )
-        if _signed_volume(mesh.vertices, mesh.faces) <= 0.0:
+        if signed_volume(mesh.vertices, mesh.faces) <= 0.0:
             raise InvalidInputError(
                 f"{path}: enclosed volume is not positive even after re-orienting the faces; the "
                 "surface is self-intersecting or degenerate: repair it (e.g. MeshLab) and re-export"
@@ -219,7 +219,7 @@ def enclosed_volume(mesh: trimesh.Trimesh) -> float:
             "read meshes with shelljax.geometry.load_mesh"
         )
     _require_watertight(mesh, "enclosed_volume")
-    volume = _signed_volume(mesh.vertices, mesh.faces)
+    volume = signed_volume(mesh.vertices, mesh.faces)
     if volume <= 0.0:
         raise InvalidInputError(
             f"enclosed_volume: signed volume is {volume:.6g} m³ (≤ 0): the face normals point "

@@ -1,4 +1,5 @@
-"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions (SI units)."""
+"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions, and the
+closed-form results of shell theory (SI units)."""
 
 from ._contact import (
     barrier_energy,
@@ -30,4 +31,12 @@ from ._material import (
     lame_constants_2d,
     neo_hookean_membrane_density,
     neo_hookean_membrane_invariants,
+)
+from ._shell_theory import (
+    CRITICAL_W,
+    WRINKLE_PREFACTOR,
+    reissner_stiffness,
+    scaling_wrinkle_count,
+    tau,
+    vella_linear_stiffness,
 )
