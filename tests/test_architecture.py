@@ -1,0 +1,145 @@
+"""The house rules of docs/architecture.md, checked on the source tree (no JAX needed).
+
+* a module imports only from its own layer or the layers below it;
+* the data layer does not import JAX;
+* no package file is over 600 lines;
+* scripts and notebooks import public names only and patch no ``sys.path``;
+* the paper's laws and constants are defined once.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "shelljax"
+LAYERS = {  # rank: a module may import ranks ≤ its own
+    "paper": 0, "_errors": 0,
+    "physics": 1, "session": 1, "geometry": 1, "sensing": 1,
+    "axisym": 2, "shell3d": 2, "_parallel": 2, "_hilbert": 2, "_memory_mappings": 2,
+    "estimate": 3, "diagnose": 3, "virtual": 3,
+    "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4,
+}  # fmt: skip
+DATA_LAYER = ("session", "geometry", "sensing")
+MAX_FILE_LINES = 600
+
+
+def _package_files():
+    return sorted(p for p in PACKAGE.rglob("*.py") if "data" not in p.relative_to(PACKAGE).parts[:1])
+
+
+def _top(path: Path) -> str:
+    part = path.relative_to(PACKAGE).parts[0]
+    return part.removesuffix(".py")
+
+
+def _imported_tops(path: Path) -> set[str]:
+    """The shelljax top-level modules ``path`` imports (relative or absolute)."""
+    tree = ast.parse(path.read_text())
+    depth_of_file = len(path.relative_to(PACKAGE).parts) - 1  # 0: shelljax/x.py, 1: shelljax/pkg/x.py
+    tops = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0 and node.module and node.module.startswith("shelljax."):
+                tops.add(node.module.split(".")[1])
+            elif node.level > 0:
+                up = node.level - 1  # levels above the file's own package
+                if up > depth_of_file:
+                    continue
+                if up == depth_of_file:  # relative to shelljax/ itself
+                    names = [node.module.split(".")[0]] if node.module else [a.name for a in node.names]
+                    tops.update(names)
+                else:
+                    tops.add(_top(path))
+        elif isinstance(node, ast.Import):
+            tops.update(a.name.split(".")[1] for a in node.names if a.name.startswith("shelljax."))
+    return tops
+
+
+def test_every_package_module_has_a_layer():
+    missing = {_top(p) for p in _package_files() if _top(p) != "__init__"} - set(LAYERS)
+    assert not missing, f"add these to LAYERS here and to docs/architecture.md: {sorted(missing)}"
+
+
+def test_modules_import_only_their_layer_and_below():
+    upward = []
+    for path in _package_files():
+        own = _top(path)
+        if own == "__init__":
+            continue
+        for top in _imported_tops(path) - {"__init__", "__version__"}:
+            if top in LAYERS and LAYERS[top] > LAYERS[own]:
+                upward.append(f"{path.relative_to(ROOT)} ({own}, layer {LAYERS[own]}) imports {top} (layer {LAYERS[top]})")
+    assert not upward, "\n".join(upward)
+
+
+def test_data_layer_does_not_import_jax():
+    offenders = [
+        str(p.relative_to(ROOT)) for p in _package_files()
+        if _top(p) in DATA_LAYER and re.search(r"^\s*(import|from) (jax|equinox|optimistix|lineax)\b", p.read_text(), re.M)
+    ]  # fmt: skip
+    assert not offenders, offenders
+
+
+def test_no_package_file_is_over_600_lines():
+    long = {str(p.relative_to(ROOT)): n for p in _package_files() if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES}
+    assert not long, long
+
+
+def _script_sources():
+    for path in sorted((ROOT / "experiments").glob("*.py")):
+        yield path, path.read_text()
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        cells = json.loads(path.read_text())["cells"]
+        yield path, "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+
+
+@pytest.mark.parametrize("path, source", list(_script_sources()), ids=lambda v: v.name if isinstance(v, Path) else "")
+def test_scripts_and_notebooks_use_public_names_only(path, source):
+    private_module = re.findall(r"shelljax(?:\.\w+)*\._\w+", source)
+    private_attribute = re.findall(r"\b(?!self\b)[a-z]\w*\._[a-z]\w*", source)
+    assert "sys.path" not in source, f"{path.name} patches sys.path; use an editable install"
+    assert not private_module, f"{path.name} imports private modules: {sorted(set(private_module))}"
+    assert not private_attribute, f"{path.name} reaches private attributes: {sorted(set(private_attribute))}"
+
+
+def test_no_test_patches_sys_path():
+    offenders = [p.name for p in (ROOT / "tests").glob("*.py") if p.name != Path(__file__).name and "sys.path" in p.read_text()]
+    assert not offenders, offenders
+
+
+def _numbers(path: Path) -> set[float]:
+    return {n.value for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Constant) and type(n.value) is float}
+
+
+@pytest.mark.parametrize(
+    "value, home",
+    [
+        (1.33, "physics/_shell_theory.py"),  # the wrinkle law's prefactor
+        (2.52, "physics/_shell_theory.py"),  # the wrinkling onset
+        (0.64, "paper.py"),  # the paper's k_s
+        (8e-3, "paper.py"),  # the paper's finger radius
+    ],
+)
+def test_each_constant_of_the_paper_is_defined_once(value, home):
+    where = [str(p.relative_to(PACKAGE)) for p in _package_files() if value in _numbers(p)]
+    assert where == [home], f"{value} is written in {where}; its one home is {home}"
+
+
+@pytest.mark.parametrize(
+    "pattern, home",
+    [
+        (r"arctanh", "physics/_shell_theory.py"),  # Vella's point-load stiffness
+        (r"def tau\(", "physics/_shell_theory.py"),
+        (r"def \w*signed_volume\(", "geometry/_mesh.py"),
+        (r"arange\(5", None),  # the force levels are listed once, in paper.py
+    ],
+)
+def test_each_law_is_defined_once(pattern, home):
+    where = [str(p.relative_to(PACKAGE)) for p in _package_files() if re.search(pattern, p.read_text())]
+    assert where == ([home] if home else []), f"{pattern!r} appears in {where}; its one home is {home or 'paper.py'}"
