@@ -37,6 +37,7 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from ..paper import PAPER_FORCES
 from ..session import LENGTH_UNITS
 from ._calibration import ADC_SATURATED, Calibration
 from ._capture import HumanOperator, Operator, Pump, Reading, SampleLog, accept_force
@@ -51,16 +52,11 @@ class RecordingAborted(Exception):
     """The user quit; everything received is on disk and ``--resume`` continues."""
 
 
-def paper_forces() -> tuple[float, ...]:
-    """The paper's force levels [N]: 5 to 20 in steps of 2.5."""
-    return tuple(float(f) for f in np.arange(5.0, 20.0 + 1e-9, 2.5))
-
-
 @dataclasses.dataclass(frozen=True)
 class AcquisitionPlan:
     """What to record. Forces [N], times [s], ``depth_scale`` [m/count] for channel 2."""
 
-    forces: tuple[float, ...] = dataclasses.field(default_factory=paper_forces)
+    forces: tuple[float, ...] = PAPER_FORCES
     trials: int = 3
     hold: float = 0.5
     tolerance: float = 0.5

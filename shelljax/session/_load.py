@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._schema import DEFAULT_POISSON_RATIO, SHAPE_OBSERVABLES, Session
+from ..paper import DEFAULT_POISSON_RATIO
+from ._schema import SHAPE_OBSERVABLES, Session
 from ._units import QUANTITY_UNITS
 
 SCHEMA_VERSION = 1

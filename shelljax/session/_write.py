@@ -15,8 +15,9 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from ..paper import DEFAULT_POISSON_RATIO
 from ._load import SCHEMA_VERSION, load_session
-from ._schema import DEFAULT_POISSON_RATIO, SHAPE_OBSERVABLES, Session
+from ._schema import SHAPE_OBSERVABLES, Session
 
 _HEADER = "# Written by shelljax.session.write_session; format: docs/session-format.md; SI units.\n"
 
