@@ -296,7 +296,7 @@ def sample_posterior(
     in a box of ±``SURROGATE_SIGMAS`` Laplace standard deviations around the fit; its error
     against the engine is in ``PosteriorResult.surrogate``, and a :class:`SurrogateWarning` says
     when it exceeds ``SURROGATE_TOLERANCE`` of the depth noise. False samples the engine itself
-    (about an hour on 2 CPU cores).
+    (slow: docs/fit-and-bayes.md).
     """
     chain = ChainOptions(max_steps, check_every, autocorr_factor, tau_tolerance, min_steps)
     problem, source = fit.problem, fit.source

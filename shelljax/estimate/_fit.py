@@ -75,10 +75,8 @@ def _forward_ok(problem: InverseProblem, u):
 
 @functools.partial(jax.jit, static_argnames="max_steps")
 def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
-    # One compiled program: the LM solve and everything evaluated at its optimum. Every call of
-    # the forward model there is a copy of the shell engine for XLA to compile: the residuals,
-    # Jacobian (linearised) and predictions at the optimum are those LM computed when it accepted
-    # it, not a fresh Jacobian pass (a quarter of the program's compile time).
+    # One compiled program; every forward-model call in it is another engine copy to compile, so
+    # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol = optx.least_squares(problem.residuals_and_prediction, solver, u0, has_aux=True, max_steps=max_steps,
                              throw=False)  # fmt: skip
@@ -129,7 +127,7 @@ def fit_session(
     there would remove less than ``OPTIMALITY_TOL`` of χ², and Levenberg–Marquardt either met
     its ``rtol``/``atol`` step tolerances or ran out of its ``max_steps`` at such a point (near
     the optimum the engine's round-off can make every trial step a rejected one, so LM's own test
-    may never fire: 1 of 192 virtual sessions stopped like that with 7e-17 χ² left).
+    may never fire).
 
     ``raise_on_failure=False`` returns the last iterate (``converged = False``) when
     Levenberg–Marquardt stops without meeting its tolerances but the forward model is finite
