@@ -16,7 +16,16 @@ import numpy as np
 import pytest
 
 from shelljax import InvalidInputError, NoConvergenceError
-from shelljax.estimate import ConvergenceWarning, Prediction, ScalingLawModel, fit_session, sample_posterior
+from shelljax.estimate import (
+    ConvergenceWarning,
+    Estimate,
+    EstimatorOptions,
+    Prediction,
+    ScalingLawModel,
+    fit_session,
+    run_estimator,
+    sample_posterior,
+)
 from shelljax.session import Session
 
 FORCES = np.tile(np.arange(5.0, 20.01, 2.5), 3)
@@ -157,3 +166,18 @@ def test_fit_out_of_steps_at_a_verified_optimum_is_converged():
     normal = fit_session(s, MODEL)
     assert exhausted.converged and exhausted.steps == 200
     assert exhausted.estimates["gauge_pressure"].value == pytest.approx(normal.estimates["gauge_pressure"].value, rel=1e-6)
+
+
+def test_every_estimator_answers_in_one_protocol():
+    s = synthetic(depth_noise=1e-3, seed=3)
+    options = EstimatorOptions(forward_model="scaling", walkers=16, max_steps=300, bootstrap_samples=0)
+    fit = run_estimator("fit", s, options)
+    with pytest.warns(ConvergenceWarning):
+        post = run_estimator("bayes", s, options, fit=fit)
+    for result in (run_estimator("closed-form", s, options), fit, post):
+        assert all(isinstance(e, Estimate) for e in result.estimates.values())
+        record = result.to_dict()
+        assert list(record["estimates"]) == list(result.estimates)
+        assert record["estimates"]["gauge_pressure"]["unit"] == "Pa"
+    with pytest.raises(InvalidInputError, match="unknown estimator"):
+        run_estimator("magic", s, options)
