@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from shelljax.config import bundled_data_dir
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))  # the checkout's shelljax, not an installed one
-SESSIONS = sorted(str(p) for p in (ROOT / "shelljax" / "data" / "sessions").glob("calib_pezzi_*.toml"))[:4]
+SESSIONS = sorted(str(p) for p in (bundled_data_dir() / "sessions").glob("calib_pezzi_*.toml"))[:4]
 
 
 def _timed_diagnosis() -> dict:
@@ -63,27 +64,33 @@ def loo_check() -> dict:
     import jax
     import jax.numpy as jnp
 
-    from shelljax.diagnose._diagnose import _data_for
-    from shelljax.diagnose._loo import _row_layout, fit_candidate, loo_score
-    from shelljax.diagnose._model import JointProblem, study_arrays
-    from shelljax.diagnose._study import build_study
+    from shelljax.diagnose import (
+        JointProblem,
+        build_study,
+        candidate_data,
+        fit_candidate,
+        loo_score,
+        study_arrays,
+        unit_log_jacobian,
+    )
     from shelljax.session import load_session
 
     sessions = [load_session(p) for p in SESSIONS]
     free = ("young_modulus", "thickness", "radius")
     study = build_study(sessions)
-    data = _data_for(study_arrays(study), None, free)
+    data = candidate_data(study_arrays(study), None, free)
     fit = fit_candidate(data, "scaling", np.zeros(data.free.shape[0]))
     linear = loo_score(fit).elpd
     problem = JointProblem(data, "scaling")
     jac_fn = jax.jit(jax.jacfwd(lambda u: problem.residuals_and_prediction(u)[0]))
     units = np.concatenate([np.asarray(data.depth_unit), np.asarray(data.count_unit)])
     mask = np.asarray(data.free)
+    log_jac = unit_log_jacobian(data)
     refit = []
     for i, (s, trial) in enumerate(study.units):
         reduced = [(_without_trial(x, trial) if k == s else x) for k, x in enumerate(sessions)]
         sub_study = build_study(reduced, noise=(study.trial_offset_std, study.depth_noise))
-        sub = _data_for(study_arrays(sub_study), None, free)
+        sub = candidate_data(study_arrays(sub_study), None, free)
         sub_fit = fit_candidate(sub, "scaling", fit.u)
         rows = np.flatnonzero(units == i)
         r = np.asarray(problem.residuals_and_prediction(jnp.asarray(sub_fit.u))[0])[rows]
@@ -91,8 +98,7 @@ def loo_check() -> dict:
         cov = np.eye(rows.size) + j @ sub_fit.covariance @ j.T
         chol = np.linalg.cholesky(cov)
         white = np.linalg.solve(chol, r)
-        log_jac = _row_layout(data)[2][i]
-        refit.append(float(-0.5 * white @ white - np.sum(np.log(np.diag(chol))) + log_jac))
+        refit.append(float(-0.5 * white @ white - np.sum(np.log(np.diag(chol))) + log_jac[i]))
     refit = np.array(refit)
     return {"linearised": linear.tolist(), "refitted": refit.tolist(),
             "max_abs_difference_nats": float(np.max(np.abs(linear - refit))),

@@ -1,4 +1,4 @@
-"""Benchmark of the simulation-based estimators (issue 4, item 6): table + JSON.
+"""Benchmark of the simulation-based estimators: table + JSON.
 
 * fit: wall time of ``fit_session`` after compilation, median over repeats;
 * bayes: wall time of ``sample_posterior`` after compilation (with the default surrogate: the
@@ -17,31 +17,21 @@ import json
 import os
 import platform
 import statistics
-import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
-
-import shelljax  # noqa: E402
-from shelljax.config import bundled_data_dir  # noqa: E402
-from shelljax.estimate import ConvergenceWarning, estimate_session, fit_session, sample_posterior  # noqa: E402
-from shelljax.estimate import forward_model_for  # noqa: E402
-from shelljax.session import load_session  # noqa: E402
+import shelljax
+from shelljax.config import bundled_data_dir
+from shelljax.estimate import ConvergenceWarning, LogPosterior, fit_session, forward_model_for, sample_posterior
+from shelljax.session import load_session
 
 
-def _exact_seconds_per_evaluation(session, model, walkers, repeats=3):
+def _exact_seconds_per_evaluation(fit, walkers, repeats=3):
     """Median seconds per walker of the exact (engine) vectorized log posterior, after compiling."""
-    from shelljax.estimate._bayes import _LogPosterior
-    from shelljax.estimate._problem import build_problem
-
-    start = estimate_session(session, bootstrap_samples=0)
-    problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
-                            start_modulus=start.young_modulus.value)  # fmt: skip
-    log_prob = _LogPosterior(problem)
+    problem = fit.problem
+    log_prob = LogPosterior(problem)
     rng = np.random.default_rng(0)
     coords = np.concatenate([1e-2 * rng.standard_normal((walkers, problem.ndim)),
                              np.full((walkers, 1), np.log(problem.depth_noise))], axis=1)  # fmt: skip
@@ -83,17 +73,18 @@ def main(argv=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             t = time.perf_counter()
-            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=20_000, progress=False,
+            fit = fit_session(session, model, raise_on_failure=False)
+            post = sample_posterior(fit, n_walkers=args.walkers, max_steps=20_000, progress=False,
                                     surrogate=not args.no_surrogate)
-            return time.perf_counter() - t, post
+            return time.perf_counter() - t, post, fit
 
-    bayes_first, _ = posterior()
+    bayes_first, _, fit = posterior()
     runs = [posterior() for _ in range(max(1, args.repeats // 2))]
-    times = [t for t, _ in runs]
-    ess = [p.effective_samples for _, p in runs]
+    times = [t for t, _, _ in runs]
+    ess = [p.effective_samples for _, p, _ in runs]
     rate = [e / t for t, e in zip(times, ess)]
-    steps = statistics.median(p.n_steps for _, p in runs)
-    exact_per_eval = _exact_seconds_per_evaluation(session, model, args.walkers) if args.model == "axisym" else None
+    steps = statistics.median(p.n_steps for _, p, _ in runs)
+    exact_per_eval = _exact_seconds_per_evaluation(fit, args.walkers) if args.model == "axisym" else None
     surrogate = runs[-1][1].surrogate
     rows = [
         ("fit, first call (compile + solve)", f"{fit_first:.2f} s"),

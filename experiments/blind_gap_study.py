@@ -25,22 +25,21 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
+from shelljax.physics import scaling_wrinkle_count
 
-FORCE_LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)  # [N], the paper's protocol
+FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 SHAPE_FORCES = (10.0, 20.0)  # [N]
 N_TRIALS = 3
 REALITY_RADIUS = 0.15  # [m] the generator's engine radius (similarity to every R)
 REALITY_ELEMENTS = 201
-POISSON = 0.4
-INDENTER = 8e-3  # [m] the nominal finger
+POISSON = DEFAULT_POISSON_RATIO
 MAX_REDRAWS = 5
 # effect: (parameter, sampler of its true value). Magnitudes are plausible and large enough to
 # move some observable by several noise std at the protocol's noise (docs/sim-to-real.md lists
@@ -83,7 +82,7 @@ def reality_curves(obj, truth, pressure, true_forces):
     mass = truth.get("body_mass", 0.0)
     areal_weight = mass * STANDARD_GRAVITY / (4 * math.pi * (obj["radius"] / stretch) ** 2)
     physics = CurvePhysics(
-        indenter_radius=np.array([truth.get("indenter_radius", INDENTER) / scale]),
+        indenter_radius=np.array([truth.get("indenter_radius", PAPER_INDENTER_RADIUS) / scale]),
         gas_volume_ratio=np.ones(1), gas_exponent=np.array([truth.get("gas_exponent", 1.0)]),
         stiffening=np.array([truth.get("stiffening", 0.0)]), areal_weight=np.array([areal_weight]),
         friction_coefficient=np.array([truth.get("friction_coefficient", 0.0)]),
@@ -120,9 +119,8 @@ def make_study(rng, effect: str, directory: Path, with_shape: bool):
             trial += [t] * recorded.size
             force += recorded.tolist()
             depth += (np.round(measured * 2e3) / 2e3).tolist()
-            bending = obj["young_modulus"] * thickness**3 / (12 * (1 - POISSON**2))
-            tau = pressure * obj["radius"] ** 2 / math.sqrt(obj["young_modulus"] * thickness * bending)
-            counts.append(int(round(1.33 * math.sqrt(tau) + rng.normal(0.0, 0.5))))
+            mean_count = scaling_wrinkle_count(pressure, obj["radius"], obj["young_modulus"], thickness, POISSON)
+            counts.append(int(round(float(mean_count) + rng.normal(0.0, 0.5))))
             if with_shape:
                 for j, f in enumerate(SHAPE_FORCES):
                     row = {key: float(np.round((at[key][recorded.size + j] + rng.normal(0, 1e-3)) * 2e3) / 2e3)

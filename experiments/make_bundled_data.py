@@ -22,20 +22,20 @@ Run:  python experiments/make_bundled_data.py
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import tomli_w
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
+from shelljax.config import bundled_data_dir
+from shelljax.geometry import HAMMER_HEAD_RADIUS, HAMMER_POKE_POINT, enclosed_volume, load_mesh
+from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
+from shelljax.physics import scaling_wrinkle_count, tau
 
-DATA = Path(__file__).resolve().parents[1] / "shelljax" / "data"
-SESSIONS = DATA / "sessions"
-FORCE_LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)  # [N], paper Section 4.1
+SESSIONS = bundled_data_dir() / "sessions"
+FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 N_TRIALS = 3
 N_ELEMENTS = 201  # the estimators' forward model uses the engine's default of 101
-POISSON = 0.4
+POISSON = DEFAULT_POISSON_RATIO
 
 # name: radius [m] (None: from mesh), thickness [m], E [Pa], mass [kg]
 OBJECTS = {
@@ -48,16 +48,8 @@ OBJECTS = {
 }
 
 
-def _hammer_geometry():
-    from shelljax.geometry import _primitives
-
-    return _primitives.HAMMER_POKE_POINT, _primitives.HAMMER_HEAD_RADIUS
-
-
 def _mesh_volume_ratio(mesh_file: str, radius: float) -> float:
     """Enclosed volume of the bundled mesh over 4/3 π R³ [-]: the sealed gas of a non-ball."""
-    from shelljax.geometry import enclosed_volume, load_mesh
-
     return enclosed_volume(load_mesh(SESSIONS / mesh_file)) / (4.0 / 3.0 * math.pi * radius**3)
 
 
@@ -72,6 +64,7 @@ def engine_depths(gauge_pressure, obj, radius, forces, gas_volume_ratio):
 
 
 def make_session(rng, name, slug, gauge_pressure, *, manometer: bool, role: str, inline: bool = False):
+    """Write one virtual session (TOML, and CSV unless ``inline``) at ``gauge_pressure`` [Pa]; return its slug."""
     obj = dict(OBJECTS[name])
     radius = obj["radius"]
     geometry: dict = {}
@@ -79,13 +72,13 @@ def make_session(rng, name, slug, gauge_pressure, *, manometer: bool, role: str,
     if "mesh" in obj:
         poke = obj["poke_point"]
         if name == "inflatable-hammer":
-            poke, radius = _hammer_geometry()
+            poke, radius = HAMMER_POKE_POINT, HAMMER_HEAD_RADIUS
         volume_ratio = _mesh_volume_ratio(obj["mesh"], radius)
         geometry = {"mesh": obj["mesh"], "poke_point": [float(v) for v in poke], "length_unit": "m"}
     else:
         geometry = {"radius": radius, "radius_std": 0.02 * radius, "length_unit": "m"}
-    bending = obj["young_modulus"] * obj["thickness"] ** 3 / (12 * (1 - POISSON**2))
-    tau = gauge_pressure * radius**2 / math.sqrt(obj["young_modulus"] * obj["thickness"] * bending)
+    tau_value = float(tau(gauge_pressure, radius, obj["young_modulus"], obj["thickness"], POISSON))
+    count_mean = float(scaling_wrinkle_count(gauge_pressure, radius, obj["young_modulus"], obj["thickness"], POISSON))
     rows, counts, slopes = [], [], []
     for trial in range(1, N_TRIALS + 1):
         offset = rng.normal(0.0, 0.5e-3)
@@ -94,7 +87,7 @@ def make_session(rng, name, slug, gauge_pressure, *, manometer: bool, role: str,
         slopes.append(np.polyfit(depths, forces, 1)[0])  # the closed form's regression F = s w + c [N/m]
         for force, depth in zip(forces, depths * (1 + rng.normal(0, 0.02, forces.size)) + offset):
             rows.append((trial, float(force), round(depth * 2e3) / 2))  # mm, 0.5 mm resolution
-        counts.append(int(round(1.33 * math.sqrt(tau) + rng.normal(0.0, 0.5))))
+        counts.append(int(round(count_mean + rng.normal(0.0, 0.5))))
     k_s = float(np.mean(slopes)) / (math.pi * radius * gauge_pressure)
     doc: dict = {
         "schema_version": 1,
@@ -103,7 +96,7 @@ def make_session(rng, name, slug, gauge_pressure, *, manometer: bool, role: str,
                   f"axisymmetric shell engine ({N_ELEMENTS} elements, sealed isothermal gas, gas volume "
                   f"{volume_ratio:.3f} x 4/3 pi R^3): true P_g = {gauge_pressure:.1f} Pa, "
                   f"E = {obj['young_modulus']:.4g} Pa, h = {obj['thickness']:.4g} m, R = {radius:.4g} m; "
-                  f"tau = {tau:.1f}, noise-free k_s = {k_s:.3f}"),
+                  f"tau = {tau_value:.1f}, noise-free k_s = {k_s:.3f}"),
         "poisson_ratio": POISSON,
         "mass": obj["mass"],
     }

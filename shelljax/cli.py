@@ -20,42 +20,29 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .estimate import Estimate, estimate_session, fit_session, forward_model_for, sample_posterior
+    from .estimate import Estimate, EstimatorOptions, run_estimator
     from .session import load_session
 
     session = load_session(args.session)
-    out = {"session": str(session.source), "object": session.object_name, "method": args.method}
-    if args.method == "closed-form":
-        k_s = None
-        if args.k_s is not None:
-            if args.k_s <= 0 or args.k_s_std < 0:
-                raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
-            k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
-        result = estimate_session(session, k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed)
-        estimates = result.estimates()
-        out["bootstrap"] = {k: v.to_dict() for k, v in result.bootstrap.items()}
-    else:
-        options = {"gas": args.gas, "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
-        model = forward_model_for(session, args.model, **options)
-        nuisance = tuple(args.nuisance or ())
-        if args.method == "fit":
-            result = fit_session(session, model, nuisance=nuisance)
-            estimates = result.estimates
-            out.update(chi2=result.chi2, dof=result.dof, iterations=result.steps)
-        else:
-            result = sample_posterior(session, model, nuisance=nuisance, n_walkers=args.walkers,
-                                      max_steps=args.max_steps, backend_path=args.chain, seed=args.seed,
-                                      surrogate=not args.no_surrogate)  # fmt: skip
-            estimates = result.estimates
-            out.update(converged=result.converged, steps=result.n_steps, effective_samples=result.effective_samples,
-                       failed_forward_solves=result.failed_forward, surrogate=result.surrogate)  # fmt: skip
+    k_s = None
+    if args.method == "closed-form" and args.k_s is not None:
+        if args.k_s <= 0 or args.k_s_std < 0:
+            raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
+        k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
+    options = EstimatorOptions(
+        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model, gas=args.gas,
+        wrinkle_law=args.wrinkle_law, nuisance=tuple(args.nuisance or ()), walkers=args.walkers,
+        max_steps=args.max_steps, surrogate=not args.no_surrogate,
+    )  # fmt: skip
+    result = run_estimator(args.method, session, options, backend_path=args.chain)
+    out = {"session": str(session.source), "object": session.object_name, "method": args.method, **result.to_dict()}
+    if args.method != "closed-form":
         out["forward_model"] = args.model
-    out["estimates"] = {k: v.to_dict() for k, v in estimates.items()}
     if args.json:
         json.dump(out, sys.stdout, indent=2)
         print()
     else:
-        for name, est in estimates.items():
+        for name, est in result.estimates.items():
             unit = "" if est.unit == "1" else f" {est.unit}"
             print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
                   f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip

@@ -14,6 +14,7 @@ from importlib import resources
 from pathlib import Path
 
 from ._errors import InvalidInputError
+from .paper import PAPER_KS
 
 METHODS = ("closed-form", "fit", "bayes")
 FORWARD_MODELS = ("axisym", "scaling")
@@ -38,7 +39,7 @@ class ExperimentConfig:
     """A validated experiment config.
 
     ``calibration_sessions`` (k_s from Procedure 1) or ``k_s``/``k_s_std`` [-] (None: the
-    paper's 0.64); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
+    paper's, ``shelljax.paper.PAPER_KS``); ``sessions`` to estimate; ``methods``; ``bootstrap_samples``; ``seed``;
     ``figures`` (write PNGs); ``output_dir`` where run directories are created; for ``fit`` and
     ``bayes``: ``forward_model`` ("axisym" or "scaling"), ``gas`` ("prescribed" or "isothermal"),
     ``wrinkle_law`` of the axisym model ("mechanics" or "scaling"),
@@ -108,12 +109,7 @@ def resolve_paths(path: Path, field: str, patterns) -> tuple[Path, ...]:
 def load_config(path: str | Path) -> ExperimentConfig:
     """Read and validate an experiment config TOML; raise InvalidInputError naming the field."""
     path = Path(path)
-    if not path.is_file():
-        raise InvalidInputError(f"{path}: config file does not exist. Fix: check the path (e.g. configs/paper.toml)")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
+    data = _read_toml(path)
     _check_keys(path, data, _TOP_KEYS)
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not name or any(c in name for c in "/\\ "):
@@ -121,8 +117,36 @@ def load_config(path: str | Path) -> ExperimentConfig:
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(path, "seed", f"{seed!r} is not a non-negative integer", "write seed = 0")
+    estimators = _estimator_settings(path, _table(path, data, "estimators", _ESTIMATOR_KEYS))
+    calibration = _calibration_settings(path, _table(path, data, "calibration", _CALIBRATION_KEYS))
+    sessions_table = _table(path, data, "sessions", _SESSION_KEYS)
+    if "paths" not in sessions_table:
+        raise _fail(path, "sessions.paths", "missing", 'add [sessions] paths = ["bundled:sessions/pezzi.toml"]')
+    sessions = resolve_paths(path, "sessions.paths", sessions_table["paths"])
+    outputs = _table(path, data, "outputs", _OUTPUT_KEYS)
+    figures = outputs.get("figures", True)
+    if not isinstance(figures, bool):
+        raise _fail(path, "outputs.figures", f"{figures!r} is not true/false", "write true or false")
+    output_dir = data.get("output_dir", "runs")
+    if not isinstance(output_dir, str):
+        raise _fail(path, "output_dir", f"{output_dir!r} is not a path", 'write output_dir = "runs"')
+    return ExperimentConfig(
+        source=path, name=name, description=str(data.get("description", "")), output_dir=Path(output_dir),
+        seed=seed, sessions=sessions, figures=figures, **estimators, **calibration,
+    )  # fmt: skip
 
-    estimators = _table(path, data, "estimators", _ESTIMATOR_KEYS)
+
+def _read_toml(path: Path) -> dict:
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: config file does not exist. Fix: check the path (e.g. configs/paper.toml)")
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
+
+
+def _estimator_settings(path: Path, estimators: dict) -> dict:
+    """The ExperimentConfig fields of the [estimators] table, checked."""
     methods = estimators.get("methods", ["closed-form"])
     if not isinstance(methods, list) or not methods:
         raise _fail(path, "estimators.methods", f"expected a non-empty list, got {methods!r}", 'write methods = ["closed-form"]')
@@ -135,17 +159,13 @@ def load_config(path: str | Path) -> ExperimentConfig:
     through_origin = estimators.get("through_origin", False)
     if not isinstance(through_origin, bool):
         raise _fail(path, "estimators.through_origin", f"{through_origin!r} is not true/false", "write true or false")
-
-    forward_model = estimators.get("forward_model", "axisym")
-    if forward_model not in FORWARD_MODELS:
-        raise _fail(path, "estimators.forward_model", f"unknown model {forward_model!r}", f"available: {', '.join(FORWARD_MODELS)}")
-    gas = estimators.get("gas", "prescribed")
-    if gas not in GAS_MODELS:
-        raise _fail(path, "estimators.gas", f"unknown gas model {gas!r}", f"available: {', '.join(GAS_MODELS)}")
-    wrinkle_law = estimators.get("wrinkle_law", "mechanics")
-    if wrinkle_law not in WRINKLE_LAWS:
-        raise _fail(path, "estimators.wrinkle_law", f"unknown wrinkle law {wrinkle_law!r}",
-                    f"available: {', '.join(WRINKLE_LAWS)}")  # fmt: skip
+    choices = {}
+    for key, default, allowed, what in (("forward_model", "axisym", FORWARD_MODELS, "model"),
+                                        ("gas", "prescribed", GAS_MODELS, "gas model"),
+                                        ("wrinkle_law", "mechanics", WRINKLE_LAWS, "wrinkle law")):  # fmt: skip
+        choices[key] = estimators.get(key, default)
+        if choices[key] not in allowed:
+            raise _fail(path, f"estimators.{key}", f"unknown {what} {choices[key]!r}", f"available: {', '.join(allowed)}")
     nuisance = estimators.get("nuisance", [])
     if not isinstance(nuisance, list) or any(n not in NUISANCE for n in nuisance):
         raise _fail(path, "estimators.nuisance", f"{nuisance!r} is not a list of known nuisance parameters",
@@ -159,8 +179,12 @@ def load_config(path: str | Path) -> ExperimentConfig:
     surrogate = estimators.get("bayes_surrogate", True)
     if not isinstance(surrogate, bool):
         raise _fail(path, "estimators.bayes_surrogate", f"{surrogate!r} is not true/false", "write true or false")
+    return dict(methods=tuple(methods), bootstrap_samples=boot, through_origin=through_origin, **choices,
+                nuisance=tuple(nuisance), bayes_surrogate=surrogate, **counts)  # fmt: skip
 
-    calibration = _table(path, data, "calibration", _CALIBRATION_KEYS)
+
+def _calibration_settings(path: Path, calibration: dict) -> dict:
+    """The ExperimentConfig fields of the [calibration] table: sessions, or k_s and its std [-]."""
     calibration_sessions = resolve_paths(path, "calibration.sessions", calibration["sessions"]) if "sessions" in calibration else ()
     k_s = calibration.get("k_s")
     k_s_std = calibration.get("k_s_std")
@@ -169,26 +193,9 @@ def load_config(path: str | Path) -> ExperimentConfig:
     for field, value in (("k_s", k_s), ("k_s_std", k_s_std)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0
                                   or value == float("inf")):  # fmt: skip
-            raise _fail(path, f"calibration.{field}", f"{value!r} is not a finite non-negative number", "e.g. k_s = 0.64")
+            raise _fail(path, f"calibration.{field}", f"{value!r} is not a finite non-negative number",
+                        f"e.g. k_s = {PAPER_KS}")  # fmt: skip
     if k_s is not None and k_s == 0:
-        raise _fail(path, "calibration.k_s", "k_s = 0 divides by zero", "the paper's value is 0.64")
-
-    sessions_table = _table(path, data, "sessions", _SESSION_KEYS)
-    if "paths" not in sessions_table:
-        raise _fail(path, "sessions.paths", "missing", 'add [sessions] paths = ["bundled:sessions/pezzi.toml"]')
-    sessions = resolve_paths(path, "sessions.paths", sessions_table["paths"])
-    outputs = _table(path, data, "outputs", _OUTPUT_KEYS)
-    figures = outputs.get("figures", True)
-    if not isinstance(figures, bool):
-        raise _fail(path, "outputs.figures", f"{figures!r} is not true/false", "write true or false")
-    output_dir = data.get("output_dir", "runs")
-    if not isinstance(output_dir, str):
-        raise _fail(path, "output_dir", f"{output_dir!r} is not a path", 'write output_dir = "runs"')
-    return ExperimentConfig(
-        source=path, name=name, description=str(data.get("description", "")),
-        output_dir=Path(output_dir), seed=seed, methods=tuple(methods), bootstrap_samples=boot,
-        through_origin=through_origin, calibration_sessions=calibration_sessions,
-        k_s=None if k_s is None else float(k_s), k_s_std=None if k_s_std is None else float(k_s_std),
-        sessions=sessions, figures=figures, forward_model=forward_model, gas=gas, wrinkle_law=wrinkle_law,
-        nuisance=tuple(nuisance), bayes_surrogate=surrogate, **counts,
-    )  # fmt: skip
+        raise _fail(path, "calibration.k_s", "k_s = 0 divides by zero", f"the paper's value is {PAPER_KS}")
+    return dict(calibration_sessions=calibration_sessions, k_s=None if k_s is None else float(k_s),
+                k_s_std=None if k_s_std is None else float(k_s_std))  # fmt: skip

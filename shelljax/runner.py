@@ -17,16 +17,14 @@ from ._errors import ShelljaxError
 from ._memory_mappings import release_compiled_programs_if_crowded
 from .config import ExperimentConfig, load_config
 from .estimate import (
-    PAPER_KS,
-    PAPER_KS_STD,
     ConvergenceWarning,
     Estimate,
+    EstimatorOptions,
     SurrogateWarning,
     calibrate_ks,
-    estimate_session,
-    fit_session,
-    forward_model_for,
-    sample_posterior,
+    options_forward_model,
+    paper_k_s,
+    run_estimator,
 )
 from .session import Session, file_sha256, load_session
 
@@ -64,63 +62,139 @@ def _session_inputs(session: Session) -> dict:
     return inputs
 
 
-def _closed_form_block(result) -> dict:
-    block = {name: est.to_dict() for name, est in result.estimates().items()}
-    block["bootstrap"] = {name: est.to_dict() for name, est in result.bootstrap.items()}
-    block["regression"] = {"slope": {"value": result.regression.slope, "std": result.regression.slope_std, "unit": "N/m"},
-                           "intercept": {"value": result.regression.intercept, "std": result.regression.intercept_std, "unit": "N"},
-                           "residual_std": {"value": result.regression.residual_std, "unit": "N"}}  # fmt: skip
-    return block
+def _block(result) -> dict:
+    """An estimator's record in results.json: its estimates by name, then everything else it reports."""
+    record = result.to_dict()
+    estimates = record.pop("estimates")
+    return {**estimates, **{key: value for key, value in record.items() if value is not None}}
 
 
-def _simulation_method(method: str, session: Session, config: ExperimentConfig, run_dir: Path):
-    """Run ``fit`` or ``bayes`` on one session: (results block, plotted estimates, model depths [m]).
+def _estimator_options(config: ExperimentConfig, k_s: Estimate) -> EstimatorOptions:
+    return EstimatorOptions(
+        k_s=k_s, through_origin=config.through_origin, bootstrap_samples=config.bootstrap_samples,
+        seed=config.seed, forward_model=config.forward_model, gas=config.gas, wrinkle_law=config.wrinkle_law,
+        nuisance=config.nuisance, walkers=config.bayes_walkers, max_steps=config.bayes_max_steps,
+        surrogate=config.bayes_surrogate,
+    )  # fmt: skip
+
+
+def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_dir: Path, figures: bool):
+    """Sample the posterior into its record: chain file, caught warnings, figures."""
+    chains = run_dir / "chains"
+    chains.mkdir(exist_ok=True)
+    chain_path = chains / f"{session.source.stem}.h5"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConvergenceWarning)
+        warnings.simplefilter("always", SurrogateWarning)
+        post = run_estimator("bayes", session, options, model=model, fit=fit, backend_path=chain_path)
+    block = _block(post)
+    block["chain"] = str(chain_path.relative_to(run_dir))
+    if caught:
+        block["warning"] = str(caught[-1].message)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if figures:
+        from .plots import plot_posterior
+
+        paths = plot_posterior(post.samples, post.chain, post.names, session.source.stem, run_dir / "figures")
+        block["_figures"] = [str(p.relative_to(run_dir)) for p in paths]
+    return block, post
+
+
+def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path):
+    """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
+    result or None). bayes starts from the fit when it converged.
 
     A failure is recorded in the block (``error``) and reported, not raised: one bad session must
     not lose the others' results.
     """
-    options = {"gas": config.gas, "wrinkle_law": config.wrinkle_law} if config.forward_model == "axisym" else {}
-    model = forward_model_for(session, config.forward_model, **options)
-    try:
-        if method == "fit":
-            result = fit_session(session, model, nuisance=config.nuisance)
-            block = {name: est.to_dict() for name, est in result.estimates.items()}
-            block.update(chi2=result.chi2, dof=result.dof, iterations=result.steps,
-                         predicted_wrinkle_count=result.predicted_wrinkle_count,
-                         depth_noise={"value": result.problem.depth_noise, "unit": "m"})  # fmt: skip
-            return block, _plotted(result.estimates), result.predicted_depth
-        chains = run_dir / "chains"
-        chains.mkdir(exist_ok=True)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            warnings.simplefilter("always", SurrogateWarning)
-            post = sample_posterior(session, model, nuisance=config.nuisance, n_walkers=config.bayes_walkers,
-                                    max_steps=config.bayes_max_steps, backend_path=chains / f"{session.source.stem}.h5",
-                                    seed=config.seed, surrogate=config.bayes_surrogate)  # fmt: skip
-        block = {name: {**est.to_dict(), "ci68": list(post.intervals68[name])} for name, est in post.estimates.items()}
-        block.update(converged=post.converged, steps=post.n_steps, effective_samples=post.effective_samples,
-                     autocorr_time={"value": post.autocorr_time, "unit": "steps"},
-                     failed_forward_solves=post.failed_forward, acceptance_fraction=post.acceptance_fraction,
-                     chain=str((chains / f"{session.source.stem}.h5").relative_to(run_dir)))  # fmt: skip
-        if post.surrogate is not None:
-            block["surrogate"] = post.surrogate
-        if caught:
-            block["warning"] = str(caught[-1].message)
-            for w in caught:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        if config.figures:
-            from .plots import plot_posterior
-
-            paths = plot_posterior(post.samples, post.chain, post.names, session.source.stem, run_dir / "figures")
-            block["_figures"] = [str(p.relative_to(run_dir)) for p in paths]
-        return block, _plotted(post.estimates), None
-    except ShelljaxError as err:
-        warnings.warn(f"{method} failed on {session.source}: {err}", stacklevel=2)
-        return {"error": f"{type(err).__name__}: {err}"}, None, None
+    methods = [m for m in ("fit", "bayes") if m in config.methods]
+    model = options_forward_model(session, options) if methods else None
+    out, fit = {}, None
+    for method in methods:
+        try:
+            if method == "fit":
+                fit = run_estimator("fit", session, options, model=model)
+                out[method] = (_block(fit), fit)
+            else:
+                out[method] = _bayes_block(session, options, model, fit, run_dir, config.figures)
+        except ShelljaxError as err:
+            warnings.warn(f"{method} failed on {session.source}: {err}", stacklevel=2)
+            out[method] = ({"error": f"{type(err).__name__}: {err}"}, None)
+    return out
 
 
-def _plotted(estimates: dict[str, Estimate]) -> dict:
-    return {"gauge_pressure": estimates["gauge_pressure"], "young_modulus": estimates["young_modulus"]}
+def _plotted(estimates: dict[str, Estimate | None]) -> dict:
+    return {"gauge_pressure": estimates.get("gauge_pressure"), "young_modulus": estimates.get("young_modulus")}
+
+
+def _calibration(config: ExperimentConfig, calibration_sessions: list[Session]):
+    """(k_s calibration or None, the k_s [-] the closed form uses)."""
+    if calibration_sessions:
+        calibration = calibrate_ks(calibration_sessions, through_origin=config.through_origin)
+        return calibration, calibration.k_s
+    if config.k_s is not None:
+        return None, Estimate.lognormal(config.k_s, (config.k_s_std or 0.0) / config.k_s, "1", "given in config")
+    return None, paper_k_s()
+
+
+def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
+    return {
+        "shelljax_version": __version__,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "machine": platform.platform(),
+        "config": {"path": str(config.source), "sha256": file_sha256(config.source), "name": config.name,
+                   "description": config.description, "methods": list(config.methods),
+                   "bootstrap_samples": config.bootstrap_samples, "seed": config.seed},  # fmt: skip
+        "units": "SI: Pa, m, N, kg; '1' marks dimensionless quantities",
+        "k_s": k_s.to_dict(),
+        "sessions": [],
+    }
+
+
+def _estimate_session_entry(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
+                            used_in_calibration: bool, held_out: list):  # fmt: skip
+    """Every configured estimator on one session: (results.json entry, summary-figure row)."""
+    entry = {"object": session.object_name, "session": str(session.source),
+             "used_in_calibration": used_in_calibration, "input_files": session.input_files,
+             "inputs": _session_inputs(session), "estimates": {}, "figures": []}  # fmt: skip
+    row = {"label": session.source.stem, "manometer": session.manometer_gauge_pressure, "estimates": {}}
+    closed = run_estimator("closed-form", session, options)
+    model_curves: dict[str, np.ndarray] = {}
+    if "closed-form" in config.methods:
+        entry["estimates"]["closed-form"] = _block(closed)
+        row["estimates"]["closed-form"] = _plotted(closed.estimates)
+        manometer = session.manometer_gauge_pressure
+        if manometer is not None and not used_in_calibration:
+            held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
+    for method, (block, result) in _simulation_methods(session, config, options, run_dir).items():
+        entry["estimates"][method] = block
+        if result is not None:
+            row["estimates"][method] = _plotted(result.estimates)
+            entry["figures"] += block.pop("_figures", [])
+            if method == "fit":
+                model_curves[f"{method}: {config.forward_model} model"] = result.predicted_depth
+    if session.manometer_gauge_pressure is not None:
+        for method, estimates in row["estimates"].items():
+            error = estimates["gauge_pressure"].value / session.manometer_gauge_pressure - 1.0
+            entry["estimates"][method]["gauge_pressure_relative_error_vs_manometer"] = error
+    if config.figures:
+        from .plots import plot_force_depth
+
+        fig = plot_force_depth(session, closed, run_dir / "figures" / f"force_depth_{session.source.stem}.png",
+                               model_curves=model_curves)  # fmt: skip
+        entry["figures"].append(str(fig.relative_to(run_dir)))
+    return entry, row
+
+
+def _calibration_record(calibration) -> dict:
+    return {
+        "k_s": calibration.k_s.to_dict(),
+        "points": [{"session": src, "object": obj, "manometer_gauge_pressure": {"value": float(p), "unit": "Pa"},
+                    "pressure_slope": {"value": float(ph), "std": float(sd), "unit": "Pa"}}
+                   for src, obj, p, ph, sd in zip(calibration.sources, calibration.objects, calibration.gauge_pressures,
+                                                  calibration.pressure_slopes, calibration.pressure_slope_stds)],
+    }  # fmt: skip
 
 
 def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = None, progress: bool | None = None) -> Path:
@@ -133,89 +207,32 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     disable = None if progress is None else not progress
     calibration_sessions = [load_session(p) for p in config.calibration_sessions]
     sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
-
-    if calibration_sessions:
-        calibration = calibrate_ks(calibration_sessions, through_origin=config.through_origin)
-        k_s = calibration.k_s
-    else:
-        calibration = None
-        if config.k_s is not None:
-            k_s = Estimate.lognormal(config.k_s, (config.k_s_std or 0.0) / config.k_s, "1", "given in config")
-        else:
-            k_s = Estimate.lognormal(PAPER_KS, PAPER_KS_STD / PAPER_KS, "1", "paper's calibrated value (Section 4.1)")
+    calibration, k_s = _calibration(config, calibration_sessions)
+    options = _estimator_options(config, k_s)
 
     run_dir = _fresh_run_dir(config, None if output_dir is None else Path(output_dir))
     shutil.copy2(config.source, run_dir / "config.toml")
-    figures_dir = run_dir / "figures"
-    results: dict = {
-        "shelljax_version": __version__,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": platform.platform(),
-        "config": {"path": str(config.source), "sha256": file_sha256(config.source), "name": config.name,
-                   "description": config.description, "methods": list(config.methods),
-                   "bootstrap_samples": config.bootstrap_samples, "seed": config.seed},  # fmt: skip
-        "units": "SI: Pa, m, N, kg; '1' marks dimensionless quantities",
-        "k_s": k_s.to_dict(),
-        "sessions": [],
-    }
+    results = _results_header(config, k_s)
     summary_rows: list[dict] = []
     held_out: list[tuple[str, float, float, float]] = []
     calibration_files = {str(s.source) for s in calibration_sessions}
     for session in tqdm(sessions, desc="estimating", disable=disable):
-        entry = {"object": session.object_name, "session": str(session.source),
-                 "used_in_calibration": str(session.source) in calibration_files,
-                 "input_files": session.input_files, "inputs": _session_inputs(session),
-                 "estimates": {}, "figures": []}  # fmt: skip
-        row = {"label": session.source.stem, "manometer": session.manometer_gauge_pressure, "estimates": {}}
-        closed = estimate_session(session, k_s=k_s, through_origin=config.through_origin,
-                                  bootstrap_samples=config.bootstrap_samples, seed=config.seed)  # fmt: skip
-        model_curves: dict[str, np.ndarray] = {}
-        if "closed-form" in config.methods:
-            entry["estimates"]["closed-form"] = _closed_form_block(closed)
-            row["estimates"]["closed-form"] = {"gauge_pressure": closed.gauge_pressure, "young_modulus": closed.young_modulus}
-            manometer = session.manometer_gauge_pressure
-            if manometer is not None and not entry["used_in_calibration"]:
-                held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
-        for method in ("fit", "bayes"):
-            if method not in config.methods:
-                continue
-            block, estimates, curve = _simulation_method(method, session, config, run_dir)
-            entry["estimates"][method] = block
-            if estimates:
-                row["estimates"][method] = estimates
-                entry["figures"] += block.pop("_figures", [])
-            if curve is not None:
-                model_curves[f"{method}: {config.forward_model} model"] = curve
-        if session.manometer_gauge_pressure is not None:
-            for method, estimates in row["estimates"].items():
-                error = estimates["gauge_pressure"].value / session.manometer_gauge_pressure - 1.0
-                entry["estimates"][method]["gauge_pressure_relative_error_vs_manometer"] = error
+        entry, row = _estimate_session_entry(session, config, options, run_dir,
+                                             str(session.source) in calibration_files, held_out)  # fmt: skip
         summary_rows.append(row)
-        if config.figures:
-            from .plots import plot_force_depth
-
-            fig = plot_force_depth(session, closed, figures_dir / f"force_depth_{session.source.stem}.png",
-                                   model_curves=model_curves)  # fmt: skip
-            entry["figures"].append(str(fig.relative_to(run_dir)))
         results["sessions"].append(entry)
         release_compiled_programs_if_crowded()  # each object compiles its own engine
 
     if calibration is not None:
-        results["calibration"] = {
-            "k_s": calibration.k_s.to_dict(),
-            "points": [{"session": src, "object": obj, "manometer_gauge_pressure": {"value": float(p), "unit": "Pa"},
-                        "pressure_slope": {"value": float(ph), "std": float(sd), "unit": "Pa"}}
-                       for src, obj, p, ph, sd in zip(calibration.sources, calibration.objects, calibration.gauge_pressures,
-                                                      calibration.pressure_slopes, calibration.pressure_slope_stds)],
-        }  # fmt: skip
+        results["calibration"] = _calibration_record(calibration)
     if config.figures:
         from .plots import plot_calibration, plot_estimate_summary
 
         if calibration is not None:
-            plot_calibration(calibration, held_out, figures_dir / "calibration.png")
+            plot_calibration(calibration, held_out, run_dir / "figures" / "calibration.png")
             results["calibration"]["figure"] = "figures/calibration.png"
         if summary_rows:
-            plot_estimate_summary(summary_rows, figures_dir / "estimates.png")
+            plot_estimate_summary(summary_rows, run_dir / "figures" / "estimates.png")
             results["summary_figure"] = "figures/estimates.png"
     (run_dir / "results.json").write_text(json.dumps(results, indent=2))
     return run_dir

@@ -12,15 +12,14 @@ import pytest
 from shelljax import InvalidInputError
 from shelljax.config import bundled_data_dir
 from shelljax.estimate import (
-    PAPER_KS,
     Estimate,
     calibrate_ks,
     estimate_session,
     modulus_from_wrinkles,
     regress_force_on_depth,
-    tau,
 )
-from shelljax.physics import bending_stiffness
+from shelljax.paper import PAPER_KS
+from shelljax.physics import bending_stiffness, tau
 from shelljax.session import Session, load_session
 
 FORCE_LEVELS = np.arange(5.0, 20.01, 2.5)

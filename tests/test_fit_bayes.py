@@ -16,9 +16,16 @@ import numpy as np
 import pytest
 
 from shelljax import InvalidInputError, NoConvergenceError
-from shelljax.estimate import ScalingLawModel, fit_session, sample_posterior
-from shelljax.estimate._bayes import ConvergenceWarning
-from shelljax.estimate._forward import Prediction
+from shelljax.estimate import (
+    ConvergenceWarning,
+    Estimate,
+    EstimatorOptions,
+    Prediction,
+    ScalingLawModel,
+    fit_session,
+    run_estimator,
+    sample_posterior,
+)
 from shelljax.session import Session
 
 FORCES = np.tile(np.arange(5.0, 20.01, 2.5), 3)
@@ -61,7 +68,7 @@ def test_laplace_and_mcmc_agree():
     fit = fit_session(s, MODEL)
     with warnings.catch_warnings():
         warnings.simplefilter("error", ConvergenceWarning)
-        post = sample_posterior(s, MODEL, n_walkers=24, max_steps=6000, seed=1, progress=False)
+        post = sample_posterior(fit, n_walkers=24, max_steps=6000, seed=1, progress=False)
     assert post.converged and post.effective_samples > 1000
     for name in ("gauge_pressure", "young_modulus"):
         f, b = fit.estimates[name], post.estimates[name]
@@ -75,11 +82,12 @@ def test_laplace_and_mcmc_agree():
 def test_posterior_resumes_from_hdf5(tmp_path):
     s = synthetic(depth_noise=1e-3, seed=5)
     path = tmp_path / "chain.h5"
+    fit = fit_session(s, MODEL)
     with pytest.warns(ConvergenceWarning, match="before convergence"):
-        first = sample_posterior(s, MODEL, n_walkers=16, max_steps=300, check_every=100, backend_path=path, progress=False)
+        first = sample_posterior(fit, n_walkers=16, max_steps=300, check_every=100, backend_path=path, progress=False)
     assert first.n_steps == 300 and not first.converged
     with pytest.warns(ConvergenceWarning):
-        second = sample_posterior(s, MODEL, n_walkers=16, max_steps=600, check_every=100, backend_path=path, progress=False)
+        second = sample_posterior(fit, n_walkers=16, max_steps=600, check_every=100, backend_path=path, progress=False)
     assert second.n_steps == 600
     # the first 300 steps of the resumed chain are the stored ones, untouched
     np.testing.assert_array_equal(second.chain[:300], first.chain)
@@ -98,7 +106,7 @@ def test_failed_forward_solves_are_counted_not_fatal():
     model = _FailsAbovePressure(poisson_ratio=0.4, k_s=0.64, limit=1.02 * TRUTH["gauge_pressure"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        post = sample_posterior(s, model, n_walkers=16, max_steps=500, check_every=250, progress=False)
+        post = sample_posterior(fit_session(s, model, raise_on_failure=False), n_walkers=16, max_steps=500, check_every=250, progress=False)
     assert post.failed_forward > 0
     assert np.all(post.samples["gauge_pressure"] < model.limit)
 
@@ -158,3 +166,18 @@ def test_fit_out_of_steps_at_a_verified_optimum_is_converged():
     normal = fit_session(s, MODEL)
     assert exhausted.converged and exhausted.steps == 200
     assert exhausted.estimates["gauge_pressure"].value == pytest.approx(normal.estimates["gauge_pressure"].value, rel=1e-6)
+
+
+def test_every_estimator_answers_in_one_protocol():
+    s = synthetic(depth_noise=1e-3, seed=3)
+    options = EstimatorOptions(forward_model="scaling", walkers=16, max_steps=300, bootstrap_samples=0)
+    fit = run_estimator("fit", s, options)
+    with pytest.warns(ConvergenceWarning):
+        post = run_estimator("bayes", s, options, fit=fit)
+    for result in (run_estimator("closed-form", s, options), fit, post):
+        assert all(isinstance(e, Estimate) for e in result.estimates.values())
+        record = result.to_dict()
+        assert list(record["estimates"]) == list(result.estimates)
+        assert record["estimates"]["gauge_pressure"]["unit"] == "Pa"
+    with pytest.raises(InvalidInputError, match="unknown estimator"):
+        run_estimator("magic", s, options)

@@ -31,7 +31,7 @@ from .._errors import InvalidInputError, NoConvergenceError
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
-from ._model import GAS_EXPONENTS, WRINKLE_LAWS, physical, study_arrays
+from ._model import GAS_EXPONENTS, WRINKLE_LAWS, StudyArrays, physical, study_arrays
 from ._study import SHAPE_OBSERVABLES, Study, build_study
 
 WIN_SE = 2.0
@@ -195,13 +195,105 @@ def _gap(points: dict) -> dict:
     return out
 
 
-def _data_for(base, effect: str | None, baseline_free: tuple[str, ...]):
+def candidate_data(base: StudyArrays, effect: str | None, baseline_free: tuple[str, ...]) -> StudyArrays:
+    """``base`` with the free mask and priors of candidate ``effect`` (None: the baseline), whose
+    baseline frees the global parameters ``baseline_free``."""
     n_sessions = int(base.radius.shape[0])
     data = eqx.tree_at(lambda d: d.free, base, jnp.asarray(free_mask(n_sessions, baseline_free, effect)))
     if effect == "wall_thickness":
         index = n_sessions + GLOBAL_PARAMETERS.index("thickness")
         data = eqx.tree_at(lambda d: d.prior_std, data, data.prior_std.at[index].set(FREE_THICKNESS_STD))
     return data
+
+
+def _checked_options(effects, baseline: str, gas: str | None, wrinkle_law: str) -> tuple[tuple[str, ...], str]:
+    """(candidate names, gas law) after checking every option."""
+    effects = tuple(EFFECTS) if effects is None else check_effect_names(effects)
+    if baseline not in BASELINES:
+        raise InvalidInputError(f"unknown baseline {baseline!r}. Fix: choose from {', '.join(BASELINES)}")
+    gas = gas or BASELINES[baseline]
+    if gas not in GAS_EXPONENTS:
+        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
+    if wrinkle_law not in WRINKLE_LAWS:
+        raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
+    return effects, gas
+
+
+def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessions, report_progress):
+    """Fit the baseline, then every candidate from the baseline's optimum: (fits, scores) by name."""
+    fits, scores = {}, {}
+    report_progress("baseline")
+    fit = fit_candidate(candidate_data(base, None, baseline_free), wrinkle_law, np.zeros(base.free.shape[0]))
+    if not fit.converged:
+        raise NoConvergenceError(f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
+                                 f"{fit.message}. Fix: check the sessions with `shelljax validate`")  # fmt: skip
+    fits["baseline"], scores["baseline"] = fit, loo_score(fit)
+    for effect in effects:
+        report_progress(effect)
+        fit = fit_candidate(candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u)
+        fits[effect] = fit
+        if fit.converged:
+            scores[effect] = loo_score(fit)
+    report_progress(None)
+    return fits, scores
+
+
+def _ranking(fits: dict, scores: dict, effects) -> tuple[list[dict], str]:
+    """(every model's entry, best score first and failures last; the chosen model's name)."""
+    base_score = scores["baseline"]
+    ranking = []
+    for name in ("baseline",) + effects:
+        fit = fits[name]
+        entry = {"effect": name, "status": "ok" if name in scores else "failed"}
+        if name != "baseline":
+            entry["parameters"] = _parameter_report(fit, EFFECTS[name].parameters) if fit.converged else {}
+        if name not in scores:
+            entry.update(score=None, score_se=None, delta=None, delta_se=None, message=fit.message)
+        else:
+            sc = scores[name]
+            diff = sc.elpd - base_score.elpd
+            n = diff.size
+            entry.update(score=sc.total, score_se=float(math.sqrt(n * np.var(sc.elpd))), delta=float(diff.sum()),
+                         delta_se=float(math.sqrt(n * np.var(diff))), chi2=fit.chi2, steps=fit.steps)  # fmt: skip
+        ranking.append(entry)
+    ok = [e for e in ranking if e["status"] == "ok"]
+    ranking = sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
+    winners = [e for e in ranking if e["status"] == "ok" and e["effect"] != "baseline" and e["delta"] >= WIN_NATS
+               and e["delta"] >= WIN_SE * e["delta_se"]]  # fmt: skip
+    return ranking, winners[0]["effect"] if winners else "baseline"
+
+
+def _winner_record(chosen: str, fits: dict, before_est: dict, after_est: dict) -> dict | None:
+    if chosen == "baseline":
+        return None
+    return {
+        "effect": chosen, "description": EFFECTS[chosen].description, "layer": EFFECTS[chosen].layer,
+        "parameters": _parameter_report(fits[chosen], EFFECTS[chosen].parameters),
+        "estimates_before": before_est, "estimates_after": after_est,
+        "gauge_pressure_shift_percent": [100 * (a["value"] / b["value"] - 1) for a, b in
+                                         zip(after_est["gauge_pressure"], before_est["gauge_pressure"])],
+        "young_modulus_shift_percent": 100 * (after_est["young_modulus"]["value"]
+                                              / before_est["young_modulus"]["value"] - 1),
+    }  # fmt: skip
+
+
+def _baseline_record(baseline: str, gas: str, wrinkle_law: str, base: StudyArrays, baseline_free, before_est: dict,
+                     study: Study) -> dict:  # fmt: skip
+    return {"name": baseline, "gas": gas, "wrinkle_law": wrinkle_law, "engine": "axisym",
+            "indenter_radius": {"value": float(base.indenter_radius), "unit": "m"},
+            "free": list(baseline_free), "estimates": before_est,
+            "noise": {"depth_scatter_a": {"value": study.depth_noise[0], "unit": "m^2"},
+                      "depth_scatter_b": {"value": study.depth_noise[1], "unit": "1"},
+                      "trial_offset_std": {"value": study.trial_offset_std, "unit": "m"}}}  # fmt: skip
+
+
+def _sessions_record(study: Study) -> list[dict]:
+    return [{"path": str(s.source), "object": s.object_name, "radius": {"value": s.radius, "unit": "m"},
+             "manometer_gauge_pressure": None if s.manometer_gauge_pressure is None else
+             {"value": s.manometer_gauge_pressure, "unit": "Pa"},
+             "trials": int(s.trial_ids.size), "samples": int(s.depth.size),
+             "shape_points": int(np.sum(study.shape_session == i))}
+            for i, s in enumerate(study.sessions)]  # fmt: skip
 
 
 def diagnose(
@@ -226,56 +318,15 @@ def diagnose(
         NoConvergenceError: the baseline fit failed (a candidate's failure is reported in the
             ranking instead).
     """
-    effects = tuple(EFFECTS) if effects is None else check_effect_names(effects)
-    if baseline not in BASELINES:
-        raise InvalidInputError(f"unknown baseline {baseline!r}. Fix: choose from {', '.join(BASELINES)}")
-    gas = gas or BASELINES[baseline]
-    if gas not in GAS_EXPONENTS:
-        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
-    if wrinkle_law not in WRINKLE_LAWS:
-        raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
+    effects, gas = _checked_options(effects, baseline, gas, wrinkle_law)
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
     study = build_study(sessions)
     base = study_arrays(study, gas=gas)
     baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
         ("radius",) if study.radius_std > 0 else ())  # fmt: skip
     report_progress = _progress_reporter(progress, 1 + len(effects))
-
-    fits, scores, ranking = {}, {}, []
-    report_progress("baseline")
-    fit = fit_candidate(_data_for(base, None, baseline_free), wrinkle_law, np.zeros(base.free.shape[0]))
-    if not fit.converged:
-        raise NoConvergenceError(f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
-                                 f"{fit.message}. Fix: check the sessions with `shelljax validate`")  # fmt: skip
-    fits["baseline"], scores["baseline"] = fit, loo_score(fit)
-    for effect in effects:
-        report_progress(effect)
-        fit = fit_candidate(_data_for(base, effect, baseline_free), wrinkle_law, fits["baseline"].u)
-        fits[effect] = fit
-        if fit.converged:
-            scores[effect] = loo_score(fit)
-    report_progress(None)
-
-    base_score = scores["baseline"]
-    for name in ("baseline",) + effects:
-        fit = fits[name]
-        entry = {"effect": name, "status": "ok" if name in scores else "failed"}
-        if name != "baseline":
-            entry["parameters"] = _parameter_report(fit, EFFECTS[name].parameters) if fit.converged else {}
-        if name not in scores:
-            entry.update(score=None, score_se=None, delta=None, delta_se=None, message=fit.message)
-        else:
-            sc = scores[name]
-            diff = sc.elpd - base_score.elpd
-            n = diff.size
-            entry.update(score=sc.total, score_se=float(math.sqrt(n * np.var(sc.elpd))), delta=float(diff.sum()),
-                         delta_se=float(math.sqrt(n * np.var(diff))), chi2=fit.chi2, steps=fit.steps)  # fmt: skip
-        ranking.append(entry)
-    ok = [e for e in ranking if e["status"] == "ok"]
-    ranking = sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
-    winners = [e for e in ranking if e["status"] == "ok" and e["effect"] != "baseline" and e["delta"] >= WIN_NATS
-               and e["delta"] >= WIN_SE * e["delta_se"]]  # fmt: skip
-    chosen = winners[0]["effect"] if winners else "baseline"
+    fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
+    ranking, chosen = _ranking(fits, scores, effects)
 
     regime = fits["baseline"].prediction["wrinkled"]
     points_before = _points(study, scores["baseline"], regime)
@@ -283,7 +334,6 @@ def diagnose(
     gap_before, gap_after = _gap(points_before), _gap(points_after)
     misfit_p = float(stats.chi2.sf(np.sum(points_after["whitened"] ** 2), points_after["whitened"].size))
     verdict = "unexplained" if misfit_p < MISFIT_P else ("none" if chosen == "baseline" else chosen)
-
     before_est, after_est = _session_estimates(fits["baseline"]), _session_estimates(fits[chosen])
     report = {
         "verdict": verdict,
@@ -293,30 +343,12 @@ def diagnose(
         "shrink": gap_before["rms_standardized"] / gap_after["rms_standardized"],
         "where": _where(study, points_before),
         "where_after": _where(study, points_after) if chosen != "baseline" else None,
-        "winner": None if chosen == "baseline" else {
-            "effect": chosen, "description": EFFECTS[chosen].description, "layer": EFFECTS[chosen].layer,
-            "parameters": _parameter_report(fits[chosen], EFFECTS[chosen].parameters),
-            "estimates_before": before_est, "estimates_after": after_est,
-            "gauge_pressure_shift_percent": [100 * (a["value"] / b["value"] - 1) for a, b in
-                                             zip(after_est["gauge_pressure"], before_est["gauge_pressure"])],
-            "young_modulus_shift_percent": 100 * (after_est["young_modulus"]["value"]
-                                                  / before_est["young_modulus"]["value"] - 1),
-        },  # fmt: skip
+        "winner": _winner_record(chosen, fits, before_est, after_est),
         "misfit_p_value": misfit_p,
         "decision": {"win_se": WIN_SE, "win_nats": WIN_NATS, "misfit_p": MISFIT_P,
                      "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum"},  # fmt: skip
-        "baseline": {"name": baseline, "gas": gas, "wrinkle_law": wrinkle_law, "engine": "axisym",
-                     "indenter_radius": {"value": float(base.indenter_radius), "unit": "m"},
-                     "free": list(baseline_free), "estimates": before_est,
-                     "noise": {"depth_scatter_a": {"value": study.depth_noise[0], "unit": "m^2"},
-                               "depth_scatter_b": {"value": study.depth_noise[1], "unit": "1"},
-                               "trial_offset_std": {"value": study.trial_offset_std, "unit": "m"}}},  # fmt: skip
-        "sessions": [{"path": str(s.source), "object": s.object_name, "radius": {"value": s.radius, "unit": "m"},
-                      "manometer_gauge_pressure": None if s.manometer_gauge_pressure is None else
-                      {"value": s.manometer_gauge_pressure, "unit": "Pa"},
-                      "trials": int(s.trial_ids.size), "samples": int(s.depth.size),
-                      "shape_points": int(np.sum(study.shape_session == i))}
-                     for i, s in enumerate(study.sessions)],  # fmt: skip
+        "baseline": _baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
+        "sessions": _sessions_record(study),
     }
     return Diagnosis(report=report, study=study, fits=fits, scores=scores, points_before=points_before,
                      points_after=points_after)

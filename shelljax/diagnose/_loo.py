@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
-from ..estimate._fit import solve_least_squares
+from ..estimate import solve_least_squares
 from ._model import JointProblem, StudyArrays
 
 FIT_TOLERANCE = 1e-6  # [-] LM's rtol and atol on u: far below any parameter's statistical error
@@ -116,6 +116,12 @@ def _row_layout(data: StudyArrays):
                                     minlength=log_jac.size)  # fmt: skip
     log_jac = log_jac - 0.5 * math.log(2 * math.pi) * np.bincount(np.asarray(data.count_unit), minlength=log_jac.size)
     return units, raw, log_jac
+
+
+def unit_log_jacobian(data: StudyArrays) -> np.ndarray:
+    """Log-Jacobian [-] of each leave-one-out unit's whitening: its whitened log density plus
+    this is the log density of its raw data."""
+    return _row_layout(data)[2]
 
 
 def loo_score(fit: CandidateFit) -> LooScore:

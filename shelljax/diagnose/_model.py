@@ -29,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch, vella_wrinkle_count
-from ..estimate._problem import FAILED_RESIDUAL, count_log_likelihood
-from ..physics import STANDARD_GRAVITY
+from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
+from ..estimate import FAILED_RESIDUAL, count_log_likelihood
+from ..paper import PAPER_INDENTER_RADIUS
+from ..physics import STANDARD_GRAVITY, scaling_wrinkle_count
 from ._effects import (
     FREE_THICKNESS_STD,
     FRICTION_REFERENCE,
@@ -49,7 +50,6 @@ from ._study import Study
 R_REF = 0.2  # [m] the engine's radius; every object is reached by similarity
 N_GRID = 12  # forces per curve
 GRID_SPAN = (0.6, 1.3)  # the grid covers [0.6 F_min, 1.3 F_max]: room for gain and exponent
-DEFAULT_INDENTER_RADIUS = 8e-3  # [m], the finger of the estimators' forward model
 N_ELEMENTS = 101  # meridian elements, as the fitted estimator's forward model
 GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": 1.4}
 WRINKLE_LAWS = ("scaling", "mechanics")
@@ -98,7 +98,7 @@ class StudyArrays(eqx.Module):
     n_units: int = eqx.field(static=True)
 
 
-def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = DEFAULT_INDENTER_RADIUS) -> StudyArrays:
+def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = PAPER_INDENTER_RADIUS) -> StudyArrays:
     """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only)."""
     s = study.n_sessions
     n_u = s + len(GLOBAL_PARAMETERS)
@@ -188,7 +188,7 @@ def engine_inputs(phys, data: StudyArrays):
 
 def engine_setup() -> Setup:
     """The engine's static setup: reference radius, sealed polytropic gas, relaxed wrinkling."""
-    return Setup(radius=R_REF, n_elements=N_ELEMENTS, gas="polytropic", indenter_radius=DEFAULT_INDENTER_RADIUS)
+    return Setup(radius=R_REF, n_elements=N_ELEMENTS, gas="polytropic", indenter_radius=PAPER_INDENTER_RADIUS)
 
 
 def solve_curves(rows, physics, data: StudyArrays, chunk: int = 0):
@@ -213,8 +213,8 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
     wrinkled = _at(curves.min_hoop_tension, data.depth_session, f_ref, data.grid) < 0.0
     top = jax.ops.segment_max(f_ref, data.depth_session, num_segments=scale.shape[0])
     if wrinkle_law == "scaling":
-        per_session = vella_wrinkle_count(phys["gauge_pressure"], phys["young_modulus"], phys["thickness"],
-                                          data.poisson_ratio, phys["radius"])  # fmt: skip
+        per_session = scaling_wrinkle_count(phys["gauge_pressure"], phys["radius"], phys["young_modulus"],
+                                            phys["thickness"], data.poisson_ratio)  # fmt: skip
     else:
         per_session = jax.vmap(lambda n, f: jnp.interp(f, data.grid, n))(curves.wrinkle_count, top)
     count = per_session[data.count_session]

@@ -25,7 +25,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._errors import InvalidInputError
-from ..estimate import PAPER_KS, modulus_from_wrinkles, pressure_slope
+from ..estimate import depth_noise_from_scatter, modulus_from_wrinkles, pressure_slope
+from ..paper import PAPER_KS
 from ..session import SHAPE_OBSERVABLES, Session
 
 DEPTH_NOISE_FLOOR = 1e-5  # [m]
@@ -239,8 +240,6 @@ def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, fl
     tau, scatter = _anova(sessions, levels) if noise is None else noise
     depth = np.concatenate([s.depth for s in sessions])
     if scatter is None:  # no replicated levels: model-free scatter about a line in force, per session
-        from ..estimate._problem import depth_noise_from_scatter
-
         noise = np.sqrt(np.mean([depth_noise_from_scatter(s.force, s.depth) ** 2 for s in sessions]))
         scatter = (float(noise**2), 0.0)
     depth_std = np.sqrt(np.maximum(scatter[0] + scatter[1] * depth**2, DEPTH_NOISE_FLOOR**2))

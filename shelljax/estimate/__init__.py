@@ -1,10 +1,11 @@
-"""Estimators of gauge pressure and Young's modulus from a measurement session."""
+"""Estimators of gauge pressure and Young's modulus from a measurement session.
 
+Each estimator returns a result with ``estimates`` (name → :class:`Estimate`) and ``to_dict()``;
+:func:`run_estimator` runs any of them by name.
+"""
+
+from ._bayes import ConvergenceWarning, LogPosterior, PosteriorResult, SurrogateWarning, sample_posterior
 from ._closed_form import (
-    CRITICAL_W,
-    PAPER_KS,
-    PAPER_KS_STD,
-    WRINKLE_PREFACTOR,
     ClosedFormResult,
     KsCalibration,
     Regression,
@@ -12,12 +13,13 @@ from ._closed_form import (
     estimate_session,
     modulus_from_critical_depth,
     modulus_from_wrinkles,
+    paper_k_s,
     pressure_slope,
     regress_force_on_depth,
-    tau,
 )
-from ._bayes import ConvergenceWarning, PosteriorResult, SurrogateWarning, sample_posterior
-from ._fit import FitResult, fit_session
+from ._dispatch import METHODS, EstimatorOptions, EstimatorResult, options_forward_model, run_estimator
+from ._fit import FitResult, fit_session, solve_least_squares
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel, forward_model_for
+from ._problem import FAILED_RESIDUAL, InverseProblem, build_problem, count_log_likelihood, depth_noise_from_scatter
 from ._result import Estimate
 from ._surrogate import SurrogateForwardModel, build_surrogate, surrogate_error

@@ -6,9 +6,12 @@ Sampling runs in chunks; after each, the integrated autocorrelation time τ of e
 estimated and sampling stops once the chain is longer than ``autocorr_factor`` (50) τ and τ
 changed by less than ``tau_tolerance`` (5 %) since the last check (emcee's documentation uses
 100 τ and 1 %; 50 τ already bounds the Monte-Carlo error of τ to ~10 %), and never before
-``min_steps`` (1000): on shorter chains τ itself is underestimated — otherwise a warning says the chain has not converged. Chains can live in an HDF5
-file (emcee's HDFBackend) and a later call with the same file resumes them. Forward solves that
-fail map to log p = −∞ and are counted.
+``min_steps`` (1000): on shorter chains τ itself is underestimated. Otherwise a warning says the
+chain has not converged. Chains can live in an HDF5 file (emcee's HDFBackend) and a later call
+with the same file resumes them. Forward solves that fail map to log p = −∞ and are counted.
+
+The sampler starts from a least-squares fit (:class:`FitResult`): its inverse problem, and, with
+the surrogate, its optimum and Laplace covariance.
 """
 
 from __future__ import annotations
@@ -27,11 +30,9 @@ from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError
 from .._parallel import map_batch
-from ..session import Session
-from ._closed_form import estimate_session
-from ._fit import fit_session
-from ._forward import AbstractForwardModel, AxisymForwardModel
-from ._problem import InverseProblem, build_problem
+from ._fit import FitResult
+from ._forward import AxisymForwardModel
+from ._problem import InverseProblem
 from ._surrogate import DEFAULT_NODES, SURROGATE_AXES, build_surrogate, surrogate_error
 from ._result import Estimate
 
@@ -82,6 +83,19 @@ class PosteriorResult:
     names: tuple[str, ...]
     surrogate: dict | None = None
 
+    def to_dict(self) -> dict:
+        """JSON-ready: ``estimates`` by name (each with its 68 % interval ``ci68``), convergence,
+        steps, effective samples, autocorrelation times [steps], failed forward solves,
+        acceptance fraction and the ``surrogate`` report (None when the model itself was sampled)."""
+        return {
+            "estimates": {name: {**est.to_dict(), "ci68": list(self.intervals68[name])}
+                          for name, est in self.estimates.items()},
+            "converged": self.converged, "steps": self.n_steps, "effective_samples": self.effective_samples,
+            "autocorr_time": {"value": self.autocorr_time, "unit": "steps"},
+            "failed_forward_solves": self.failed_forward, "acceptance_fraction": self.acceptance_fraction,
+            "surrogate": self.surrogate,
+        }  # fmt: skip
+
 
 @jax.jit
 def _batched_log_posterior(problem: InverseProblem, coords):
@@ -93,7 +107,7 @@ def _batched_physical(problem: InverseProblem, u):
     return jax.vmap(problem.physical)(u)
 
 
-class _LogPosterior:
+class LogPosterior:
     """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior.
 
     The compiled function is module-level and takes the problem as an argument, so a second
@@ -109,6 +123,7 @@ class _LogPosterior:
         self.workers = None if isinstance(problem.model, AxisymForwardModel) else 1
 
     def __call__(self, coords: np.ndarray) -> np.ndarray:
+        """log p [-] of each row of ``coords``: (walkers, unknowns + 1) scaled unknowns and log σ_w."""
         log_p, converged = map_batch(lambda c: _batched_log_posterior(self.problem, c), coords, self.workers)
         self.failed_forward += int(np.sum(~np.asarray(converged)))
         self.evaluations += coords.shape[0]
@@ -122,11 +137,9 @@ def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np
     return out
 
 
-def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nodes, progress):
-    """(surrogate model, u at the fit, report) for ``sample_posterior``."""
-    # The fit only places the box: its last iterate will do when LM stops short of its tolerances
-    # (seen once in 60 sessions, 0.6 % from the truth, on the kinks of the force interpolation).
-    fit = fit_session(session, model, nuisance=nuisance, raise_on_failure=False)
+def _surrogate_around_fit(fit: FitResult, nodes, progress):
+    """(surrogate model, report) of the fit's engine model, in a box around the fit."""
+    problem, model = fit.problem, fit.problem.model
     u_std = np.sqrt(np.diag(fit.covariance))
     center = {k: float(v) for k, v in problem.physical(jnp.asarray(fit.u)).items()}
     half_width = {name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
@@ -150,115 +163,95 @@ def _surrogate_around_fit(session, model, problem: InverseProblem, nuisance, nod
     }  # fmt: skip
     if error["depth"] > SURROGATE_TOLERANCE * problem.depth_noise or error["wrinkle_count"] > SURROGATE_TOLERANCE:
         warnings.warn(
-            f"{session.source}: the surrogate differs from the engine by up to {error['depth'] * 1e3:.3g} mm in depth "
+            f"{fit.source}: the surrogate differs from the engine by up to {error['depth'] * 1e3:.3g} mm in depth "
             f"({error['depth'] / problem.depth_noise:.2f} σ_w) and {error['wrinkle_count']:.2g} wrinkles; "
             "Fix: more surrogate_nodes, or surrogate=False",
             SurrogateWarning, stacklevel=3,
         )  # fmt: skip
-    return built, np.asarray(fit.u), report
+    return built, report
 
 
-def sample_posterior(
-    session: Session,
-    model: AbstractForwardModel,
-    *,
-    nuisance: tuple[str, ...] = (),
-    n_walkers: int = 32,
-    max_steps: int = 20_000,
-    check_every: int = 250,
-    autocorr_factor: float = 50.0,
-    tau_tolerance: float = 0.05,
-    min_steps: int = 1000,
-    backend_path: str | Path | None = None,
-    seed: int = 0,
-    progress: bool | None = None,
-    surrogate: bool = True,
-    surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES,
-) -> PosteriorResult:
-    """Sample the posterior of ``session``'s unknowns under ``model``.
-
-    ``backend_path``: HDF5 file for the chain; if it already holds a chain for this problem, it
-    is resumed. ``progress``: None shows a bar on terminals only. Warns with
-    :class:`ConvergenceWarning` when ``max_steps`` is reached before the τ criterion holds.
-    ``surrogate`` (axisymmetric engine models only): sample through a Chebyshev surrogate of the
-    engine (``surrogate_nodes`` per axis P_g, E, h, R) built in a box of ±``SURROGATE_SIGMAS``
-    Laplace standard deviations around the least-squares fit, started there; its error against
-    the engine is in ``PosteriorResult.surrogate``, and a :class:`SurrogateWarning` says when it
-    exceeds ``SURROGATE_TOLERANCE`` of the depth noise. False samples the engine itself (about
-    an hour on 2 CPU cores).
-    """
-    start = estimate_session(session, bootstrap_samples=0)
-    start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
-    problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
-                            start_modulus=start_modulus, nuisance=nuisance)  # fmt: skip
-    u_start = np.zeros(problem.ndim)
-    surrogate_info = None
-    if surrogate and isinstance(model, AxisymForwardModel):
-        model, u_start, surrogate_info = _surrogate_around_fit(session, model, problem, nuisance,
-                                                               surrogate_nodes, progress)  # fmt: skip
-        problem = eqx.tree_at(lambda q: q.model, problem, model)
-    ndim = problem.ndim + 1  # + log σ_w
-    if n_walkers < 2 * ndim:
-        raise InvalidInputError(f"n_walkers = {n_walkers} is too few for {ndim} unknowns. Fix: use at least {2 * ndim}")
-    log_prob = _LogPosterior(problem)
-    backend = None
-    initial = None
-    if backend_path is not None:
-        backend = emcee.backends.HDFBackend(str(backend_path), name=f"shelljax-{session.source.stem}")
-        if Path(backend_path).is_file() and backend.initialized and backend.iteration > 0:
-            if backend.shape != (n_walkers, ndim):
-                raise InvalidInputError(
-                    f"{backend_path}: holds a chain of shape {backend.shape}, this problem needs "
-                    f"{(n_walkers, ndim)}. Fix: use a new file or the same n_walkers and nuisance"
-                )
-        else:
-            backend.reset(n_walkers, ndim)
-    rng = np.random.default_rng(seed)
-    if backend is None or backend.iteration == 0:  # a fresh chain
-        # Start in a small ball around the closed form (u = 0), or the fit when a surrogate is
-        # used (its box is centred there), and the scatter-based σ_w.
-        center = np.concatenate([u_start, [math.log(problem.depth_noise)]])
-        initial = center + 1e-3 * rng.standard_normal((n_walkers, ndim))
-        if not np.all(np.isfinite(log_prob(initial))):
+def _open_backend(backend_path, source: Path, n_walkers: int, ndim: int):
+    """emcee's HDF5 backend at ``backend_path``, reset unless it holds a chain of this shape."""
+    backend = emcee.backends.HDFBackend(str(backend_path), name=f"shelljax-{source.stem}")
+    if Path(backend_path).is_file() and backend.initialized and backend.iteration > 0:
+        if backend.shape != (n_walkers, ndim):
             raise InvalidInputError(
-                f"{session.source}: the posterior is zero at the closed-form start; the forward "
-                f"model {type(model).__name__} fails there or the data are outside the priors"
+                f"{backend_path}: holds a chain of shape {backend.shape}, this problem needs "
+                f"{(n_walkers, ndim)}. Fix: use a new file or the same n_walkers and nuisance"
             )
     else:
-        initial = backend.get_last_sample()
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
-    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    tau_old = np.full(ndim, np.inf)
+        backend.reset(n_walkers, ndim)
+    return backend
+
+
+def _fresh_walkers(log_prob: LogPosterior, u_start: np.ndarray, n_walkers: int, rng, source: Path):
+    """A small ball around ``u_start`` and the scatter-based σ_w, checked to have p > 0."""
+    problem = log_prob.problem
+    center = np.concatenate([u_start, [math.log(problem.depth_noise)]])
+    initial = center + 1e-3 * rng.standard_normal((n_walkers, center.size))
+    if not np.all(np.isfinite(log_prob(initial))):
+        raise InvalidInputError(
+            f"{source}: the posterior is zero at the closed-form start; the forward "
+            f"model {type(problem.model).__name__} fails there or the data are outside the priors"
+        )
+    return initial
+
+
+@dataclasses.dataclass(frozen=True)
+class ChainOptions:
+    """When a chain stops: after ``max_steps``, or once it is ``min_steps`` long, longer than
+    ``autocorr_factor`` τ, and τ moved by less than ``tau_tolerance`` (relative) since the last of
+    the checks made every ``check_every`` steps."""
+
+    max_steps: int = 20_000
+    check_every: int = 250
+    autocorr_factor: float = 50.0
+    tau_tolerance: float = 0.05
+    min_steps: int = 1000
+
+
+def _run_until_converged(sampler, state, chain: ChainOptions, source: Path, progress) -> tuple[bool, int]:
+    """Sample in chunks until the autocorrelation criterion holds or ``max_steps``: (converged, steps)."""
+    tau_old = np.full(sampler.ndim, np.inf)
     converged = False
     done = sampler.iteration
     disable = None if progress is None else not progress
-    with tqdm(total=max_steps, initial=done, desc=f"bayes {session.source.stem}", disable=disable) as bar:
-        state = initial
-        while done < max_steps:
-            chunk = min(check_every, max_steps - done)
-            state = sampler.run_mcmc(state, chunk, progress=False)
+    with tqdm(total=chain.max_steps, initial=done, desc=f"bayes {source.stem}", disable=disable) as bar:
+        while done < chain.max_steps:
+            step = min(chain.check_every, chain.max_steps - done)
+            state = sampler.run_mcmc(state, step, progress=False)
             done = sampler.iteration
-            bar.update(chunk)
+            bar.update(step)
             tau = sampler.get_autocorr_time(tol=0)
-            converged = bool(done >= min_steps and np.all(autocorr_factor * tau < done) and np.all(np.abs(tau_old - tau) < tau_tolerance * tau))
+            converged = bool(done >= chain.min_steps and np.all(chain.autocorr_factor * tau < done)
+                             and np.all(np.abs(tau_old - tau) < chain.tau_tolerance * tau))  # fmt: skip
             bar.set_postfix(tau=f"{np.max(tau):.0f}")
             if converged:
                 break
             tau_old = tau
-    tau = sampler.get_autocorr_time(tol=0)
     if not converged:
+        tau = sampler.get_autocorr_time(tol=0)
         warnings.warn(
-            f"{session.source}: MCMC stopped at {done} steps before convergence (max τ = "
-            f"{np.max(tau):.0f} steps needs > {autocorr_factor * np.max(tau):.0f} steps and τ stable within {tau_tolerance:.0%}); "
+            f"{source}: MCMC stopped at {done} steps before convergence (max τ = {np.max(tau):.0f} steps "
+            f"needs > {chain.autocorr_factor * np.max(tau):.0f} steps and τ stable within {chain.tau_tolerance:.0%}); "
             "treat the intervals as rough or raise max_steps",
-            ConvergenceWarning, stacklevel=2,
+            ConvergenceWarning, stacklevel=3,
         )  # fmt: skip
+    return converged, done
+
+
+def _summarise(sampler, problem: InverseProblem, log_prob: LogPosterior, converged: bool, done: int,
+               surrogate_info) -> PosteriorResult:  # fmt: skip
+    """The posterior's estimates after burn-in (2 max τ) and thinning (½ min τ)."""
+    tau = sampler.get_autocorr_time(tol=0)
+    n_walkers = sampler.nwalkers
     burn = int(min(2 * np.max(tau), done // 2))
     thin = max(1, int(0.5 * np.min(tau)))
     flat = sampler.get_chain(discard=burn, thin=thin, flat=True)
     samples = _physical_samples(problem, flat)
     names = (*problem.names, "depth_noise")
-    method = f"bayes: emcee ({n_walkers} walkers, {done} steps) through {type(model).__name__}, posterior median"
+    method = f"bayes: emcee ({n_walkers} walkers, {done} steps) through {type(problem.model).__name__}, posterior median"
     estimates, intervals68 = {}, {}
     for name in names:
         x = samples[name]
@@ -274,4 +267,55 @@ def sample_posterior(
     )  # fmt: skip
 
 
+def sample_posterior(
+    fit: FitResult,
+    *,
+    n_walkers: int = 32,
+    max_steps: int = 20_000,
+    check_every: int = 250,
+    autocorr_factor: float = 50.0,
+    tau_tolerance: float = 0.05,
+    min_steps: int = 1000,
+    backend_path: str | Path | None = None,
+    seed: int = 0,
+    progress: bool | None = None,
+    surrogate: bool = True,
+    surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES,
+) -> PosteriorResult:
+    """Sample the posterior of the unknowns of ``fit``'s session, model and nuisances.
 
+    ``fit``: :func:`fit_session`'s result (``raise_on_failure=False`` will do: the fit only
+    supplies the inverse problem and places the surrogate). The chain starts at the closed form
+    (u = 0), or at the fit when a surrogate is used, with σ_w from the fit's problem.
+
+    ``backend_path``: HDF5 file for the chain; if it already holds a chain for this problem, it
+    is resumed. ``progress``: None shows a bar on terminals only. Warns with
+    :class:`ConvergenceWarning` when ``max_steps`` is reached before the τ criterion (module
+    docstring) holds. ``surrogate`` (axisymmetric engine models only): sample
+    through a Chebyshev surrogate of the engine (``surrogate_nodes`` per axis P_g, E, h, R) built
+    in a box of ±``SURROGATE_SIGMAS`` Laplace standard deviations around the fit; its error
+    against the engine is in ``PosteriorResult.surrogate``, and a :class:`SurrogateWarning` says
+    when it exceeds ``SURROGATE_TOLERANCE`` of the depth noise. False samples the engine itself
+    (slow: docs/fit-and-bayes.md).
+    """
+    chain = ChainOptions(max_steps, check_every, autocorr_factor, tau_tolerance, min_steps)
+    problem, source = fit.problem, fit.source
+    u_start = np.zeros(problem.ndim)
+    surrogate_info = None
+    if surrogate and isinstance(problem.model, AxisymForwardModel):
+        built, surrogate_info = _surrogate_around_fit(fit, surrogate_nodes, progress)
+        problem, u_start = eqx.tree_at(lambda q: q.model, problem, built), np.asarray(fit.u)
+    ndim = problem.ndim + 1  # + log σ_w
+    if n_walkers < 2 * ndim:
+        raise InvalidInputError(f"n_walkers = {n_walkers} is too few for {ndim} unknowns. Fix: use at least {2 * ndim}")
+    log_prob = LogPosterior(problem)
+    backend = None if backend_path is None else _open_backend(backend_path, source, n_walkers, ndim)
+    rng = np.random.default_rng(seed)
+    if backend is None or backend.iteration == 0:
+        initial = _fresh_walkers(log_prob, u_start, n_walkers, rng, source)
+    else:
+        initial = backend.get_last_sample()
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
+    converged, done = _run_until_converged(sampler, initial, chain, source, progress)
+    return _summarise(sampler, problem, log_prob, converged, done, surrogate_info)

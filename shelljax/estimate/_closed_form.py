@@ -27,16 +27,11 @@ import numpy as np
 from scipy import stats
 
 from .._errors import InvalidInputError
-from ..physics import bending_stiffness
+from ..paper import PAPER_KS, PAPER_KS_STD
+from ..physics import CRITICAL_W, WRINKLE_PREFACTOR
 from ..session import Session
 from ._result import Estimate
 
-PAPER_KS = 0.64  # [-], calibrated on a Pezzi and a yoga ball (paper Section 4.1)
-# The paper quotes no error bar on k_s; its held-out pressures came out with 3.5 % mean relative
-# error, which we take as k_s's relative standard deviation when the paper's value is used.
-PAPER_KS_STD = 0.035 * PAPER_KS
-WRINKLE_PREFACTOR = 1.33  # n ≈ 1.33 τ^½ (Vella et al. 2011, paper Eq. modulus-estimation-2)
-CRITICAL_W = 2.52  # wrinkling onset at W(0) = -2.52 (Vella et al. 2011)
 COUNT_READING_STD = 1.0  # [wrinkles] per count
 _METHOD = "closed-form (paper Procedures 1-3), delta method"
 
@@ -158,11 +153,6 @@ def modulus_from_critical_depth(gauge_pressure, radius, thickness, critical_dept
     return CRITICAL_W * gauge_pressure * radius**2 / (thickness * critical_depth)
 
 
-def tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
-    """Dimensionless pressure τ = P_g R² / √(E h B) [-]."""
-    return gauge_pressure * radius**2 / math.sqrt(young_modulus * thickness * bending_stiffness(young_modulus, thickness, poisson_ratio))
-
-
 def _count_stats(counts: np.ndarray) -> tuple[float, float]:
     mean = float(np.mean(counts))
     scatter = float(np.var(counts, ddof=1)) if counts.size > 1 else 0.0
@@ -173,30 +163,61 @@ def _count_stats(counts: np.ndarray) -> tuple[float, float]:
 class ClosedFormResult:
     """Closed-form estimates of one session.
 
-    ``pressure_slope`` P̂ [Pa], ``gauge_pressure`` P_g [Pa], ``young_modulus`` E [Pa] (None without
-    wrinkle counts), ``critical_depth_modulus`` E from the onset depth [Pa] (None without onset
-    depths; flagged unreliable), ``tau`` τ [-], ``wrinkle_count`` mean n [-], ``k_s`` used [-],
-    ``regression`` of F on w(0), and the ``bootstrap`` estimates of the same quantities.
+    ``estimates``, by name: ``pressure_slope`` P̂ [Pa], ``gauge_pressure`` P_g [Pa],
+    ``young_modulus`` E [Pa] (without wrinkle counts: absent), ``critical_depth_modulus`` E from
+    the onset depth [Pa] (without onset depths: absent; flagged unreliable), ``tau`` τ [-] and
+    ``wrinkle_count`` mean n [-] (with wrinkle counts), ``k_s`` used [-]. ``regression`` of F on
+    w(0), and the ``bootstrap`` estimates of P̂, P_g and E. Each estimate is also an attribute,
+    None when absent.
     """
 
-    pressure_slope: Estimate
-    gauge_pressure: Estimate
-    young_modulus: Estimate | None
-    critical_depth_modulus: Estimate | None
-    tau: Estimate | None
-    wrinkle_count: Estimate | None
-    k_s: Estimate
+    estimates: dict[str, Estimate]
     regression: Regression
     bootstrap: dict[str, Estimate]
 
-    def estimates(self) -> dict[str, Estimate]:
-        """Named estimates (skipping absent ones) for reports."""
-        named = {
-            "pressure_slope": self.pressure_slope, "gauge_pressure": self.gauge_pressure,
-            "young_modulus": self.young_modulus, "critical_depth_modulus": self.critical_depth_modulus,
-            "tau": self.tau, "wrinkle_count": self.wrinkle_count, "k_s": self.k_s,
+    @property
+    def pressure_slope(self) -> Estimate:
+        return self.estimates["pressure_slope"]
+
+    @property
+    def gauge_pressure(self) -> Estimate:
+        return self.estimates["gauge_pressure"]
+
+    @property
+    def young_modulus(self) -> Estimate | None:
+        return self.estimates.get("young_modulus")
+
+    @property
+    def critical_depth_modulus(self) -> Estimate | None:
+        return self.estimates.get("critical_depth_modulus")
+
+    @property
+    def tau(self) -> Estimate | None:
+        return self.estimates.get("tau")
+
+    @property
+    def wrinkle_count(self) -> Estimate | None:
+        return self.estimates.get("wrinkle_count")
+
+    @property
+    def k_s(self) -> Estimate:
+        return self.estimates["k_s"]
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``estimates`` by name, the ``bootstrap`` estimates and the ``regression``."""
+        reg = self.regression
+        return {
+            "estimates": {name: est.to_dict() for name, est in self.estimates.items()},
+            "bootstrap": {name: est.to_dict() for name, est in self.bootstrap.items()},
+            "regression": {"slope": {"value": reg.slope, "std": reg.slope_std, "unit": "N/m"},
+                           "intercept": {"value": reg.intercept, "std": reg.intercept_std, "unit": "N"},
+                           "residual_std": {"value": reg.residual_std, "unit": "N"}},
         }  # fmt: skip
-        return {k: v for k, v in named.items() if v is not None}
+
+
+def paper_k_s() -> Estimate:
+    """The paper's calibrated k_s [-] with its assumed standard deviation (``shelljax.paper``)."""
+    return Estimate.lognormal(PAPER_KS, PAPER_KS_STD / PAPER_KS, "1", "paper's calibrated value (Section 4.1)")
 
 
 def estimate_session(
@@ -209,11 +230,10 @@ def estimate_session(
 ) -> ClosedFormResult:
     """Procedures 2 and 3 on one session: P̂, P_g and E with delta-method and bootstrap errors.
 
-    ``k_s`` defaults to the paper's 0.64 (± 3.5 %, see PAPER_KS_STD). ``bootstrap_samples`` = 0
-    skips the bootstrap.
+    ``k_s`` defaults to :func:`paper_k_s`. ``bootstrap_samples`` = 0 skips the bootstrap.
     """
     if k_s is None:
-        k_s = Estimate.lognormal(PAPER_KS, PAPER_KS_STD / PAPER_KS, "1", "paper's calibrated value (Section 4.1)")
+        k_s = paper_k_s()
     slope_est, reg = pressure_slope(session, through_origin=through_origin)
     rel = {
         "slope": reg.slope_std / reg.slope,
@@ -223,44 +243,49 @@ def estimate_session(
     }
     p_g = slope_est.value / k_s.value
     gauge = Estimate.lognormal(p_g, math.hypot(rel["slope"], rel["radius"], rel["k_s"]), "Pa", _METHOD)
-
-    modulus = tau_est = count_est = None
+    estimates = {"pressure_slope": slope_est, "gauge_pressure": gauge}
     if session.wrinkle_counts is not None:
-        if np.any(session.wrinkle_counts == 0):
-            raise InvalidInputError(
-                f"{session.source}: field 'wrinkles.counts': a count of 0 gives no modulus "
-                "(n ≈ 1.33 τ^½ needs wrinkles). Fix: indent past the wrinkling onset, or drop [wrinkles]"
-            )
-        n_mean, n_std = _count_stats(session.wrinkle_counts)
-        rel["count"] = n_std / n_mean
-        e_value = modulus_from_wrinkles(p_g, session.radius, session.thickness, n_mean, session.poisson_ratio)
-        # E ∝ slope · R · k_s⁻¹ · n⁻² · h⁻²  (P_g ∝ slope/R, times R²)
-        e_rel = math.hypot(rel["slope"], rel["radius"], rel["k_s"], 2 * rel["count"], 2 * rel["thickness"])
-        modulus = Estimate.lognormal(e_value, e_rel, "Pa", _METHOD)
-        # τ = (n / 1.33)² exactly, by the model's own relation.
-        tau_est = Estimate.lognormal((n_mean / WRINKLE_PREFACTOR) ** 2, 2 * rel["count"], "1", _METHOD)
-        count_est = Estimate(n_mean, n_std, (n_mean - 1.96 * n_std, n_mean + 1.96 * n_std), "1",
-                             "mean of per-trial counts; var = (scatter + 1)/N")  # fmt: skip
-
-    critical = None
+        estimates.update(_wrinkle_estimates(session, p_g, rel))
     if session.onset_depth is not None:
-        w_c = float(np.mean(session.onset_depth))
-        w_c_rel = (float(np.std(session.onset_depth, ddof=1)) / math.sqrt(session.onset_depth.size)
-                   if session.onset_depth.size > 1 else 0.5) / w_c  # fmt: skip
-        # E ∝ P_g R² h⁻¹ w_c⁻¹ ∝ slope R k_s⁻¹ h⁻¹ w_c⁻¹
-        c_rel = math.hypot(rel["slope"], rel["radius"], rel["k_s"], rel["thickness"], w_c_rel)
-        critical = Estimate.lognormal(
-            modulus_from_critical_depth(p_g, session.radius, session.thickness, w_c), c_rel, "Pa",
-            _METHOD, note="unreliable: the wrinkling onset is ambiguous to observe and E ∝ 1/w_c "
-            "amplifies its error (paper Section 3.4); use young_modulus from the wrinkle count",
-        )  # fmt: skip
-
+        estimates["critical_depth_modulus"] = _critical_depth_estimate(session, p_g, rel)
+    estimates["k_s"] = k_s
     boot = (_bootstrap(session, k_s, through_origin, bootstrap_samples, seed)
             if bootstrap_samples > 0 else {})  # fmt: skip
-    return ClosedFormResult(
-        pressure_slope=slope_est, gauge_pressure=gauge, young_modulus=modulus,
-        critical_depth_modulus=critical, tau=tau_est, wrinkle_count=count_est, k_s=k_s,
-        regression=reg, bootstrap=boot,
+    return ClosedFormResult(estimates=estimates, regression=reg, bootstrap=boot)
+
+
+def _wrinkle_estimates(session: Session, p_g: float, rel: dict[str, float]) -> dict[str, Estimate]:
+    """Procedure 3: E [Pa], τ [-] and the mean count n [-] from the wrinkle counts."""
+    if np.any(session.wrinkle_counts == 0):
+        raise InvalidInputError(
+            f"{session.source}: field 'wrinkles.counts': a count of 0 gives no modulus "
+            "(n ≈ 1.33 τ^½ needs wrinkles). Fix: indent past the wrinkling onset, or drop [wrinkles]"
+        )
+    n_mean, n_std = _count_stats(session.wrinkle_counts)
+    count_rel = n_std / n_mean
+    e_value = modulus_from_wrinkles(p_g, session.radius, session.thickness, n_mean, session.poisson_ratio)
+    # E ∝ slope · R · k_s⁻¹ · n⁻² · h⁻²  (P_g ∝ slope/R, times R²)
+    e_rel = math.hypot(rel["slope"], rel["radius"], rel["k_s"], 2 * count_rel, 2 * rel["thickness"])
+    return {
+        "young_modulus": Estimate.lognormal(e_value, e_rel, "Pa", _METHOD),
+        # τ = (n / 1.33)² exactly, by the model's own relation.
+        "tau": Estimate.lognormal((n_mean / WRINKLE_PREFACTOR) ** 2, 2 * count_rel, "1", _METHOD),
+        "wrinkle_count": Estimate(n_mean, n_std, (n_mean - 1.96 * n_std, n_mean + 1.96 * n_std), "1",
+                                  "mean of per-trial counts; var = (scatter + 1)/N"),
+    }  # fmt: skip
+
+
+def _critical_depth_estimate(session: Session, p_g: float, rel: dict[str, float]) -> Estimate:
+    """E [Pa] from the mean wrinkling-onset depth, flagged unreliable."""
+    w_c = float(np.mean(session.onset_depth))
+    w_c_rel = (float(np.std(session.onset_depth, ddof=1)) / math.sqrt(session.onset_depth.size)
+               if session.onset_depth.size > 1 else 0.5) / w_c  # fmt: skip
+    # E ∝ P_g R² h⁻¹ w_c⁻¹ ∝ slope R k_s⁻¹ h⁻¹ w_c⁻¹
+    c_rel = math.hypot(rel["slope"], rel["radius"], rel["k_s"], rel["thickness"], w_c_rel)
+    return Estimate.lognormal(
+        modulus_from_critical_depth(p_g, session.radius, session.thickness, w_c), c_rel, "Pa",
+        _METHOD, note="unreliable: the wrinkling onset is ambiguous to observe and E ∝ 1/w_c "
+        "amplifies its error (paper Section 3.4); use young_modulus from the wrinkle count",
     )  # fmt: skip
 
 

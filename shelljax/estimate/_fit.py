@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -36,8 +37,9 @@ class FitResult:
     unknowns in the problem's scaled space; ``chi2`` and ``dof`` of the whitened residuals;
     ``steps``: LM iterations; ``predicted_depth`` [m] at the recorded forces and
     ``predicted_wrinkle_count`` at the optimum; ``problem``: the inverse problem solved;
-    ``u``: the optimum in the problem's scaled space; ``converged``: False only when
-    ``fit_session(..., raise_on_failure=False)`` returned the last Levenberg–Marquardt iterate.
+    ``u``: the optimum in the problem's scaled space; ``source``: the session's file;
+    ``converged``: False only when ``fit_session(..., raise_on_failure=False)`` returned the last
+    Levenberg–Marquardt iterate.
     """
 
     estimates: dict[str, Estimate]
@@ -49,7 +51,18 @@ class FitResult:
     predicted_wrinkle_count: float
     problem: InverseProblem
     u: np.ndarray
+    source: Path
     converged: bool = True
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``estimates`` by name, χ², degrees of freedom, iterations, the predicted
+        wrinkle count [-] and the depth noise σ_w [m] of the whitened residuals."""
+        return {
+            "estimates": {name: est.to_dict() for name, est in self.estimates.items()},
+            "chi2": self.chi2, "dof": self.dof, "iterations": self.steps,
+            "predicted_wrinkle_count": self.predicted_wrinkle_count,
+            "depth_noise": {"value": self.problem.depth_noise, "unit": "m"},
+        }  # fmt: skip
 
 
 OPTIMALITY_TOL = 1e-3  # [χ²] an optimum's remaining Gauss–Newton decrease; 1 χ² ≈ a 1σ shift
@@ -62,10 +75,8 @@ def _forward_ok(problem: InverseProblem, u):
 
 @functools.partial(jax.jit, static_argnames="max_steps")
 def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
-    # One compiled program: the LM solve and everything evaluated at its optimum. Every call of
-    # the forward model there is a copy of the shell engine for XLA to compile: the residuals,
-    # Jacobian (linearised) and predictions at the optimum are those LM computed when it accepted
-    # it, not a fresh Jacobian pass (a quarter of the program's compile time).
+    # One compiled program; every forward-model call in it is another engine copy to compile, so
+    # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol = optx.least_squares(problem.residuals_and_prediction, solver, u0, has_aux=True, max_steps=max_steps,
                              throw=False)  # fmt: skip
@@ -116,7 +127,7 @@ def fit_session(
     there would remove less than ``OPTIMALITY_TOL`` of χ², and Levenberg–Marquardt either met
     its ``rtol``/``atol`` step tolerances or ran out of its ``max_steps`` at such a point (near
     the optimum the engine's round-off can make every trial step a rejected one, so LM's own test
-    may never fire: 1 of 192 virtual sessions stopped like that with 7e-17 χ² left).
+    may never fire).
 
     ``raise_on_failure=False`` returns the last iterate (``converged = False``) when
     Levenberg–Marquardt stops without meeting its tolerances but the forward model is finite
@@ -150,9 +161,20 @@ def fit_session(
             f"{promised_decrease:.3g}); try nuisance=() or check the data for outliers"
         )
     covariance = np.linalg.inv(jac.T @ jac)
+    chi2 = float(residual @ residual)
+    return FitResult(
+        estimates=_laplace_estimates(problem, u, covariance), covariance=covariance, chi2=chi2,
+        dof=int(residual.size - problem.ndim), steps=int(steps), predicted_depth=np.asarray(out["prediction"][0]),
+        predicted_wrinkle_count=float(out["prediction"][1]), problem=problem, u=np.asarray(u),
+        source=session.source, converged=converged,
+    )  # fmt: skip
+
+
+def _laplace_estimates(problem: InverseProblem, u, covariance: np.ndarray) -> dict[str, Estimate]:
+    """Every free parameter's value and Laplace error at ``u``, in SI."""
     u_std = np.sqrt(np.diag(covariance))
     physical = {k: float(v) for k, v in problem.physical(u).items()}
-    method = _METHOD.format(model=type(model).__name__)
+    method = _METHOD.format(model=type(problem.model).__name__)
     estimates = {}
     for i, name in enumerate(problem.names):
         if name == "depth_offset":
@@ -160,12 +182,7 @@ def fit_session(
             estimates[name] = Estimate(value, std, (value - 1.96 * std, value + 1.96 * std), "m", method)
         else:  # log-parametrised: σ(u) is the relative standard deviation
             estimates[name] = Estimate.lognormal(physical[name], float(u_std[i]), _UNITS[name], method)
-    chi2 = float(residual @ residual)
-    return FitResult(
-        estimates=estimates, covariance=covariance, chi2=chi2, dof=int(residual.size - problem.ndim),
-        steps=int(steps), predicted_depth=np.asarray(out["prediction"][0]), predicted_wrinkle_count=float(out["prediction"][1]),
-        problem=problem, u=np.asarray(u), converged=converged,
-    )  # fmt: skip
+    return estimates
 
 
 def relative_error(estimate: Estimate, truth: float) -> float:

@@ -16,7 +16,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ..physics import bending_stiffness
+from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
+from ..physics import scaling_wrinkle_count
 
 
 class Prediction(eqx.Module):
@@ -30,7 +31,8 @@ class Prediction(eqx.Module):
 class AbstractForwardModel(eqx.Module):
     """F, (P_g, E, h, R) ↦ (|w(0)|, n, converged); must be jit-, vmap- and grad-compatible.
 
-    ``poisson_ratio`` ν [-] is a fixed property of the model (the paper assumes 0.4).
+    ``poisson_ratio`` ν [-] is a fixed property of the model (the paper assumes
+    ``shelljax.paper.DEFAULT_POISSON_RATIO``).
     """
 
     poisson_ratio: eqx.AbstractVar[float]
@@ -47,14 +49,13 @@ class ScalingLawModel(AbstractForwardModel):
     ``poisson_ratio`` ν [-], ``k_s`` [-].
     """
 
-    poisson_ratio: float = 0.4
-    k_s: float = 0.64
+    poisson_ratio: float = DEFAULT_POISSON_RATIO
+    k_s: float = PAPER_KS
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
         depth = forces / (jnp.pi * self.k_s * radius * gauge_pressure)
-        bending = bending_stiffness(young_modulus, thickness, self.poisson_ratio)
-        tau = gauge_pressure * radius**2 / jnp.sqrt(young_modulus * thickness * bending)
-        return Prediction(depth=depth, wrinkle_count=1.33 * jnp.sqrt(tau), converged=jnp.array(True))
+        count = scaling_wrinkle_count(gauge_pressure, radius, young_modulus, thickness, self.poisson_ratio)
+        return Prediction(depth=depth, wrinkle_count=count, converged=jnp.array(True))
 
 
 WRINKLE_LAWS = ("mechanics", "scaling")
@@ -87,7 +88,7 @@ class AxisymForwardModel(AbstractForwardModel):
     wrinkle_law: str = eqx.field(static=True, default="mechanics")
 
     @classmethod
-    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = 0.4, n_grid: int = 7,
+    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = DEFAULT_POISSON_RATIO, n_grid: int = 7,
                    wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]."""
         from .._errors import InvalidInputError

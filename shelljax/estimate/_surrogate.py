@@ -1,8 +1,8 @@
 """A Chebyshev surrogate of the axisymmetric forward model, for MCMC.
 
-A posterior needs ~10⁵ forward curves; the engine costs ~15–30 ms a curve on 2 CPU cores, so an
-exact chain takes about half an hour (docs/fit-and-bayes.md, benchmark). The posterior, though, lives in a small box around the least-squares
-optimum, where the model is smooth in (log P_g, log E, log h, log R). ``build_surrogate`` solves
+A posterior needs ~10⁵ forward curves, which makes an exact chain through the engine slow
+(docs/fit-and-bayes.md, benchmark). The posterior, though, lives in a small box around the
+least-squares optimum, where the model is smooth in (log P_g, log E, log h, log R). ``build_surrogate`` solves
 the engine once on a tensor grid of Chebyshev nodes in that box (a few hundred curves, batched
 over the CPU cores) and interpolates every output — the depth at each force of the model's force
 grid and the wrinkle count — by a tensor-product Chebyshev series. ``surrogate_error`` checks it

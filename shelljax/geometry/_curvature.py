@@ -265,8 +265,34 @@ def fit_local_sphere(
     surface, fewer than 10 vertices fall in the neighbourhood, or the region is flat.
     """
     _require_watertight(mesh, "fit_local_sphere")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
     diagonal = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    point, fit_radius = _checked_inputs(poke_point, fit_radius, diagonal)
+    snapped, face, pts = _neighbourhood(mesh, point, fit_radius, diagonal)
+    face_normal = np.asarray(mesh.face_normals[face], dtype=np.float64)
+    k, _, normal = _quadric_curvatures(pts, snapped, face_normal, fit_radius)
+    center, radius, radius_std, rms = _sphere_fit(pts, snapped, fit_radius, diagonal, k)
+    k1, k2 = float(k[0]), float(k[1])
+    is_convex = bool(0.5 * (k1 + k2) > 0.0)
+    messages = _shape_warnings(snapped, k1, k2, radius)
+    for message in messages:
+        warnings.warn(message, GeometryWarning, stacklevel=2)
+    return LocalCurvature(
+        radius=float(radius),
+        radius_std=radius_std,
+        rms_residual=rms,
+        center=tuple(float(x) for x in center),
+        poke_point=tuple(float(x) for x in snapped),
+        normal=tuple(float(x) for x in normal),
+        principal_curvatures=(k1, k2),
+        n_vertices=len(pts),
+        fit_radius=fit_radius,
+        is_convex=is_convex,
+        warnings=messages,
+    )
+
+
+def _checked_inputs(poke_point, fit_radius, diagonal: float) -> tuple[np.ndarray, float]:
+    """(poke point [m], neighbourhood radius [m], the default's when None), checked."""
     point = np.asarray(poke_point, dtype=np.float64)
     if point.shape != (3,) or not np.all(np.isfinite(point)):
         raise InvalidInputError(
@@ -281,7 +307,11 @@ def fit_local_sphere(
             f"fit_local_sphere: fit_radius = {fit_radius!r} m must be a positive length; "
             f"omit it for the default ({DEFAULT_FIT_RADIUS_FRACTION:.0%} of the bounding diagonal)"
         )
+    return point, fit_radius
 
+
+def _neighbourhood(mesh: trimesh.Trimesh, point: np.ndarray, fit_radius: float, diagonal: float):
+    """(the poke point snapped to the surface [m], its face, the vertices of its geodesic ball [m])."""
     snapped, face = _closest_surface_point(mesh, point)
     distance = float(np.linalg.norm(snapped - point))
     if distance > _MAX_SNAP_FRACTION * diagonal:
@@ -292,7 +322,7 @@ def fit_local_sphere(
             f"`length_unit` and that they are in the mesh's frame (mesh bounds "
             f"{mesh.bounds[0].round(4).tolist()} to {mesh.bounds[1].round(4).tolist()} m)"
         )
-
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
     inside = np.linalg.norm(vertices - snapped, axis=1) <= fit_radius
     selected = _connected_neighbourhood(mesh, inside, np.asarray(mesh.faces[face]))
     n = int(selected.sum())
@@ -309,10 +339,11 @@ def fit_local_sphere(
     extent = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
     if extent[2] <= 1e-9 * extent[0]:
         raise InvalidInputError(_flat_message(snapped, fit_radius, None))
+    return snapped, face, pts
 
-    face_normal = np.asarray(mesh.face_normals[face], dtype=np.float64)
-    k, _, normal = _quadric_curvatures(pts, snapped, face_normal, fit_radius)
 
+def _sphere_fit(pts: np.ndarray, snapped: np.ndarray, fit_radius: float, diagonal: float, k: np.ndarray):
+    """(centre [m], radius R [m], its standard error [m], rms residual [m]) of the geometric fit."""
     center0, radius0 = _algebraic_sphere(pts)
     if not np.isfinite(radius0) or radius0 > _MAX_RADIUS_FRACTION * diagonal:
         raise InvalidInputError(_flat_message(snapped, fit_radius, k))
@@ -320,16 +351,17 @@ def fit_local_sphere(
     if not np.isfinite(radius) or abs(radius) > _MAX_RADIUS_FRACTION * diagonal:
         raise InvalidInputError(_flat_message(snapped, fit_radius, k))
     radius = abs(radius)  # R and −R describe the same sphere in the residual
-
-    dof = max(n - 4, 1)
+    dof = max(len(pts) - 4, 1)
     s2 = float(res @ res) / dof
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     radius_std = float(np.sqrt(max(cov[3, 3], 0.0)))
     rms = float(np.sqrt(np.mean(res * res)))
+    return center, radius, radius_std, rms
 
-    k1, k2 = float(k[0]), float(k[1])
+
+def _shape_warnings(snapped: np.ndarray, k1: float, k2: float, radius: float) -> list[str]:
+    """Why the spherical model may not apply: unequal principal curvatures, or a concave region."""
     mean_curvature = 0.5 * (k1 + k2)
-    is_convex = bool(mean_curvature > 0.0)
     messages = []
     spread = abs(k1 - k2) / max(abs(k1), abs(k2), 1e-300)
     if spread > _ANISOTROPY_LIMIT:
@@ -340,28 +372,13 @@ def fit_local_sphere(
             f"radius, so R = {radius:.4g} m is an average. Poke where the surface is rounder or "
             "use the 3D shell model."
         )
-    if not is_convex:
+    if not mean_curvature > 0.0:
         messages.append(
             f"region around poke point {snapped.round(5).tolist()} m is concave (mean curvature "
             f"{mean_curvature:.4g} 1/m relative to the outward normal, sphere centre outside the "
             "object); the indentation formulas assume a convex, outward-bulging shell."
         )
-    for message in messages:
-        warnings.warn(message, GeometryWarning, stacklevel=2)
-
-    return LocalCurvature(
-        radius=float(radius),
-        radius_std=radius_std,
-        rms_residual=rms,
-        center=tuple(float(x) for x in center),
-        poke_point=tuple(float(x) for x in snapped),
-        normal=tuple(float(x) for x in normal),
-        principal_curvatures=(k1, k2),
-        n_vertices=n,
-        fit_radius=fit_radius,
-        is_convex=is_convex,
-        warnings=messages,
-    )
+    return messages
 
 
 def _inv(k: float) -> str:

@@ -21,6 +21,7 @@ __all__ = [
     "bundled_mesh_path",
     "enclosed_volume",
     "load_mesh",
+    "signed_volume",
 ]
 
 #: Factor that converts a coordinate in the given unit to metres.
@@ -118,6 +119,16 @@ def load_mesh(
     diagonal above 20 m or below 5 mm after unit conversion, which means the unit is wrong).
     """
     path = Path(path)
+    mesh = _read_triangles(path, length_unit)
+    _check_size(mesh, path, length_unit)
+    if require_watertight:
+        _require_watertight(mesh, str(path))
+        _orient_outward(mesh, path)
+    return mesh
+
+
+def _read_triangles(path: Path, length_unit: str) -> trimesh.Trimesh:
+    """The file's triangles as one mesh in metres, vertices merged by position."""
     if length_unit not in LENGTH_UNITS:
         raise InvalidInputError(
             f"{path}: length_unit = {length_unit!r} is not supported; use one of "
@@ -156,7 +167,11 @@ def load_mesh(
     )
     if not np.all(np.isfinite(mesh.vertices)):
         raise InvalidInputError(f"{path}: mesh has NaN or infinite coordinates; re-export it")
+    return mesh
 
+
+def _check_size(mesh: trimesh.Trimesh, path: Path, length_unit: str) -> None:
+    """Reject a bounding-box diagonal outside the window of indentable objects (a wrong unit)."""
     diagonal = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     if diagonal > _MAX_DIAGONAL_M:
         raise InvalidInputError(
@@ -173,36 +188,36 @@ def load_mesh(
             'mesh was exported in ("m", "cm" or "mm")'
         )
 
-    if require_watertight:
-        _require_watertight(mesh, str(path))
-        faces_before = mesh.faces.copy()
-        # multibody: orient every closed body outward on its own (trimesh otherwise only checks
-        # the total volume).
-        trimesh.repair.fix_normals(mesh, multibody=True)
-        n_flipped = int(np.sum(np.any(mesh.faces != faces_before, axis=1)))
-        if n_flipped:
-            warnings.warn(
-                f"{path}: {n_flipped} of {len(mesh.faces)} faces had inverted or inconsistent "
-                "winding and were flipped so the normals point outward "
-                "(trimesh.repair.fix_normals)",
-                GeometryWarning,
-                stacklevel=2,
-            )
-        if signed_volume(mesh.vertices, mesh.faces) <= 0.0:
-            raise InvalidInputError(
-                f"{path}: enclosed volume is not positive even after re-orienting the faces; the "
-                "surface is self-intersecting or degenerate: repair it (e.g. MeshLab) and re-export"
-            )
-        n_bodies = int(mesh.body_count)
-        if n_bodies > 1:
-            warnings.warn(
-                f"{path}: mesh consists of {n_bodies} disconnected closed bodies; the enclosed "
-                "volume adds them up and counts any overlap twice. Merge the parts with a boolean "
-                "union (e.g. trimesh.boolean.union with manifold3d) if they overlap.",
-                GeometryWarning,
-                stacklevel=2,
-            )
-    return mesh
+
+def _orient_outward(mesh: trimesh.Trimesh, path: Path) -> None:
+    """Flip the faces of a closed mesh outward in place, warning about flips and several bodies."""
+    faces_before = mesh.faces.copy()
+    # multibody: orient every closed body outward on its own (trimesh otherwise only checks
+    # the total volume).
+    trimesh.repair.fix_normals(mesh, multibody=True)
+    n_flipped = int(np.sum(np.any(mesh.faces != faces_before, axis=1)))
+    if n_flipped:
+        warnings.warn(
+            f"{path}: {n_flipped} of {len(mesh.faces)} faces had inverted or inconsistent "
+            "winding and were flipped so the normals point outward "
+            "(trimesh.repair.fix_normals)",
+            GeometryWarning,
+            stacklevel=3,
+        )
+    if signed_volume(mesh.vertices, mesh.faces) <= 0.0:
+        raise InvalidInputError(
+            f"{path}: enclosed volume is not positive even after re-orienting the faces; the "
+            "surface is self-intersecting or degenerate: repair it (e.g. MeshLab) and re-export"
+        )
+    n_bodies = int(mesh.body_count)
+    if n_bodies > 1:
+        warnings.warn(
+            f"{path}: mesh consists of {n_bodies} disconnected closed bodies; the enclosed "
+            "volume adds them up and counts any overlap twice. Merge the parts with a boolean "
+            "union (e.g. trimesh.boolean.union with manifold3d) if they overlap.",
+            GeometryWarning,
+            stacklevel=3,
+        )
 
 
 def enclosed_volume(mesh: trimesh.Trimesh) -> float:

@@ -46,6 +46,5 @@ from ._recording import (
     RecordingAborted,
     RecordingPaths,
     acquire,
-    paper_forces,
     write_session_files,
 )

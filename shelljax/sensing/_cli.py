@@ -16,13 +16,14 @@ from importlib import resources
 from pathlib import Path
 
 from .._errors import DeviceError, InvalidInputError
+from ..paper import PAPER_FORCES
 from ._calibrate import DEFAULT_MASSES, calibrate_sensor
 from ._calibration import MODELS, Calibration
 from ._capture import HumanOperator
 from ._console import AutoConsole, Console, TerminalConsole
 from ._driver import DEFAULT_BAUD, SerialSensor, logger
 from ._emulator import EmulatedDevice, EmulatedOperator, Faults, PtyLink
-from ._recording import LENGTH_UNITS, AcquisitionPlan, RecordingAborted, acquire, paper_forces
+from ._recording import LENGTH_UNITS, AcquisitionPlan, RecordingAborted, acquire
 
 EXIT_INTERRUPTED = 130
 EXIT_ABORTED = 3
@@ -293,7 +294,7 @@ def cmd_emulator(args) -> int:
     faults = Faults(garbage_rate=0.01, corrupt_rate=0.01, disconnects=tuple(20.0 * k for k in range(1, 1000))) \
         if args.faults else Faults()  # fmt: skip
     device = EmulatedDevice(faults=faults, seed=args.seed, finger_tau=0.3)
-    levels = paper_forces()
+    levels = PAPER_FORCES
     with PtyLink(device, args.link) as link:
         print(f"emulated force sensor on {link.port} (Ctrl-C to stop)", flush=True)
         stop = math.inf if args.duration is None else time.monotonic() + args.duration

@@ -27,6 +27,8 @@ from collections.abc import Callable
 import numpy as np
 import serial
 
+from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
+from ..physics import scaling_wrinkle_count
 from ._protocol import HELLO_REQUEST, Hello, RawSample, format_hello, format_sample
 
 
@@ -78,19 +80,20 @@ class PokedBall:
 
     radius: float = 0.13  # [m]
     gauge_pressure: float = 3000.0  # [Pa]
-    k_s: float = 0.64  # [-]
+    k_s: float = PAPER_KS  # [-]
     thickness: float = 0.9e-3  # [m]
     youngs_modulus: float = 2.34e6  # [Pa]
-    poisson_ratio: float = 0.4  # [-]
+    poisson_ratio: float = DEFAULT_POISSON_RATIO  # [-]
 
     def depth(self, force: float) -> float:
         """Indentation depth [m] at force [N]."""
         return max(force, 0.0) / (math.pi * self.k_s * self.radius * self.gauge_pressure)
 
     def wrinkles(self) -> int:
-        """Radial wrinkle count n ≈ 1.33 R/h (12 (1-ν²) P²/E²)^(1/4) (paper, Eq. 8)."""
-        ratio = 12 * (1 - self.poisson_ratio**2) * self.gauge_pressure**2 / self.youngs_modulus**2
-        return round(1.33 * self.radius / self.thickness * ratio**0.25)
+        """Radial wrinkle count [-]: Vella's n ≈ 1.33 τ^½ (the paper's Eq. 8), rounded."""
+        n = scaling_wrinkle_count(self.gauge_pressure, self.radius, self.youngs_modulus, self.thickness,
+                                  self.poisson_ratio)  # fmt: skip
+        return round(float(n))
 
 
 @dataclasses.dataclass(frozen=True)

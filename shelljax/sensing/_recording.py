@@ -37,6 +37,7 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from ..paper import PAPER_FORCES
 from ..session import LENGTH_UNITS
 from ._calibration import ADC_SATURATED, Calibration
 from ._capture import HumanOperator, Operator, Pump, Reading, SampleLog, accept_force
@@ -51,16 +52,11 @@ class RecordingAborted(Exception):
     """The user quit; everything received is on disk and ``--resume`` continues."""
 
 
-def paper_forces() -> tuple[float, ...]:
-    """The paper's force levels [N]: 5 to 20 in steps of 2.5."""
-    return tuple(float(f) for f in np.arange(5.0, 20.0 + 1e-9, 2.5))
-
-
 @dataclasses.dataclass(frozen=True)
 class AcquisitionPlan:
     """What to record. Forces [N], times [s], ``depth_scale`` [m/count] for channel 2."""
 
-    forces: tuple[float, ...] = dataclasses.field(default_factory=paper_forces)
+    forces: tuple[float, ...] = PAPER_FORCES
     trials: int = 3
     hold: float = 0.5
     tolerance: float = 0.5
@@ -217,6 +213,38 @@ def _now() -> str:
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
+def _resumed(paths: RecordingPaths):
+    """(state, calibration, plan, meta) of an interrupted recording, from its event log."""
+    if not paths.events.exists():
+        raise InvalidInputError(
+            f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording"
+        )
+    state = _State.from_events(EventLog.read(paths.events), paths.events)
+    start = state.start
+    calibration = Calibration.from_dict(start["calibration"], source=str(paths.events))
+    return state, calibration, _plan_from_dict(start["plan"]), start["meta"]
+
+
+def _started(paths: RecordingPaths, calibration: Calibration | None, plan: AcquisitionPlan | None,
+             meta: dict | None) -> _State:  # fmt: skip
+    """The state of a new recording, after checking that nothing would be overwritten."""
+    if calibration is None or plan is None or meta is None:
+        raise ValueError("a new recording needs calibration, plan and meta")
+    clash = paths.existing()
+    if clash:
+        raise InvalidInputError(
+            f"--out {paths.session}: {', '.join(str(p) for p in clash)} already exist(s). Fix: add "
+            "--resume to continue that recording, or choose another --out"
+        )
+    plan.check(calibration)
+    for key in ("object", "geometry", "wall"):
+        if key not in meta:
+            raise InvalidInputError(f"session field '{key}' missing. Fix: pass it on the command line")
+    start = {"event": "start", "version": EVENTS_VERSION, "time": _now(), "session": paths.session.name,
+             "calibration": calibration.to_dict(), "plan": _plan_to_dict(plan), "meta": meta}  # fmt: skip
+    return _State(start)
+
+
 def acquire(
     driver: SerialSensor,
     out: str | Path,
@@ -250,31 +278,10 @@ def acquire(
     paths = RecordingPaths.for_session(out)
     operator = operator or HumanOperator()
     if resume:
-        if not paths.events.exists():
-            raise InvalidInputError(
-                f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording"
-            )
-        state = _State.from_events(EventLog.read(paths.events), paths.events)
-        start = state.start
-        calibration = Calibration.from_dict(start["calibration"], source=str(paths.events))
-        plan = _plan_from_dict(start["plan"])
-        meta = start["meta"]
+        state, calibration, plan, meta = _resumed(paths)
     else:
-        if calibration is None or plan is None or meta is None:
-            raise ValueError("a new recording needs calibration, plan and meta")
-        clash = paths.existing()
-        if clash:
-            raise InvalidInputError(
-                f"--out {paths.session}: {', '.join(str(p) for p in clash)} already exist(s). Fix: add "
-                "--resume to continue that recording, or choose another --out"
-            )
-        plan.check(calibration)
-        for key in ("object", "geometry", "wall"):
-            if key not in meta:
-                raise InvalidInputError(f"session field '{key}' missing. Fix: pass it on the command line")
-        start = {"event": "start", "version": EVENTS_VERSION, "time": _now(), "session": paths.session.name,
-                 "calibration": calibration.to_dict(), "plan": _plan_to_dict(plan), "meta": meta}  # fmt: skip
-        state = _State(start)
+        state = _started(paths, calibration, plan, meta)
+    start = state.start
     paths.session.parent.mkdir(parents=True, exist_ok=True)
     events = EventLog(paths.events)
     log = SampleLog(paths.samples, durable=durable)

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._schema import DEFAULT_POISSON_RATIO, SHAPE_OBSERVABLES, Session
+from ..paper import DEFAULT_POISSON_RATIO
+from ._schema import SHAPE_OBSERVABLES, Session
 from ._units import QUANTITY_UNITS
 
 SCHEMA_VERSION = 1
@@ -181,17 +182,41 @@ def load_session(path: str | Path) -> Session:
     """
     path = Path(path)
     reader = _Reader(path)
+    data = _read_toml(path)
+    input_files = {str(path): file_sha256(path)}
+    reader.no_unknown_keys(data, _TOP_KEYS)
+    header = _read_header(reader, data)
+    # Wall first: its thickness bounds the plausible radius.
+    thickness, thickness_std = _read_wall(reader, data)
+    geometry = _read_geometry(reader, data, input_files)
+    if thickness >= 0.2 * geometry["radius"]:
+        raise reader.fail(
+            "wall.thickness", f"h = {thickness:g} m is not thin against R = {geometry['radius']:g} m",
+            "check thickness_unit / length_unit; the shell model needs h << R",
+        )  # fmt: skip
+    trial, force, depth, depth_scale = _read_indentation(reader, data, geometry["radius"], input_files)
+    wrinkle_counts, onset_depth = _read_wrinkles(reader, data, trial, depth_scale)
+    shape_trial, shape_force, shape = _read_shape(reader, data, trial, input_files)
+    return Session(
+        source=path, **header, **geometry, thickness=float(thickness), thickness_std=float(thickness_std),
+        trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
+        shape_trial=shape_trial, shape_force=shape_force, shape=shape, input_files=input_files,
+    )  # fmt: skip
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise InvalidInputError(f"{path}: session file does not exist. Fix: check the path")
     try:
-        data: dict[str, Any] = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
     except UnicodeDecodeError:
         raise InvalidInputError(f"{path}: not a UTF-8 text file. Fix: save it as UTF-8 TOML") from None
-    input_files = {str(path): file_sha256(path)}
-    reader.no_unknown_keys(data, _TOP_KEYS)
 
+
+def _read_header(reader: _Reader, data: dict) -> dict:
+    """The top-level fields: object name, notes, Poisson ratio [-], mass [kg], manometer P_g [Pa]."""
     version = data.get("schema_version", SCHEMA_VERSION)
     if version != SCHEMA_VERSION:
         raise reader.fail("schema_version", f"unsupported version {version!r}", f"write schema_version = {SCHEMA_VERSION}")
@@ -201,7 +226,6 @@ def load_session(path: str | Path) -> Session:
     notes = data.get("notes", "")
     if not isinstance(notes, str):
         raise reader.fail("notes", f"expected text, got {notes!r}", 'write notes = "..."')
-
     poisson_ratio = reader.number(data, "poisson_ratio", required=False, positive=False)
     poisson_ratio = DEFAULT_POISSON_RATIO if poisson_ratio is None else poisson_ratio
     if not -1.0 < poisson_ratio < 0.5:
@@ -217,8 +241,12 @@ def load_session(path: str | Path) -> Session:
                 "manometer_gauge_pressure", f"{manometer:g} Pa is above 10 bar",
                 "inflated toys hold 0.1-10 kPa: check pressure_unit (e.g. 'kPa')",
             )  # fmt: skip
+    return {"object_name": object_name.strip(), "notes": notes, "poisson_ratio": float(poisson_ratio), "mass": mass,
+            "manometer_gauge_pressure": manometer}  # fmt: skip
 
-    # Wall first: its thickness bounds the plausible radius.
+
+def _read_wall(reader: _Reader, data: dict) -> tuple[float, float]:
+    """(thickness h [m], its standard deviation [m]) from [wall]."""
     wall = reader.table(data, "wall", _WALL_KEYS, required=True)
     wall_scale = reader.unit(wall, "thickness_unit", "length", "m", "wall.")
     thickness = reader.number(wall, "thickness", "wall.") * wall_scale
@@ -230,36 +258,37 @@ def load_session(path: str | Path) -> Session:
             "wall.thickness", f"{thickness:g} m is a thick wall for an inflated shell",
             "if you wrote millimetres, set thickness_unit = \"mm\"",
         )  # fmt: skip
+    return thickness, thickness_std
 
+
+def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
+    """The Session's geometry fields from [geometry]: a given radius [m], or one fitted on a mesh."""
     geometry = reader.table(data, "geometry", _GEOMETRY_KEYS, required=True)
     length_scale = reader.unit(geometry, "length_unit", "length", "m", "geometry.")
-    mesh_path = poke_point = fit_radius = fit_rms = mesh_volume = None
     if ("radius" in geometry) == ("mesh" in geometry):
         raise reader.fail(
             "geometry", "give exactly one of 'radius' or 'mesh'",
             "write radius = <R> for a measured radius of curvature, or mesh = \"file\" with poke_point",
         )  # fmt: skip
-    if "radius" in geometry:
-        radius = reader.number(geometry, "radius", "geometry.") * length_scale
-        radius_std = (reader.number(geometry, "radius_std", "geometry.", required=False, positive=False) or 0.0) * length_scale
-        if radius > 50.0:
-            raise reader.fail(
-                "geometry.radius", f"{radius:g} m is implausibly large",
-                "if you wrote millimetres or centimetres, set length_unit in [geometry]",
-            )  # fmt: skip
-    else:
+    if "mesh" in geometry:
         radius, radius_std, mesh_path, poke_point, fit_radius, fit_rms, mesh_volume = _mesh_geometry(
             reader, geometry, length_scale, input_files
         )
-    if thickness >= 0.2 * radius:
+        return {"radius": float(radius), "radius_std": float(radius_std), "mesh_path": mesh_path,
+                "poke_point": poke_point, "fit_radius": fit_radius, "fit_rms_residual": fit_rms,
+                "enclosed_volume": mesh_volume}  # fmt: skip
+    radius = reader.number(geometry, "radius", "geometry.") * length_scale
+    radius_std = (reader.number(geometry, "radius_std", "geometry.", required=False, positive=False) or 0.0) * length_scale
+    if radius > 50.0:
         raise reader.fail(
-            "wall.thickness", f"h = {thickness:g} m is not thin against R = {radius:g} m",
-            "check thickness_unit / length_unit; the shell model needs h << R",
+            "geometry.radius", f"{radius:g} m is implausibly large",
+            "if you wrote millimetres or centimetres, set length_unit in [geometry]",
         )  # fmt: skip
+    return {"radius": float(radius), "radius_std": float(radius_std)}
 
-    indentation = reader.table(data, "indentation", _INDENTATION_KEYS, required=True)
-    force_scale = reader.unit(indentation, "force_unit", "force", "N", "indentation.")
-    depth_scale = reader.unit(indentation, "depth_unit", "length", "m", "indentation.")
+
+def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
+    """(trial, force, depth) as written, from trials_csv or inline arrays, and where they came from."""
     inline = [k for k in ("trial", "force", "depth") if k in indentation]
     if "trials_csv" in indentation:
         if inline:
@@ -267,26 +296,33 @@ def load_session(path: str | Path) -> Session:
                 "indentation.trials_csv", f"given together with inline '{inline[0]}'",
                 "use either trials_csv or inline arrays, not both",
             )  # fmt: skip
-        csv_path = path.parent / str(indentation["trials_csv"])
+        csv_path = reader.path.parent / str(indentation["trials_csv"])
         trial, force, depth = _read_trials_csv(reader, csv_path)
         input_files[str(csv_path)] = file_sha256(csv_path)
-        where = f"(in {csv_path.name}) "
-    else:
-        for key in ("force", "depth"):
-            if key not in indentation:
-                raise reader.fail(
-                    f"indentation.{key}", "missing",
-                    "give inline force/depth arrays (and optional trial) or trials_csv = \"file.csv\"",
-                )  # fmt: skip
-        force = reader.array(indentation, "force", "indentation.")
-        depth = reader.array(indentation, "depth", "indentation.")
-        trial = reader.array(indentation, "trial", "indentation.") if "trial" in indentation else np.ones_like(force)
-        if not (force.size == depth.size == trial.size):
+        return trial, force, depth, f"(in {csv_path.name}) "
+    for key in ("force", "depth"):
+        if key not in indentation:
             raise reader.fail(
-                "indentation", f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
-                "give one trial id, force and depth per sample",
+                f"indentation.{key}", "missing",
+                "give inline force/depth arrays (and optional trial) or trials_csv = \"file.csv\"",
             )  # fmt: skip
-        where = ""
+    force = reader.array(indentation, "force", "indentation.")
+    depth = reader.array(indentation, "depth", "indentation.")
+    trial = reader.array(indentation, "trial", "indentation.") if "trial" in indentation else np.ones_like(force)
+    if not (force.size == depth.size == trial.size):
+        raise reader.fail(
+            "indentation", f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
+            "give one trial id, force and depth per sample",
+        )  # fmt: skip
+    return trial, force, depth, ""
+
+
+def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: dict):
+    """(trial ids, forces [N], depths [m], the depth unit [m]) from [indentation], checked against R [m]."""
+    indentation = reader.table(data, "indentation", _INDENTATION_KEYS, required=True)
+    force_scale = reader.unit(indentation, "force_unit", "force", "N", "indentation.")
+    depth_scale = reader.unit(indentation, "depth_unit", "length", "m", "indentation.")
+    trial, force, depth, where = _indentation_arrays(reader, indentation, input_files)
     _check_samples(reader, "indentation.force", force, where)
     _check_samples(reader, "indentation.depth", depth, where)
     trial = _trial_ids(reader, "indentation.trial", trial)
@@ -303,43 +339,39 @@ def load_session(path: str | Path) -> Session:
             "indentation.depth", f"deepest indentation {deepest:g} m exceeds the radius {radius:g} m",
             "depths look like millimetres written as metres: set depth_unit = \"mm\"",
         )  # fmt: skip
+    return trial, force, depth, depth_scale
 
-    wrinkle_counts = onset_depth = None
+
+def _read_wrinkles(reader: _Reader, data: dict, trial: np.ndarray, depth_scale: float):
+    """(one wrinkle count per trial or None, onset depths [m] or None) from [wrinkles]."""
     wrinkles = reader.table(data, "wrinkles", _WRINKLE_KEYS, required=False)
-    if wrinkles is not None:
-        n_trials = np.unique(trial).size
-        if "counts" in wrinkles:
-            counts = wrinkles["counts"]
-            if not isinstance(counts, list) or not counts:
-                raise reader.fail("wrinkles.counts", f"expected a non-empty array, got {counts!r}", "write counts = [n1, n2, ...]")
-            for i, c in enumerate(counts):
-                if isinstance(c, bool) or not isinstance(c, int) or c < 0:
-                    raise reader.fail(
-                        f"wrinkles.counts[{i}]", f"{c!r} is not a non-negative integer",
-                        "count whole wrinkles around the poke (0 if none)",
-                    )  # fmt: skip
-            if len(counts) != n_trials:
-                raise reader.fail(
-                    "wrinkles.counts", f"{len(counts)} counts for {n_trials} trials",
-                    "give exactly one wrinkle count per trial, in order of trial id",
-                )  # fmt: skip
-            wrinkle_counts = np.asarray(counts, dtype=np.int64)
-        if "onset_depth" in wrinkles:
-            onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
-            _check_samples(reader, "wrinkles.onset_depth", onset_depth, "")
-            onset_depth = onset_depth * depth_scale
-    shape_trial, shape_force, shape = _read_shape(reader, data, trial, input_files)
+    if wrinkles is None:
+        return None, None
+    wrinkle_counts = onset_depth = None
+    if "counts" in wrinkles:
+        wrinkle_counts = _wrinkle_counts(reader, wrinkles["counts"], np.unique(trial).size)
+    if "onset_depth" in wrinkles:
+        onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
+        _check_samples(reader, "wrinkles.onset_depth", onset_depth, "")
+        onset_depth = onset_depth * depth_scale
+    return wrinkle_counts, onset_depth
 
-    return Session(
-        source=path, object_name=object_name.strip(), radius=float(radius),
-        radius_std=float(radius_std), thickness=float(thickness),
-        thickness_std=float(thickness_std), poisson_ratio=float(poisson_ratio), trial=trial,
-        force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
-        manometer_gauge_pressure=manometer, mass=mass, mesh_path=mesh_path, poke_point=poke_point,
-        fit_radius=fit_radius, fit_rms_residual=fit_rms, enclosed_volume=mesh_volume,
-        shape_trial=shape_trial, shape_force=shape_force, shape=shape, notes=notes,
-        input_files=input_files,
-    )  # fmt: skip
+
+def _wrinkle_counts(reader: _Reader, counts, n_trials: int) -> np.ndarray:
+    if not isinstance(counts, list) or not counts:
+        raise reader.fail("wrinkles.counts", f"expected a non-empty array, got {counts!r}", "write counts = [n1, n2, ...]")
+    for i, c in enumerate(counts):
+        if isinstance(c, bool) or not isinstance(c, int) or c < 0:
+            raise reader.fail(
+                f"wrinkles.counts[{i}]", f"{c!r} is not a non-negative integer",
+                "count whole wrinkles around the poke (0 if none)",
+            )  # fmt: skip
+    if len(counts) != n_trials:
+        raise reader.fail(
+            "wrinkles.counts", f"{len(counts)} counts for {n_trials} trials",
+            "give exactly one wrinkle count per trial, in order of trial id",
+        )  # fmt: skip
+    return np.asarray(counts, dtype=np.int64)
 
 
 # A shape column: the values as written and which of them were measured (False: an empty CSV cell).

@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_POISSON_RATIO = 0.4  # the paper's assumption (Section 3.4): rubbers sit at 0.3-0.4
-
 # The deformed-shape observables of the paper's evaluation rig (docs/session-format.md), all [m]:
 # height H of the ball's highest point above the ground, diameter D_u of the ridge circle around
 # the dimple, diameter D_l of the ground contact disc, depth d of the sunken region (ridge height

@@ -15,8 +15,9 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from ..paper import DEFAULT_POISSON_RATIO
 from ._load import SCHEMA_VERSION, load_session
-from ._schema import DEFAULT_POISSON_RATIO, SHAPE_OBSERVABLES, Session
+from ._schema import SHAPE_OBSERVABLES, Session
 
 _HEADER = "# Written by shelljax.session.write_session; format: docs/session-format.md; SI units.\n"
 
@@ -116,6 +117,24 @@ def write_session(
     path = Path(path)
     if path.suffix != ".toml":
         raise InvalidInputError(f"write_session: path {path} does not end in .toml. Fix: name the session NAME.toml")
+    doc = _session_document(
+        object_name=object_name, radius=radius, radius_std=radius_std, thickness=thickness,
+        thickness_std=thickness_std, trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts,
+        manometer_gauge_pressure=manometer_gauge_pressure, mass=mass, poisson_ratio=poisson_ratio, notes=notes,
+    )  # fmt: skip
+    files: dict[str, str] = {}
+    if shape is not None:
+        csv_name = f"{path.stem}_shape.csv"
+        doc["shape"] = {"length_unit": "m", "force_unit": "N", "shape_csv": csv_name}
+        files[csv_name] = _shape_csv(shape)
+    files[path.name] = _HEADER + tomli_w.dumps(doc)
+    _write_if_valid(path, files)
+    return load_session(path)
+
+
+def _session_document(*, object_name, radius, radius_std, thickness, thickness_std, trial, force, depth,
+                      wrinkle_counts, manometer_gauge_pressure, mass, poisson_ratio, notes) -> dict:  # fmt: skip
+    """The session TOML's tables, every value in SI units (see :func:`write_session`)."""
     doc: dict = {"schema_version": SCHEMA_VERSION, "object": object_name}
     if notes:
         doc["notes"] = notes
@@ -132,13 +151,11 @@ def write_session(
     }  # fmt: skip
     if wrinkle_counts is not None:
         doc["wrinkles"] = {"counts": np.asarray(wrinkle_counts).tolist()}
-    files: dict[str, str] = {}
-    if shape is not None:
-        csv_name = f"{path.stem}_shape.csv"
-        doc["shape"] = {"length_unit": "m", "force_unit": "N", "shape_csv": csv_name}
-        files[csv_name] = _shape_csv(shape)
-    files[path.name] = _HEADER + tomli_w.dumps(doc)
+    return doc
 
+
+def _write_if_valid(path: Path, files: dict[str, str]) -> None:
+    """Write ``files`` (name → text) beside ``path`` only if the session ``path`` then loads."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # Written and read back in a scratch folder beside the target, so that a rejected session
     # never replaces a good one and the final moves stay on one file system.
@@ -151,4 +168,3 @@ def write_session(
             raise InvalidInputError(str(err).replace(scratch, str(path.parent))) from None
         for name in files:  # the TOML last: it never names a CSV that is not there yet
             os.replace(Path(scratch) / name, path.parent / name)
-    return load_session(path)
