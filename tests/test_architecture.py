@@ -101,7 +101,7 @@ def _script_sources():
 
 @pytest.mark.parametrize("path, source", list(_script_sources()), ids=lambda v: v.name if isinstance(v, Path) else "")
 def test_scripts_and_notebooks_use_public_names_only(path, source):
-    private_module = re.findall(r"shelljax(?:\.\w+)*\._\w+", source)
+    private_module = re.findall(r"shelljax(?:\.\w+)*\._(?!_)\w+", source)
     private_attribute = re.findall(r"\b(?!self\b)[a-z]\w*\._[a-z]\w*", source)
     assert "sys.path" not in source, f"{path.name} patches sys.path; use an editable install"
     assert not private_module, f"{path.name} imports private modules: {sorted(set(private_module))}"
