@@ -135,8 +135,8 @@ def test_each_constant_of_the_paper_is_defined_once(value, home):
     "pattern, home",
     [
         (r"arctanh", "physics/_shell_theory.py"),  # Vella's point-load stiffness
-        (r"def tau\(", "physics/_shell_theory.py"),
-        (r"def \w*signed_volume\(", "geometry/_mesh.py"),
+        (r"(?m)^def tau\(", "physics/_shell_theory.py"),
+        (r"(?m)^def \w*signed_volume\(", "geometry/_mesh.py"),
         (r"arange\(5", None),  # the force levels are listed once, in paper.py
     ],
 )
