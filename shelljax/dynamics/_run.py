@@ -39,6 +39,7 @@ class StepRecord(eqx.Module):
     energy_J: dict[str, Float[Array, ""]]
     position_m: Float[Array, " n"]
     converged: Bool[Array, ""]
+    feasible_start: Bool[Array, ""]
     newton_iterations: Int[Array, ""]
     residual_history_N: Float[Array, " K"]
 
@@ -59,7 +60,7 @@ def initial_state(system: AbstractDynamicSystem, position, velocity=None, time=0
     v = jnp.zeros_like(x) if velocity is None else jnp.broadcast_to(jnp.asarray(velocity, dtype=float).reshape(-1), x.shape)
     state = DynamicState(time, x, v, jnp.zeros_like(x))
     _check_system(system, state)
-    if not np.all(np.isfinite(np.asarray(x))):
+    if not isinstance(x, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(x))):
         raise InvalidInputError("the initial position has NaN or infinite entries; give finite positions in m.")
     force = -jax.grad(system.potential)(x, jnp.asarray(time))
     a = force / system.lumped_mass()
@@ -69,7 +70,9 @@ def initial_state(system: AbstractDynamicSystem, position, velocity=None, time=0
     return DynamicState(time, x, v, a)
 
 
-def observe(system: AbstractDynamicSystem, state: DynamicState, forces: Float[Array, "P 3"], result=None, max_steps: int = 1) -> StepRecord:
+def observe(
+    system: AbstractDynamicSystem, state: DynamicState, forces: Float[Array, "P 3"], result=None, max_steps: int = 1, feasible_start=True
+) -> StepRecord:
     """The record of ``state`` with plane forces [N] (and the step's convergence, if any)."""
     x, t = state.position, state.time
     com, com_velocity = jax.jvp(system.centre_of_mass, (x,), (state.velocity,))
@@ -89,7 +92,7 @@ def observe(system: AbstractDynamicSystem, state: DynamicState, forces: Float[Ar
         time_s=t, com_position_m=com, com_velocity_m_per_s=com_velocity, contact_force_N=forces,
         min_gap_m=jnp.stack(gaps) if gaps else jnp.zeros((0,)), gas_pressure_Pa=jnp.asarray(pressure, dtype=float),
         gas_volume_m3=jnp.asarray(volume, dtype=float), energy_J=energies, position_m=x,
-        converged=converged, newton_iterations=iterations, residual_history_N=history,
+        converged=converged, feasible_start=jnp.asarray(feasible_start), newton_iterations=iterations, residual_history_N=history,
     )  # fmt: skip
 
 
@@ -113,10 +116,11 @@ def step(
     x_hat_full = potential.full(potential.free(potential.x_hat))
     # The prediction x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start.
     start = jnp.where(potential.is_feasible(potential.free(x_hat_full)), potential.free(x_hat_full), potential.free(state.position))
+    feasible = potential.is_feasible(start)
     result = solve_step(potential, minimiser, jax.lax.stop_gradient(start))
     x_new = potential.full(result.y)
     new_state = integrator.advance(state, x_new, potential.dt)
-    return new_state, observe(system, new_state, potential.plane_forces(x_new), result)
+    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible)
 
 
 def rollout(
@@ -213,6 +217,13 @@ def simulate(
             if failed.size:
                 k = int(failed[0])
                 history = rec.residual_history_N[k]
+                if not rec.feasible_start[k]:
+                    raise NoConvergenceError(
+                        f"the step to t = {rec.time_s[k]:.6g} s (step {done + k + 1}) starts with contact points "
+                        "through a barrier plane: the prescribed motion pushes nodes into a plane. Move the plane or "
+                        "change the prescribed schedule.",
+                        [float(h) for h in history[np.isfinite(history)]],
+                    )
                 raise NoConvergenceError(
                     f"the step to t = {rec.time_s[k]:.6g} s (step {done + k + 1}) did not converge in "
                     f"{int(rec.newton_iterations[k])} Newton iterations. Reduce dt (now {dt} s; try dt/4), "
