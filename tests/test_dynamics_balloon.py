@@ -54,3 +54,31 @@ def test_prescribed_nodes_pushed_through_a_barrier_plane_are_reported():
     system, nodes, _, _ = swing_system(wall_x=0.12)  # the clamp itself reaches x = 0.128 m at 60°
     with pytest.raises(NoConvergenceError, match="prescribed motion pushes nodes into a plane"):
         d.simulate(system, d.initial_state(system, nodes), 5e-4, 0.15, progress=False)
+
+
+def test_point_hessian_blocks_assemble_the_dense_hessian():
+    # The decomposition a sparse minimiser uses: inertia + internal energy's Hessian + point blocks.
+    import jax
+    import jax.numpy as jnp
+
+    nodes0, _ = d.icosphere(RADIUS, 0)
+    system, nodes, clamp, _ = swing_system(wall_x=float(nodes0[:, 0].max()) + 1e-3)  # nodes 1 mm inside ĝ = 2 mm
+    state = d.initial_state(system, nodes, np.tile([0.3, 0.0, 0.1], len(nodes)))
+    potential = d.incremental_potential(system, d.Newmark(), state, 1e-3)
+    x = jnp.asarray(nodes.reshape(-1)) + 1e-4
+    x = x.at[potential.prescribed_dofs].set(potential.prescribed_values)
+    import equinox as eqx
+
+    @eqx.filter_jit
+    def hessians(potential, x):
+        assembled = jnp.diag(potential.inertia_weight) + jax.hessian(potential.system.internal_energy)(x, potential.time)
+        blocks = potential.point_hessian_blocks(x)
+        assembled = assembled + jax.scipy.linalg.block_diag(*blocks)
+        return blocks, assembled, potential.dense_hessian(potential.free(x))
+
+    blocks, assembled, dense = hessians(potential, x)
+    assert float(jnp.max(jnp.abs(blocks))) > 0.0
+    n = x.shape[0]
+    free = np.asarray(potential.free_dofs)
+    np.testing.assert_allclose(dense, assembled[np.ix_(free, free)], rtol=1e-10, atol=1e-8 * float(jnp.max(jnp.abs(dense))))
+    assert n == 3 * len(nodes)

@@ -51,16 +51,40 @@ class IncrementalPotential(eqx.Module):
         """The free positions y [m] of a full vector x [m]."""
         return x[self.free_dofs]
 
-    def plane_energy(self, index: int, points: Float[Array, "k 3"]) -> Scalar:
-        """Contact, damping and friction energy [J] of plane ``index`` at contact points [m]."""
+    def point_energies(self, index: int, points: Float[Array, "k 3"]) -> Float[Array, " k"]:
+        """Contact, damping and friction energy [J] of each contact point [m] against plane ``index``.
+
+        Each point's energy depends on that point alone, so these terms' Hessian is block diagonal.
+        """
         plane = self.system.planes[index]
         step = points - self.points_prev
         normal_step = step @ plane.normal
         slip = step - normal_step[:, None] * plane.normal
-        contact = jnp.sum(plane.law.energy(plane.gap(points)))
-        damping = plane.damping / (2.0 * self.dt) * jnp.sum(self.damping_weight_prev[index] * normal_step**2)
-        friction = jnp.sum(friction_energy(slip, self.normal_force_prev[index], plane.friction, plane.slip_tolerance))
+        contact = plane.law.energy(plane.gap(points))
+        damping = plane.damping / (2.0 * self.dt) * self.damping_weight_prev[index] * normal_step**2
+        friction = friction_energy(slip, self.normal_force_prev[index], plane.friction, plane.slip_tolerance)
         return contact + damping + friction
+
+    def plane_energy(self, index: int, points: Float[Array, "k 3"]) -> Scalar:
+        """Contact, damping and friction energy [J] of plane ``index`` at contact points [m]."""
+        return jnp.sum(self.point_energies(index, points))
+
+    def point_hessian_blocks(self, x: Float[Array, " n"]) -> Float[Array, "k 3 3"]:
+        """The 3×3 Hessian blocks [N/m] of all planes' point terms at each contact point, at x [m].
+
+        A sparse minimiser assembles ∇²Φ_inc = diag(inertia_weight) + ∇²(internal energy)
+        [+ Rayleigh] + Jᵀ blockdiag(these) J, J the Jacobian of the contact points (a selection
+        of nodes for a shell).
+        """
+        points = self.system.contact_points(x)
+
+        def one(point, i):
+            total = jnp.asarray(0.0)
+            for index in range(len(self.system.planes)):
+                total = total + self.point_energies(index, points.at[i].set(point))[i]
+            return total
+
+        return jax.vmap(jax.hessian(one))(points, jnp.arange(points.shape[0]))
 
     def value_full(self, x: Float[Array, " n"]) -> Scalar:
         """Φ_inc [J] at all positions x [m]."""
