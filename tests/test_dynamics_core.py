@@ -188,3 +188,14 @@ def test_mass_proportional_rayleigh_damping_decays_velocity_exponentially():
     # With Newmark, (x − xₙ)/Δt is the mean of the step's end velocities, so each step scales v by
     # (1 − αΔt/2)/(1 + αΔt/2) = exp(−αΔt) + O((αΔt)³): ~1e-7 over 1000 steps (measured 4e-8).
     assert speed == pytest.approx(math.exp(-alpha * 0.1), rel=1e-6)
+
+
+def test_hertz_impact_matches_its_closed_form():
+    (impact,) = d.measured_cor(spring_impact(law=HERTZ, dt=1e-5))
+    expected = d.hertz_impact(MASS, 1.0, K_HERTZ)
+    # Newmark's O((ωΔt)²) error at ~470 steps per contact, plus O(Δt²) in the interpolated onset
+    # and end: measured relative errors below 1e-5.
+    assert impact.contact_time_s == pytest.approx(expected["contact_time_s"], rel=1e-4)
+    assert impact.peak_force_N == pytest.approx(expected["peak_force_N"], rel=1e-4)
+    assert impact.max_compression_m == pytest.approx(expected["max_compression_m"], rel=1e-4)
+    assert impact.cor == pytest.approx(1.0, abs=1e-6)

@@ -19,6 +19,7 @@ from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
 from ._minimise import AbstractMinimiser, DenseNewton, MinimiserResult, solve_step
 from ._output import write_results
 from ._potential import IncrementalPotential, incremental_potential
+from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness
 from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
 from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation
 from ._systems import PointMassOnGround, SpringBalloon, icosphere
