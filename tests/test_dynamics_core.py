@@ -116,26 +116,29 @@ def test_calibration_rejects_an_unreachable_target():
         d.calibrate_contact_damping(lambda c: d.measured_cor(hertz_drop(damping=c))[0].cor, 0.3, (0.0, 5.0))
 
 
-def test_bounce_apex_gradient_in_damping_matches_finite_differences():
+def test_bounce_apex_gradient_in_damping_and_stiffness_matches_finite_differences():
     dt, g = 1e-4, STANDARD_GRAVITY
 
-    def apex(c):
-        system = d.PointMassOnGround(MASS, [d.ground(HERTZ, damping=c)])
+    def apex(c, stiffness):
+        system = d.PointMassOnGround(MASS, [d.ground(d.PowerLawContact(stiffness, 1.5), damping=c)])
         state = d.initial_state(system, jnp.array([0.0, 0.0, 2e-3]), jnp.array([0.0, 0.0, -1.0]))
         end, record = d.rollout(system, state, dt, 90)
         # Ballistic apex of the final state (Newmark integrates constant gravity exactly).
         return end.position[2] + end.velocity[2] ** 2 / (2 * g), record
 
-    c0, h = 10.0, 1e-3
-    value, record = jax.jit(apex)(c0)
+    c0, k0 = 10.0, K_HERTZ
+    value, record = jax.jit(apex)(c0, k0)
     touching = np.flatnonzero(np.asarray(record.min_gap_m[:, 0]) < 0.0)
     assert bool(record.converged.all()) and touching[0] > 0 and touching[-1] < 89  # onset and release inside the run
-    grad = jax.jit(jax.grad(lambda c: apex(c)[0]))(c0)
-    f = jax.jit(lambda c: apex(c)[0])
-    fd = (f(c0 + h) - f(c0 - h)) / (2 * h)
-    # Central differences' truncation error is O(h²) here ≈ 1e-9 relative (measured 7e-10).
-    assert float(grad) == pytest.approx(float(fd), rel=1e-6)
-    assert float(grad) < 0.0  # more damping, lower bounce
+    grad_c, grad_k = jax.jit(jax.grad(lambda c, k: apex(c, k)[0], argnums=(0, 1)))(c0, k0)
+    f = jax.jit(lambda c, k: apex(c, k)[0])
+    fd_c = (f(c0 + 1e-3, k0) - f(c0 - 1e-3, k0)) / 2e-3
+    fd_k = (f(c0, k0 * (1 + 1e-5)) - f(c0, k0 * (1 - 1e-5))) / (2e-5 * k0)
+    # Central differences converge as O(h²) to the implicit gradient (for K: 3e-3, 3e-5, 3e-7 at
+    # relative steps 1e-2, 1e-3, 1e-4); at the steps used, measured 7e-10 (c) and 6e-9 (K).
+    assert float(grad_c) == pytest.approx(float(fd_c), rel=1e-6)
+    assert float(grad_k) == pytest.approx(float(fd_k), rel=1e-6)
+    assert float(grad_c) < 0.0  # more damping, lower bounce
 
 
 def test_write_results_json_and_figures(tmp_path):

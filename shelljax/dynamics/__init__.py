@@ -11,6 +11,7 @@ from ._contact import (
     BarrierContact,
     CompressionCurve,
     Plane,
+    PowerLawContact,
     TabulatedCompressionCurve,
     ground,
 )

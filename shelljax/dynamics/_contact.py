@@ -5,6 +5,7 @@ separated). Its normal force is λ(g) = −de/dg [N] ≥ 0. Two kinds:
 
 * ``BarrierContact``: the IPC log barrier of ``shelljax.physics.barrier_energy``; gaps stay
   positive (the minimiser's line search keeps them so), active below the distance ĝ [m].
+* ``PowerLawContact``: F = K δ^p (linear p = 1, Hertz p = 1.5), with a differentiable K.
 * ``CompressionCurve`` / ``TabulatedCompressionCurve``: a nonlinear contact spring given by its
   force–compression curve F(δ) [N] of the compression δ = max(−g, 0) [m], the issue's 1-DOF model
   m ẍ = −F_ground(x) (e.g. a quasi-static ground force–compression curve of the shell engine).
@@ -136,6 +137,35 @@ class CompressionCurve(AbstractContactLaw):
         half = 0.5 * d[..., None]
         values = self.force_curve(half * (_GL_NODES + 1.0))
         return jnp.sum(_GL_WEIGHTS * values, axis=-1) * half[..., 0]
+
+    def damping_weight(self, gap):
+        return _step_weight(_compression(jnp.asarray(gap)), self.damping_ramp)
+
+    def contact_distance(self):
+        return jnp.asarray(0.0)
+
+
+class PowerLawContact(AbstractContactLaw):
+    """A contact spring F = K δ^p [N] of the compression δ = max(−g, 0) [m]; p = 1.5 is Hertz's law.
+
+    ``stiffness`` K [N/m^p] is a traced array (differentiable, calibratable); ``exponent`` p ≥ 1 [-].
+    Its energy is K δ^(p+1) / (p + 1) [J]. ``damping_ramp`` [m] as for ``CompressionCurve``.
+    """
+
+    stiffness: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    exponent: float = eqx.field(static=True, default=1.5)
+    damping_ramp: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+
+    def __check_init__(self):
+        check_positive("PowerLawContact.stiffness [N/m^p]", self.stiffness, "Give K > 0.")
+        if not self.exponent >= 1.0:
+            raise InvalidInputError(f"PowerLawContact.exponent must be ≥ 1; got {self.exponent}. Use 1 (linear) or 1.5 (Hertz).")
+
+    def energy(self, gap):
+        d = _compression(jnp.asarray(gap))
+        # δ^(p+1) through a positive base so that its derivatives stay finite at δ = 0.
+        safe = jnp.where(d > 0.0, d, 1.0)
+        return jnp.where(d > 0.0, self.stiffness * safe ** (self.exponent + 1.0) / (self.exponent + 1.0), 0.0)
 
     def damping_weight(self, gap):
         return _step_weight(_compression(jnp.asarray(gap)), self.damping_ramp)

@@ -204,9 +204,8 @@ def simulate(
     _check_system(system, state)
     n_steps = int(math.ceil(duration / dt - 1e-9))
     chunk = max(1, min(chunk, n_steps))
-    max_steps = getattr(minimiser, "max_steps", 1)
-    first = observe(system, state, elastic_plane_forces(system, state.position), None, max_steps)
-    chunks = [jax.tree_util.tree_map(lambda a: np.asarray(a)[None], first)]
+    first = observe(system, state, elastic_plane_forces(system, state.position), None, 0)
+    chunks = []
     done = 0
     with tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress) as bar:
         while done < n_steps:
@@ -233,6 +232,9 @@ def simulate(
             chunks.append(rec)
             done += take
             bar.update(take)
+    # The initial state has no Newton history: pad it to the minimiser's history length.
+    first = eqx.tree_at(lambda r: r.residual_history_N, first, jnp.full(chunks[0].residual_history_N.shape[1:], jnp.nan))
+    chunks.insert(0, jax.tree_util.tree_map(lambda a: np.asarray(a)[None], first))
     stacked = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *chunks)
     planes = system.planes
     return Trajectory(
