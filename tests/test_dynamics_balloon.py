@@ -44,8 +44,12 @@ def test_swing_into_a_wall_follows_the_schedule_and_squeezes_the_gas(tmp_path):
     # squeeze before the first contact (2.5 kPa).
     assert trajectory["contact_force_N"][peak, 0] @ np.array([-1.0, 0.0, 0.0]) > 1.0
     assert pressure[peak] > 2.0 * pressure[trajectory["time_s"] < impact.onset_s].max()
-    written = d.write_results(trajectory, tmp_path, max_frames=4)
-    assert (tmp_path / "preview.gif").exists() and len(list((tmp_path / "frames").glob("*.ply"))) == 4
+    written = d.write_results(trajectory, tmp_path, max_frames=4, mesh_format="glb")
+    assert (tmp_path / "preview.gif").exists() and len(list((tmp_path / "frames").glob("*.glb"))) == 4
+    import trimesh
+
+    frame = trimesh.load(tmp_path / "frames" / "frame_0003.glb", force="mesh")
+    assert len(frame.faces) == 20  # the icosahedron, loadable by common tools
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["summary"]["impacts"][0]["plane"] == "wall" and all(p.exists() for p in written)
 

@@ -1,7 +1,7 @@
 """Writing a run: ``results.json`` (units in every field name), figures, and mesh frames.
 
 Layout of ``out_dir``: ``results.json``; ``figures/trajectory.png``, ``figures/energies.png``,
-``figures/contact_force.png``; for systems with faces, ``frames/frame_XXXX.ply`` (trimesh) and
+``figures/contact_force.png``; for systems with faces, ``frames/frame_XXXX.ply`` or ``.glb`` (trimesh) and
 ``preview.gif`` (matplotlib).
 """
 
@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._errors import InvalidInputError
 from ._cor import Impact, measured_cor
 from ._run import Trajectory
 
@@ -85,7 +86,7 @@ def _plots(trajectory: Trajectory, figures: Path) -> list[Path]:
     return written
 
 
-def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int) -> list[Path]:
+def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -100,7 +101,7 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int) -> list[Pat
     written = []
     for j, k in enumerate(picks):
         mesh = trimesh.Trimesh(positions[k].reshape(-1, 3), trajectory.faces, process=False)
-        written.append(frames / f"frame_{j:04d}.ply")
+        written.append(frames / f"frame_{j:04d}.{mesh_format}")
         mesh.export(written[-1])
     fig = plt.figure(figsize=(4, 4))
     ax = fig.add_subplot(projection="3d")
@@ -117,13 +118,20 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int) -> list[Pat
     return written + [out / "preview.gif"]
 
 
-def write_results(trajectory: Trajectory, out_dir: str | os.PathLike, *, max_frames: int = 30) -> list[Path]:
-    """Write ``results.json``, the figures and (with faces) PLY frames and a GIF to ``out_dir``; the paths written."""
+def write_results(
+    trajectory: Trajectory, out_dir: str | os.PathLike, *, max_frames: int = 30, mesh_format: str = "ply"
+) -> list[Path]:
+    """Write ``results.json``, the figures and (with faces) mesh frames and a GIF to ``out_dir``; the paths written.
+
+    ``mesh_format``: ``"ply"`` or ``"glb"`` (binary glTF), one file per frame, at most ``max_frames``.
+    """
+    if mesh_format not in ("ply", "glb"):
+        raise InvalidInputError(f"mesh_format must be 'ply' or 'glb' (binary glTF); got {mesh_format!r}.")
     out = Path(out_dir)
     (out / "figures").mkdir(parents=True, exist_ok=True)
     impacts = measured_cor(trajectory)
     _atomic_write_text(out / "results.json", json.dumps(results_dict(trajectory, impacts), indent=1))
     written = [out / "results.json", *_plots(trajectory, out / "figures")]
     if trajectory.faces is not None:
-        written += _mesh_frames(trajectory, out, max_frames)
+        written += _mesh_frames(trajectory, out, max_frames, mesh_format)
     return written
