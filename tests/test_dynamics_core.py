@@ -202,3 +202,15 @@ def test_hertz_impact_matches_its_closed_form():
     assert impact.peak_force_N == pytest.approx(expected["peak_force_N"], rel=1e-4)
     assert impact.max_compression_m == pytest.approx(expected["max_compression_m"], rel=1e-4)
     assert impact.cor == pytest.approx(1.0, abs=1e-6)
+
+
+def test_coulomb_friction_decelerates_a_sliding_mass_at_mu_g():
+    mu, g = 0.5, STANDARD_GRAVITY
+    system = d.PointMassOnGround(MASS, [d.ground(LINEAR, friction=mu, slip_tolerance=1e-6)])
+    resting = -MASS * g / K_LINEAR  # [m]: the spring carries the weight, so the lagged λ = m g
+    state = d.initial_state(system, [0.0, 0.0, resting], [1.0, 0.0, 0.0])
+    trajectory = d.simulate(system, state, 1e-4, 0.1, progress=False)
+    # Sliding at ‖slip‖ ≫ ε the friction force is exactly μ λ, so v = v₀ − μ g t, less half a step:
+    # Newmark's a₀ holds the conservative forces only (friction needs a lagged previous state).
+    assert trajectory["com_velocity_m_per_s"][-1, 0] == pytest.approx(1.0 - mu * g * (0.1 - 0.5e-4), rel=1e-9)
+    np.testing.assert_allclose(trajectory["contact_force_N"][:, 0, 0][1:], -mu * MASS * g, rtol=1e-6)
