@@ -1,6 +1,6 @@
 """shelljax.dynamics against analytic solutions: impacts of a point mass on contact springs.
 
-Each run is ≤ 10⁴ steps of a 3-DOF system (milliseconds once compiled); the numbers quoted in the
+Each run is ≤ 10⁴ steps of a 3-DOF system; the numbers quoted in the
 comments are the measured ones that docs/dynamics.md reports.
 """
 

@@ -142,6 +142,7 @@ def rollout(
 
 @eqx.filter_jit
 def _chunk(system, state, dt, n_steps, integrator, minimiser, rayleigh):
+    """``rollout`` compiled once per system structure and chunk length (Δt [s] and parameters traced)."""
     return rollout(system, state, dt, n_steps, integrator, minimiser, rayleigh)
 
 
