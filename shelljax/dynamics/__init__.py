@@ -1,0 +1,26 @@
+"""Implicit dynamics as incremental potential minimisation: drops, bounces and swings (SI units).
+
+Build a system (``PointMassOnGround``, ``SpringBalloon``, or the 3D shell engine's own
+``AbstractDynamicSystem``), start it with ``initial_state``, run it with ``simulate`` (or the
+differentiable ``rollout``), read its impacts with ``measured_cor`` and write them with
+``write_results``. See docs/dynamics.md.
+"""
+
+from ._contact import (
+    AbstractContactLaw,
+    BarrierContact,
+    CompressionCurve,
+    Plane,
+    PowerLawContact,
+    TabulatedCompressionCurve,
+    ground,
+)
+from ._cor import Calibration, Impact, calibrate_contact_damping, measured_cor
+from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
+from ._minimise import AbstractMinimiser, DenseNewton, MinimiserResult, solve_step
+from ._output import write_results
+from ._potential import IncrementalPotential, incremental_potential
+from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness
+from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
+from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation
+from ._systems import PointMassOnGround, SpringBalloon, icosphere
