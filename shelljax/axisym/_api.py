@@ -13,10 +13,9 @@ from jaxtyping import Array, Bool, Float, Int
 from .._errors import InvalidInputError, NoConvergenceError
 from .._hilbert import hilbert_order
 from .._parallel import map_batch
+from ..paper import PAPER_FORCES
 from ._model import CurvePhysics, Setup, curve_single
-from ._wrinkles import wrinkle_count
-
-PAPER_FORCES = (5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)  # [N], the paper's protocol
+from ._observables import wrinkle_count
 
 
 class CurveResult(eqx.Module):
@@ -25,13 +24,13 @@ class CurveResult(eqx.Module):
     ``force`` [N]; ``w0`` [m] local dimple depth (positive, the paper's −w(0), see
     docs/axisym.md); ``travel`` [m] indenter travel since first contact; ``top_drop`` [m]
     drop of the top pole (the 3D engine's w0); ``height`` H [m];
-    ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_model``);
+    ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_observables``);
     ``contact_diameter_mesh`` [m] geometric edge; ``sunken_depth`` d [m];
     ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N] (F plus the wall's
     weight with a self-weight, ``CurvePhysics.areal_weight``);
     ``min_hoop_tension`` [N/m] most compressive unrelaxed hoop stress resultant of the upper
     half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
-    annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``wall_gap`` [m] top pole
+    annulus; ``wrinkle_count`` n [-] (continuous model, ``wrinkle_count``); ``wall_gap`` [m] top pole
     height above the bottom pole; ``residual`` [N] worst Newton residual up to this level;
     ``iterations`` [-] Newton iterations of this level's load steps;
     ``converged`` (bool): Newton met ``atol`` up to this level and the walls have not met
@@ -68,7 +67,7 @@ def _one(setup: Setup, theta, forces, physics: CurvePhysics, nearby_guesses=None
     out = curve_single(setup, pressure, young, thick, nu, forces, return_states=True,
                        nearby_guesses=nearby_guesses, physics=physics)
     n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
-                      young, thick, nu, setup.radius)
+                      setup.radius, young, thick, nu)
     fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
     fields.update(
         force=forces,

@@ -1,38 +1,11 @@
-"""Force-controlled indentation of an inflated ball resting on the ground: curves + observables.
+"""Force-controlled indentation of an inflated ball resting on the ground: set-up and curves.
 
 Set-up (the paper's finger poke and its Fig. "elasticity" (b) vertical indentation): a closed
 Neo-Hookean sphere of inflated radius R [m] at gauge pressure P_g [Pa] rests on a rigid ground
 plane (bottom pole) and a rigid spherical indenter of radius a [m] pushes the top pole down with
 force F [N] (force control: the indenter height is an unknown loaded by F). Contact is an
 area-weighted penalty: contact pressure = k_c × penetration, so the penetration bound is
-(contact pressure) / k_c [m].
-
-Observables per force level (all SI; "inflated" = the pressurized state before indentation):
-
-* ``w0`` [m]: local dimple depth, positive — vertical displacement of the top pole relative to
-  the equator, w0 = Δz_equator − Δz_top. It is the depth of the dimple below the undisturbed
-  (rigidly translated) upper hemisphere, which is what a user measures against the surrounding
-  surface; it excludes the rigid sinking into the ground flattening (the paper's −w(0)).
-* ``top_drop`` [m]: drop of the top pole from its inflated height (includes the sinking into
-  the ground flattening; this is what ``shelljax.shell3d`` calls w0).
-* ``travel`` [m]: indenter displacement since first contact (includes the ground flattening).
-* ``height`` H [m]: highest point of the deformed ball above the ground.
-* ``upper_diameter`` D_u [m]: diameter of the upper circle = the ridge (circle of maximum
-  height) around the dimple; 0 while the pole is the highest point.
-* ``contact_diameter`` D_l [m]: diameter of the ground contact disc, from the ground reaction
-  and the gas pressure, D_l = 2 √(F_ground / (π P)): the flat disc carries the gas pressure
-  and the membrane leaves the ground tangentially, so this equals the geometric disc while
-  being smooth in the parameters (with a self-weight q [Pa] the disc carries P + q, and
-  D_l = 2 √(F_ground / (π (P + q)))). ``contact_diameter_mesh`` [m] is the geometric edge (ground
-  gap sign change, linear interpolation; resolution-limited by the local element size).
-* ``sunken_depth`` d [m]: depth of the sunken region, ridge height − top-pole height (≥ 0).
-* ``pressure`` [Pa], ``volume`` [m³]: gauge pressure and enclosed volume.
-* ``ground_reaction`` [N]: total ground contact force (global balance: equals F, plus the
-  wall's weight q · 4π R0² with a self-weight q = ``CurvePhysics.areal_weight``).
-* ``wall_gap`` [m]: height of the top pole above the bottom pole (mid-surface to mid-surface).
-  The indenter pushes the upper wall onto the lower one when it falls below the thickness h;
-  self-contact is not modelled, so past that the state is not a ball's (the top passes through
-  the bottom wall onto the ground) and :mod:`._api` reports the level as not converged.
+(contact pressure) / k_c [m]. The observables of each level are defined in :mod:`._observables`.
 """
 
 from __future__ import annotations
@@ -46,17 +19,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
+from ..paper import PAPER_INDENTER_RADIUS
 from ._energy import (
     GAS_MODELS,
     WRINKLED_HOOP_CAPACITY,
     Config,
     Params,
     enclosed_volume,
-    gauge_pressure_at,
-    ground_gaps,
-    hoop_tension,
     ground_normal_forces,
-    node_rest_areas,
     rest_nodes,
     rest_zone_areas,
     split,
@@ -65,6 +35,7 @@ from ._geometry import unit_polar_angles
 from ._inflation import inflation_stretch
 from ._linalg import structured_solve
 from ._newton import SolverOptions, equilibrium, hessian_at
+from ._observables import observables
 from ._tracing import tied_to
 
 
@@ -105,7 +76,7 @@ class Setup(eqx.Module):
     grading: float = eqx.field(static=True, default=0.85)
     gas: str = eqx.field(static=True, default="prescribed")
     relax: bool = eqx.field(static=True, default=True)
-    indenter_radius: float = eqx.field(static=True, default=8e-3)
+    indenter_radius: float = eqx.field(static=True, default=PAPER_INDENTER_RADIUS)
     contact_stiffness: float = eqx.field(static=True, default=1e11)
     ramp: tuple = eqx.field(static=True, default=())
     atol: float = eqx.field(static=True, default=1e-7)
@@ -125,7 +96,7 @@ class Setup(eqx.Module):
         if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
             raise InvalidInputError(
                 f"Setup: indenter_radius = {self.indenter_radius!r} must be a positive length [m]. "
-                "Fix: pass the finger's radius, e.g. 8e-3"
+                f"Fix: pass the finger's radius, e.g. {PAPER_INDENTER_RADIUS}"
             )
         if not (math.isfinite(self.hoop_capacity) and self.hoop_capacity >= 0):
             raise InvalidInputError(
@@ -236,104 +207,6 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
         y0 = jnp.concatenate([y0[None], jax.lax.stop_gradient(guesses)])
     y, res, it, _ = equilibrium(cfg, setup.options(), p, y0)
     return r0, y, res, it
-
-
-def _ridge(x):
-    # Highest point of the deformed meridian: parabola through the top node and its neighbours
-    # (continuous in the nodal coordinates, unlike a plain argmax).
-    z = x[:, 1]
-    n = z.shape[0]
-    i = jnp.clip(jnp.argmax(z), 1, n - 2)
-    za, zb, zc = z[i - 1], z[i], z[i + 1]
-    curv = za - 2.0 * zb + zc
-    safe_curv = jnp.where(curv < 0, curv, -1.0)
-    s = jnp.where(curv < 0.0, jnp.clip(0.5 * (za - zc) / safe_curv, -1, 1), 0.0)
-    z_max = zb + 0.5 * s * (zc - za) + 0.5 * s**2 * curv
-    r_a, r_b, r_c = x[i - 1, 0], x[i, 0], x[i + 1, 0]
-    r_max = r_b + 0.5 * s * (r_c - r_a) + 0.5 * s**2 * (r_a - 2.0 * r_b + r_c)
-    top_is_max = jnp.argmax(z) == n - 1
-    z_max = jnp.where(top_is_max, z[-1], jnp.maximum(z_max, z[-1]))
-    r_max = jnp.where(top_is_max, 0.0, r_max)
-    return z_max, r_max
-
-
-def _contact_radius(x, gaps):
-    # Ground contact disc: outermost penetrating node of the lower half, edge interpolated to
-    # the gap's sign change (the relaxed contact zone may lift slightly at the pole).
-    n = gaps.shape[0]
-    lower = jnp.arange(n) < n // 2
-    inside = (gaps < 0.0) & lower
-    j = jnp.clip(jnp.max(jnp.where(inside, jnp.arange(n), -1)), 0, n - 2)
-    g0, g1 = gaps[j], gaps[j + 1]
-    frac = jnp.clip(g0 / jnp.where(g0 - g1 != 0, g0 - g1, 1.0), 0.0, 1.0)
-    r_edge = x[j, 0] + frac * (x[j + 1, 0] - x[j, 0])
-    return jnp.where(jnp.any(inside), r_edge, 0.0)
-
-
-def compressive_annulus(x, n_theta, r_gauss):
-    """(r_in, r_out) [m] of the compressive-hoop annulus in the upper half (0, 0 if none).
-
-    Edges are linear interpolations of the sign changes of the unrelaxed hoop tension
-    N_θ [N/m] between Gauss points, so both are continuous in the state.
-    """
-    nt = n_theta.T.reshape(-1)
-    rg = r_gauss.T.reshape(-1)
-    k = nt.shape[0]
-    upper = jnp.arange(k) >= k // 2
-    comp = (nt < 0.0) & upper
-    any_comp = jnp.any(comp)
-    idx = jnp.arange(k)
-    # outer edge: first compressive point from the equator side; inner: last one (towards pole)
-    i_out = jnp.clip(jnp.min(jnp.where(comp, idx, k - 1)), 1, k - 1)
-    i_in = jnp.clip(jnp.max(jnp.where(comp, idx, 0)), 0, k - 2)
-
-    def cross(i, j):
-        f0, f1 = nt[i], nt[j]
-        frac = jnp.clip(f0 / jnp.where(f0 - f1 != 0, f0 - f1, 1.0), 0.0, 1.0)
-        return rg[i] + frac * (rg[j] - rg[i])
-
-    r_out = cross(i_out - 1, i_out)
-    r_in = jnp.where(i_in + 1 < k, cross(i_in, i_in + 1), 0.0)
-    return jnp.where(any_comp, r_in, 0.0), jnp.where(any_comp, r_out, 0.0)
-
-
-def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
-    """Dictionary of the observables documented in the module docstring for one state."""
-    n = cfg.n_nodes
-    x, zc = split(y, n)
-    x_inf, _ = split(y_inflated, n)
-    eq = jnp.array([n // 2 - 1, n // 2])
-    dz_eq = jnp.mean(x[eq, 1]) - jnp.mean(x_inf[eq, 1])
-    dz_top = x[-1, 1] - x_inf[-1, 1]
-    volume = enclosed_volume(x)
-    z_max, r_max = _ridge(x)
-    gaps = ground_gaps(x, p)
-    k_node = p.contact_stiffness * node_rest_areas(rest_nodes(cfg, p.rest_radius))
-    n_theta, r_gauss = hoop_tension(x, rest_nodes(cfg, p.rest_radius), p)
-    annulus = compressive_annulus(x, n_theta, r_gauss)
-    # the flat contact disc carries the gas pressure and its own weight
-    disc_pressure = gauge_pressure_at(volume, cfg, p) + p.areal_weight
-    return dict(
-        w0=dz_eq - dz_top,
-        top_drop=-dz_top,
-        travel=zc_contact - zc,
-        height=z_max - p.ground_z,
-        upper_diameter=2.0 * r_max,
-        contact_diameter=2.0 * jnp.sqrt(
-            jnp.sum(k_node * jnp.maximum(-gaps, 0.0)) / (jnp.pi * disc_pressure)
-        ),
-        contact_diameter_mesh=2.0 * _contact_radius(x, gaps),
-        sunken_depth=z_max - x[-1, 1],
-        wall_gap=x[-1, 1] - x[0, 1],
-        pressure=gauge_pressure_at(volume, cfg, p),
-        volume=volume,
-        ground_reaction=jnp.sum(k_node * jnp.maximum(-gaps, 0.0)),
-        min_hoop_tension=jnp.min(
-            jnp.where(jnp.arange(n_theta.shape[1]) >= n_theta.shape[1] // 2, n_theta, jnp.inf)
-        ),
-        compressive_inner_radius=annulus[0],
-        compressive_outer_radius=annulus[1],
-    )
 
 
 def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
@@ -461,4 +334,4 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     return out
 
 
-__all__ = ["CurvePhysics", "Setup", "curve_single", "inflate", "observables"]
+__all__ = ["CurvePhysics", "Setup", "curve_single", "inflate"]
