@@ -37,24 +37,20 @@ ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the contact set the step
 MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a contact-predicted step
 
 
-class SolverOptions(tuple):
-    """(atol [N], max_iter, max_backtracks, max_step [m]) as a hashable tuple (static under jit).
+class SolverOptions(eqx.Module):
+    """Newton settings, all static: hashable, so a jit or ``custom_jvp`` can key on them.
 
-    ``max_step`` caps one Newton step: the nodes' motion relative to a spherical indenter
-    (``_step_cap``), or the largest coordinate change without one. It keeps the indenter from
-    tunnelling through the shell (a penalty contact cannot stop a jump past it).
+    ``atol`` [N]: tolerance on the out-of-balance force; ``max_iter``: Newton iterations;
+    ``max_backtracks``: line-search halvings per iteration; ``max_step`` [m] caps one Newton step:
+    the nodes' motion relative to a spherical indenter (``_step_cap``), or the largest coordinate
+    change without one. It keeps the indenter from tunnelling through the shell (a penalty contact
+    cannot stop a jump past it).
     """
 
-    def __new__(cls, atol: float = 1e-7, max_iter: int = 60, max_backtracks: int = 30,
-                max_step: float = float("inf")):
-        return super().__new__(
-            cls, (float(atol), int(max_iter), int(max_backtracks), float(max_step))
-        )
-
-    atol = property(lambda s: s[0])
-    max_iter = property(lambda s: s[1])
-    max_backtracks = property(lambda s: s[2])
-    max_step = property(lambda s: s[3])
+    atol: float = eqx.field(static=True, default=1e-7, converter=float)
+    max_iter: int = eqx.field(static=True, default=60, converter=int)
+    max_backtracks: int = eqx.field(static=True, default=30, converter=int)
+    max_step: float = eqx.field(static=True, default=float("inf"), converter=float)
 
 
 def _free(cfg: Config, dtype):
