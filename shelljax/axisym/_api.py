@@ -110,9 +110,7 @@ def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
         # (1 + k, n_y) [m], its coordinates (1 + k, 4) and the slope d state / d coordinates
         # (1 + k, n_y, 4) [m] learnt along the way (Broyden's update: the secant condition
         # along each step, the slope unchanged across it). The unextrapolated state stays a
-        # guess: on 5 % of the levels (80 curves, one lane) the extrapolation landed
-        # millimetres off (force residuals of 1e3–1e4 N), and without the plain state those
-        # levels restarted from the previous level (5 Newton iterations).
+        # guess, for the levels where the extrapolation lands far off.
         states, anchors, slopes = walk
         thetas, here, physics_rows = step_in
         delta = here[:, None, :] - anchors
@@ -151,10 +149,9 @@ def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0,
     program runs, and curves are differentiable in its values as in ``params``.
     ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
     a stretch of the batch ordered along a Hilbert curve and starting every curve from its
-    predecessor's equilibria (throughput on CPUs: 12–13 instead of 37 Newton iterations a
-    curve when 10⁵ parameter sets fill a ±15 % box); 0 vmaps the whole batch at once, every
-    curve from scratch. The results agree to the Newton tolerance either way (w0 to ≈ 3e-8
-    relative). Differentiable in ``params`` (implicit differentiation of every equilibrium).
+    predecessor's equilibria (fewer Newton iterations on dense batches, docs/axisym.md); 0 vmaps
+    the whole batch at once, every curve from scratch. The results agree to the Newton tolerance
+    either way. Differentiable in ``params`` (implicit differentiation of every equilibrium).
     """
     params = jnp.asarray(params, jnp.float64)
     if physics is None:
@@ -236,10 +233,9 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
     ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: vmapped lanes
     per host thread, each solving its share of the batch curve after curve from the previous
-    curve's equilibria (:func:`indentation_curves_raw`); 8 lanes: 2.2 ms per curve on one
-    thread (2048 curves), as fast as 4, against 2.4 ms for 16. ``workers``:
+    curve's equilibria (:func:`indentation_curves_raw`; docs/axisym.md, *Benchmark*). ``workers``:
     host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
-    GPU; see ``shelljax._parallel``). For use inside jit/vmap/grad call
+    GPU; see :func:`map_batch`). For use inside jit/vmap/grad call
     :func:`indentation_curves_raw`.
     """
     p, f = _check(params, forces, radius)

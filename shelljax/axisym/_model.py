@@ -39,9 +39,8 @@ from ._observables import observables
 from ._tracing import tied_to
 
 
-# ε / R [-]: the 3D engine's default slip tolerance (ĝ/100 = 4 µm on the 0.13 m ball, where
-# ĝ/100 … ĝ/800 agreed to 5 digits, docs/shell3d.md) in units of the radius, so similar balls
-# stay similar.
+# ε / R [-]: the 3D engine's default slip tolerance (4 µm on the 0.13 m ball, docs/shell3d.md) in
+# units of the radius, so similar balls stay similar.
 FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
 
 
@@ -57,11 +56,10 @@ class Setup(eqx.Module):
     (default calibrated on a 3D curve, see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
     ``indenter_radius`` a (the default of the traced ``CurvePhysics.indenter_radius``, and the
     Newton step cap); ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
-    force solved first (load stepping; none by default: the flattened start below converges
-    without, 4–5 Newton iterations a curve fewer); ``atol`` [N]: Newton tolerance on the
-    out-of-balance force; ``max_iter``: Newton iterations per load step; ``predictor``:
-    "none" (start from the last converged state: the most robust), "secant" (extrapolate the
-    last two states, ≈ 20 % faster, failed on some parameter sets) or "tangent" (Euler step);
+    force solved first (load stepping; none by default: the flattened start converges without);
+    ``atol`` [N]: Newton tolerance on the out-of-balance force; ``max_iter``: Newton iterations
+    per load step; ``predictor``: "none" (start from the last converged state: the most robust),
+    "secant" (extrapolate the last two states) or "tangent" (Euler step);
     ``substeps``: equal load steps per interval between requested forces (raise it when the
     requested forces are far apart; the paper's 2.5 N steps need 1); ``gas_volume_ratio`` [-]:
     with ``gas = "isothermal"``, the sealed gas volume over the ball's inflated volume 4/3 π R³
@@ -127,8 +125,7 @@ class Setup(eqx.Module):
 
     def options(self) -> SolverOptions:
         # Newton steps capped at one indenter radius of motion relative to the indenter
-        # (_newton._step_cap): on 128 balls (P_g, E, h × e^±0.5) a cap of 2a let the indenter
-        # tunnel through the shell on some, a/2 cost 20 % more iterations.
+        # (_newton._step_cap), between tunnelling and slow steps (docs/axisym.md, *Solver*)
         return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
 
 
@@ -144,7 +141,7 @@ class CurvePhysics(eqx.Module):
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
-    default: frictionless). :meth:`defaults` gives today's physics.
+    default: frictionless). :meth:`defaults` gives the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
@@ -209,12 +206,109 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
     return r0, y, res, it
 
 
+def _indentation_config(setup: Setup) -> Config:
+    # the gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1
+    return Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
+                  pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
+
+
+def _load_schedule(setup: Setup, forces):
+    """(every load step's force (n_ramp + k · substeps,) [N], the first step's force [N]).
+
+    The ramp's fractions of the first force come first; then ``substeps`` equal steps per
+    interval between requested forces, of which only the last is reported.
+    """
+    ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
+    m = setup.substeps
+    start = ramp[-1:] if len(setup.ramp) else jnp.zeros(1)
+    anchors = jnp.concatenate([start, forces[:-1]])
+    frac = jnp.arange(1, m + 1, dtype=jnp.float64) / m
+    sub = anchors[:, None] + (forces - anchors)[:, None] * frac[None, :]
+    first_load = ramp[0] if len(setup.ramp) else forces[0]
+    return jnp.concatenate([ramp, sub.ravel()]), first_load
+
+
+def _start_state(setup: Setup, x_inf, zc_contact, pressure, load):
+    """Unknowns [m] of the first load step's start: the inflated ball with both contacts slightly
+    engaged (a non-singular first Hessian) and sunk by the membrane estimate δ = load / (2π R P_g)
+    into the ground, flattened there (a contact disc of area load / P_g) for ``load`` [N] (the
+    first force plus the wall's weight)."""
+    nudge = 1e-4 * setup.radius
+    ground_z = x_inf[0, 1]
+    sink = load / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
+    x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
+    x_start = x_start.at[:, 1].max(ground_z - nudge)
+    return jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
+
+
+def _with_load(p: Params, force, lag) -> Params:
+    """``p`` at one load step: its force [N] and its ground-friction lag (anchor radii [m],
+    normal forces [N])."""
+    return eqx.tree_at(lambda c: (c.force, c.friction_anchor, c.friction_normal_force), p, (force, *lag))
+
+
+def _friction_lag(y, cfg: Config, p: Params):
+    """Ground-friction lag of a converged state: (node radii (n,) [m], ground forces (n,) [N])."""
+    x, _ = split(y, cfg.n_nodes)
+    return x[:, 0], ground_normal_forces(x, cfg, p)
+
+
+def _predicted_start(setup: Setup, cfg: Config, base: Params, carry, force):
+    """Newton's start [m] for the load step at ``force`` [N] from the previous steps (``predictor``)."""
+    y_prev, y_prev2, f_prev, f_prev2, lag = carry
+    if setup.predictor == "tangent":
+        # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
+        p_prev = _with_load(base, f_prev, lag)
+        e_zc = jnp.zeros_like(y_prev).at[-1].set(1.0)
+        dy_df = -structured_solve(hessian_at(y_prev, cfg, p_prev), e_zc)
+        return y_prev + (force - f_prev) * dy_df
+    if setup.predictor == "none":
+        return y_prev
+    # Secant predictor, never extrapolating further than the last increment (a long
+    # extrapolation can land on a folded state).
+    w = jnp.where(f_prev - f_prev2 > 0, (force - f_prev) / (f_prev - f_prev2), 0.0)
+    w = jnp.clip(w, 0.0, 1.0)
+    return y_prev + w * (y_prev - y_prev2)
+
+
+def _initial_carry(y_start, cfg: Config, base: Params, load):
+    """The load-step scan's first carry: (state, previous state, force, previous force, lag).
+
+    The first step's lag takes the start state's radii and its contact forces scaled to the
+    step's ground reaction ``load`` [N]: the start's nudge penetration carries penalty forces
+    (≈ 1e3 × P_g per area) that are no physical load, but its disc spread evenly is the membrane's.
+    """
+    anchor0, normal0 = _friction_lag(y_start, cfg, base)
+    normal0 = normal0 * load / jnp.maximum(jnp.sum(normal0), 1e-300)
+    return (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)), (anchor0, normal0))
+
+
+def _nearby_per_step(nearby_guesses, n_steps: int, n_ramp: int, m: int):
+    """The guesses at the requested forces spread over the load steps: only the last sub-step of
+    each level gets them; the others get NaN guesses, which are never chosen."""
+    if nearby_guesses is None:
+        return None
+    nearby = jnp.full((n_steps,) + nearby_guesses.shape[1:], jnp.nan)
+    return nearby.at[n_ramp + m - 1 :: m].set(nearby_guesses[1:])
+
+
+def _levels(obs, n_ramp: int, m: int):
+    """The requested levels' rows of the per-load-step outputs."""
+    out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}
+    # a level counts as converged only if every load step before it converged
+    out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
+    # Newton iterations of each level's load steps (the ramp's go to the first level)
+    done = jnp.cumsum(obs["iterations"])[n_ramp + m - 1 :: m]
+    out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
+    return out
+
+
 def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
                  return_states: bool = False, nearby_guesses=None, physics: CurvePhysics | None = None):
     """One force-controlled curve (unbatched, traceable). ``forces`` (k,) [N], increasing.
 
     ``physics``: the curve's traced effects (:class:`CurvePhysics` of scalars; None:
-    ``CurvePhysics.defaults(setup)``, today's physics). Curves are differentiable in them too.
+    ``CurvePhysics.defaults(setup)``, the default physics). Curves are differentiable in them too.
 
     Returns a dict of (k,) arrays: the observables, ``residual`` [N], ``iterations`` (Newton
     iterations of the level's load steps) and ``rest_radius`` [m] (scalar); with
@@ -230,103 +324,42 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     ``nearby_guesses`` (1 + k, c, n_y) [m]: for the inflation and each level, c guesses of the
     state taken from curves with nearby parameters at the same forces (their states, or states
     extrapolated from them; NaN: none). Each Newton solve starts from the guess of lowest
-    energy, the usual start (the previous level's state) included: the state of a curve 0.5 %
-    away in (P_g, E, h) cuts the Newton iterations per level from 5–7 to ≈ 2. The result does
-    not depend on the guesses beyond the tolerance ``atol``, and no derivative flows through them.
+    energy, the usual start (the previous level's state) included. The result does not depend on
+    the guesses beyond the tolerance ``atol``, and no derivative flows through them.
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
     physics = CurvePhysics.defaults(setup) if physics is None else physics
     r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale,
                                     None if nearby_guesses is None else nearby_guesses[0],
                                     stiffening=physics.stiffening)
-    n = len(setup.theta())
-    x_inf, _ = split(y_inf, n)
-    # The gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1.
-    cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
-                 pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
-    volume_ref = enclosed_volume(x_inf)
-    ground_z = x_inf[0, 1]
+    cfg = _indentation_config(setup)
+    x_inf, _ = split(y_inf, cfg.n_nodes)
     zc_contact = x_inf[-1, 1] + physics.indenter_radius
-    base = _params(young, thick, nu, r0, pressure, setup, ref_volume=volume_ref,
-                   ground_z=ground_z, bending_scale=bending_scale, physics=physics)
-    ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
-    # Start with both contacts slightly engaged so the first Hessian is non-singular, and the
-    # bottom already flattened on the ground as a membrane carries the first load F (and the
-    # wall's weight W): the ball sinks by δ = (F + W) / (2π R P_g) (contact disc of area
-    # (F + W) / P_g). Without it the first load step grew the contact disc by about a node per
-    # Newton iteration.
-    nudge = 1e-4 * setup.radius
-    first_load = ramp[0] if len(setup.ramp) else forces[0]
-    weight = physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
-    sink = (first_load + weight) / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
-    x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
-    x_start = x_start.at[:, 1].max(ground_z - nudge)
-    y_start = jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
-    # `substeps` equal load steps per requested interval (only the last one is reported).
-    m = setup.substeps
-    start = ramp[-1:] if len(setup.ramp) else jnp.zeros(1)
-    anchors = jnp.concatenate([start, forces[:-1]])
-    frac = jnp.arange(1, m + 1, dtype=jnp.float64) / m
-    sub = anchors[:, None] + (forces - anchors)[:, None] * frac[None, :]
-    schedule = jnp.concatenate([ramp, sub.ravel()])
+    base = _params(young, thick, nu, r0, pressure, setup, ref_volume=enclosed_volume(x_inf),
+                   ground_z=x_inf[0, 1], bending_scale=bending_scale, physics=physics)
+    schedule, first_load = _load_schedule(setup, forces)
+    # the ground first carries the first force and the wall's weight
+    load = first_load + physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
+    y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
     opts = setup.options()
-
-    def lagged(q, force, lag):
-        # the step's force and its ground-friction lag (anchor radii, normal forces)
-        return eqx.tree_at(lambda c: (c.force, c.friction_anchor, c.friction_normal_force), q, (force, *lag))
-
-    def lag_of(y):
-        x, _ = split(y, n)
-        return x[:, 0], ground_normal_forces(x, cfg, base)
 
     def step(carry, level):
         force, nearby = level
-        y_prev, y_prev2, f_prev, f_prev2, lag = carry
-        if setup.predictor == "tangent":
-            # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
-            p_prev = lagged(base, f_prev, lag)
-            e_zc = jnp.zeros_like(y_prev).at[-1].set(1.0)
-            dy_df = -structured_solve(hessian_at(y_prev, cfg, p_prev), e_zc)
-            guess = y_prev + (force - f_prev) * dy_df
-        elif setup.predictor == "none":
-            guess = y_prev
-        else:
-            # Secant predictor from the last two converged states, never extrapolating further
-            # than the last increment (a long extrapolation can land on a folded state).
-            w = jnp.where(f_prev - f_prev2 > 0, (force - f_prev) / (f_prev - f_prev2), 0.0)
-            w = jnp.clip(w, 0.0, 1.0)
-            guess = y_prev + w * (y_prev - y_prev2)
-        p = lagged(base, force, lag)
+        guess = _predicted_start(setup, cfg, base, carry, force)
+        p = _with_load(base, force, carry[-1])
         if nearby_guesses is not None:
             guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
         y, res, it, _ = equilibrium(cfg, opts, p, guess)
         obs = observables(cfg, p, y, y_inf, zc_contact)
         obs.update(residual=res, iterations=it)
         if return_states:
-            obs.update(state=y, friction_anchor=lag[0], friction_normal_force=lag[1])
-        return (y, y_prev, force, f_prev, lag_of(y)), obs
+            obs.update(state=y, friction_anchor=carry[-1][0], friction_normal_force=carry[-1][1])
+        return (y, carry[0], force, carry[2], _friction_lag(y, cfg, base)), obs
 
-    # First step's lag: the start state's radii (the ball as it meets the ground) and its
-    # contact forces scaled to the step's ground reaction F + W. The start's penetration is the
-    # nudge, whose penalty forces (≈ k_c × nudge ≈ 1e3 × P_g per area) are no physical load;
-    # its contact disc spread evenly is the membrane's (a flat disc carrying the gas pressure).
-    anchor0, normal0 = lag_of(y_start)
-    normal0 = normal0 * (first_load + weight) / jnp.maximum(jnp.sum(normal0), 1e-300)
-    init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)), (anchor0, normal0))
-    n_ramp = len(setup.ramp)
-    nearby = None
-    if nearby_guesses is not None:
-        # The guesses are at the requested forces: only the last sub-step of each level gets
-        # them (NaN guesses are never chosen).
-        nearby = jnp.full((schedule.shape[0],) + nearby_guesses.shape[1:], jnp.nan)
-        nearby = nearby.at[n_ramp + m - 1 :: m].set(nearby_guesses[1:])
-    _, obs = jax.lax.scan(step, init, (schedule, nearby))
-    out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}
-    # a level counts as converged only if every load step before it converged
-    out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
-    # Newton iterations of each level's load steps (the ramp's go to the first level)
-    done = jnp.cumsum(obs["iterations"])[n_ramp + m - 1 :: m]
-    out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
+    n_ramp, m = len(setup.ramp), setup.substeps
+    nearby = _nearby_per_step(nearby_guesses, schedule.shape[0], n_ramp, m)
+    _, obs = jax.lax.scan(step, _initial_carry(y_start, cfg, base, load), (schedule, nearby))
+    out = _levels(obs, n_ramp, m)
     out["rest_radius"] = r0
     out["inflation_residual"] = res_inf
     if return_states:
