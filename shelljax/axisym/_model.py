@@ -212,7 +212,7 @@ def _indentation_config(setup: Setup) -> Config:
                   pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
 
 
-def _load_schedule(setup: Setup, forces):
+def _load_schedule(setup: Setup, forces: Float[Array, " k"]) -> tuple[Float[Array, " s"], Float[Array, ""]]:
     """(every load step's force (n_ramp + k · substeps,) [N], the first step's force [N]).
 
     The ramp's fractions of the first force come first; then ``substeps`` equal steps per
@@ -228,7 +228,7 @@ def _load_schedule(setup: Setup, forces):
     return jnp.concatenate([ramp, sub.ravel()]), first_load
 
 
-def _start_state(setup: Setup, x_inf, zc_contact, pressure, load):
+def _start_state(setup: Setup, x_inf: Float[Array, "n 2"], zc_contact, pressure, load) -> Float[Array, " ny"]:
     """Unknowns [m] of the first load step's start: the inflated ball with both contacts slightly
     engaged (a non-singular first Hessian) and sunk by the membrane estimate δ = load / (2π R P_g)
     into the ground, flattened there (a contact disc of area load / P_g) for ``load`` [N] (the
@@ -253,7 +253,7 @@ def _friction_lag(y, cfg: Config, p: Params):
     return x[:, 0], ground_normal_forces(x, cfg, p)
 
 
-def _predicted_start(setup: Setup, cfg: Config, base: Params, carry, force):
+def _predicted_start(setup: Setup, cfg: Config, base: Params, carry, force) -> Float[Array, " ny"]:
     """Newton's start [m] for the load step at ``force`` [N] from the previous steps (``predictor``)."""
     y_prev, y_prev2, f_prev, f_prev2, lag = carry
     if setup.predictor == "tangent":

@@ -47,6 +47,7 @@ analysis of the full state; radial tension and the dimple's own curvature are ne
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from ..physics import bending_stiffness
 from ._energy import (
@@ -62,7 +63,7 @@ from ._energy import (
 )
 
 
-def _ridge(x):
+def _ridge(x: Float[Array, "n 2"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
     # Highest point of the deformed meridian: parabola through the top node and its neighbours
     # (continuous in the nodal coordinates, unlike a plain argmax).
     z = x[:, 1]
@@ -81,7 +82,7 @@ def _ridge(x):
     return z_max, r_max
 
 
-def _contact_radius(x, gaps):
+def _contact_radius(x: Float[Array, "n 2"], gaps: Float[Array, " n"]) -> Float[Array, ""]:
     # Ground contact disc: outermost penetrating node of the lower half, edge interpolated to
     # the gap's sign change (the relaxed contact zone may lift slightly at the pole).
     n = gaps.shape[0]
@@ -94,7 +95,8 @@ def _contact_radius(x, gaps):
     return jnp.where(jnp.any(inside), r_edge, 0.0)
 
 
-def compressive_annulus(x, n_theta, r_gauss):
+def compressive_annulus(x: Float[Array, "n 2"], n_theta: Float[Array, "2 e"],
+                        r_gauss: Float[Array, "2 e"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """(r_in, r_out) [m] of the compressive-hoop annulus in the upper half (0, 0 if none).
 
     Edges are linear interpolations of the sign changes of the unrelaxed hoop tension
@@ -121,8 +123,10 @@ def compressive_annulus(x, n_theta, r_gauss):
     return jnp.where(any_comp, r_in, 0.0), jnp.where(any_comp, r_out, 0.0)
 
 
-def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
-    """Dictionary of the observables documented in the module docstring for one state."""
+def observables(cfg: Config, p: Params, y: Float[Array, " ny"], y_inflated: Float[Array, " ny"],
+                zc_contact: Float[Array, ""]) -> dict[str, Float[Array, ""]]:
+    """The observables documented in the module docstring for one state ``y`` [m], given the
+    inflated state [m] and the indenter height at first contact ``zc_contact`` [m]."""
     n = cfg.n_nodes
     x, zc = split(y, n)
     x_inf, _ = split(y_inflated, n)
