@@ -27,8 +27,8 @@ Observables per force level (all SI; "inflated" = the pressurized state before i
   self-contact is not modelled, so past that the state is not a ball's (the top passes through
   the bottom wall onto the ground) and :mod:`._api` reports the level as not converged.
 
-Wrinkle count (documented local model). Where the (unrelaxed) hoop stress of the axisymmetric indented state is compressive, a real
-shell wrinkles radially. The wrinkle wavelength is set by bending against the curvature-induced
+Wrinkle count (documented local model). Where the (unrelaxed) hoop stress of the axisymmetric
+indented state is compressive, a real shell wrinkles radially. The wrinkle wavelength is set by bending against the curvature-induced
 elastic foundation of the shell, K = E h / R² [Pa/m] (Cerda & Mahadevan 2003; Vella et al. 2011):
 a compressed strip on a foundation buckles at λ = 2π (B / K)^{1/4} = 2π ℓ_w with
 ℓ_w = (B R² / (E h))^{1/4} [m]. Counting wavelengths around the mid-circle of the compressive
