@@ -1,9 +1,9 @@
-"""Benchmark of the axisymmetric engine (issue 6, item 5).
+"""Benchmark of the axisymmetric engine.
 
 Measures, after compilation, medians over repeats of:
   1. one full 7-level F–w(0) curve (the paper's 5–20 N protocol),
   2. a vmapped batch of 64 parameter sets, on one host thread and split over every CPU core
-     (``shelljax._parallel.map_batch``: XLA runs this kind of computation on one core),
+     (``shelljax.axisym.map_batch``: XLA runs this kind of computation on one core),
   3. a large batch (default 1024, all cores) whose per-curve time is extrapolated to 10⁵ curves
      (the size of a posterior run) — labelled as an extrapolation in the table unless
      ``--large 100000`` times all of them. Batches are walked in ``--chunk`` lanes per thread
@@ -21,25 +21,21 @@ import json
 import os
 import platform
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import jax
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
-
-import shelljax  # noqa: E402, F401  (x64)
-from shelljax._parallel import cpu_workers, map_batch  # noqa: E402
-from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw  # noqa: E402
+import shelljax  # noqa: F401  (x64)
+from shelljax.axisym import Setup, cpu_workers, indentation_curves_raw, map_batch
+from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
 
 
 def _params(n, seed=0):
     rng = np.random.default_rng(seed)
-    base = np.array([1300.0, 2.34e6, 9e-4, 0.4])
+    base = np.array([1300.0, 2.34e6, 9e-4, DEFAULT_POISSON_RATIO])
     return base * rng.uniform(0.85, 1.15, size=(n, 4)) * np.array([1, 1, 1, 0]) + np.array(
-        [0, 0, 0, 0.4]
+        [0, 0, 0, DEFAULT_POISSON_RATIO]
     )
 
 

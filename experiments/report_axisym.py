@@ -1,4 +1,4 @@
-"""Full-size report of the axisymmetric engine (issue 6, items 2–4).
+"""Full-size report of the axisymmetric engine.
 
 Sections (``--sections`` picks a subset):
   stiffness   Reissner / Vella 2012 linear stiffness vs mesh (3 decades of pressure)
@@ -17,32 +17,30 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
-
-import shelljax  # noqa: E402, F401
-from shelljax.axisym import PAPER_FORCES, Setup, indentation_curves_raw, tau  # noqa: E402
-from shelljax.axisym._shallow import (  # noqa: E402
+import shelljax
+from shelljax.axisym import (
+    Setup,
+    indentation_curves_raw,
     pinch_linear_stiffness,
     pinch_observables,
     pinch_setup,
     pinch_state,
-    reissner_stiffness,
-    vella_linear_stiffness,
 )
+from shelljax.paper import DEFAULT_POISSON_RATIO as NU, PAPER_FORCES, PAPER_INDENTER_RADIUS
+from shelljax.physics import CRITICAL_W, reissner_stiffness, scaling_wrinkle_count, tau, vella_linear_stiffness
 
-PEZZI = (1300.0, 2.34e6, 0.9e-3, 0.4, 0.13)
+PEZZI = (1300.0, 2.34e6, 0.9e-3, NU, 0.13)
 OBJECTS = {  # bundled objects (shelljax/data/README.md): P_g, E, h, ν, R
     "pezzi": PEZZI,
-    "yoga": (1000.0, 1.34e6, 2.0e-3, 0.4, 0.325),
-    "beach": (800.0, 4.10e6, 0.25e-3, 0.4, 0.25),
-    "hammer": (3955.0, 53.98e6, 0.3e-3, 0.4, 0.08),
+    "yoga": (1000.0, 1.34e6, 2.0e-3, NU, 0.325),
+    "beach": (800.0, 4.10e6, 0.25e-3, NU, 0.25),
+    "hammer": (3955.0, 53.98e6, 0.3e-3, NU, 0.08),
 }
 
 
@@ -55,8 +53,8 @@ def section_stiffness():
         f = jax.jit(lambda p: pinch_linear_stiffness(s, p, e, h, nu))
         for p in pressures:
             k = float(f(p))
-            ref = vella_linear_stiffness(p, e, h, nu, r)
-            rows.append(dict(n_elements=n_el, pressure=p, tau=float(tau(p, e, h, nu, r)),
+            ref = vella_linear_stiffness(p, r, e, h, nu)
+            rows.append(dict(n_elements=n_el, pressure=p, tau=float(tau(p, r, e, h, nu)),
                              k=k, k_ref=ref, ratio=k / ref))
     print("\n## Linear point-load stiffness (pinch), k / k_Vella2012 (τ→0: Reissner)")
     print("| τ | " + " | ".join(f"n={n}" for n in (101, 201, 401)) + " | Richardson(201,401) |")
@@ -65,7 +63,7 @@ def section_stiffness():
         rr = [x["ratio"] for x in rows if x["pressure"] == p]
         print(f"| {rows[pressures.index(p)]['tau']:.3g} | " + " | ".join(f"{v:.4f}" for v in rr)
               + f" | {2 * rr[2] - rr[1]:.4f} |")
-    print(f"Reissner k = {reissner_stiffness(e, h, nu, r):.4g} N/m")
+    print(f"Reissner k = {reissner_stiffness(r, e, h, nu):.4g} N/m")
     return rows
 
 
@@ -96,10 +94,10 @@ def section_onset():
         s = pinch_setup(n_elements=n_el)
         for bs in (1.0, 0.1, 0.01):
             wc, res = _onset(s, p, e, h, nu, r, bs, 0.4)
-            t = float(tau(p, e, h, nu, r)) / np.sqrt(bs)
-            rows.append(dict(n_elements=n_el, tau=t, onset_W0=wc, rel_err=wc / 2.52 - 1,
+            t = float(tau(p, r, e, h, nu)) / np.sqrt(bs)
+            rows.append(dict(n_elements=n_el, tau=t, onset_W0=wc, rel_err=wc / CRITICAL_W - 1,
                              residual=res))
-    print("\n## Onset of compressive hoop stress, −W(0) (Vella et al. 2011: 2.52)")
+    print(f"\n## Onset of compressive hoop stress, −W(0) (Vella et al. 2011: {CRITICAL_W})")
     print("| τ | n=201 | n=401 | error (401) |\n|---|---|---|---|")
     for bs_i in range(3):
         a, b = rows[bs_i], rows[3 + bs_i]
@@ -150,7 +148,7 @@ def section_ks():
             c = _curves(obj, PAPER_FORCES, gas=gas)
             lp2 = p * r**3 / (e * h)
             rows.append(dict(
-                object=name, gas=gas, tau=float(tau(p, e, h, nu, r)),
+                object=name, gas=gas, tau=float(tau(p, r, e, h, nu)),
                 converged=bool(c["converged"].all()),
                 W0_range=[float(c["w0"][0] * r / lp2), float(c["w0"][-1] * r / lp2)],
                 ks_local=_ks(c, p, r, "w0"), ks_top_drop=_ks(c, p, r, "top_drop"),
@@ -201,8 +199,6 @@ def _relax_vs_3d():
 
     Set 0 calibrated the wrinkled hoop capacity c_w (scan below); every other set is held out.
     """
-    from pathlib import Path
-
     curves = json.loads((Path(shelljax.__file__).parent / "data/virtual/curves.json").read_text())["curves"]
     rows, scan = [], []
 
@@ -237,15 +233,15 @@ def _relax_vs_3d():
 
 def section_wrinkles():
     rows = []
-    p, e, nu, r = 1300.0, 2.34e6, 0.4, 0.13
+    p, e, nu, r = 1300.0, 2.34e6, NU, 0.13
     forces = np.linspace(2.5, 40.0, 16)
     for target_tau in (10.0, 40.0, 100.0):
-        h = 0.9e-3 * np.sqrt(float(tau(p, e, 0.9e-3, nu, r)) / target_tau)
+        h = 0.9e-3 * np.sqrt(float(tau(p, r, e, 0.9e-3, nu)) / target_tau)
         c = _curves((p, e, h, nu, r), forces)
         lp2 = p * r**3 / (e * h)
         wd = c["w0"] * r / lp2
-        t = float(tau(p, e, h, nu, r))
-        vella = 1.33 * np.sqrt(t)
+        t = float(tau(p, r, e, h, nu))
+        vella = float(scaling_wrinkle_count(p, r, e, h, nu))
         for wlev in (3.0, 4.0, 6.0):
             ok = c["converged"] & (wd <= wd.max())
             n_at = float(np.interp(wlev, wd[ok], c["wrinkle_count"][ok])) if wd[ok].max() >= wlev else float("nan")
@@ -267,7 +263,7 @@ def section_cross3d():
         p, e, h, nu, r = PEZZI
         ball = s3.ball(radius=r, thickness=h, n_triangles=4000)
         sim = s3.Indentation(ball, young_modulus=e, poisson_ratio=nu, gauge_pressure=p,
-                             gas="prescribed", indenter_radius=0.008, ground=True)
+                             gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True)
         states = sim.force_curve([5.0, 10.0])
         obs3 = [s.observables() for s in states]
     except Exception as err:  # the other engine is work in progress: report, don't crash

@@ -1,8 +1,7 @@
 """Hilbert-curve ordering of parameter sets, so that consecutive sets are neighbours.
 
 A batch of forward solves walked in this order can start each solve from its predecessor's
-equilibrium (``shelljax.axisym``: 12–13 instead of 37 Newton iterations a curve when
-neighbours differ by ≈ 0.5 %). The Hilbert curve visits the cells of a grid one face-neighbour
+equilibrium (``shelljax.axisym``, docs/axisym.md). The Hilbert curve visits the cells of a grid one face-neighbour
 after another, so, unlike a lexicographic or Z-order sort, it never jumps across the box. Written in
 jax.numpy (traceable: usable inside ``jit``) after J. Skilling, "Programming the Hilbert
 curve", AIP Conf. Proc. 707, 381 (2004).

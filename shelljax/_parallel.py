@@ -2,8 +2,8 @@
 
 XLA on CPU runs a computation made of small operations (a vmapped Newton loop on ~200 unknowns)
 on one core, and two computations dispatched one after the other run one after the other.
-Dispatched from separate threads they run at once (measured on 2 cores: 32 axisymmetric
-curves in 0.44 s instead of 0.70 s). On a GPU the batch is left whole.
+Dispatched from separate threads they run at once (docs/axisym.md, *Benchmark*). On a GPU the
+batch is left whole. Public as ``shelljax.axisym.cpu_workers`` and ``shelljax.axisym.map_batch``.
 """
 
 from __future__ import annotations

@@ -13,10 +13,9 @@ from jaxtyping import Array, Bool, Float, Int
 from .._errors import InvalidInputError, NoConvergenceError
 from .._hilbert import hilbert_order
 from .._parallel import map_batch
+from ..paper import PAPER_FORCES
 from ._model import CurvePhysics, Setup, curve_single
-from ._wrinkles import wrinkle_count
-
-PAPER_FORCES = (5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)  # [N], the paper's protocol
+from ._observables import wrinkle_count
 
 
 class CurveResult(eqx.Module):
@@ -25,13 +24,13 @@ class CurveResult(eqx.Module):
     ``force`` [N]; ``w0`` [m] local dimple depth (positive, the paper's −w(0), see
     docs/axisym.md); ``travel`` [m] indenter travel since first contact; ``top_drop`` [m]
     drop of the top pole (the 3D engine's w0); ``height`` H [m];
-    ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_model``);
+    ``upper_diameter`` D_u [m]; ``contact_diameter`` D_l [m] (from the ground reaction, see ``_observables``);
     ``contact_diameter_mesh`` [m] geometric edge; ``sunken_depth`` d [m];
     ``pressure`` [Pa] gauge pressure; ``volume`` [m³]; ``ground_reaction`` [N] (F plus the wall's
     weight with a self-weight, ``CurvePhysics.areal_weight``);
     ``min_hoop_tension`` [N/m] most compressive unrelaxed hoop stress resultant of the upper
     half; ``compressive_inner_radius``/``compressive_outer_radius`` [m] of the compressive
-    annulus; ``wrinkle_count`` n [-] (continuous model, ``_wrinkles``); ``wall_gap`` [m] top pole
+    annulus; ``wrinkle_count`` n [-] (continuous model, ``wrinkle_count``); ``wall_gap`` [m] top pole
     height above the bottom pole; ``residual`` [N] worst Newton residual up to this level;
     ``iterations`` [-] Newton iterations of this level's load steps;
     ``converged`` (bool): Newton met ``atol`` up to this level and the walls have not met
@@ -68,7 +67,7 @@ def _one(setup: Setup, theta, forces, physics: CurvePhysics, nearby_guesses=None
     out = curve_single(setup, pressure, young, thick, nu, forces, return_states=True,
                        nearby_guesses=nearby_guesses, physics=physics)
     n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
-                      young, thick, nu, setup.radius)
+                      setup.radius, young, thick, nu)
     fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
     fields.update(
         force=forces,
@@ -111,9 +110,7 @@ def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
         # (1 + k, n_y) [m], its coordinates (1 + k, 4) and the slope d state / d coordinates
         # (1 + k, n_y, 4) [m] learnt along the way (Broyden's update: the secant condition
         # along each step, the slope unchanged across it). The unextrapolated state stays a
-        # guess: on 5 % of the levels (80 curves, one lane) the extrapolation landed
-        # millimetres off (force residuals of 1e3–1e4 N), and without the plain state those
-        # levels restarted from the previous level (5 Newton iterations).
+        # guess, for the levels where the extrapolation lands far off.
         states, anchors, slopes = walk
         thetas, here, physics_rows = step_in
         delta = here[:, None, :] - anchors
@@ -152,10 +149,9 @@ def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0,
     program runs, and curves are differentiable in its values as in ``params``.
     ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
     a stretch of the batch ordered along a Hilbert curve and starting every curve from its
-    predecessor's equilibria (throughput on CPUs: 12–13 instead of 37 Newton iterations a
-    curve when 10⁵ parameter sets fill a ±15 % box); 0 vmaps the whole batch at once, every
-    curve from scratch. The results agree to the Newton tolerance either way (w0 to ≈ 3e-8
-    relative). Differentiable in ``params`` (implicit differentiation of every equilibrium).
+    predecessor's equilibria (fewer Newton iterations on dense batches, docs/axisym.md); 0 vmaps
+    the whole batch at once, every curve from scratch. The results agree to the Newton tolerance
+    either way. Differentiable in ``params`` (implicit differentiation of every equilibrium).
     """
     params = jnp.asarray(params, jnp.float64)
     if physics is None:
@@ -237,10 +233,9 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     Raises :class:`shelljax.NoConvergenceError` if any batch element failed and
     ``raise_on_failure`` (otherwise inspect ``result.converged``). ``chunk``: vmapped lanes
     per host thread, each solving its share of the batch curve after curve from the previous
-    curve's equilibria (:func:`indentation_curves_raw`); 8 lanes: 2.2 ms per curve on one
-    thread (2048 curves), as fast as 4, against 2.4 ms for 16. ``workers``:
+    curve's equilibria (:func:`indentation_curves_raw`; docs/axisym.md, *Benchmark*). ``workers``:
     host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
-    GPU; see ``shelljax._parallel``). For use inside jit/vmap/grad call
+    GPU; see :func:`map_batch`). For use inside jit/vmap/grad call
     :func:`indentation_curves_raw`.
     """
     p, f = _check(params, forces, radius)

@@ -47,11 +47,8 @@ from ._geometry import gauss_points_2
 
 GAS_MODELS = ("prescribed", "isothermal", "polytropic")
 RELAX_WIDTH = 1e-3  # [-] smoothing width of the wrinkling switch, in units of stretch²
-# c_w [-]: hoop compression a wrinkled wall carries, in classical buckling resultants. Calibrated
-# on one 3D curve only (the Pezzi-like ball, τ = 37) over the paper's 5–20 N: its w0 rms error is
-# 0.37 % at 2.0, 0.39 % at 2.25, 0.58 % at 2.5 (2.5 was best over 5–15 N, the range of the earlier
-# 3D curves). On the eight held-out 3D balls (τ 27…193) w0 then agrees within 1.4 % at every level;
-# c_w = 2.5 missed the τ = 27 ball by 2.8 % at 20 N (docs/axisym.md, *Post-onset F–w(0)*).
+# c_w [-]: hoop compression a wrinkled wall carries, in classical buckling resultants, calibrated
+# on one 3D curve (docs/axisym.md, *Post-onset F–w(0)*).
 WRINKLED_HOOP_CAPACITY = 2.0
 COLLAPSE_HOOP_STRETCH = 0.5  # [-] below it the relaxed hoop direction stiffens again (a barrier)
 LOADINGS = ("none", "sphere", "point")
@@ -213,8 +210,7 @@ def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float 
         upper = jnp.arange(n_el) >= n_el // 2
         wrinkle_work = jnp.where(upper, hoop_resultant * (jnp.sqrt(relaxed) - jnp.abs(lam_t)), 0.0)
         # Relaxation removes the log barrier of det C against λ_θ → 0, so a Newton step could park
-        # a node on the axis (a collapsed element: Newton stalled there on 1 of 96 fits). Restore
-        # a barrier far below any physical state (converged dimples keep λ_θ > 0.73).
+        # a node on the axis: restore a barrier far below any physical state.
         _, beta = lame_constants_2d(p.young_modulus, p.poisson_ratio)
         collapse = jnp.minimum(jnp.log(lam_t_sq / COLLAPSE_HOOP_STRETCH**2), 0.0) ** 2
         wrinkle_work = wrinkle_work + jnp.where(upper, p.thickness * beta * collapse, 0.0)

@@ -7,18 +7,16 @@ element volumes. The chain rule gives each term's
 Hessian as Σ ∂²W/∂a∂b ∇a ∇bᵀ + Σ ∂W/∂a ∇²a. The pointwise derivatives of the densities come
 from autodiff of the shared physics laws (elementwise, so they vectorize over a batch); the
 gradients and Hessians of the measures are closed forms (a segment length, a node radius, the
-direction angle of a segment, a distance to the indenter centre). This replaced 12 coloured
-Hessian-vector products of the whole energy, which cost as much as ~24 gradients and did not
-vectorize over a batch (docs/axisym.md, *Benchmark*).
+direction angle of a segment, a distance to the indenter centre). Unlike Hessian-vector products
+of the whole energy, this vectorizes over a batch (docs/axisym.md, *Solver*).
 
 The membrane, contact and gas terms and the assembly are written as structs of arrays: a local
 gradient is a list of one array per local dof (``None`` where it is zero, skipped when tracing),
 a local Hessian a nested list of them, each array running over the elements, and so is the
-result (``StructuredHessian``). XLA:CPU compiles that to flat loops over the elements. With
-arrays of small blocks ((…, n, 4, 4) with broadcasts between them) it computed every entry with
-per-element index arithmetic and recomputed the block expressions in each band slice and block
-stack that consumed them. The bending hinges stay 6×6 block arrays, computed once
-(docs/axisym.md, *Benchmark*).
+result (``StructuredHessian``). XLA:CPU compiles that to flat loops over the elements, where
+arrays of small blocks recompute the block expressions in every slice that consumes them. The
+bending hinges stay 6×6 block arrays, computed once, for a smaller program (docs/axisym.md,
+*Performance notes*).
 """
 
 from __future__ import annotations
@@ -61,9 +59,8 @@ def _computed_once(*arrays):
     """``arrays`` (finite) unchanged, exactly (x·1 + Σ y·0), each computed once.
 
     XLA:CPU fuses cheap elementwise producers into each of their consumers and recomputes them
-    there. The relaxed membrane law's second derivatives are a chain of ≈ 100 multiplies per Gauss
-    point that feeds all ten entries of an element Hessian: it was computed ten times (≈ 30 µs of
-    a batch of 16 each). XLA does not fuse a product with the identity matrix into its consumers.
+    there: the relaxed membrane law's second derivatives, a long chain per Gauss point, feed all
+    ten entries of an element Hessian. XLA does not fuse a product with the identity matrix.
     """
     return tuple(jnp.tensordot(jnp.eye(len(arrays)), jnp.stack(arrays), axes=1))
 
@@ -180,11 +177,7 @@ def _membrane_and_gas_entries(x, x0, cfg: Config, p: Params, d_gas):
         hess_hoop, _matrix_scale((g_s[0] + g_s[1]) / seg0, hess_s), volume))
 
 
-# --- hinge Hessians as arrays of 6×6 blocks -----------------------------------------------------
-# Written entry by entry too, the bending Hessian took ≈ 40 instead of 85 µs a curve (batch of 16,
-# per call), but it had 3.5× the HLO instructions and compiled in 2.1 s instead of 0.7 s, twice in
-# every curve program and more under autodiff. Each ``Setup``, batch shape and derivative compiles
-# its own program, and the test suite (two thirds compilation) has no room for it (docs/axisym.md).
+# --- hinge Hessians as arrays of 6×6 blocks (smaller programs than entry-wise: docs/axisym.md) ---
 
 def _block_outer(u, v):
     return u[..., :, None] * v[..., None, :]
@@ -388,8 +381,7 @@ def hessian_at(y, cfg: Config, p: Params) -> StructuredHessian:
         arrow = [-node[0][1], -node[1][1]]  # ∂(x − c)/∂z_c = (0, −1)
         corner = jnp.sum(node[1][1])
 
-    # computed once, as in ``_computed_once``: the band slices below each fused the whole block
-    # expression otherwise (five slices at 115–173 µs each for a batch of 16)
+    # computed once, as in ``_computed_once``: each band slice below would recompute the blocks
     blocks = jnp.tensordot(_bending_blocks(x, x0, p), jnp.eye(6), axes=1)
     hinge = [[blocks[:, i, j] for j in range(6)] for i in range(6)]
     # ghosted node bands: hinge i couples ghosted nodes i, i + 1, i + 2

@@ -24,7 +24,7 @@ class StructuredHessian(eqx.Module):
 
     ``diag`` and ``upper``: the 4×4 diagonal and upper blocks of A [N/m] as a struct of arrays,
     ``diag[i][j]`` (m,) the entry (i, j) of every diagonal block and ``upper[i][j]`` (m − 1,) of
-    every upper block (XLA:CPU fuses arrays of 4×4 blocks badly: docs/axisym.md, *Benchmark*);
+    every upper block (XLA:CPU fuses arrays of 4×4 blocks badly: docs/axisym.md, *Performance notes*);
     ``arrow`` b (4m,) and ``corner`` c (scalar) [N/m]; ``gas_sigma`` σ = Π''(V) [Pa/m³] and
     ``gas_grad`` g = ∇V (4m,) [m²].
     """
@@ -41,7 +41,7 @@ def _inverse_4x4(m):
     """Inverse of (..., 4, 4) blocks from 2×2 sub-determinants (Laplace expansion).
 
     Inside the block-Thomas scan a LAPACK LU per block costs more in call overhead than in
-    arithmetic: this closed form made the solve 2.2× (one curve) to 3.5× (batch of 64) faster.
+    arithmetic.
     """
     a = [[m[..., i, j] for j in range(4)] for i in range(4)]
     s0 = a[0][0]*a[1][1] - a[1][0]*a[0][1]
@@ -85,8 +85,7 @@ def _block_tridiagonal_solve(diag, upper, rhs):
     """Solve A X = rhs for symmetric block-tridiagonal A given entry-wise (``diag[i][j]`` (m,),
     ``upper[i][j]`` (m − 1,)); rhs (m, 4, k).
 
-    The scan works on 4×4 blocks, stacked here once: reading the 48 entries in every step instead
-    cost two more small kernels a step (6.2 / 5.2 against 4.9 / 5.1 ms a curve, batch of 16).
+    The scan works on 4×4 blocks, stacked here once (stacking in every step costs more kernels).
     """
     pad_after = lambda a: jnp.concatenate([a, jnp.zeros(1, a.dtype)])  # noqa: E731
     pad_before = lambda a: jnp.concatenate([jnp.zeros(1, a.dtype), a])  # noqa: E731

@@ -1,38 +1,11 @@
-"""Force-controlled indentation of an inflated ball resting on the ground: curves + observables.
+"""Force-controlled indentation of an inflated ball resting on the ground: set-up and curves.
 
 Set-up (the paper's finger poke and its Fig. "elasticity" (b) vertical indentation): a closed
 Neo-Hookean sphere of inflated radius R [m] at gauge pressure P_g [Pa] rests on a rigid ground
 plane (bottom pole) and a rigid spherical indenter of radius a [m] pushes the top pole down with
 force F [N] (force control: the indenter height is an unknown loaded by F). Contact is an
 area-weighted penalty: contact pressure = k_c × penetration, so the penetration bound is
-(contact pressure) / k_c [m].
-
-Observables per force level (all SI; "inflated" = the pressurized state before indentation):
-
-* ``w0`` [m]: local dimple depth, positive — vertical displacement of the top pole relative to
-  the equator, w0 = Δz_equator − Δz_top. It is the depth of the dimple below the undisturbed
-  (rigidly translated) upper hemisphere, which is what a user measures against the surrounding
-  surface; it excludes the rigid sinking into the ground flattening (the paper's −w(0)).
-* ``top_drop`` [m]: drop of the top pole from its inflated height (includes the sinking into
-  the ground flattening; this is what ``shelljax.shell3d`` calls w0).
-* ``travel`` [m]: indenter displacement since first contact (includes the ground flattening).
-* ``height`` H [m]: highest point of the deformed ball above the ground.
-* ``upper_diameter`` D_u [m]: diameter of the upper circle = the ridge (circle of maximum
-  height) around the dimple; 0 while the pole is the highest point.
-* ``contact_diameter`` D_l [m]: diameter of the ground contact disc, from the ground reaction
-  and the gas pressure, D_l = 2 √(F_ground / (π P)): the flat disc carries the gas pressure
-  and the membrane leaves the ground tangentially, so this equals the geometric disc while
-  being smooth in the parameters (with a self-weight q [Pa] the disc carries P + q, and
-  D_l = 2 √(F_ground / (π (P + q)))). ``contact_diameter_mesh`` [m] is the geometric edge (ground
-  gap sign change, linear interpolation; resolution-limited by the local element size).
-* ``sunken_depth`` d [m]: depth of the sunken region, ridge height − top-pole height (≥ 0).
-* ``pressure`` [Pa], ``volume`` [m³]: gauge pressure and enclosed volume.
-* ``ground_reaction`` [N]: total ground contact force (global balance: equals F, plus the
-  wall's weight q · 4π R0² with a self-weight q = ``CurvePhysics.areal_weight``).
-* ``wall_gap`` [m]: height of the top pole above the bottom pole (mid-surface to mid-surface).
-  The indenter pushes the upper wall onto the lower one when it falls below the thickness h;
-  self-contact is not modelled, so past that the state is not a ball's (the top passes through
-  the bottom wall onto the ground) and :mod:`._api` reports the level as not converged.
+(contact pressure) / k_c [m]. The observables of each level are defined in :mod:`._observables`.
 """
 
 from __future__ import annotations
@@ -46,17 +19,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
+from ..paper import PAPER_INDENTER_RADIUS
 from ._energy import (
     GAS_MODELS,
     WRINKLED_HOOP_CAPACITY,
     Config,
     Params,
     enclosed_volume,
-    gauge_pressure_at,
-    ground_gaps,
-    hoop_tension,
     ground_normal_forces,
-    node_rest_areas,
     rest_nodes,
     rest_zone_areas,
     split,
@@ -65,12 +35,12 @@ from ._geometry import unit_polar_angles
 from ._inflation import inflation_stretch
 from ._linalg import structured_solve
 from ._newton import SolverOptions, equilibrium, hessian_at
+from ._observables import observables
 from ._tracing import tied_to
 
 
-# ε / R [-]: the 3D engine's default slip tolerance (ĝ/100 = 4 µm on the 0.13 m ball, where
-# ĝ/100 … ĝ/800 agreed to 5 digits, docs/shell3d.md) in units of the radius, so similar balls
-# stay similar.
+# ε / R [-]: the 3D engine's default slip tolerance (4 µm on the 0.13 m ball, docs/shell3d.md) in
+# units of the radius, so similar balls stay similar.
 FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
 
 
@@ -86,11 +56,10 @@ class Setup(eqx.Module):
     (default calibrated on a 3D curve, see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
     ``indenter_radius`` a (the default of the traced ``CurvePhysics.indenter_radius``, and the
     Newton step cap); ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
-    force solved first (load stepping; none by default: the flattened start below converges
-    without, 4–5 Newton iterations a curve fewer); ``atol`` [N]: Newton tolerance on the
-    out-of-balance force; ``max_iter``: Newton iterations per load step; ``predictor``:
-    "none" (start from the last converged state: the most robust), "secant" (extrapolate the
-    last two states, ≈ 20 % faster, failed on some parameter sets) or "tangent" (Euler step);
+    force solved first (load stepping; none by default: the flattened start converges without);
+    ``atol`` [N]: Newton tolerance on the out-of-balance force; ``max_iter``: Newton iterations
+    per load step; ``predictor``: "none" (start from the last converged state: the most robust),
+    "secant" (extrapolate the last two states) or "tangent" (Euler step);
     ``substeps``: equal load steps per interval between requested forces (raise it when the
     requested forces are far apart; the paper's 2.5 N steps need 1); ``gas_volume_ratio`` [-]:
     with ``gas = "isothermal"``, the sealed gas volume over the ball's inflated volume 4/3 π R³
@@ -105,7 +74,7 @@ class Setup(eqx.Module):
     grading: float = eqx.field(static=True, default=0.85)
     gas: str = eqx.field(static=True, default="prescribed")
     relax: bool = eqx.field(static=True, default=True)
-    indenter_radius: float = eqx.field(static=True, default=8e-3)
+    indenter_radius: float = eqx.field(static=True, default=PAPER_INDENTER_RADIUS)
     contact_stiffness: float = eqx.field(static=True, default=1e11)
     ramp: tuple = eqx.field(static=True, default=())
     atol: float = eqx.field(static=True, default=1e-7)
@@ -125,7 +94,7 @@ class Setup(eqx.Module):
         if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
             raise InvalidInputError(
                 f"Setup: indenter_radius = {self.indenter_radius!r} must be a positive length [m]. "
-                "Fix: pass the finger's radius, e.g. 8e-3"
+                f"Fix: pass the finger's radius, e.g. {PAPER_INDENTER_RADIUS}"
             )
         if not (math.isfinite(self.hoop_capacity) and self.hoop_capacity >= 0):
             raise InvalidInputError(
@@ -156,8 +125,7 @@ class Setup(eqx.Module):
 
     def options(self) -> SolverOptions:
         # Newton steps capped at one indenter radius of motion relative to the indenter
-        # (_newton._step_cap): on 128 balls (P_g, E, h × e^±0.5) a cap of 2a let the indenter
-        # tunnel through the shell on some, a/2 cost 20 % more iterations.
+        # (_newton._step_cap), between tunnelling and slow steps (docs/axisym.md, *Solver*)
         return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
 
 
@@ -173,7 +141,7 @@ class CurvePhysics(eqx.Module):
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
-    default: frictionless). :meth:`defaults` gives today's physics.
+    default: frictionless). :meth:`defaults` gives the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
@@ -238,102 +206,101 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
     return r0, y, res, it
 
 
-def _ridge(x):
-    # Highest point of the deformed meridian: parabola through the top node and its neighbours
-    # (continuous in the nodal coordinates, unlike a plain argmax).
-    z = x[:, 1]
-    n = z.shape[0]
-    i = jnp.clip(jnp.argmax(z), 1, n - 2)
-    za, zb, zc = z[i - 1], z[i], z[i + 1]
-    curv = za - 2.0 * zb + zc
-    safe_curv = jnp.where(curv < 0, curv, -1.0)
-    s = jnp.where(curv < 0.0, jnp.clip(0.5 * (za - zc) / safe_curv, -1, 1), 0.0)
-    z_max = zb + 0.5 * s * (zc - za) + 0.5 * s**2 * curv
-    r_a, r_b, r_c = x[i - 1, 0], x[i, 0], x[i + 1, 0]
-    r_max = r_b + 0.5 * s * (r_c - r_a) + 0.5 * s**2 * (r_a - 2.0 * r_b + r_c)
-    top_is_max = jnp.argmax(z) == n - 1
-    z_max = jnp.where(top_is_max, z[-1], jnp.maximum(z_max, z[-1]))
-    r_max = jnp.where(top_is_max, 0.0, r_max)
-    return z_max, r_max
+def _indentation_config(setup: Setup) -> Config:
+    # the gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1
+    return Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
+                  pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
 
 
-def _contact_radius(x, gaps):
-    # Ground contact disc: outermost penetrating node of the lower half, edge interpolated to
-    # the gap's sign change (the relaxed contact zone may lift slightly at the pole).
-    n = gaps.shape[0]
-    lower = jnp.arange(n) < n // 2
-    inside = (gaps < 0.0) & lower
-    j = jnp.clip(jnp.max(jnp.where(inside, jnp.arange(n), -1)), 0, n - 2)
-    g0, g1 = gaps[j], gaps[j + 1]
-    frac = jnp.clip(g0 / jnp.where(g0 - g1 != 0, g0 - g1, 1.0), 0.0, 1.0)
-    r_edge = x[j, 0] + frac * (x[j + 1, 0] - x[j, 0])
-    return jnp.where(jnp.any(inside), r_edge, 0.0)
+def _load_schedule(setup: Setup, forces: Float[Array, " k"]) -> tuple[Float[Array, " s"], Float[Array, ""]]:
+    """(every load step's force (n_ramp + k · substeps,) [N], the first step's force [N]).
 
-
-def compressive_annulus(x, n_theta, r_gauss):
-    """(r_in, r_out) [m] of the compressive-hoop annulus in the upper half (0, 0 if none).
-
-    Edges are linear interpolations of the sign changes of the unrelaxed hoop tension
-    N_θ [N/m] between Gauss points, so both are continuous in the state.
+    The ramp's fractions of the first force come first; then ``substeps`` equal steps per
+    interval between requested forces, of which only the last is reported.
     """
-    nt = n_theta.T.reshape(-1)
-    rg = r_gauss.T.reshape(-1)
-    k = nt.shape[0]
-    upper = jnp.arange(k) >= k // 2
-    comp = (nt < 0.0) & upper
-    any_comp = jnp.any(comp)
-    idx = jnp.arange(k)
-    # outer edge: first compressive point from the equator side; inner: last one (towards pole)
-    i_out = jnp.clip(jnp.min(jnp.where(comp, idx, k - 1)), 1, k - 1)
-    i_in = jnp.clip(jnp.max(jnp.where(comp, idx, 0)), 0, k - 2)
-
-    def cross(i, j):
-        f0, f1 = nt[i], nt[j]
-        frac = jnp.clip(f0 / jnp.where(f0 - f1 != 0, f0 - f1, 1.0), 0.0, 1.0)
-        return rg[i] + frac * (rg[j] - rg[i])
-
-    r_out = cross(i_out - 1, i_out)
-    r_in = jnp.where(i_in + 1 < k, cross(i_in, i_in + 1), 0.0)
-    return jnp.where(any_comp, r_in, 0.0), jnp.where(any_comp, r_out, 0.0)
+    ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
+    m = setup.substeps
+    start = ramp[-1:] if len(setup.ramp) else jnp.zeros(1)
+    anchors = jnp.concatenate([start, forces[:-1]])
+    frac = jnp.arange(1, m + 1, dtype=jnp.float64) / m
+    sub = anchors[:, None] + (forces - anchors)[:, None] * frac[None, :]
+    first_load = ramp[0] if len(setup.ramp) else forces[0]
+    return jnp.concatenate([ramp, sub.ravel()]), first_load
 
 
-def observables(cfg: Config, p: Params, y, y_inflated, zc_contact):
-    """Dictionary of the observables documented in the module docstring for one state."""
-    n = cfg.n_nodes
-    x, zc = split(y, n)
-    x_inf, _ = split(y_inflated, n)
-    eq = jnp.array([n // 2 - 1, n // 2])
-    dz_eq = jnp.mean(x[eq, 1]) - jnp.mean(x_inf[eq, 1])
-    dz_top = x[-1, 1] - x_inf[-1, 1]
-    volume = enclosed_volume(x)
-    z_max, r_max = _ridge(x)
-    gaps = ground_gaps(x, p)
-    k_node = p.contact_stiffness * node_rest_areas(rest_nodes(cfg, p.rest_radius))
-    n_theta, r_gauss = hoop_tension(x, rest_nodes(cfg, p.rest_radius), p)
-    annulus = compressive_annulus(x, n_theta, r_gauss)
-    # the flat contact disc carries the gas pressure and its own weight
-    disc_pressure = gauge_pressure_at(volume, cfg, p) + p.areal_weight
-    return dict(
-        w0=dz_eq - dz_top,
-        top_drop=-dz_top,
-        travel=zc_contact - zc,
-        height=z_max - p.ground_z,
-        upper_diameter=2.0 * r_max,
-        contact_diameter=2.0 * jnp.sqrt(
-            jnp.sum(k_node * jnp.maximum(-gaps, 0.0)) / (jnp.pi * disc_pressure)
-        ),
-        contact_diameter_mesh=2.0 * _contact_radius(x, gaps),
-        sunken_depth=z_max - x[-1, 1],
-        wall_gap=x[-1, 1] - x[0, 1],
-        pressure=gauge_pressure_at(volume, cfg, p),
-        volume=volume,
-        ground_reaction=jnp.sum(k_node * jnp.maximum(-gaps, 0.0)),
-        min_hoop_tension=jnp.min(
-            jnp.where(jnp.arange(n_theta.shape[1]) >= n_theta.shape[1] // 2, n_theta, jnp.inf)
-        ),
-        compressive_inner_radius=annulus[0],
-        compressive_outer_radius=annulus[1],
-    )
+def _start_state(setup: Setup, x_inf: Float[Array, "n 2"], zc_contact, pressure, load) -> Float[Array, " ny"]:
+    """Unknowns [m] of the first load step's start: the inflated ball with both contacts slightly
+    engaged (a non-singular first Hessian) and sunk by the membrane estimate δ = load / (2π R P_g)
+    into the ground, flattened there (a contact disc of area load / P_g) for ``load`` [N] (the
+    first force plus the wall's weight)."""
+    nudge = 1e-4 * setup.radius
+    ground_z = x_inf[0, 1]
+    sink = load / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
+    x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
+    x_start = x_start.at[:, 1].max(ground_z - nudge)
+    return jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
+
+
+def _with_load(p: Params, force, lag) -> Params:
+    """``p`` at one load step: its force [N] and its ground-friction lag (anchor radii [m],
+    normal forces [N])."""
+    return eqx.tree_at(lambda c: (c.force, c.friction_anchor, c.friction_normal_force), p, (force, *lag))
+
+
+def _friction_lag(y, cfg: Config, p: Params):
+    """Ground-friction lag of a converged state: (node radii (n,) [m], ground forces (n,) [N])."""
+    x, _ = split(y, cfg.n_nodes)
+    return x[:, 0], ground_normal_forces(x, cfg, p)
+
+
+def _predicted_start(setup: Setup, cfg: Config, base: Params, carry, force) -> Float[Array, " ny"]:
+    """Newton's start [m] for the load step at ``force`` [N] from the previous steps (``predictor``)."""
+    y_prev, y_prev2, f_prev, f_prev2, lag = carry
+    if setup.predictor == "tangent":
+        # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
+        p_prev = _with_load(base, f_prev, lag)
+        e_zc = jnp.zeros_like(y_prev).at[-1].set(1.0)
+        dy_df = -structured_solve(hessian_at(y_prev, cfg, p_prev), e_zc)
+        return y_prev + (force - f_prev) * dy_df
+    if setup.predictor == "none":
+        return y_prev
+    # Secant predictor, never extrapolating further than the last increment (a long
+    # extrapolation can land on a folded state).
+    w = jnp.where(f_prev - f_prev2 > 0, (force - f_prev) / (f_prev - f_prev2), 0.0)
+    w = jnp.clip(w, 0.0, 1.0)
+    return y_prev + w * (y_prev - y_prev2)
+
+
+def _initial_carry(y_start, cfg: Config, base: Params, load):
+    """The load-step scan's first carry: (state, previous state, force, previous force, lag).
+
+    The first step's lag takes the start state's radii and its contact forces scaled to the
+    step's ground reaction ``load`` [N]: the start's nudge penetration carries penalty forces
+    (≈ 1e3 × P_g per area) that are no physical load, but its disc spread evenly is the membrane's.
+    """
+    anchor0, normal0 = _friction_lag(y_start, cfg, base)
+    normal0 = normal0 * load / jnp.maximum(jnp.sum(normal0), 1e-300)
+    return (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)), (anchor0, normal0))
+
+
+def _nearby_per_step(nearby_guesses, n_steps: int, n_ramp: int, m: int):
+    """The guesses at the requested forces spread over the load steps: only the last sub-step of
+    each level gets them; the others get NaN guesses, which are never chosen."""
+    if nearby_guesses is None:
+        return None
+    nearby = jnp.full((n_steps,) + nearby_guesses.shape[1:], jnp.nan)
+    return nearby.at[n_ramp + m - 1 :: m].set(nearby_guesses[1:])
+
+
+def _levels(obs, n_ramp: int, m: int):
+    """The requested levels' rows of the per-load-step outputs."""
+    out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}
+    # a level counts as converged only if every load step before it converged
+    out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
+    # Newton iterations of each level's load steps (the ramp's go to the first level)
+    done = jnp.cumsum(obs["iterations"])[n_ramp + m - 1 :: m]
+    out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
+    return out
 
 
 def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
@@ -341,7 +308,7 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     """One force-controlled curve (unbatched, traceable). ``forces`` (k,) [N], increasing.
 
     ``physics``: the curve's traced effects (:class:`CurvePhysics` of scalars; None:
-    ``CurvePhysics.defaults(setup)``, today's physics). Curves are differentiable in them too.
+    ``CurvePhysics.defaults(setup)``, the default physics). Curves are differentiable in them too.
 
     Returns a dict of (k,) arrays: the observables, ``residual`` [N], ``iterations`` (Newton
     iterations of the level's load steps) and ``rest_radius`` [m] (scalar); with
@@ -357,103 +324,42 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     ``nearby_guesses`` (1 + k, c, n_y) [m]: for the inflation and each level, c guesses of the
     state taken from curves with nearby parameters at the same forces (their states, or states
     extrapolated from them; NaN: none). Each Newton solve starts from the guess of lowest
-    energy, the usual start (the previous level's state) included: the state of a curve 0.5 %
-    away in (P_g, E, h) cuts the Newton iterations per level from 5–7 to ≈ 2. The result does
-    not depend on the guesses beyond the tolerance ``atol``, and no derivative flows through them.
+    energy, the usual start (the previous level's state) included. The result does not depend on
+    the guesses beyond the tolerance ``atol``, and no derivative flows through them.
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
     physics = CurvePhysics.defaults(setup) if physics is None else physics
     r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale,
                                     None if nearby_guesses is None else nearby_guesses[0],
                                     stiffening=physics.stiffening)
-    n = len(setup.theta())
-    x_inf, _ = split(y_inf, n)
-    # The gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1.
-    cfg = Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
-                 pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
-    volume_ref = enclosed_volume(x_inf)
-    ground_z = x_inf[0, 1]
+    cfg = _indentation_config(setup)
+    x_inf, _ = split(y_inf, cfg.n_nodes)
     zc_contact = x_inf[-1, 1] + physics.indenter_radius
-    base = _params(young, thick, nu, r0, pressure, setup, ref_volume=volume_ref,
-                   ground_z=ground_z, bending_scale=bending_scale, physics=physics)
-    ramp = jnp.asarray(setup.ramp, dtype=jnp.float64) * forces[0]
-    # Start with both contacts slightly engaged so the first Hessian is non-singular, and the
-    # bottom already flattened on the ground as a membrane carries the first load F (and the
-    # wall's weight W): the ball sinks by δ = (F + W) / (2π R P_g) (contact disc of area
-    # (F + W) / P_g). Without it the first load step grew the contact disc by about a node per
-    # Newton iteration.
-    nudge = 1e-4 * setup.radius
-    first_load = ramp[0] if len(setup.ramp) else forces[0]
-    weight = physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
-    sink = (first_load + weight) / (2.0 * jnp.pi * setup.radius * jnp.abs(pressure))
-    x_start = x_inf - jnp.array([0.0, nudge]) - jnp.array([0.0, 1.0]) * sink
-    x_start = x_start.at[:, 1].max(ground_z - nudge)
-    y_start = jnp.concatenate([x_start.ravel(), (zc_contact - sink - 2.0 * nudge)[None]])
-    # `substeps` equal load steps per requested interval (only the last one is reported).
-    m = setup.substeps
-    start = ramp[-1:] if len(setup.ramp) else jnp.zeros(1)
-    anchors = jnp.concatenate([start, forces[:-1]])
-    frac = jnp.arange(1, m + 1, dtype=jnp.float64) / m
-    sub = anchors[:, None] + (forces - anchors)[:, None] * frac[None, :]
-    schedule = jnp.concatenate([ramp, sub.ravel()])
+    base = _params(young, thick, nu, r0, pressure, setup, ref_volume=enclosed_volume(x_inf),
+                   ground_z=x_inf[0, 1], bending_scale=bending_scale, physics=physics)
+    schedule, first_load = _load_schedule(setup, forces)
+    # the ground first carries the first force and the wall's weight
+    load = first_load + physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
+    y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
     opts = setup.options()
-
-    def lagged(q, force, lag):
-        # the step's force and its ground-friction lag (anchor radii, normal forces)
-        return eqx.tree_at(lambda c: (c.force, c.friction_anchor, c.friction_normal_force), q, (force, *lag))
-
-    def lag_of(y):
-        x, _ = split(y, n)
-        return x[:, 0], ground_normal_forces(x, cfg, base)
 
     def step(carry, level):
         force, nearby = level
-        y_prev, y_prev2, f_prev, f_prev2, lag = carry
-        if setup.predictor == "tangent":
-            # Euler predictor along the equilibrium path: dy/dF = −H⁻¹ ∂g/∂F = −H⁻¹ e_zc.
-            p_prev = lagged(base, f_prev, lag)
-            e_zc = jnp.zeros_like(y_prev).at[-1].set(1.0)
-            dy_df = -structured_solve(hessian_at(y_prev, cfg, p_prev), e_zc)
-            guess = y_prev + (force - f_prev) * dy_df
-        elif setup.predictor == "none":
-            guess = y_prev
-        else:
-            # Secant predictor from the last two converged states, never extrapolating further
-            # than the last increment (a long extrapolation can land on a folded state).
-            w = jnp.where(f_prev - f_prev2 > 0, (force - f_prev) / (f_prev - f_prev2), 0.0)
-            w = jnp.clip(w, 0.0, 1.0)
-            guess = y_prev + w * (y_prev - y_prev2)
-        p = lagged(base, force, lag)
+        guess = _predicted_start(setup, cfg, base, carry, force)
+        p = _with_load(base, force, carry[-1])
         if nearby_guesses is not None:
             guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
         y, res, it, _ = equilibrium(cfg, opts, p, guess)
         obs = observables(cfg, p, y, y_inf, zc_contact)
         obs.update(residual=res, iterations=it)
         if return_states:
-            obs.update(state=y, friction_anchor=lag[0], friction_normal_force=lag[1])
-        return (y, y_prev, force, f_prev, lag_of(y)), obs
+            obs.update(state=y, friction_anchor=carry[-1][0], friction_normal_force=carry[-1][1])
+        return (y, carry[0], force, carry[2], _friction_lag(y, cfg, base)), obs
 
-    # First step's lag: the start state's radii (the ball as it meets the ground) and its
-    # contact forces scaled to the step's ground reaction F + W. The start's penetration is the
-    # nudge, whose penalty forces (≈ k_c × nudge ≈ 1e3 × P_g per area) are no physical load;
-    # its contact disc spread evenly is the membrane's (a flat disc carrying the gas pressure).
-    anchor0, normal0 = lag_of(y_start)
-    normal0 = normal0 * (first_load + weight) / jnp.maximum(jnp.sum(normal0), 1e-300)
-    init = (y_start, y_start, *tied_to(y_start, jnp.asarray(0.0), jnp.asarray(0.0)), (anchor0, normal0))
-    n_ramp = len(setup.ramp)
-    nearby = None
-    if nearby_guesses is not None:
-        # The guesses are at the requested forces: only the last sub-step of each level gets
-        # them (NaN guesses are never chosen).
-        nearby = jnp.full((schedule.shape[0],) + nearby_guesses.shape[1:], jnp.nan)
-        nearby = nearby.at[n_ramp + m - 1 :: m].set(nearby_guesses[1:])
-    _, obs = jax.lax.scan(step, init, (schedule, nearby))
-    out = {key: val[n_ramp + m - 1 :: m] for key, val in obs.items()}
-    # a level counts as converged only if every load step before it converged
-    out["residual"] = jax.lax.cummax(obs["residual"])[n_ramp + m - 1 :: m]
-    # Newton iterations of each level's load steps (the ramp's go to the first level)
-    done = jnp.cumsum(obs["iterations"])[n_ramp + m - 1 :: m]
-    out["iterations"] = jnp.diff(done, prepend=0).astype(jnp.int32)
+    n_ramp, m = len(setup.ramp), setup.substeps
+    nearby = _nearby_per_step(nearby_guesses, schedule.shape[0], n_ramp, m)
+    _, obs = jax.lax.scan(step, _initial_carry(y_start, cfg, base, load), (schedule, nearby))
+    out = _levels(obs, n_ramp, m)
     out["rest_radius"] = r0
     out["inflation_residual"] = res_inf
     if return_states:
@@ -461,4 +367,4 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     return out
 
 
-__all__ = ["CurvePhysics", "Setup", "curve_single", "inflate", "observables"]
+__all__ = ["CurvePhysics", "Setup", "curve_single", "inflate"]

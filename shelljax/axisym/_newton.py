@@ -37,24 +37,20 @@ ACTIVE_SET_PASSES = 2  # re-solves per Newton step with the contact set the step
 MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a contact-predicted step
 
 
-class SolverOptions(tuple):
-    """(atol [N], max_iter, max_backtracks, max_step [m]) as a hashable tuple (static under jit).
+class SolverOptions(eqx.Module):
+    """Newton settings, all static: hashable, so a jit or ``custom_jvp`` can key on them.
 
-    ``max_step`` caps one Newton step: the nodes' motion relative to a spherical indenter
-    (``_step_cap``), or the largest coordinate change without one. It keeps the indenter from
-    tunnelling through the shell (a penalty contact cannot stop a jump past it).
+    ``atol`` [N]: tolerance on the out-of-balance force; ``max_iter``: Newton iterations;
+    ``max_backtracks``: line-search halvings per iteration; ``max_step`` [m] caps one Newton step:
+    the nodes' motion relative to a spherical indenter (``_step_cap``), or the largest coordinate
+    change without one. It keeps the indenter from tunnelling through the shell (a penalty contact
+    cannot stop a jump past it).
     """
 
-    def __new__(cls, atol: float = 1e-7, max_iter: int = 60, max_backtracks: int = 30,
-                max_step: float = float("inf")):
-        return super().__new__(
-            cls, (float(atol), int(max_iter), int(max_backtracks), float(max_step))
-        )
-
-    atol = property(lambda s: s[0])
-    max_iter = property(lambda s: s[1])
-    max_backtracks = property(lambda s: s[2])
-    max_step = property(lambda s: s[3])
+    atol: float = eqx.field(static=True, default=1e-7, converter=float)
+    max_iter: int = eqx.field(static=True, default=60, converter=int)
+    max_backtracks: int = eqx.field(static=True, default=30, converter=int)
+    max_step: float = eqx.field(static=True, default=float("inf"), converter=float)
 
 
 def _free(cfg: Config, dtype):
@@ -84,13 +80,11 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
     """Newton direction for the contact set (ground and indenter) that the step itself predicts.
 
     The quadratic penalty's Hessian is k on a touching node and 0 on a free one, so a plain
-    Newton step drives a node about to touch the ground deep into it: the line search then
-    crawls (measured: 3–8 iterations of step length 1e-2 … 1e-4 each time the contact disc
-    grows by a node). The same happens under the indenter, most of all on the first load step,
-    where only the pole touches it. As in a primal–dual active-set method, the step is
-    recomputed with the exact piecewise-quadratic penalty model of the free nodes it predicts in
-    contact (spring k along the contact normal and force k·gap added; the indenter gap
-    linearised); the line search is unchanged, so this only changes the direction.
+    Newton step drives a node about to touch a contact deep into it and the line search crawls.
+    As in a primal–dual active-set method, the step is recomputed with the exact
+    piecewise-quadratic penalty model of the free nodes it predicts in contact (spring k along the
+    contact normal and force k·gap added; the indenter gap linearised); the line search is
+    unchanged, so this only changes the direction (docs/axisym.md, *Solver*).
     """
     n = cfg.n_nodes
     x, zc = split(y, n)
@@ -127,21 +121,14 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         springs = _add_contact_springs(hess, k_ground * free_z, k_indenter * free[-1],
                                        normal * free_node)
         d_pred = structured_solve(springs, -(g + force)) * free
-        # The model's pull k·gap on a node still clear of contact is not in the true gradient:
-        # keep the predicted direction only if it still descends the true energy, by at least a
-        # fraction of a Jacobi-scaled gradient step's rate. A node hovering at a gap where k·gap
-        # equals its true load makes the model's step vanish (measured: 1e-17 m, Newton stuck
-        # for 300 iterations on a hammer surrogate node). An SPD Newton step keeps at least
-        # 1/λmax of that rate, and Gershgorin bounds λmax of the Jacobi-scaled H by the nonzeros
-        # per row (12 in the blocks, the contact nodes in the indenter row): 1e-3 rejects only
-        # such degenerate steps.
+        # The model's pull k·gap on a node still clear of contact is not in the true gradient,
+        # and can cancel a node's load: keep the direction only if it still descends the true
+        # energy at ≥ MIN_DESCENT_FRACTION of a Jacobi-scaled gradient step's rate.
         slope = g @ d_pred
         floor = MIN_DESCENT_FRACTION * (g @ (g / _jacobi_diagonal(hess)))
         return jnp.where(jnp.isfinite(slope) & (slope < -floor), d_pred, d)
 
-    # A pass whose predicted contact set is the one the current direction was solved with would
-    # reproduce it: stop there (under vmap, once no curve of the batch changes its set), which
-    # saves the two re-solves on most steps near equilibrium.
+    # A pass whose predicted set is the one d was solved with would reproduce d: stop there.
     # The state carries the set d was solved with and the set d predicts.
     def changed(state):
         _, passes, (used_ground, used_indenter), (ground_hit, indenter_hit) = state
@@ -164,11 +151,8 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     Under a spherical indenter the cap is on each node's motion relative to the indenter, and
     a node farther away than ``max_step`` may move up to its gap: α |Δx_i − Δc| ≤
     max(max_step, gap_i). A node can pass through the sphere only by moving relative to it by
-    more than its gap, so this keeps the
-    indenter from tunnelling as the old cap on every coordinate did, while letting the shell
-    and the indenter translate together. That cap truncated the good first Newton step of
-    every 2.5 N load step (≈ 11 mm of indenter travel against an 8 mm cap, measured on the
-    Pezzi-like ball) and cost 1–2 iterations per level.
+    more than its gap, so this keeps the indenter from tunnelling while letting the shell and the
+    indenter translate together. Without an indenter the cap is on every coordinate.
     """
     if cfg.loading != "sphere":
         return jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
@@ -196,13 +180,45 @@ def _shift(hess: StructuredHessian, mu):
                        (diag, hess.corner + mu * jnp.abs(hess.corner)))
 
 
+def _levenberg(mu, descends, accepted, backtracks):
+    """Next Levenberg shift μ [-]: ×100 (at least 1e-4) after a non-descent direction or a step
+    the line search could not accept, ÷10 after a full step, else unchanged."""
+    return jnp.where(~descends | ~accepted, jnp.maximum(100.0 * mu, 1e-4),
+                     jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu))
+
+
+def _direction(hess, g, y, cfg: Config, p: Params, free):
+    """(Newton direction, whether it descends): the contact-predicted step where contacts
+    exist, with a Jacobi-scaled gradient step where the Hessian gives no descent."""
+    if cfg.ground or cfg.loading == "sphere":
+        d = _contact_active_set_step(hess, g, y, cfg, p, free)
+    else:
+        d = structured_solve(hess, -g) * free
+    slope = g @ d
+    fallback = -g / _jacobi_diagonal(hess)
+    descends = jnp.isfinite(slope) & (slope < 0.0)
+    return jnp.where(descends, d, fallback), descends
+
+
+def _gas_energy_scale(cfg: Config, p: Params):
+    """Size [J] of a sealed gas's p_abs·V energy, whose round-off the line search must tolerate."""
+    if cfg.gas not in ("isothermal", "polytropic"):
+        return 0.0
+    return ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
+            * jnp.abs(gas_volume_ratio(cfg, p)))
+
+
+def _lowest_energy_start(energy, y0):
+    """The candidate start (a row of ``y0``) of lowest energy, the quantity the line search
+    decreases (the force residual ranks poorly: one misplaced touching node dominates it); NaN or
+    infinite rows are never taken."""
+    e_starts = jax.vmap(energy)(y0)
+    return y0[jnp.argmin(jnp.where(jnp.isfinite(e_starts), e_starts, jnp.inf))]
+
+
 def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     free = _free(cfg, y0.dtype)
-    # A sealed gas's energy is computed from p_abs·V (≈ 1e5 Pa × the volume) and carries its
-    # round-off: on large balls that noise (≈ 1e-12 J) hid the true decrease of Newton steps near
-    # equilibrium and Newton stalled at 1e-5–1e-4 N; the line search tolerates noise of that size.
-    gas_scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
-                 * jnp.abs(gas_volume_ratio(cfg, p)) if cfg.gas in ("isothermal", "polytropic") else 0.0)  # fmt: skip
+    gas_scale = _gas_energy_scale(cfg, p)
     energy = lambda y: total_energy(y, cfg, p)  # noqa: E731
     energy_and_grad = jax.value_and_grad(energy)
 
@@ -213,25 +229,15 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     def body(state):
         y, g, e, _, it, hist, mu = state
         hess = _shift(hessian_at(y, cfg, p), mu)
-        if cfg.ground or cfg.loading == "sphere":
-            d = _contact_active_set_step(hess, g, y, cfg, p, free)
-        else:
-            d = structured_solve(hess, -g) * free
+        d, descends = _direction(hess, g, y, cfg, p, free)
         slope = g @ d
-        # Indefinite Hessian far from equilibrium: fall back to a Jacobi-scaled gradient step.
-        fallback = -g / _jacobi_diagonal(hess)
-        ok_dir = jnp.isfinite(slope) & (slope < 0.0)
-        d = jnp.where(ok_dir, d, fallback)
-        slope = jnp.where(ok_dir, slope, g @ fallback)
         tol_e = 64.0 * jnp.finfo(y.dtype).eps * (jnp.abs(e) + gas_scale + 1.0)
 
         def accept(alpha, e_new):
             return jnp.isfinite(e_new) & (e_new <= e + 1e-4 * alpha * slope + tol_e)
 
-        # Each trial also returns its gradient (reverse mode computes the energy anyway): the
-        # accepted trial's gradient is the next residual, with no separate gradient pass. The
-        # loop starts at 2·alpha0 with no trial made (energy +inf, count −1), so its body makes the
-        # first trial too: one copy of the energy and gradient for XLA to compile, not two.
+        # Each trial returns its gradient too, the next residual if accepted. The loop starts at
+        # 2·alpha0 with no trial made, so one copy of the energy and gradient is compiled, not two.
         def ls_cond(s):
             alpha, e_new, _, k = s
             return (~accept(alpha, e_new)) & (k < opts.max_backtracks)
@@ -244,15 +250,10 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
         alpha0 = _step_cap(d, y, cfg, p, opts.max_step)
         no_trial = tied_to(y, jnp.asarray(jnp.inf, e.dtype), jnp.zeros_like(g), jnp.asarray(-1))
         alpha, e_new, g_trial, backtracks = jax.lax.while_loop(ls_cond, ls_body, (2.0 * alpha0, *no_trial))
-        # Levenberg shift: where the Hessian is indefinite (a buckling dimple), the scaled
-        # gradient step crawls (measured: 30+ iterations on soft balls); shifting the next
-        # Hessians until Newton descends again, and relaxing the shift after clean steps,
-        # recovers in a few. The shift only changes directions, never the equilibrium.
-        # A step the line search could not make acceptable is not taken (it may sit past the
-        # infinite-energy wall of a node crossing the axis); the next direction is shifted instead.
+        # A step the line search could not accept is not taken (it may sit past the infinite-energy
+        # wall of a node crossing the axis); the Levenberg shift changes the next direction instead.
         accepted = accept(alpha, e_new)
-        mu = jnp.where(~ok_dir | ~accepted, jnp.maximum(100.0 * mu, 1e-4),
-                       jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu))
+        mu = _levenberg(mu, descends, accepted, backtracks)
         y_new = jnp.where(accepted, y + alpha * d, y)
         e_new = jnp.where(accepted, e_new, e)
         g_new = jnp.where(accepted, g_trial * free, g)
@@ -262,11 +263,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
         return y_new, g_new, e_new, res, it + 1, hist, mu
 
     if y0.ndim == 2:
-        # Candidate starts (rows): begin at the one of lowest energy, the quantity the line
-        # search decreases. The force residual's maximum is a poorer rank: single touching nodes
-        # dominate it (penalty springs of ≈ 1e6 N/m: a micrometre of misplaced contact is ≈ 1 N).
-        e_starts = jax.vmap(energy)(y0)
-        y0 = y0[jnp.argmin(jnp.where(jnp.isfinite(e_starts), e_starts, jnp.inf))]
+        y0 = _lowest_energy_start(energy, y0)
     e0, g0 = energy_and_grad(y0)
     g0 = g0 * free
     res0 = jnp.max(jnp.abs(g0))

@@ -8,6 +8,8 @@ as long as the dimples are far apart (l_p, l_b ≪ R).
 Analytic references (linear shallow shell, pre-tension T = P_g R / 2, foundation K = E h / R²,
 bending B; w(0) = F/(2π) ∫₀^∞ q dq / (B q⁴ + T q² + K) from the Hankel transform):
 
+The closed forms are ``physics.reissner_stiffness`` and ``physics.vella_linear_stiffness``:
+
 * Reissner (P_g = 0): k = 8 √(B K) = 4 E h² / (R √(3 (1 − ν²))).
 * Vella et al. 2012 (J. R. Soc. Interface 9, 448): k = 2π √(T² − 4BK) / artanh(√(1 − 4BK/T²)),
   continued analytically (artanh → arctan) for T² < 4BK; with τ = P_g R² / √(E h B) one has
@@ -18,33 +20,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from ..physics import bending_stiffness
 from ._energy import Config, hoop_tension, rest_nodes, split
 from ._model import Setup, _params, inflate
 from ._newton import SolverOptions, equilibrium
-
-
-def reissner_stiffness(young_modulus, thickness, poisson_ratio, radius):
-    """k = 4 E h² / (R √(3(1 − ν²))) [N/m] of an unpressurized spherical shell under a point load."""
-    return 4.0 * young_modulus * thickness**2 / (radius * np.sqrt(3.0 * (1.0 - poisson_ratio**2)))
-
-
-def vella_linear_stiffness(gauge_pressure, young_modulus, thickness, poisson_ratio, radius,
-                           bending_scale=1.0):
-    """Linear point-load stiffness [N/m] of a pressurized spherical shell (Vella et al. 2012)."""
-    b = bending_scale * bending_stiffness(young_modulus, thickness, poisson_ratio)
-    t = gauge_pressure * radius / 2.0
-    k = young_modulus * thickness / radius**2
-    disc = t**2 - 4.0 * b * k
-    if disc > 0:
-        s = np.sqrt(disc)
-        return 2.0 * np.pi * s / np.arctanh(s / t)
-    s = np.sqrt(-disc)
-    # ∫₀^∞ du / (B u² + T u + K) = (2/s)(π/2 − arctan(T/s)) for T² < 4BK
-    integral = (2.0 / s) * (0.5 * np.pi - np.arctan(t / s))
-    return 4.0 * np.pi / integral
+from ._observables import compressive_annulus
 
 
 def pinch_setup(n_elements=201, grading=0.9, radius=0.1):
@@ -85,8 +65,6 @@ def pinch_linear_stiffness(setup: Setup, pressure, young, thick, nu, bending_sca
 def pinch_observables(setup: Setup, y, y_inf, p):
     """(w(0) [m] dimple depth of the top pole relative to the equator, min upper hoop tension [N/m],
     compressive annulus (r_in, r_out) [m])."""
-    from ._model import compressive_annulus
-
     n = len(setup.theta())
     x, _ = split(y, n)
     xi, _ = split(y_inf, n)
@@ -97,3 +75,4 @@ def pinch_observables(setup: Setup, y, y_inf, p):
     return w0, jnp.min(jnp.where(upper, n_theta, jnp.inf)), compressive_annulus(x, n_theta, r_g)
 
 
+__all__ = ["pinch_config", "pinch_linear_stiffness", "pinch_observables", "pinch_setup", "pinch_state"]
