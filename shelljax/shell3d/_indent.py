@@ -27,6 +27,7 @@ result depends on the continuation steps (``max_step``), as a real poke depends 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 
@@ -36,12 +37,17 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE
-from ..solve import continuation, implicit_equilibrium, release_factorizations
+from ._config import ContactConfig, ModelConfig
+from ._contact import body_gaps, place_at_gaps
+from ._continuation import continuation
+from ._implicit import implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
-from ._model import ContactConfig, ModelConfig, ShellModel, body_gaps, place_at_gaps, rigid_mode_pins
-from ._wrinkles import wrinkle_spectrum
+from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
 from ._rest import solve_rest_scale, solve_rest_shape
+from ._search import match_forces, solve_travels
+from ._sparse import release_factorizations
+from ._wrinkles import wrinkle_spectrum
 
 #: Lagging stops once the normal forces change by less than this fraction of their largest value.
 FRICTION_LAG_TOLERANCE = 0.01
@@ -93,7 +99,7 @@ class IndentationState:
     touched the ground (gap < activation distance), with or without friction. ``factorizations``:
     Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
     a factorization while it keeps converging fast); ``products``: the Hessian-vector products of
-    its conjugate-gradient steps (:func:`shelljax.solve.newton`).
+    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`).
     """
 
     sim: "Indentation"
@@ -119,7 +125,7 @@ class IndentationState:
 
     def observables(self) -> dict:
         """Observables (SI): see :func:`shelljax.shell3d.observables`."""
-        return _observables(self.sim, self.q, self.sim._params_for(self.q, **self.friction))
+        return _observables(self.sim, self.q, self.sim.params_at(self.q, **self.friction))
 
     def wrinkles(self, max_radius: float, ring_width: float, max_mode: int = 60):
         """Angular spectrum of the normal displacement from the inflated reference state, on rings
@@ -140,6 +146,31 @@ class IndentationState:
         from ._export import plot_state
 
         plot_state(self, path)
+
+
+def _is_count(value, least: int) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= least
+
+
+def _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
+                     friction_iterations, max_newton_iterations) -> None:
+    """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
+    if not young_modulus > 0:
+        raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
+    if not -1.0 < poisson_ratio < 0.5:
+        raise InvalidInputError(f"poisson_ratio: must be in (-1, 0.5), got {poisson_ratio}.")
+    if not gauge_pressure >= 0:
+        raise InvalidInputError(f"gauge_pressure: must be ≥ 0 Pa, got {gauge_pressure}.")
+    if not indenter_radius > 0:
+        raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
+    if rest_shape not in ("solve", "exact", "scan"):
+        raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
+    if not _is_count(friction_iterations, 0):
+        raise InvalidInputError(
+            f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
+        )
+    if not _is_count(max_newton_iterations, 1):
+        raise InvalidInputError(f"max_newton_iterations: must be an integer ≥ 1, got {max_newton_iterations!r}.")
 
 
 class Indentation:
@@ -190,39 +221,16 @@ class Indentation:
         slip_tolerance: float | None = None,
         friction_iterations: int = 2,
     ):
-        if not young_modulus > 0:
-            raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
-        if not -1.0 < poisson_ratio < 0.5:
-            raise InvalidInputError(f"poisson_ratio: must be in (-1, 0.5), got {poisson_ratio}.")
-        if not gauge_pressure >= 0:
-            raise InvalidInputError(f"gauge_pressure: must be ≥ 0 Pa, got {gauge_pressure}.")
-        if not indenter_radius > 0:
-            raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
-        if rest_shape not in ("solve", "exact", "scan"):
-            raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
-        if not (isinstance(friction_iterations, (int, np.integer)) and not isinstance(friction_iterations, bool)
-                and friction_iterations >= 0):
-            raise InvalidInputError(
-                f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
-            )
-        if not (isinstance(max_newton_iterations, (int, np.integer)) and not isinstance(max_newton_iterations, bool)
-                and max_newton_iterations >= 1):
-            raise InvalidInputError(f"max_newton_iterations: must be an integer ≥ 1, got {max_newton_iterations!r}.")
+        _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
+                         friction_iterations, max_newton_iterations)  # fmt: skip
+        ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
-        ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.shell = shell
         self.progress = progress
-        mesh = shell.mesh
-        scan = mesh.vertices - np.array([0.0, 0.0, mesh.vertices[:, 2].min()])
-        size = float(np.ptp(scan, axis=0).max())
-        self.size = size
-        self.gap0 = (activation_distance or 2e-4 * size / 0.13) if contact == "barrier" else 0.0
-        ghat = activation_distance or (2e-4 * size / 0.13 if contact == "barrier" else 2e-5 * size / 0.13)
-        self.activation_distance = ghat
-        scan = scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
-        self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * size
-        self.max_step = max_step or 0.02 * size
+        scan = self._place_scan(shell.mesh, contact, activation_distance)
+        self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
+        self.max_step = max_step or 0.02 * self.size
         self.base_params = {
             "young_modulus": jnp.asarray(float(young_modulus)),
             "poisson_ratio": jnp.asarray(float(poisson_ratio)),
@@ -233,50 +241,67 @@ class Indentation:
         }
         if mass is not None:
             self.base_params["mass"] = jnp.asarray(float(mass))
-        top = int(np.argmax(scan[:, 2]))
-        self.top, self.bottom = top, int(np.argmin(scan[:, 2]))
-        fixed = rigid_mode_pins(scan)
-        # 1. Rest shape: free shell (no contacts) under the prescribed pressure; the bottom vertex's
-        #    height is pinned only to remove the vertical translation.
-        free_fixed = fixed.copy()
+        self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
+        self._fixed = rigid_mode_pins(scan)
+        self._reference_state(scan, rest_shape, gas, indenter_radius)
+        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
+        contact_cfg = ContactConfig(
+            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
+            activation_distance=float(self.activation_distance), reference_pressure=float(max(gauge_pressure, 1e3)),
+            friction=friction, slip_tolerance=slip_tolerance,
+        )  # fmt: skip
+        self.friction = contact_cfg.friction
+        self.model = ShellModel(shell.mesh, self.rest, ModelConfig(shell.mesh.n_vertices, gas=gas, contact=contact_cfg),
+                                self._fixed)  # fmt: skip
+        self._force_model = None
+        self._kept_factorization = (None, None)
+
+    def _place_scan(self, mesh: ShellMesh, contact: str, activation_distance: float | None) -> np.ndarray:
+        """The scan (V, 3) [m] standing on the ground (half the barrier's range ĝ above it); sets
+        the shell's ``size`` [m], the barrier's initial gap ``gap0`` and ``activation_distance`` ĝ."""
+        scan = mesh.vertices - np.array([0.0, 0.0, mesh.vertices[:, 2].min()])
+        size = float(np.ptp(scan, axis=0).max())
+        self.size = size
+        self.gap0 = (activation_distance or 2e-4 * size / 0.13) if contact == "barrier" else 0.0
+        ghat = activation_distance or (2e-4 * size / 0.13 if contact == "barrier" else 2e-5 * size / 0.13)
+        self.activation_distance = ghat
+        return scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
+
+    def _reference_state(self, scan, rest_shape: str, gas: str, indenter_radius: float) -> None:
+        """Rest shape and pressurized reference state of the free shell (no contacts): sets
+        ``rest``, ``q_reference``, ``rest_mismatch``, ``reference_volume`` [m³], ``top_height``
+        [m], ``touch_center`` [m] (the indenter at first touch) and the sealed gas's parameters."""
+        # The bottom vertex's height is pinned only to remove the vertical translation.
+        free_fixed = self._fixed.copy()
         free_fixed[3 * self.bottom + 2] = True
+        mesh = self.shell.mesh
         free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), free_fixed)
         q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
-        if rest_shape == "exact" and gauge_pressure > 0:
+        pressurized = float(self.base_params["gauge_pressure"]) > 0
+        if rest_shape == "exact" and pressurized:
             self.rest = solve_rest_shape(free_model, scan, self.base_params, atol=self.atol)
-        elif rest_shape == "solve" and gauge_pressure > 0:
+        elif rest_shape == "solve" and pressurized:
             self.rest, q_scan, _ = solve_rest_scale(free_model, scan, self.base_params, atol=self.atol)
         else:
             self.rest = scan
         free_model = free_model.with_rest(self.rest)
-        ref = free_model.solve(q_scan, self.base_params, atol=self.atol, name="reference state")
+        ref = free_model.equilibrium(q_scan, self.base_params, atol=self.atol, name="reference state")
         #: Largest distance [m] between the pressurized reference state and the scan.
         self.rest_mismatch = float(np.max(np.linalg.norm(ref.x[:-3].reshape(-1, 3) - scan, axis=1)))
         self.q_reference = ref.x
         self.reference_volume = float(free_model.volume(jnp.asarray(ref.x)))
-        # The free shell is done with: its factor (0.5 GiB at 80k faces) would otherwise live on
-        # through the contact model's compilation, until that model's first factorization.
+        # The free shell is done with: its factor would otherwise live on through the contact
+        # model's compilation, until that model's first factorization.
         release_factorizations()
         if gas != "prescribed":
             self.base_params["reference_volume"] = jnp.asarray(self.reference_volume)
             self.base_params["atmospheric_pressure"] = jnp.asarray(ATMOSPHERIC_PRESSURE)
         x_ref = ref.x[:-3].reshape(-1, 3)
-        self.top_height = float(x_ref[top, 2])
+        self.top_height = float(x_ref[self.top, 2])
         self.indenter_radius = float(indenter_radius)
-        self.touch_center = np.array([x_ref[top, 0], x_ref[top, 1], self.top_height + indenter_radius + 0.5 * self.gap0])
+        self.touch_center = np.array([x_ref[self.top, 0], x_ref[self.top, 1],
+                                      self.top_height + indenter_radius + 0.5 * self.gap0])  # fmt: skip
         self.q_reference[-3:] = self.touch_center
-        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
-        contact_cfg = ContactConfig(
-            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
-            activation_distance=float(ghat), reference_pressure=float(max(gauge_pressure, 1e3)),
-            friction=friction, slip_tolerance=slip_tolerance,
-        )
-        self.friction = contact_cfg.friction
-        cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact_cfg)
-        self.model = ShellModel(mesh, self.rest, cfg, fixed)
-        self._fixed = fixed
-        self._force_model = None
-        self._kept_factorization = (None, None)
 
     def with_friction(self, friction: float, slip_tolerance: float | None = None) -> "Indentation":
         """The same simulation (shell, rest shape, reference state, settings) with another ground
@@ -284,11 +309,11 @@ class Indentation:
         and keeps the sparsity pattern; μ is a traced value in the compiled functions, so every
         μ > 0 with the same ε shares one compilation."""
         contact = dataclasses.replace(self.model.config.contact, friction=friction, slip_tolerance=slip_tolerance)
-        other = object.__new__(Indentation)
-        other.__dict__.update(self.__dict__)
+        other = copy.copy(self)
         other.model = self.model.with_config(dataclasses.replace(self.model.config, contact=contact))
         other.friction = contact.friction
         other._force_model = None
+        other._kept_factorizations = {}
         return other
 
     @property
@@ -302,11 +327,16 @@ class Indentation:
         return self._force_model
 
     # ------------------------------------------------------------------------------------------
-    def _params_for(self, q, **extra):
+    def params_at(self, q, **extra) -> dict:
+        """The model parameters (SI; :mod:`shelljax.shell3d._model`) at state ``q`` (3V + 3,) [m]:
+        the simulation's, with the indenter center of ``q`` and the ``extra`` entries (e.g. a
+        state's lagged ``friction`` data, or ``indenter_force`` [N])."""
         p = dict(self.base_params)
         p["indenter_center"] = jnp.asarray(q[-3:])
         p.update({k: jnp.asarray(v) for k, v in extra.items()})
         return p
+
+    _params_for = params_at  # the old private name, still used by tests/_balance.py
 
     def _feasible_start(self, q, model, q_prev=None):
         """Newton's start from the guess ``q``: the barrier energy finite and near equilibrium.
@@ -335,11 +365,12 @@ class Indentation:
 
     def _step(self, model, q_guess, params, label, q_prev=None):
         q0 = self._feasible_start(q_guess, model, q_prev)
-        # The last load step's last factorization preconditions this one (same model only).
-        kept_model, kept = self._kept_factorization
-        res = model.solve(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
-                          factorization=kept if kept_model is model else None, name=label)  # fmt: skip
-        self._kept_factorization = (model, res.last_factorization)
+        # The last load step's last factorization preconditions this one (same control mode only).
+        control = "force" if model.config.force_control else "depth"
+        kept_control, kept = self._kept_factorization
+        res = model.equilibrium(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
+                                factorization=kept if kept_control == control else None, name=label)  # fmt: skip
+        self._kept_factorization = (control, res.last_factorization)
         return res
 
     def _lagged_step(self, model, q_guess, params, label, q_start):
@@ -436,7 +467,7 @@ class Indentation:
         ``history`` [(travel, q)], secant-predicted: (NewtonResult, friction params, lag change)."""
         guess = self._predict(history, depth)
         guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
-        return self._lagged_step(self.model, guess, self._params_for(guess), f"indentation depth {depth:.4g} m",
+        return self._lagged_step(self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m",
                                  history[-1][1])  # fmt: skip
 
     def force_curve(self, forces) -> list[IndentationState]:
@@ -447,7 +478,7 @@ class Indentation:
 
         def step(force, _prev):
             guess = self._predict(history, force)
-            params = self._params_for(guess, indenter_force=force)
+            params = self.params_at(guess, indenter_force=force)
             q_start = history[-1][1]
             res, lagged, change = self._lagged_step(
                 self.force_model, guess, params, f"indentation force {force:.4g} N", q_start
@@ -469,13 +500,27 @@ class Indentation:
             return qb.copy()
         return qb + (qb - qa) * (value - b) / (b - a)
 
+    def travel_states(self, travels, *, solved=None, on_solve=None) -> list[tuple[float, np.ndarray]]:
+        """[(travel [m], state q)] at each of the indenter ``travels`` (increasing), solved as
+        :meth:`curve` does; see :func:`shelljax.shell3d.solve_travels` for ``solved`` and
+        ``on_solve`` (resuming and checkpointing a long run)."""
+        return solve_travels(self, travels, solved=solved, on_solve=on_solve)
+
+    def states_at_forces(self, forces, *, tolerance: float, solved=None, on_solve=None,
+                         max_solves: int = 40) -> list[tuple[float, np.ndarray]]:
+        """[(force [N], state q)] at each of the indenter ``forces`` (increasing) to within
+        ``tolerance`` [N], solved under displacement control at the travel that matches each
+        force: see :func:`shelljax.shell3d.match_forces`."""
+        return match_forces(self, forces, tolerance=tolerance, solved=solved, on_solve=on_solve,
+                            max_solves=max_solves)  # fmt: skip
+
     # ------------------------------------------------------------------------------------------
     def force_function(self, depth: float):
         """Differentiable map θ ↦ indenter force F [N] at indenter travel ``depth`` [m].
 
         θ is a dict with any of ``gauge_pressure`` [Pa], ``young_modulus`` [Pa], ``thickness`` [m]
         (others keep their values). The equilibrium is differentiated implicitly (forward and
-        reverse mode, see :func:`shelljax.solve.implicit_equilibrium`). The rest shape (and a sealed
+        reverse mode, see :func:`shelljax.shell3d.implicit_equilibrium`). The rest shape (and a sealed
         gas's reference volume) are held at their values for the nominal parameters: this is the
         sensitivity of the forward model with a fixed stress-free shape. With friction, the lagged
         anchors and normal forces of the nominal solve are held fixed too (the last load step's
@@ -492,7 +537,7 @@ class Indentation:
             p.update(theta)
             return p
 
-        def solve_host(theta):
+        def minimise_at(theta):
             q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal", cache["q"])
             cache["q"] = q.x
             return q.x
@@ -503,7 +548,7 @@ class Indentation:
         def hessian_host(q, theta):
             return model.host_hessian(q, params_of(theta), project=False)
 
-        equilibrium = implicit_equilibrium(solve_host, residual, hessian_host, model.free, model.n_dofs)
+        equilibrium = implicit_equilibrium(minimise_at, residual, hessian_host, model.free, model.n_dofs)
 
         def force(theta):
             q = equilibrium(theta)

@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..geometry import signed_volume
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -59,12 +60,6 @@ class ShellMesh:
     @property
     def n_faces(self) -> int:
         return int(self.faces.shape[0])
-
-
-def signed_volume(vertices, faces) -> float:
-    """Enclosed volume [m³] of a closed mesh (positive when its faces are oriented outward)."""
-    p = np.asarray(vertices)[np.asarray(faces)]
-    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
 
 
 def _flap_stencil(faces: np.ndarray, n_vertices: int, name: str) -> np.ndarray:

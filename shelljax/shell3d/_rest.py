@@ -10,8 +10,8 @@ matching equations (net force and torque) hold identically.
 
 Stops when max |r| ≤ ``atol`` [N]; then the forward solve from X reproduces the scan up to
 ``atol`` divided by the shell's stiffness. A failure raises NoConvergenceError with the history
-of max |r| [N]. (A plain fixed point X ← X + x_s − x*(X) was tried first and diverges: a
-pressurized membrane amplifies short-wavelength bumps of its rest shape.)
+of max |r| [N]. (A plain fixed point X ← X + x_s − x*(X) diverges: a pressurized membrane
+amplifies short-wavelength bumps of its rest shape.)
 """
 
 from __future__ import annotations
@@ -20,9 +20,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import NoConvergenceError
-from ..solve import SparseSolver
-from ._mesh import signed_volume
-from ._model import rest_jacobian_values
+from ..geometry import signed_volume
+from ._hessian import rest_jacobian_values
+from ._sparse import SparseSolver
+
+
+def _membrane_strain(scan, faces, params) -> tuple[float, float]:
+    """(small-strain membrane strain P R (1−ν) / (2 E h) [-] of the scan's equivalent sphere,
+    R = 3V/A, the scan's area A [m²])."""
+    edges1, edges2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(edges1, edges2), axis=1).sum()
+    radius = 3.0 * signed_volume(scan, faces) / area
+    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
+    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    return strain, area
 
 
 def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
@@ -32,14 +43,7 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
     gas; ``params``: its parameters (gauge pressure P_g [Pa], E [Pa], ν, h [m]); ``atol`` [N].
     """
     scan = np.asarray(scan, dtype=np.float64)
-    mesh = model.mesh
-    area = 0.5 * np.linalg.norm(
-        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
-        axis=1,
-    ).sum()
-    radius = 3.0 * signed_volume(scan, mesh.faces) / area
-    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    strain, _ = _membrane_strain(scan, model.mesh.faces, params)
     centroid = scan.mean(axis=0)
     rest = centroid + (scan - centroid) / (1.0 + strain)
     q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
@@ -66,7 +70,7 @@ def _newton_rest(model, scan, q_scan, rest, params, atol, max_iter, final):
             return rest
         data = rest_jacobian_values(jnp.asarray(scan), jnp.asarray(rest), stencil, params, pattern)
         jac = pattern.matrix(data)
-        step = SparseSolver(jac).solve(-r)
+        step = SparseSolver(jac).apply_inverse(-r)
         # Backtrack on the residual norm: the first steps can overshoot on stiff short modes.
         alpha, r_norm = 1.0, np.linalg.norm(r)
         for _ in range(20):
@@ -97,20 +101,12 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     stalls. The fixed point s ← s (V_scan / V(s))^(1/3) contracts by about the membrane strain.
     """
     scan = np.asarray(scan, dtype=np.float64)
-    mesh = model.mesh
-    v_scan = signed_volume(scan, mesh.faces)
-    area = 0.5 * np.linalg.norm(
-        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
-        axis=1,
-    ).sum()
-    radius = 3.0 * v_scan / area
+    v_scan = signed_volume(scan, model.mesh.faces)
+    strain, area = _membrane_strain(scan, model.mesh.faces, params)
     p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
     if p["gauge_pressure"] > 0:
-        # A force residual δ [N] per vertex moves the volume by about 3 × strain × δ / (p A_v)
-        # (relative), with p A_v the vertex's pressure load. The caller's atol scales with the
-        # object's size, not with A_v, so on fine meshes (80k faces) or with a loose tolerance the
-        # forward solves stopped before the volume could reach rtol and the fixed point stalled.
+        # A force residual δ per vertex moves the volume by ≈ 3 strain δ / (p A_v): bound δ so
+        # that the volume can reach rtol on fine meshes, whose vertex loads p A_v are small.
         atol = min(atol, rtol * p["gauge_pressure"] * area / len(scan))
     bottom = int(np.argmin(scan[:, 2]))
     anchor = scan[bottom].copy()  # the pinned bottom vertex stays put
@@ -119,7 +115,7 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     history = []
     for _ in range(max_iter):
         rest = anchor + (scan - anchor) * scale
-        q = model.with_rest(rest).solve(q, params, atol=atol, name="rest-scale forward solve").x
+        q = model.with_rest(rest).equilibrium(q, params, atol=atol, name="rest-scale forward solve").x
         vol = float(model.volume(jnp.asarray(q)))
         history.append(abs(vol / v_scan - 1.0))
         if history[-1] <= rtol:
