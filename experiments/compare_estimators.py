@@ -1,6 +1,6 @@
 """Closed form vs fit vs bayes on virtual experiments from the 3D engine (issue 4, item 3).
 
-Sessions: ``experiments/make_virtual_sessions.py`` (noise-free 3D curves bundled in
+Sessions: ``shelljax.virtual`` (noise-free 3D curves bundled in
 ``shelljax/data/virtual/curves.json``, noisy sessions drawn reproducibly). For P_g [Pa] and E [Pa]
 and each method it reports, over sessions, the bias (mean relative error), the median |relative
 error|, the RMS relative error and the 95 %-interval coverage of the truth. Methods:
@@ -32,17 +32,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_virtual_sessions import (  # noqa: E402
+from shelljax.paper import PAPER_FORCES as FORCES
+from shelljax.virtual import (
     CURVES_PATH,
-    FORCES,
+    QUANTITIES,
     calibration_sessions,
     draw_sessions,
     load_curves,
     noise_free_session,
+    summarise,
 )
-
-QUANTITIES = ("gauge_pressure", "young_modulus")
 
 
 def _record(est, truth: float) -> dict:
@@ -50,21 +49,6 @@ def _record(est, truth: float) -> dict:
     return {"value": est.value, "std": est.std, "ci95": [lo, hi], "rel_error": est.value / truth - 1.0,
             "covered": bool(lo <= truth <= hi)}  # fmt: skip
 
-
-def summarise(rows: list[dict], method: str) -> dict:
-    """Bias, median |rel. err.|, RMS rel. err. and coverage per quantity for ``method``."""
-    out = {}
-    for q in QUANTITIES:
-        recs = [r[method][q] for r in rows if method in r and isinstance(r[method], dict) and q in r[method]]
-        if not recs:
-            continue
-        err = np.array([x["rel_error"] for x in recs])
-        cov = np.array([x["covered"] for x in recs])
-        out[q] = {"n": int(err.size), "bias": float(err.mean()), "median_abs": float(np.median(np.abs(err))),
-                  "rms": float(np.sqrt(np.mean(err**2))), "coverage95": float(cov.mean())}  # fmt: skip
-    failed = sum(1 for r in rows if isinstance(r.get(method), dict) and "error" in r[method])
-    out["failed"] = failed
-    return out
 
 
 NOISE_FREE_DEPTH_NOISE = 1e-3  # [m]: σ_w assumed by the noise-free fits; it only scales their Laplace errors
@@ -128,7 +112,7 @@ def main(argv=None):
 
     import shelljax  # noqa: F401  (float64)
 
-    # Same guard as make_virtual_sessions.py: XLA CPU async dispatch wedged long runs on this box.
+    # Synchronous dispatch: XLA:CPU wedged long runs (docs/shell3d.md, *XLA:CPU hangs*).
     jax.config.update("jax_cpu_enable_async_dispatch", False)
     from tqdm import tqdm
 
