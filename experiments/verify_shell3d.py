@@ -39,7 +39,7 @@ def sphere_model(mesh):
 
 
 def params(h, p, nu=NU):
-    return {k: jnp.asarray(v) for k, v in dict(young_modulus=E, poisson_ratio=nu, thickness=h, gauge_pressure=p).items()}
+    return s3.ShellParams(young_modulus=E, poisson_ratio=nu, thickness=h, gauge_pressure=p)
 
 
 def p_exact(lam, h, nu=NU):

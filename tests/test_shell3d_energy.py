@@ -15,9 +15,7 @@ E, NU, H = 1.0e6, 0.3, 1.0e-3
 
 
 def _params(**kw):
-    p = dict(young_modulus=E, poisson_ratio=NU, thickness=H, gauge_pressure=500.0)
-    p.update(kw)
-    return {k: jnp.asarray(v) for k, v in p.items()}
+    return s3.ShellParams(young_modulus=E, poisson_ratio=NU, thickness=H, gauge_pressure=500.0).replace(**kw)
 
 
 def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
@@ -110,7 +108,7 @@ def test_scaled_sphere_energies_match_analytic_values():
     x = jnp.asarray(q[:-3].reshape(-1, 3))
     from shelljax.shell3d._energy import elastic_energy
 
-    tiny = dict(p0, thickness=jnp.asarray(1e-9))  # bending ∝ h³ vanishes; membrane ∝ h
+    tiny = p0.replace(thickness=1e-9)  # bending ∝ h³ vanishes; membrane ∝ h
     e_m = float(elastic_energy(x, tiny, model.geometry)) * H / 1e-9
     np.testing.assert_allclose(e_m, area * w_m, rtol=1e-9)
     e_total = float(elastic_energy(x, p0, model.geometry))

@@ -25,7 +25,7 @@ def _sphere_model(mesh):
 
 
 def _params(h, p):
-    return {k: jnp.asarray(v) for k, v in dict(young_modulus=E, poisson_ratio=NU, thickness=h, gauge_pressure=p).items()}
+    return s3.ShellParams(young_modulus=E, poisson_ratio=NU, thickness=h, gauge_pressure=p)
 
 
 def compressible_pressure(lam, h, radius):

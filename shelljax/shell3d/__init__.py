@@ -26,6 +26,7 @@ from ._indent import Indentation, IndentationState, Shell, ball, load
 from ._mesh import ShellMesh, random_sphere_mesh, sphere_mesh
 from ._model import EquilibriumProblem, ShellModel, rigid_mode_pins
 from ._newton import AbstractEnergyProblem, NewtonResult, newton
+from ._params import ShellParams
 from ._observables import observables
 from ._rest import solve_rest_shape
 from ._search import match_forces, solve_travels

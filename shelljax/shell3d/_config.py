@@ -93,9 +93,6 @@ def split_dofs(q, config: ModelConfig):
     return q[:n3].reshape(-1, 3), q[n3:]
 
 
-FRICTION_KEYS = ("friction_anchor", "friction_normal_force", "friction_coefficient")
-
-
 def jit_config(config: ModelConfig) -> ModelConfig:
     """``config`` with μ > 0 normalised to 1 (μ then travels in ``params``): the compile key."""
     if not config.contact.has_friction:

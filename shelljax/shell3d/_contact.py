@@ -60,14 +60,14 @@ def plane_normal_forces(x, plane, geometry, config) -> Float[Array, " V"]:
 
 
 def friction_data(params, config):
-    keys = ("friction_anchor", "friction_normal_force")
-    missing = [key for key in keys if key not in params]
+    """(lagged anchors (V, 3) [m], lagged normal forces (n_planes, V) [N]) of ``params``."""
+    missing = [key for key in ("friction_anchor", "friction_normal_force") if getattr(params, key) is None]
     if missing:
         raise InvalidInputError(
             f"params: friction μ = {config.contact.friction} needs {missing} (lagged vertex positions "
             "(V, 3) [m] and normal forces (n_planes, V) [N]); Indentation sets them, or use μ = 0."
         )
-    return params["friction_anchor"], params["friction_normal_force"]
+    return params.friction_anchor, params.friction_normal_force
 
 
 def vertex_friction(y, anchor, lam, normal, mu, contact: ContactConfig):
@@ -77,9 +77,9 @@ def vertex_friction(y, anchor, lam, normal, mu, contact: ContactConfig):
     return friction_energy(slip, lam, mu, contact.friction_slip_tolerance)
 
 
-
 def friction_coefficient(params, config):
-    return params.get("friction_coefficient", config.contact.friction)
+    """Coulomb μ [-]: the traced one of ``params`` if set, else the config's."""
+    return config.contact.friction if params.friction_coefficient is None else params.friction_coefficient
 
 
 

@@ -28,7 +28,6 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from ..physics import (
-    ATMOSPHERIC_PRESSURE,
     adiabatic_gas_energy,
     bending_density,
     isothermal_gas_energy,
@@ -156,11 +155,11 @@ def volume(x: Float[Array, "V 3"], stencil) -> Float[Array, ""]:
 
 def gas_energy(vol, params, config: ModelConfig):
     """Gas potential Π(V) [J] (see :mod:`shelljax.physics._gas`)."""
-    p_g = params["gauge_pressure"]
+    p_g = params.gauge_pressure
     if config.gas == "prescribed":
         return prescribed_pressure_energy(vol, p_g)
-    p_atm = params.get("atmospheric_pressure", ATMOSPHERIC_PRESSURE)
-    v0 = params["reference_volume"]
+    p_atm = params.outside_pressure
+    v0 = params.reference_volume
     if config.gas == "isothermal":
         return isothermal_gas_energy(vol, v0, p_g, atmospheric_pressure=p_atm)
     return adiabatic_gas_energy(vol, v0, p_g, config.heat_capacity_ratio, atmospheric_pressure=p_atm)
@@ -178,7 +177,7 @@ def elastic_energy(x, params, geometry):
     p = x[geometry.stencil]
     e = jax.vmap(face_energy, in_axes=(0, 0, 0, 0, None, None, None, None))(
         p, geometry.rest_metric, geometry.rest_curvature, geometry.rest_area,
-        params["thickness"], params["young_modulus"], params["poisson_ratio"], 0.0,
+        params.thickness, params.young_modulus, params.poisson_ratio, 0.0,
     )
     return jnp.sum(e)
 
@@ -195,12 +194,12 @@ def total_energy(q, params, geometry: ShellGeometry, config: ModelConfig):
     if config.contact.has_friction:
         e = e + friction_potential(x, params, config)
     if config.force_control:
-        e = e + params["indenter_force"] * c[2]
-    if "nodal_forces" in params:
-        e = e - jnp.sum(params["nodal_forces"] * x)
-    if "mass" in params:
+        e = e + params.indenter_force * c[2]
+    if params.nodal_forces is not None:
+        e = e - jnp.sum(params.nodal_forces * x)
+    if params.mass is not None:
         weights = geometry.vertex_area / jnp.sum(geometry.vertex_area)
-        e = e + params["mass"] * GRAVITY * jnp.sum(weights * x[:, 2])
+        e = e + params.mass * GRAVITY * jnp.sum(weights * x[:, 2])
     return e
 
 

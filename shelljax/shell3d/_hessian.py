@@ -58,7 +58,7 @@ def _face_hessian_kernel(q, params, geometry, config):
     vol = volume(x, geometry.stencil)
     pressure = -jax.grad(gas_energy)(vol, params, config)
     face_hess = jax.hessian(lambda p, *rest: face_energy(p.reshape(6, 3), *rest))
-    material = (params["thickness"], params["young_modulus"], params["poisson_ratio"], pressure)
+    material = (params.thickness, params.young_modulus, params.poisson_ratio, pressure)
     faces = (x[geometry.stencil].reshape(-1, 18), geometry.rest_metric, geometry.rest_curvature, geometry.rest_area)
     return (lambda face: face_hess(*face, *material)), faces
 
@@ -249,7 +249,7 @@ def rest_jacobian_values(x, rest, stencil, params, pattern):
     scatter deadlocked XLA:CPU (docs/shell3d.md, *XLA:CPU hangs*).
     """
     blocks = np.asarray(
-        _rest_jacobian_blocks(x, rest, stencil, params["thickness"], params["young_modulus"], params["poisson_ratio"])
+        _rest_jacobian_blocks(x, rest, stencil, params.thickness, params.young_modulus, params.poisson_ratio)
     )
     return pattern.assemble_host(0, blocks)
 

@@ -44,6 +44,7 @@ from ._implicit import implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
 from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
+from ._params import ShellParams
 from ._rest import solve_rest_scale, solve_rest_shape
 from ._search import match_forces, solve_travels
 from ._sparse import release_factorizations
@@ -231,16 +232,9 @@ class Indentation:
         scan = self._place_scan(shell.mesh, contact, activation_distance)
         self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
         self.max_step = max_step or 0.02 * self.size
-        self.base_params = {
-            "young_modulus": jnp.asarray(float(young_modulus)),
-            "poisson_ratio": jnp.asarray(float(poisson_ratio)),
-            "thickness": jnp.asarray(float(shell.thickness)),
-            "gauge_pressure": jnp.asarray(float(gauge_pressure)),
-            "indenter_center": jnp.zeros(3),
-            "indenter_force": jnp.asarray(0.0),
-        }
-        if mass is not None:
-            self.base_params["mass"] = jnp.asarray(float(mass))
+        #: The model parameters at the indenter's start (:class:`ShellParams`, SI).
+        self.base_params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness),
+                                       float(gauge_pressure), mass=None if mass is None else float(mass))  # fmt: skip
         self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
         self._fixed = rigid_mode_pins(scan)
         self._reference_state(scan, rest_shape, gas, indenter_radius)
@@ -277,7 +271,7 @@ class Indentation:
         mesh = self.shell.mesh
         free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), free_fixed)
         q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
-        pressurized = float(self.base_params["gauge_pressure"]) > 0
+        pressurized = float(self.base_params.gauge_pressure) > 0
         if rest_shape == "exact" and pressurized:
             self.rest = solve_rest_shape(free_model, scan, self.base_params, atol=self.atol)
         elif rest_shape == "solve" and pressurized:
@@ -294,8 +288,8 @@ class Indentation:
         # model's compilation, until that model's first factorization.
         release_factorizations()
         if gas != "prescribed":
-            self.base_params["reference_volume"] = jnp.asarray(self.reference_volume)
-            self.base_params["atmospheric_pressure"] = jnp.asarray(ATMOSPHERIC_PRESSURE)
+            self.base_params = self.base_params.replace(reference_volume=self.reference_volume,
+                                                        atmospheric_pressure=ATMOSPHERIC_PRESSURE)  # fmt: skip
         x_ref = ref.x[:-3].reshape(-1, 3)
         self.top_height = float(x_ref[self.top, 2])
         self.indenter_radius = float(indenter_radius)
@@ -313,7 +307,7 @@ class Indentation:
         other.model = self.model.with_config(dataclasses.replace(self.model.config, contact=contact))
         other.friction = contact.friction
         other._force_model = None
-        other._kept_factorizations = {}
+        other._kept_factorization = (None, None)
         return other
 
     @property
@@ -327,14 +321,11 @@ class Indentation:
         return self._force_model
 
     # ------------------------------------------------------------------------------------------
-    def params_at(self, q, **extra) -> dict:
-        """The model parameters (SI; :mod:`shelljax.shell3d._model`) at state ``q`` (3V + 3,) [m]:
-        the simulation's, with the indenter center of ``q`` and the ``extra`` entries (e.g. a
-        state's lagged ``friction`` data, or ``indenter_force`` [N])."""
-        p = dict(self.base_params)
-        p["indenter_center"] = jnp.asarray(q[-3:])
-        p.update({k: jnp.asarray(v) for k, v in extra.items()})
-        return p
+    def params_at(self, q, **extra) -> ShellParams:
+        """The model parameters (:class:`ShellParams`, SI) at state ``q`` (3V + 3,) [m]: the
+        simulation's, with the indenter center of ``q`` and the ``extra`` entries (e.g. a state's
+        lagged ``friction`` data, or ``indenter_force`` [N])."""
+        return self.base_params.replace(indenter_center=q[-3:], **extra)
 
     _params_for = params_at  # the old private name, still used by tests/_balance.py
 
@@ -384,7 +375,7 @@ class Indentation:
             "friction_anchor": np.array(q_start[:-3].reshape(-1, 3)),
             "friction_normal_force": model.plane_normal_forces(q_start),
         }
-        res = self._step(model, q_guess, {**params, **lagged}, label, q_start)
+        res = self._step(model, q_guess, params.replace(**lagged), label, q_start)
         iterations, factorizations, products = res.iterations, res.factorizations, res.products
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.x)
@@ -393,7 +384,7 @@ class Indentation:
             if change < FRICTION_LAG_TOLERANCE or k == self.friction_iterations:
                 break
             lagged = {**lagged, "friction_normal_force": current}
-            res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})", res.x)
+            res = self._step(model, res.x, params.replace(**lagged), f"{label} (friction lag {k + 1})", res.x)
             iterations += res.iterations
             factorizations += res.factorizations
             products += res.products
@@ -531,11 +522,7 @@ class Indentation:
         cache = {"q": state0.q}
 
         def params_of(theta):
-            p = dict(self.base_params)
-            p["indenter_center"] = jnp.asarray(state0.q[-3:])
-            p.update({k: jnp.asarray(v) for k, v in state0.friction.items()})
-            p.update(theta)
-            return p
+            return self.params_at(state0.q, **state0.friction).replace(**theta)
 
         def minimise_at(theta):
             q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal", cache["q"])

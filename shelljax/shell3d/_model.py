@@ -15,16 +15,7 @@ smoothed lagged Coulomb friction against the planes (:func:`shelljax.physics.fri
 μ [-] and the slip tolerance ε [m] of f₀ are set in :class:`ContactConfig`, the anchors x̂ and the
 lagged normal forces λ are parameters; P_p = I − n nᵀ keeps the slip in the plane.
 
-Parameters that can be differentiated live in a dict ``params`` (SI units):
-``young_modulus`` [Pa], ``poisson_ratio`` [-], ``thickness`` [m], ``gauge_pressure`` [Pa]
-(prescribed, or the sealed gas's gauge pressure at ``reference_volume`` [m³]),
-``indenter_center`` (3,) [m], ``indenter_force`` [N], ``nodal_forces`` (V, 3) [N], ``mass`` [kg];
-with friction (μ > 0 and planes) also ``friction_anchor`` (V, 3) [m] (lagged vertex positions, the
-origin of the slip) and ``friction_normal_force`` (n_planes, V) [N] (lagged normal contact force
-magnitude of every vertex on every plane, see :meth:`ShellModel.plane_normal_forces`), and
-optionally ``friction_coefficient`` [-], which overrides the config's μ (differentiable; the host
-functions of :class:`ShellModel` pass the config's μ this way, so that models differing only in
-μ > 0 share one compilation).
+Parameters that can be differentiated are a :class:`ShellParams` (SI units).
 """
 
 from __future__ import annotations
@@ -36,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._config import FRICTION_KEYS, ModelConfig, check_config, jit_config, split_dofs
+from ._config import ModelConfig, check_config, jit_config, split_dofs
 from ._contact import BARRIER_STEP_FRACTION, body_gaps, n_bodies, place_at_gaps
 from ._contact import stacked_friction_forces, stacked_plane_normal_forces
 from ._energy import ShellGeometry, energy_gradient, gauge_pressure, make_geometry, search_energy, total_energy, volume
@@ -55,6 +46,7 @@ from ._hessian import (
 )
 from ._mesh import ShellMesh
 from ._newton import AbstractEnergyProblem, NewtonResult, newton
+from ._params import FRICTION_FIELDS, ShellParams
 from ._sparse import SparseSolver, SparsityPattern
 
 
@@ -152,7 +144,7 @@ class ShellModel(eqx.Module):
         return np.asarray(stacked_friction_forces(jnp.asarray(q), self.host_params(params), self.jit_config))
 
     # --- host functions for Newton --------------------------------------------------------------
-    def host_params(self, params):
+    def host_params(self, params: ShellParams) -> ShellParams:
         """``params`` as arrays, with the config's μ as a traced value (see :func:`jit_config`):
         what the compiled host functions take.
 
@@ -161,9 +153,9 @@ class ShellModel(eqx.Module):
         """
         params = jax.tree_util.tree_map(jnp.asarray, params)
         if not self.config.contact.has_friction:
-            return {k: v for k, v in params.items() if k not in FRICTION_KEYS}
-        if "friction_coefficient" not in params:
-            params = {**params, "friction_coefficient": jnp.asarray(self.config.contact.friction)}
+            return params.replace(**dict.fromkeys(FRICTION_FIELDS))
+        if params.friction_coefficient is None:
+            params = params.replace(friction_coefficient=self.config.contact.friction)
         return params
 
     _host_params = host_params  # the old private name, still used by tests/_balance.py
@@ -257,11 +249,11 @@ class EquilibriumProblem(AbstractEnergyProblem):
     """
 
     model: ShellModel
-    params: dict
+    params: ShellParams
     barrier_aids: bool
     free: np.ndarray
 
-    def __init__(self, model: ShellModel, params: dict, barrier_aids: bool = True):
+    def __init__(self, model: ShellModel, params: ShellParams, barrier_aids: bool = True):
         self.model, self.params, self.barrier_aids = model, params, barrier_aids
         self.free = model.free
 

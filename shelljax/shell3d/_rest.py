@@ -31,9 +31,9 @@ def _membrane_strain(scan, faces, params) -> tuple[float, float]:
     edges1, edges2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
     area = 0.5 * np.linalg.norm(np.cross(edges1, edges2), axis=1).sum()
     radius = 3.0 * signed_volume(scan, faces) / area
-    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
-    return strain, area
+    p, nu, e, h = (float(params.gauge_pressure), float(params.poisson_ratio), float(params.young_modulus),
+                   float(params.thickness))  # fmt: skip
+    return p * radius * (1 - nu) / (2 * e * h), area
 
 
 def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
@@ -49,9 +49,9 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
     q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
     # Continuation in pressure: at full pressure, Newton from the small-strain guess can stall on
     # coarse meshes; each level starts from the previous level's rest shape.
-    target = float(np.asarray(params["gauge_pressure"]))
+    target = float(params.gauge_pressure)
     for level in (0.25, 0.5, 0.75, 1.0):
-        level_params = dict(params, gauge_pressure=jnp.asarray(target * level))
+        level_params = params.replace(gauge_pressure=target * level)
         rest = _newton_rest(model, scan, q_scan, rest, level_params, atol, max_iter, level == 1.0)
     return rest
 
@@ -103,11 +103,11 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     scan = np.asarray(scan, dtype=np.float64)
     v_scan = signed_volume(scan, model.mesh.faces)
     strain, area = _membrane_strain(scan, model.mesh.faces, params)
-    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    if p["gauge_pressure"] > 0:
+    pressure = float(params.gauge_pressure)
+    if pressure > 0:
         # A force residual δ per vertex moves the volume by ≈ 3 strain δ / (p A_v): bound δ so
         # that the volume can reach rtol on fine meshes, whose vertex loads p A_v are small.
-        atol = min(atol, rtol * p["gauge_pressure"] * area / len(scan))
+        atol = min(atol, rtol * pressure * area / len(scan))
     bottom = int(np.argmin(scan[:, 2]))
     anchor = scan[bottom].copy()  # the pinned bottom vertex stays put
     scale = 1.0 / (1.0 + strain)
