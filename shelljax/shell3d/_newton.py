@@ -84,6 +84,9 @@ class AbstractEnergyProblem(eqx.Module):
 
     hessian_operator = None
     feasible_trial = None
+    #: Whether ``hessian`` is symmetric: Newton then factorizes it by Cholesky and falls back to the
+    #: PSD-projected and shifted Hessians; otherwise (a root problem) by LU, without fallback.
+    symmetric = True
 
     @abc.abstractmethod
     def energy(self, x: np.ndarray) -> float:
@@ -97,6 +100,43 @@ class AbstractEnergyProblem(eqx.Module):
     def hessian(self, x: np.ndarray, gradient: tuple[np.ndarray, Any], project: bool):
         """(csr_matrix with the fixed dofs folded in, rank_one (c, u) for an extra c u uᵀ or None);
         with ``project``, the per-element PSD-projected Hessian."""
+
+    def slope(self, gradient: np.ndarray, direction: np.ndarray) -> float:
+        """Directional derivative of the energy along ``direction`` (``gradient``: the masked one)."""
+        return float(gradient @ direction)
+
+
+class AbstractRootProblem(AbstractEnergyProblem):
+    """Equations r(x) = 0 over the ``free`` dofs with a sparse, possibly nonsymmetric Jacobian,
+    solved by the same Newton: its energy is the merit ½‖r‖², its steps d = −J⁻¹ r (along which the
+    merit's slope is −‖r‖²), and it converges on max |r| [the unit of r].
+
+    Subclasses define ``residual(x) -> r (n,)`` and ``jacobian(x) -> csr_matrix`` (fixed dofs
+    folded in). Each energy evaluation computes r: the line search's decrease test is on ‖r‖.
+    """
+
+    symmetric = False
+
+    @abc.abstractmethod
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """r(x) (n,), unmasked."""
+
+    @abc.abstractmethod
+    def jacobian(self, x: np.ndarray):
+        """∂r/∂x as a csr_matrix with the fixed dofs folded in."""
+
+    def energy(self, x):
+        r = np.where(self.free, self.residual(x), 0.0)
+        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
+
+    def gradient(self, x):
+        return self.residual(x), None
+
+    def hessian(self, x, gradient, project):
+        return self.jacobian(x), None
+
+    def slope(self, gradient, direction):
+        return -float(gradient @ gradient)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,13 +237,13 @@ class _NewtonRun:
         """(step, slope g·step, whether a kept factorization gave it): a descent direction."""
         if self.reusable is not None:
             d = self._reused_direction()
-            if d is not None and np.all(np.isfinite(d)) and float(self.g @ d) < 0.0:
-                return d, float(self.g @ d), True
-        for mode in ("exact", "projected", "shifted"):
+            if d is not None and np.all(np.isfinite(d)) and self.problem.slope(self.g, d) < 0.0:
+                return d, self.problem.slope(self.g, d), True
+        for mode in ("exact", "projected", "shifted") if self.problem.symmetric else ("exact",):
             d = self._factorized_direction(mode)
             if d is None:
                 continue
-            slope = float(self.g @ d)
+            slope = self.problem.slope(self.g, d)
             if np.all(np.isfinite(d)) and slope < 0.0:
                 return d, slope, False
         raise NoConvergenceError(
@@ -234,7 +274,8 @@ class _NewtonRun:
             if mode == "shifted":
                 diag = np.abs(mat.diagonal())
                 mat = mat + 1e-3 * np.mean(diag) * sp.identity(mat.shape[0], format="csr")
-            self.solver = SparseSolver(mat, rank_one, symmetric=True, definite=True)
+            symmetric = self.problem.symmetric
+            self.solver = SparseSolver(mat, rank_one, symmetric=symmetric, definite=symmetric)
             self.factorizations += 1
             d = -self.solver.apply_inverse(self.g)
         except NoConvergenceError:
@@ -322,4 +363,4 @@ def _on_course(start: float, remaining: float, target: float, used: int) -> bool
     return rate < 1.0 and used + np.log(target / remaining) / np.log(rate) <= CG_MAX_ITERATIONS
 
 
-__all__ = ["AbstractEnergyProblem", "NewtonResult", "newton"]
+__all__ = ["AbstractEnergyProblem", "AbstractRootProblem", "NewtonResult", "newton"]

@@ -22,7 +22,9 @@ import numpy as np
 from .._errors import NoConvergenceError
 from ..geometry import signed_volume
 from ._hessian import rest_jacobian_values
-from ._sparse import SparseSolver
+from ._model import ShellModel
+from ._newton import AbstractRootProblem, newton
+from ._params import ShellParams
 
 
 def _membrane_strain(scan, faces, params) -> tuple[float, float]:
@@ -56,38 +58,52 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
     return rest
 
 
+class RestShapeProblem(AbstractRootProblem):
+    """r(X) = ∇ₓE(x_s; X) [N] on the free dofs, as a function of the rest vertices X (flattened, with
+    the model's 3 indenter dofs, fixed, at the end), at the scan's state ``q_scan``."""
+
+    model: ShellModel
+    scan: np.ndarray
+    q_scan: np.ndarray
+    params: ShellParams
+    free: np.ndarray
+
+    def __init__(self, model: ShellModel, scan, q_scan, params: ShellParams):
+        self.model, self.scan, self.q_scan, self.params = model, scan, q_scan, params
+        self.free = model.free
+
+    def _rest(self, x) -> np.ndarray:
+        return x[: 3 * self.model.mesh.n_vertices].reshape(-1, 3)
+
+    def residual(self, x) -> np.ndarray:
+        return self.model.with_rest(self._rest(x)).host_gradient(self.q_scan, self.params)
+
+    def jacobian(self, x):
+        stencil = jnp.asarray(self.model.mesh.stencil)
+        data = rest_jacobian_values(jnp.asarray(self.scan), jnp.asarray(self._rest(x)), stencil, self.params,
+                                    self.model.pattern)  # fmt: skip
+        return self.model.pattern.matrix(data)
+
+
 def _newton_rest(model, scan, q_scan, rest, params, atol, max_iter, final):
-    mesh = model.mesh
-    free = model.free
-    n3 = 3 * mesh.n_vertices
-    pattern = model.pattern
-    stencil = jnp.asarray(mesh.stencil)
-    history = []
-    for _ in range(max_iter):
-        r = np.where(free, model.with_rest(rest).host_gradient(q_scan, params), 0.0)
-        history.append(float(np.max(np.abs(r))))
-        if history[-1] <= atol or (not final and history[-1] <= 1e3 * atol):
-            return rest
-        data = rest_jacobian_values(jnp.asarray(scan), jnp.asarray(rest), stencil, params, pattern)
-        jac = pattern.matrix(data)
-        step = SparseSolver(jac).apply_inverse(-r)
-        # Backtrack on the residual norm: the first steps can overshoot on stiff short modes.
-        alpha, r_norm = 1.0, np.linalg.norm(r)
-        for _ in range(20):
-            trial = rest + alpha * step[:n3].reshape(-1, 3)
-            r_try = np.where(free, model.with_rest(trial).host_gradient(q_scan, params), 0.0)
-            if np.all(np.isfinite(r_try)) and np.linalg.norm(r_try) < r_norm:
-                break
-            alpha *= 0.5
-        else:
-            break
-        rest = trial
-    raise NoConvergenceError(
-        f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
-        f"{history[-1]:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
-        "E and h.",
-        history,
-    )
+    """Newton on the rest vertices from ``rest`` to max |r| ≤ ``atol`` [N] (1000 ``atol`` unless
+    ``final``: a pressure level on the way only needs to get close). Backtracking on ‖r‖: the first
+    steps can overshoot on stiff short modes."""
+    problem = RestShapeProblem(model, scan, q_scan, params)
+    x0 = np.concatenate([np.asarray(rest).ravel(), np.zeros(3)])
+    try:
+        res = newton(problem, x0, atol=atol if final else 1e3 * atol, max_iter=max_iter, max_halvings=20,
+                     armijo=0.0, reuse_factorization=False, name="rest shape")  # fmt: skip
+    except NoConvergenceError as err:
+        history = err.history
+        last = history[-1] if history else float("nan")
+        raise NoConvergenceError(
+            f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
+            f"{last:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
+            "E and h.",
+            history,
+        ) from err
+    return problem._rest(res.x)
 
 
 def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, max_iter: int = 20):
