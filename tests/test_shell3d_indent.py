@@ -13,6 +13,7 @@ from shelljax.physics import ATMOSPHERIC_PRESSURE
 from shelljax.shell3d import EquilibriumProblem, SparseSolver
 from shelljax.shell3d._contact import BARRIER_STEP_FRACTION, body_gaps
 from shelljax.shell3d._energy import GRAVITY
+from shelljax.shell3d._steps import feasible_start
 
 from _balance import net_vertical_residual
 
@@ -186,7 +187,7 @@ def test_rim_refinement_on_ring_and_irregular_meshes():
 
 def test_newton_start_keeps_the_converged_contact_gaps(sealed):
     """Vertices in the barrier's range keep their last converged gap (not ĝ/4: Newton on a log
-    barrier started far above its equilibrium gap takes damped iterations, see _feasible_start);
+    barrier started far above its equilibrium gap takes damped iterations, see shell3d._steps.feasible_start);
     new penetrations go to ĝ/4; every other vertex stays where the predictor put it."""
     q_prev = sealed.solve(depth=0.004).q
     ghat = sealed.activation_distance
@@ -197,7 +198,7 @@ def test_newton_start_keeps_the_converged_contact_gaps(sealed):
     outside = np.linalg.norm(x_prev - q_prev[-3:], axis=1) - sealed.indenter_radius >= ghat
     k = int(np.flatnonzero(outside)[np.argmin(np.linalg.norm(x_prev[outside] - q_prev[-3:], axis=1))])
     guess[3 * k : 3 * k + 3] = guess[-3:] + 0.5 * (x_prev[k] - guess[-3:])
-    start = sealed._feasible_start(guess, sealed.model, q_prev)
+    start = feasible_start(guess, sealed.model.config, sealed.activation_distance, q_prev)
 
     def gaps(q):
         x = q[:-3].reshape(-1, 3)
@@ -225,7 +226,7 @@ def test_line_search_projection_stops_only_the_vertices_a_step_would_drive_into_
     model = sealed.model
     guess = sealed.q_reference.copy()
     guess[-3:] = sealed.touch_center - np.array([0.0, 0.0, 0.004])
-    q = sealed._feasible_start(guess, model, sealed.q_reference)
+    q = feasible_start(guess, model.config, sealed.activation_distance, sealed.q_reference)
     params = sealed.params_at(q)
     free = model.free
     gradient = model.host_gradient(q, params)

@@ -38,7 +38,6 @@ import numpy as np
 from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE
 from ._config import ContactConfig, ModelConfig
-from ._contact import body_gaps, place_at_gaps
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
@@ -47,6 +46,7 @@ from ._observables import observables as _observables
 from ._params import ShellParams
 from ._rest import solve_rest_scale, solve_rest_shape
 from ._search import match_forces, solve_travels
+from ._steps import accumulate_slip, feasible_start, initial_slip, secant_predict
 from ._sparse import release_factorizations
 from ._wrinkles import wrinkle_spectrum
 
@@ -329,33 +329,8 @@ class Indentation:
 
     _params_for = params_at  # the old private name, still used by tests/_balance.py
 
-    def _feasible_start(self, q, model, q_prev=None):
-        """Newton's start from the guess ``q``: the barrier energy finite and near equilibrium.
-
-        A vertex that was within the barrier's range ĝ of a body in the converged state
-        ``q_prev`` gets back the gap it had there; any other vertex closer than ĝ/4 to a body (or
-        inside it) is put at ĝ/4. Why not ĝ/4 for all: vertices pressed by the indenter sit at
-        gaps of a few µm (ĝ/100 and less), and Newton on a log barrier started far above its
-        equilibrium gap g* can only take steps of length ≈ g*/g (longer ones cross the body),
-        which cost 4–5 damped iterations of the whole shell per load step. A vertex's contact
-        force changes little from one load step to the next, and so does its gap.
-        """
-        if model.config.contact.kind != "barrier":
-            return q
-        ghat = self.activation_distance
-        floor = 0.25 * ghat
-        gaps_prev = None if q_prev is None else body_gaps(q_prev, model.config)
-
-        def target(body, gap):
-            goal = np.where(gap < floor, floor, np.nan)
-            if gaps_prev is not None:
-                goal = np.where(gaps_prev[body] < ghat, np.maximum(gaps_prev[body], 1e-6 * ghat), goal)
-            return goal
-
-        return place_at_gaps(q, model.config, target)
-
     def _step(self, model, q_guess, params, label, q_prev=None):
-        q0 = self._feasible_start(q_guess, model, q_prev)
+        q0 = feasible_start(q_guess, model.config, self.activation_distance, q_prev)
         # The last load step's last factorization preconditions this one (same control mode only).
         control = "force" if model.config.force_control else "depth"
         kept_control, kept = self._kept_factorization
@@ -391,20 +366,6 @@ class Indentation:
         res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations, products=products)
         return res, lagged, change
 
-    def _accumulate_slip(self, slip, q_start, q_end):
-        """Add the tangential motion of the vertices touching the ground at ``q_end`` to ``slip``."""
-        if slip is None:
-            return None
-        point, normal = (np.asarray(v, dtype=np.float64) for v in self.model.config.contact.planes[0])
-        x0, x1 = q_start[:-3].reshape(-1, 3), q_end[:-3].reshape(-1, 3)
-        touching = (x1 - point) @ normal < self.activation_distance
-        d = x1 - x0
-        d = d - (d @ normal)[:, None] * normal
-        return slip + np.where(touching[:, None], d, 0.0)
-
-    def _initial_slip(self):
-        return np.zeros((self.model.mesh.n_vertices, 3)) if self.model.config.contact.planes else None
-
     def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
         """Equilibrium at indenter travel ``depth`` [m] (from first touch) or at ``force`` [N]."""
         if (depth is None) == (force is None):
@@ -434,13 +395,13 @@ class Indentation:
         if any(b < a for a, b in zip(depths[:-1], depths[1:])) or depths[0] < 0:
             raise InvalidInputError("depths: must be non-negative and increasing.")
         history = [(0.0, self.q_reference)]
-        slip = [self._initial_slip()]
+        slip = [initial_slip(self.model.config)]
 
         def step(depth, _prev):
             for d in self._substeps(history[-1][0], depth):
                 q_start = history[-1][1]
                 res, lagged, change = self._depth_step(history, d)
-                slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
+                slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
                 history.append((d, res.x))
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
                                     res.factorizations, res.products)  # fmt: skip
@@ -456,7 +417,7 @@ class Indentation:
     def _depth_step(self, history, depth: float):
         """One displacement-controlled load step to travel ``depth`` [m] from the last state of
         ``history`` [(travel, q)], secant-predicted: (NewtonResult, friction params, lag change)."""
-        guess = self._predict(history, depth)
+        guess = secant_predict(history, depth)
         guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
         return self._lagged_step(self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m",
                                  history[-1][1])  # fmt: skip
@@ -465,31 +426,22 @@ class Indentation:
         """Force-controlled continuation through increasing indenter ``forces`` [N]."""
         forces = [float(f) for f in forces]
         history = [(0.0, self.q_reference)]
-        slip = [self._initial_slip()]
+        slip = [initial_slip(self.model.config)]
 
         def step(force, _prev):
-            guess = self._predict(history, force)
+            guess = secant_predict(history, force)
             params = self.params_at(guess, indenter_force=force)
             q_start = history[-1][1]
             res, lagged, change = self._lagged_step(
                 self.force_model, guess, params, f"indentation force {force:.4g} N", q_start
             )
-            slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
+            slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
             history.append((force, res.x))
             depth = float(self.touch_center[2] - res.x[-1])
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
                                     res.factorizations, res.products)  # fmt: skip
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
-
-    @staticmethod
-    def _predict(history, value):
-        if len(history) < 2:
-            return history[-1][1].copy()
-        (a, qa), (b, qb) = history[-2], history[-1]
-        if b == a:
-            return qb.copy()
-        return qb + (qb - qa) * (value - b) / (b - a)
 
     def travel_states(self, travels, *, solved=None, on_solve=None) -> list[tuple[float, np.ndarray]]:
         """[(travel [m], state q)] at each of the indenter ``travels`` (increasing), solved as
