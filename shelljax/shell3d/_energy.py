@@ -6,9 +6,9 @@ flap vertices (the face and the three vertices across its edges), taken as the h
 the face plane — the curvature of the rotation-free "basic shell triangle" family (Oñate & Zárate
 2000, Int. J. Numer. Meth. Eng. 47, 557). It reproduces the curvature of any quadratic surface
 exactly, hence is consistent on irregular meshes. The midedge-average operator of libshell
-(Grinspun et al. 2006) was tried first and rejected: on our sphere meshes its rest curvature
-ā⁻¹b̄ deviates from −I/R by up to ±16 % (icosphere) and ±75 % (graded ring mesh), which would bias
-the bending stiffness by as much. Outward normals give b ≈ −a/R on a sphere of radius R.
+(Grinspun et al. 2006) is not used: on our sphere meshes its rest curvature ā⁻¹b̄ deviates from
+−I/R by up to ±16 % (icosphere) and ±75 % (graded ring mesh), which would bias the bending
+stiffness by as much. Outward normals give b ≈ −a/R on a sphere of radius R.
 
 Energy densities come from :mod:`shelljax.physics` (shared with the axisymmetric engine); each face
 contributes ``rest_area · (W_membrane + W_bending)``.

@@ -97,7 +97,7 @@ def _parabola_peak(r, z, r0):
     """Peak (r*, z*) of z(r) from a parabola through the ring heights near r0 (ring meshes).
 
     Only the upper half of the shell is searched: a vertex near the ground can share the rim's
-    radius (on an icosphere the refinement then ran to H = 340 mm on a 260 mm ball). Without three
+    radius, and would then bend the parabola far above the ball. Without three
     real rings there (irregular meshes, or rings split by wrinkles) the highest vertex is the rim.
     """
     fallback = (r0, float(z.max()))
