@@ -25,8 +25,6 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 DEPTHS = [0.02 * (i + 1) / 7 for i in range(7)]
 
 
@@ -36,8 +34,6 @@ def run_one(n_triangles: int, repeats: int) -> dict:
     import numpy as np
 
     import shelljax.shell3d as s3
-    from shelljax.shell3d._model import _hessian_values
-    from shelljax.solve import SparseSolver
 
     t0 = time.perf_counter()
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=n_triangles)
@@ -53,31 +49,28 @@ def run_one(n_triangles: int, repeats: int) -> dict:
         warm.append(time.perf_counter() - t0)
     model = sim.model
     q = jnp.asarray(states[-1].q)
-    params = model._host_params(sim._params_for(states[-1].q))
-    args = (q, params, model.geometry, model._jit_config, model.pattern.maps, model.pattern.nnz)
-    _hessian_values(*args).block_until_ready()
+    params = model.host_params(sim.params_at(states[-1].q))
+    model.hessian_values(q, params).block_until_ready()
     reps, t0 = 5, time.perf_counter()
     for _ in range(reps):
-        _hessian_values(*args).block_until_ready()
+        model.hessian_values(q, params).block_until_ready()
     t_hess = (time.perf_counter() - t0) / reps
     try:
         # XLA's cost analysis counts a loop body once: count the flops of the face kernel over all
         # faces at once (the same arithmetic as the chunked loop that was timed).
-        from shelljax.shell3d._model import _face_hessians
-
-        cost = _face_hessians.lower(q, params, model.geometry, model._jit_config, 0, ball.mesh.n_faces)
+        cost = s3.face_hessians.lower(q, params, model.geometry, model.jit_config, 0, ball.mesh.n_faces)
         cost = cost.compile().cost_analysis()
         cost = cost[0] if isinstance(cost, (list, tuple)) else cost
         flops = float(cost.get("flops", float("nan")))
     except Exception:  # cost analysis is backend-dependent
         flops = float("nan")
-    mat, rank_one = model.host_hessian(states[-1].q, sim._params_for(states[-1].q))
-    SparseSolver(mat, rank_one, symmetric=True)  # the pattern's symbolic analysis, done once
+    mat, rank_one = model.host_hessian(states[-1].q, sim.params_at(states[-1].q))
+    s3.SparseSolver(mat, rank_one, symmetric=True)  # the pattern's symbolic analysis, done once
     t_fact = []
     for _ in range(reps):
         t0 = time.perf_counter()
-        solver = SparseSolver(mat, rank_one, symmetric=True)
-        solver.solve(np.ones(mat.shape[0]))
+        solver = s3.SparseSolver(mat, rank_one, symmetric=True)
+        solver.apply_inverse(np.ones(mat.shape[0]))
         t_fact.append(time.perf_counter() - t0)
     obs = states[-1].observables()
     return {

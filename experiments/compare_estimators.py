@@ -1,6 +1,6 @@
 """Closed form vs fit vs bayes on virtual experiments from the 3D engine (issue 4, item 3).
 
-Sessions: ``experiments/make_virtual_sessions.py`` (noise-free 3D curves bundled in
+Sessions: ``shelljax.virtual`` (noise-free 3D curves bundled in
 ``shelljax/data/virtual/curves.json``, noisy sessions drawn reproducibly). For P_g [Pa] and E [Pa]
 and each method it reports, over sessions, the bias (mean relative error), the median |relative
 error|, the RMS relative error and the 95 %-interval coverage of the truth. Methods:
@@ -32,17 +32,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_virtual_sessions import (  # noqa: E402
+from shelljax.paper import PAPER_FORCES as FORCES
+from shelljax.virtual import (
     CURVES_PATH,
-    FORCES,
+    QUANTITIES,
     calibration_sessions,
     draw_sessions,
     load_curves,
     noise_free_session,
+    summarise,
 )
-
-QUANTITIES = ("gauge_pressure", "young_modulus")
 
 
 def _record(est, truth: float) -> dict:
@@ -50,21 +49,6 @@ def _record(est, truth: float) -> dict:
     return {"value": est.value, "std": est.std, "ci95": [lo, hi], "rel_error": est.value / truth - 1.0,
             "covered": bool(lo <= truth <= hi)}  # fmt: skip
 
-
-def summarise(rows: list[dict], method: str) -> dict:
-    """Bias, median |rel. err.|, RMS rel. err. and coverage per quantity for ``method``."""
-    out = {}
-    for q in QUANTITIES:
-        recs = [r[method][q] for r in rows if method in r and isinstance(r[method], dict) and q in r[method]]
-        if not recs:
-            continue
-        err = np.array([x["rel_error"] for x in recs])
-        cov = np.array([x["covered"] for x in recs])
-        out[q] = {"n": int(err.size), "bias": float(err.mean()), "median_abs": float(np.median(np.abs(err))),
-                  "rms": float(np.sqrt(np.mean(err**2))), "coverage95": float(cov.mean())}  # fmt: skip
-    failed = sum(1 for r in rows if isinstance(r.get(method), dict) and "error" in r[method])
-    out["failed"] = failed
-    return out
 
 
 NOISE_FREE_DEPTH_NOISE = 1e-3  # [m]: σ_w assumed by the noise-free fits; it only scales their Laplace errors
@@ -92,7 +76,7 @@ def _noise_free_bias(curves, model, fit_session, out: Path):
     print(f"wrote {out}")
 
 
-def main(argv=None):
+def _parse(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--curves", type=Path, default=CURVES_PATH)
     ap.add_argument("--realisations", type=int, default=4, help="noise draws per curve and noise level")
@@ -123,92 +107,31 @@ def main(argv=None):
     ap.add_argument("--write-rows", type=Path, default=None,
                     help="also write the final per-session rows (closed form recomputed, --also merged) as JSON lines")
     args = ap.parse_args(argv)
+    return args
 
+
+def main(argv=None):
+    args = _parse(argv)
     import jax
 
     import shelljax  # noqa: F401  (float64)
 
-    # Same guard as make_virtual_sessions.py: XLA CPU async dispatch wedged long runs on this box.
+    # Synchronous dispatch: XLA:CPU wedged long runs (docs/shell3d.md, *XLA:CPU hangs*).
     jax.config.update("jax_cpu_enable_async_dispatch", False)
-    from tqdm import tqdm
-
-    from shelljax import InvalidInputError, NoConvergenceError
-    from shelljax.estimate import AxisymForwardModel, ConvergenceWarning, calibrate_ks, estimate_session, fit_session
-    from shelljax.estimate import sample_posterior
+    from shelljax.estimate import calibrate_ks, fit_session
 
     curves = load_curves(args.curves)
     sessions = draw_sessions(curves, realisations=args.realisations)
     calib = calibrate_ks(calibration_sessions(curves))
     print(f"{len(curves)} curves, {len(sessions)} sessions; calibrated k_s = {calib.k_s.value:.4f} "
           f"± {calib.k_s.std:.4f}", flush=True)  # fmt: skip
-    radius = curves[0]["radius"]
-    if any(c["radius"] != radius for c in curves):
-        raise SystemExit("all curves must share one radius (one compiled forward model)")
-    # One model for every session: the grid brackets the recorded (noisy) forces, so the compiled
-    # program is shared; w0 between grid points is linearly interpolated (docs/fit-and-bayes.md).
-    model = AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
-                                          poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law,
-                                          relax=not args.no_relax,
-                                          **({} if args.hoop_capacity is None else {"hoop_capacity": args.hoop_capacity}))  # fmt: skip
-
+    model = _forward_model(curves, args)
     if args.noise_free:
         _noise_free_bias(curves, model, fit_session, args.out)
         return
-
     log_path = args.out.with_suffix(".jsonl")
-    done = {}
-    if log_path.exists():
-        for line in log_path.read_text().splitlines():
-            r = json.loads(line)
-            done[r["name"]] = r
     t_start = time.perf_counter()
-    with log_path.open("a") as log:
-        for k, (truth, session) in enumerate(tqdm(sessions, desc="sessions", file=sys.stdout, mininterval=5)):
-            previous = done.get(truth["name"], {})
-            row = dict(truth)
-            # fit and bayes results are reused from the .jsonl; the closed form is recomputed
-            # (instant), so a k_s calibrated on a grown set of curves applies to every session.
-            row.update({m: v for m, v in previous.items()
-                        if isinstance(v, dict) and not m.startswith("closed_form")})
-            true = {q: truth[q] for q in QUANTITIES}
-            for label, ks in (() if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None))):
-                t0 = time.perf_counter()
-                cf = estimate_session(session, k_s=ks, bootstrap_samples=0) if ks is not None else \
-                    estimate_session(session, bootstrap_samples=0)  # fmt: skip
-                row[label] = {"gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
-                              "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
-                              "seconds": time.perf_counter() - t0}  # fmt: skip
-            fit_label = args.fit_label
-            if not (args.skip_fit or args.only_bayes or fit_label in row):
-                t0 = time.perf_counter()
-                try:
-                    fit = fit_session(session, model)
-                    row[fit_label] = {q: _record(fit.estimates[q], true[q]) for q in QUANTITIES}
-                    row[fit_label]["chi2"] = fit.chi2
-                    row[fit_label]["dof"] = fit.dof
-                except (NoConvergenceError, InvalidInputError) as err:
-                    row[fit_label] = {"error": str(err)[:300]}
-                row[fit_label]["seconds"] = time.perf_counter() - t0
-            if args.bayes_label not in row and truth["realisation"] < args.bayes_realisations and any(abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise):
-                t0 = time.perf_counter()
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
-                    try:
-                        post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=args.bayes_steps,
-                                                min_steps=min(1000, args.bayes_steps), seed=k, progress=False,
-                                                nuisance=tuple(args.bayes_nuisance))  # fmt: skip
-                        row[args.bayes_label] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
-                        row[args.bayes_label].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
-                                            converged=post.converged, failed_forward=post.failed_forward,
-                                            surrogate=post.surrogate)  # fmt: skip
-                    except (NoConvergenceError, InvalidInputError) as err:
-                        row[args.bayes_label] = {"error": str(err)[:300]}
-                row[args.bayes_label]["seconds"] = time.perf_counter() - t0
-            if row.keys() - previous.keys():
-                log.write(json.dumps(row) + "\n")
-                log.flush()
-            done[truth["name"]] = row
-
+    done = _run_sessions(sessions, model, calib, args, log_path)
     for extra in args.also:
         for line in extra.read_text().splitlines():
             r = json.loads(line)
@@ -217,21 +140,112 @@ def main(argv=None):
     rows = [done[t["name"]] for t, _ in sessions if t["name"] in done]
     if args.write_rows is not None:
         args.write_rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
-    methods = ("closed_form_calibrated", "closed_form_paper")
-    for family in ("fit", "bayes"):
-        methods += tuple(sorted({m for r in rows for m in r if m.startswith(family) and isinstance(r[m], dict)}))
-    summary = {m: summarise(rows, m) for m in methods}
-    print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
-          f"wrinkle law {args.wrinkle_law}; wall {time.perf_counter() - t_start:.0f} s")  # fmt: skip
-    print(f"{'method':<26}{'qty':<5}{'n':>4}{'bias':>9}{'med|err|':>10}{'RMS':>9}{'cover95':>9}")
-    for m in methods:
-        for q in QUANTITIES:
-            s = summary[m].get(q)
-            if s:
-                print(f"{m:<26}{'P_g' if q == 'gauge_pressure' else 'E':<5}{s['n']:>4}{s['bias']:>+9.3f}"
-                      f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}")  # fmt: skip
-        if summary[m].get("failed"):
-            print(f"{m:<26}failed: {summary[m]['failed']}")
+    _report(rows, curves, calib, args, time.perf_counter() - t_start)
+    print(f"wrote {args.out} (per-session rows: {log_path})")
+
+
+def _forward_model(curves, args):
+    """One axisymmetric forward model for every session: the grid brackets the recorded (noisy)
+    forces, so the compiled program is shared; w0 between grid points is linearly interpolated
+    (docs/fit-and-bayes.md)."""
+    from shelljax.estimate import AxisymForwardModel
+
+    radius = curves[0]["radius"]
+    if any(c["radius"] != radius for c in curves):
+        raise SystemExit("all curves must share one radius (one compiled forward model)")
+    return AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
+                                         poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law,
+                                         relax=not args.no_relax,
+                                         **({} if args.hoop_capacity is None else {"hoop_capacity": args.hoop_capacity}))  # fmt: skip
+
+
+def _closed_forms(row, session, true, calib, args) -> None:
+    """The closed form with the calibrated and the paper's k_s (instant: always recomputed)."""
+    from shelljax.estimate import estimate_session
+
+    for label, ks in (() if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None))):
+        t0 = time.perf_counter()
+        cf = estimate_session(session, k_s=ks, bootstrap_samples=0) if ks is not None else \
+            estimate_session(session, bootstrap_samples=0)  # fmt: skip
+        row[label] = {"gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
+                      "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
+                      "seconds": time.perf_counter() - t0}  # fmt: skip
+
+
+def _fit(row, session, true, model, args) -> None:
+    """``fit_session`` through the axisymmetric engine, unless skipped or already in ``row``."""
+    from shelljax import InvalidInputError, NoConvergenceError
+    from shelljax.estimate import fit_session
+
+    fit_label = args.fit_label
+    if args.skip_fit or args.only_bayes or fit_label in row:
+        return
+    t0 = time.perf_counter()
+    try:
+        fit = fit_session(session, model)
+        row[fit_label] = {q: _record(fit.estimates[q], true[q]) for q in QUANTITIES}
+        row[fit_label]["chi2"] = fit.chi2
+        row[fit_label]["dof"] = fit.dof
+    except (NoConvergenceError, InvalidInputError) as err:
+        row[fit_label] = {"error": str(err)[:300]}
+    row[fit_label]["seconds"] = time.perf_counter() - t0
+
+
+def _bayes(row, session, truth, true, model, args, seed: int) -> None:
+    """``sample_posterior`` on the sessions ``--bayes-noise`` and ``--bayes-realisations`` select."""
+    from shelljax import InvalidInputError, NoConvergenceError
+    from shelljax.estimate import ConvergenceWarning, sample_posterior
+
+    selected = truth["realisation"] < args.bayes_realisations and any(
+        abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise)  # fmt: skip
+    if args.bayes_label in row or not selected:
+        return
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        try:
+            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=args.bayes_steps,
+                                    min_steps=min(1000, args.bayes_steps), seed=seed, progress=False,
+                                    nuisance=tuple(args.bayes_nuisance))  # fmt: skip
+            row[args.bayes_label] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
+            row[args.bayes_label].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
+                                         converged=post.converged, failed_forward=post.failed_forward,
+                                         surrogate=post.surrogate)  # fmt: skip
+        except (NoConvergenceError, InvalidInputError) as err:
+            row[args.bayes_label] = {"error": str(err)[:300]}
+    row[args.bayes_label]["seconds"] = time.perf_counter() - t0
+
+
+def _run_sessions(sessions, model, calib, args, log_path: Path) -> dict:
+    """Every session's row by name; fit and bayes results are reused from the ``log_path`` lines
+    of an earlier run, new rows are appended to it."""
+    from tqdm import tqdm
+
+    done = {}
+    if log_path.exists():
+        for line in log_path.read_text().splitlines():
+            r = json.loads(line)
+            done[r["name"]] = r
+    with log_path.open("a") as log:
+        for k, (truth, session) in enumerate(tqdm(sessions, desc="sessions", file=sys.stdout, mininterval=5)):
+            previous = done.get(truth["name"], {})
+            row = dict(truth)
+            # the closed form is recomputed, so a k_s calibrated on a grown set of curves applies to every session
+            row.update({m: v for m, v in previous.items()
+                        if isinstance(v, dict) and not m.startswith("closed_form")})
+            true = {q: truth[q] for q in QUANTITIES}
+            _closed_forms(row, session, true, calib, args)
+            _fit(row, session, true, model, args)
+            _bayes(row, session, truth, true, model, args, seed=k)
+            if row.keys() - previous.keys():
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+            done[truth["name"]] = row
+    return done
+
+
+def _per_set(rows, methods) -> dict:
+    """Median relative errors per parameter set and method (with the fit's χ²/dof and coverage)."""
     per_set = {}
     for k in sorted({r["set"] for r in rows}):
         mine = [r for r in rows if r["set"] == k]
@@ -241,6 +255,27 @@ def main(argv=None):
         if fits:
             per_set[k]["fit"]["chi2_per_dof"] = float(np.median([f["chi2"] / f["dof"] for f in fits]))
             per_set[k]["fit"]["coverage95_gauge_pressure"] = float(np.mean([f["gauge_pressure"]["covered"] for f in fits]))
+    return per_set
+
+
+def _report(rows, curves, calib, args, wall: float) -> None:
+    """Print the summary and per-set tables and write them to ``args.out``."""
+    methods = ("closed_form_calibrated", "closed_form_paper")
+    for family in ("fit", "bayes"):
+        methods += tuple(sorted({m for r in rows for m in r if m.startswith(family) and isinstance(r[m], dict)}))
+    summary = {m: summarise(rows, m) for m in methods}
+    print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
+          f"wrinkle law {args.wrinkle_law}; wall {wall:.0f} s")  # fmt: skip
+    print(f"{'method':<26}{'qty':<5}{'n':>4}{'bias':>9}{'med|err|':>10}{'RMS':>9}{'cover95':>9}")
+    for m in methods:
+        for q in QUANTITIES:
+            s = summary[m].get(q)
+            if s:
+                print(f"{m:<26}{'P_g' if q == 'gauge_pressure' else 'E':<5}{s['n']:>4}{s['bias']:>+9.3f}"
+                      f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}")  # fmt: skip
+        if summary[m].get("failed"):
+            print(f"{m:<26}failed: {summary[m]['failed']}")
+    per_set = _per_set(rows, methods)
     print("\nmedian relative error per parameter set (P_g / E):")
     for k, v in per_set.items():
         print(f"set {k}: " + "  ".join(f"{m} {e['gauge_pressure']:+.3f}/{e['young_modulus']:+.3f}" for m, e in v.items()))
@@ -255,7 +290,6 @@ def main(argv=None):
                    for c in curves],
     }  # fmt: skip
     args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out} (per-session rows: {log_path})")
 
 
 if __name__ == "__main__":

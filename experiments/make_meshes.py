@@ -9,15 +9,12 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout's shelljax, not an installed one
-
-from shelljax.geometry import make_ball_mesh, make_hammer_mesh  # noqa: E402
+from shelljax.geometry import make_ball_mesh, make_hammer_mesh
 
 OUT = Path(__file__).resolve().parents[1] / "shelljax" / "data" / "meshes"
 BEACH_BALL_RADIUS = 0.25  # [m]

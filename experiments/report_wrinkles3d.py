@@ -25,7 +25,7 @@ is a wrinkle count only where its amplitude has grown well above that floor, and
 the meshes agree.
 
 Every curve runs in a child process that checkpoints after each level (``/tmp``), under a watchdog
-that restarts it when XLA's CPU runtime wedges (as ``make_virtual_sessions.py``); finished curves
+that restarts it when XLA's CPU runtime wedges (``shelljax.virtual``); finished curves
 are kept in ``--out`` and a rerun skips them. Newton's tolerance is ``FORCE_TOLERANCE``.
 
     python experiments/report_wrinkles3d.py --taus 40 100 --faces 24000 48000 --out wrinkles3d.json
@@ -44,9 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_virtual_sessions import (  # noqa: E402
-    FORCE_TOLERANCE, NEWTON_ITERATIONS, POISSON, RADIUS, _start_watchdog, run_with_restarts, solve_curve, tau,
+from shelljax.paper import DEFAULT_POISSON_RATIO as POISSON
+from shelljax.physics import scaling_wrinkle_count, tau
+from shelljax.virtual import (
+    FORCE_TOLERANCE, NEWTON_ITERATIONS, RADIUS, Checkpoint, Watchdog, run_with_restarts, solve_curve,
 )
 
 GAUGE_PRESSURE = 1300.0  # [Pa]
@@ -58,7 +59,8 @@ POLE_REFINEMENT = 6.0
 
 def thickness_for(target_tau: float) -> float:
     """h [m] giving τ = ``target_tau`` at the Pezzi-like P_g, E, R (τ ∝ h⁻²)."""
-    return REFERENCE_THICKNESS * float(np.sqrt(tau(GAUGE_PRESSURE, YOUNG_MODULUS, REFERENCE_THICKNESS) / target_tau))
+    reference_tau = tau(GAUGE_PRESSURE, RADIUS, YOUNG_MODULUS, REFERENCE_THICKNESS, POISSON)
+    return REFERENCE_THICKNESS * float(np.sqrt(reference_tau / target_tau))
 
 
 def dimensionless_depth(w0, thickness):
@@ -105,12 +107,13 @@ def run_child(args):
     """Solve one (τ, faces) 3D curve and append it to ``args.out``."""
     import jax
 
-    jax.config.update("jax_cpu_enable_async_dispatch", False)  # see make_virtual_sessions.main
-    _start_watchdog(args.watchdog)
+    jax.config.update("jax_cpu_enable_async_dispatch", False)  # XLA:CPU wedged long runs (docs/shell3d.md)
+    watchdog = Watchdog(args.watchdog).start()
     target_tau, faces = args.taus[0], args.faces[0]
     h = thickness_for(target_tau)
     travels = travels_for(h, args.depth)
-    ckpt = Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}{'' if args.mesh == 'ball' else '_' + args.mesh}_depth.npz")
+    ckpt = Checkpoint(Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}{'' if args.mesh == 'ball' else '_' + args.mesh}_depth.npz"),
+                      watchdog)  # fmt: skip
     curve = solve_curve((GAUGE_PRESSURE, YOUNG_MODULUS, h), faces, POLE_REFINEMENT, ckpt, travels=travels,
                         force_tolerance=FORCE_TOLERANCE, mesh=args.mesh, max_newton_iterations=NEWTON_ITERATIONS)  # fmt: skip
     curve["target_tau"], curve["requested_faces"], curve["target_depth"] = target_tau, faces, args.depth
@@ -142,7 +145,8 @@ def report(out: Path) -> dict:
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for run, models in zip(runs, axisym):
         relaxed = models["relaxed"]
-        scaling = 1.33 * np.sqrt(run["tau"])
+        scaling = float(scaling_wrinkle_count(run["gauge_pressure"], run["radius"], run["young_modulus"],
+                                              run["thickness"], run["poisson_ratio"]))  # fmt: skip
         modes = np.asarray(run.get("modes", []))
         per_mode = np.asarray(run.get("mode_amplitude", []))  # (levels, modes) [m]
         for i, force in enumerate(run["force"]):

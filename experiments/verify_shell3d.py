@@ -18,17 +18,15 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 import time
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-import shelljax.shell3d as s3  # noqa: E402
-from shelljax.physics import ATMOSPHERIC_PRESSURE, lame_constants_2d  # noqa: E402
-from shelljax.shell3d._model import ModelConfig, ShellModel, rigid_mode_pins  # noqa: E402
+import shelljax.shell3d as s3
+from shelljax.physics import ATMOSPHERIC_PRESSURE, lame_constants_2d, vella_linear_stiffness
+from shelljax.shell3d import ModelConfig, ShellModel, rigid_mode_pins
 
 E, NU = 1.0e6, 0.3
 
@@ -41,7 +39,7 @@ def sphere_model(mesh):
 
 
 def params(h, p, nu=NU):
-    return {k: jnp.asarray(v) for k, v in dict(young_modulus=E, poisson_ratio=nu, thickness=h, gauge_pressure=p).items()}
+    return s3.ShellParams(young_modulus=E, poisson_ratio=nu, thickness=h, gauge_pressure=p)
 
 
 def p_exact(lam, h, nu=NU):
@@ -56,12 +54,12 @@ def inflation(n_faces):
     q0 = np.concatenate([mesh.vertices.ravel(), np.zeros(3)])
     v0 = float(model.volume(jnp.asarray(q0)))
     p_small = 2 * E * h * 0.002 / (1 - NU)
-    res = model.solve(q0, params(h, p_small), atol=1e-9 * E * h)
+    res = model.equilibrium(q0, params(h, p_small), atol=1e-9 * E * h)
     lam = (float(model.volume(jnp.asarray(res.x))) / v0) ** (1 / 3)
     err_small = 2 * E * h * (lam - 1) / (1 - NU) / p_small - 1
     q = res.x
     for lt in (1.1, 1.2, 1.3):
-        res = model.solve(q, params(h, p_exact(lt, h)), atol=1e-9 * E * h)
+        res = model.equilibrium(q, params(h, p_exact(lt, h)), atol=1e-9 * E * h)
         q = res.x
     lam = (float(model.volume(jnp.asarray(q))) / v0) ** (1 / 3)
     err_large = p_exact(lam, h) / p_exact(1.3, h) - 1
@@ -69,24 +67,11 @@ def inflation(n_faces):
     nu = 0.499
     mu = E / (2 * (1 + nu))
     p_inc = 2 * mu * h * (1 / 1.01 - 1 / 1.01**7)
-    res = model.solve(q0, params(h, p_inc, nu), atol=1e-9 * E * h)
+    res = model.equilibrium(q0, params(h, p_inc, nu), atol=1e-9 * E * h)
     lam = (float(model.volume(jnp.asarray(res.x))) / v0) ** (1 / 3)
     err_inc = 2 * mu * h * (1 / lam - 1 / lam**7) / p_inc - 1
     edge = np.sqrt(8 * np.pi / (np.sqrt(3) * mesh.n_faces))
     return dict(faces=mesh.n_faces, edge=edge, small_strain=err_small, exact_lambda_1p3=err_large, incompressible_lambda_1p01=err_inc)
-
-
-def vella_k(p, h, radius):
-    b = E * h**3 / (12 * (1 - NU**2))
-    s = np.sqrt(E * h * b)
-    tau = p * radius**2 / (4 * s)
-    if tau < 1e-12:
-        f = 2 / np.pi
-    elif tau < 1:
-        f = np.sqrt(1 - tau**2) / np.arccos(tau)
-    else:
-        f = np.sqrt(tau**2 - 1) / np.arctanh(np.sqrt(1 - tau**-2))
-    return 4 * np.pi * s / radius * f
 
 
 def stiffness(pole_spacing, taus):
@@ -99,13 +84,13 @@ def stiffness(pole_spacing, taus):
     for tau in taus:
         p = tau * 4 * np.sqrt(E * h * b)
         if p > 0:
-            q = model.solve(q, params(h, p), atol=1e-10 * E * h).x
+            q = model.equilibrium(q, params(h, p), atol=1e-10 * E * h).x
         x = q[:-3].reshape(-1, 3)
         r_now = 0.5 * np.linalg.norm(x[top] - x[bottom])
         load = np.zeros(model.n_dofs)
         load[3 * top + 2] = -1.0
         u = model.linear_response(q, params(h, p), load)
-        out[tau] = (2.0 / -u[3 * top + 2]) / vella_k(p, h, r_now) - 1
+        out[tau] = (2.0 / -u[3 * top + 2]) / vella_linear_stiffness(p, r_now, E, h, NU) - 1
     return mesh.n_faces, out
 
 

@@ -1,22 +1,33 @@
 """Helpers of experiments/report_wrinkles3d.py (the 3D study itself takes an hour: docs/axisym.md)."""
 
-import sys
+import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-import report_wrinkles3d as rw  # noqa: E402
+from shelljax import virtual
+
+
+def _load_script(name: str):
+    """An experiments/ script as a module (scripts are not a package)."""
+    path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+rw = _load_script("report_wrinkles3d")
 
 
 @pytest.mark.parametrize("target", [10.0, 40.0, 100.0])
 def test_thickness_sets_tau(target):
-    from shelljax.axisym import tau
+    from shelljax.physics import tau
 
     h = rw.thickness_for(target)
     # τ ∝ h⁻² exactly, so the rescaled thickness hits the target to round-off
-    assert float(tau(rw.GAUGE_PRESSURE, rw.YOUNG_MODULUS, h, rw.POISSON, rw.RADIUS)) == pytest.approx(target, rel=1e-12)
+    assert float(tau(rw.GAUGE_PRESSURE, rw.RADIUS, rw.YOUNG_MODULUS, h, rw.POISSON)) == pytest.approx(target, rel=1e-12)
 
 
 def test_dimensionless_depth_is_vella_w0():
@@ -27,16 +38,14 @@ def test_dimensionless_depth_is_vella_w0():
 
 
 def test_random_graded_mesh_meets_the_requested_face_count():
-    import make_virtual_sessions as mvs
-
-    shell = mvs._random_graded(5e-4, 12000)
+    shell = virtual.random_graded_shell(5e-4, 12000)
     # the search fixes F = 2V − 4 before smoothing; dropping valence-3 vertices afterwards and the
     # discrete vertex count leave it within a few per cent (measured +1 % at 15.5k and 23.5k)
     assert shell.mesh.n_faces == pytest.approx(12000, rel=0.05)
     assert shell.thickness == 5e-4
     assert all(len(set(row)) == 6 for row in shell.mesh.stencil.tolist())
     with pytest.raises(SystemExit, match="out of reach"):
-        mvs._random_graded(5e-4, 3000)  # 8 mm edges away from the poles give ≥ 7.6k faces
+        virtual.random_graded_shell(5e-4, 3000)  # 8 mm edges away from the poles give ≥ 7.6k faces
 
 
 def test_travels_stop_at_the_depth_on_walls_that_meet_within_the_force_grid():

@@ -8,15 +8,14 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax.physics import lame_constants_2d
-from shelljax.shell3d._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from shelljax.geometry import signed_volume
+from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 
 E, NU, H = 1.0e6, 0.3, 1.0e-3
 
 
 def _params(**kw):
-    p = dict(young_modulus=E, poisson_ratio=NU, thickness=H, gauge_pressure=500.0)
-    p.update(kw)
-    return {k: jnp.asarray(v) for k, v in p.items()}
+    return s3.ShellParams(young_modulus=E, poisson_ratio=NU, thickness=H, gauge_pressure=500.0).replace(**kw)
 
 
 def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
@@ -24,7 +23,7 @@ def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
     with pytest.raises(InvalidInputError, match="not closed"):
         s3.ShellMesh.from_arrays(mesh.vertices, mesh.faces[1:])
     flipped = s3.ShellMesh.from_arrays(mesh.vertices, mesh.faces[:, ::-1])
-    assert s3.signed_volume(flipped.vertices, flipped.faces) > 0
+    assert signed_volume(flipped.vertices, flipped.faces) > 0
     bad = mesh.faces.copy()
     bad[0] = bad[0, ::-1]
     with pytest.raises(InvalidInputError):
@@ -38,7 +37,7 @@ def test_random_sphere_mesh_is_closed_graded_and_seeded():
     # closed genus-0 surface on the sphere, outward oriented, a vertex at each pole
     assert mesh.n_vertices - 3 * len(f) // 2 + len(f) == 2
     np.testing.assert_allclose(np.linalg.norm(v, axis=1), radius, rtol=1e-12)
-    assert s3.signed_volume(v, f) > 0
+    assert signed_volume(v, f) > 0
     assert np.isclose(v[:, 2].max(), radius) and np.isclose(v[:, 2].min(), -radius)
     # edge lengths follow the requested spacing; single Delaunay edges of smoothed random points
     # spread widely (0.2–2 × s), so compare medians
@@ -107,9 +106,9 @@ def test_scaled_sphere_energies_match_analytic_values():
     w_m = H * (beta * (lam**2 - 1 - 2 * np.log(lam)) + alpha / 4 * (lam**4 - 1 - 4 * np.log(lam)))
     p0 = _params(gauge_pressure=0.0)
     x = jnp.asarray(q[:-3].reshape(-1, 3))
-    from shelljax.shell3d._model import elastic_energy
+    from shelljax.shell3d._energy import elastic_energy
 
-    tiny = dict(p0, thickness=jnp.asarray(1e-9))  # bending ∝ h³ vanishes; membrane ∝ h
+    tiny = p0.replace(thickness=1e-9)  # bending ∝ h³ vanishes; membrane ∝ h
     e_m = float(elastic_energy(x, tiny, model.geometry)) * H / 1e-9
     np.testing.assert_allclose(e_m, area * w_m, rtol=1e-9)
     e_total = float(elastic_energy(x, p0, model.geometry))
@@ -124,7 +123,7 @@ def _random_state(mesh, rng, scale=0.02):
 
 @pytest.mark.parametrize("gas", ["prescribed", "isothermal", "adiabatic"])
 def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch):
-    import shelljax.shell3d._model as model_module
+    import shelljax.shell3d._hessian as model_module
 
     rng = np.random.default_rng(3)
     mesh = s3.sphere_mesh(1.0, 120)
@@ -165,7 +164,7 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
 def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     """The exact Hessian is scattered chunk by chunk (the last chunk shifted back to end at the
     last face) and the projected one streamed in chunks: both against unchunked references."""
-    import shelljax.shell3d._model as model_module
+    import shelljax.shell3d._hessian as model_module
 
     rng = np.random.default_rng(5)
     mesh = s3.sphere_mesh(1.0, 150)
@@ -181,13 +180,13 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     params = _params(indenter_center=c)
     monkeypatch.setattr(model_module, "FACE_HESSIAN_CHUNK", 35)
     monkeypatch.setattr(model_module, "PROJECTION_CHUNK", 35)
-    model_module._hessian_values.clear_cache()  # the chunk size is read when tracing
+    model_module.hessian_values.clear_cache()  # the chunk size is read when tracing
     mat, _ = model.host_hessian(q, params)
-    model_module._hessian_values.clear_cache()
+    model_module.hessian_values.clear_cache()
     # Reference: every face's Hessian from one unchunked vmap, scattered at once.
-    hp = model._host_params(params)
-    faces = np.asarray(model_module._face_hessians(jnp.asarray(q), hp, model.geometry, model._jit_config, 0, mesh.n_faces))
-    blocks = [faces] + [np.asarray(b) for b in model_module._contact_hessians_jit(jnp.asarray(q), hp, model.geometry, model._jit_config)]
+    hp = model.host_params(params)
+    faces = np.asarray(model_module.face_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config, 0, mesh.n_faces))
+    blocks = [faces] + [np.asarray(b) for b in model_module.contact_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config)]
     exact = model.pattern.matrix(model.pattern.assemble_values([jnp.asarray(b) for b in blocks])).toarray()
     scale = np.abs(exact).max()
     # The same numbers summed in another order: equal to round-off of the largest entry. A face
@@ -231,7 +230,8 @@ def _ipc_barrier_derivatives(gap, ghat, kappa):
 def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_product(monkeypatch):
     """Newton's matrix scales a ground barrier's φ'' by λ̂/λ_b ∈ [0.01, 1] (λ_b = −φ', λ̂ = λ_b +
     ∂E/∂z the load on the vertex); it is the Hessian at equilibrium, and CG's products agree."""
-    import shelljax.shell3d._model as model_module
+    import shelljax.shell3d._hessian as model_module
+    from shelljax.shell3d._contact import contact_stiffness
 
     rng = np.random.default_rng(11)
     mesh = s3.sphere_mesh(1.0, 120)
@@ -251,7 +251,7 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     newton_matrix = model.host_hessian(q, params, gradient=g)[0].toarray()
 
     gap = x[:, 2] - ground
-    kappa = np.asarray(model_module._contact_stiffness(model.geometry, contact))
+    kappa = np.asarray(contact_stiffness(model.geometry, contact))
     slope, curvature = _ipc_barrier_derivatives(np.minimum(gap, ghat), ghat, kappa)
     pressed = gap < ghat
     floor = model_module.BARRIER_SOFTENING_FLOOR
@@ -277,25 +277,20 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     """A ball poked 5 mm deep, its ground-contact vertices then pushed to 1e-4 of their equilibrium
     gaps: with the true Hessian a Newton step can at most double a log barrier's gap (measured:
     17 iterations back), with Newton's softened matrix the gaps come back in a few (4)."""
-    from shelljax.solve import newton
+    from shelljax.shell3d import EquilibriumProblem, newton
 
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=600)
     sim = s3.Indentation(ball, 2.34e6, 0.4, 1300.0, progress=False)
     state = sim.solve(depth=0.005)
-    model, params = sim.model, sim._params_for(state.q)
+    model, params = sim.model, sim.params_at(state.q)
     x = state.vertices.copy()
     touching = x[:, 2] < sim.activation_distance
     assert touching.sum() >= 3
     x[touching, 2] *= 1e-4
     start = np.concatenate([x.ravel(), state.indenter_center])
-    softened = model.solve(start, params, atol=sim.atol)
-    plain = newton(
-        lambda y: model.host_energy(y, params),
-        lambda y: model.host_gradient(y, params),
-        lambda y, project: model.host_hessian(y, params, project),
-        start, model.free, atol=sim.atol, max_iter=60,
-        hessian_operator=lambda y: model.host_hessian_operator(y, params),
-    )  # fmt: skip
+    softened = model.equilibrium(start, params, atol=sim.atol)
+    plain = newton(EquilibriumProblem(model, model.host_params(params), barrier_aids=False), start,
+                   atol=sim.atol, max_iter=60)  # fmt: skip
     # Same equilibrium: all three stop at max |force| ≤ atol ≈ 5.5e-6 N, which the softest
     # stiffness of a vertex (its membrane's, E h ≈ 2e3 N/m) turns into ≤ 3e-9 m.
     np.testing.assert_allclose(softened.x, plain.x, rtol=0, atol=1e-8)

@@ -8,7 +8,7 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax.physics import friction_energy, friction_force, friction_mollifier
-from shelljax.shell3d._model import ContactConfig, ModelConfig, ShellModel
+from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel
 
 from _balance import net_vertical_residual
 
@@ -125,7 +125,7 @@ def test_sparse_hessian_with_friction_matches_central_differences(poked):
     indenter_gap = np.linalg.norm(st.vertices - st.indenter_center, axis=1) - sim.indenter_radius
     gap = min(st.vertices[:, 2].min(), indenter_gap.min())
     for lagged in (st.friction, random_lag):
-        params = sim._params_for(st.q, **lagged)
+        params = sim.params_at(st.q, **lagged)
         # Trial displacements h·v ≲ 4e-10 m: far below the smallest gap (~2e-6 m under the
         # indenter; the barrier's third derivative adds ~(δ/gap)² ≈ 4e-8 relative error) and
         # below ε (2e-6 m).
@@ -161,12 +161,12 @@ def test_zero_friction_reproduces_the_frictionless_solution(frictionless, poked)
     sim = poked[0.5][0]
     q = state0.q
     lagged = {"friction_anchor": state0.vertices + 1e-3, "friction_normal_force": np.zeros((1, len(state0.vertices)))}
-    params = sim._params_for(q, **lagged)
+    params = sim.params_at(q, **lagged)
     np.testing.assert_array_equal(sim.model.host_gradient(q, params), frictionless.model.host_gradient(q, params))
     np.testing.assert_array_equal(
         sim.model.host_hessian(q, params)[0].toarray(), frictionless.model.host_hessian(q, params)[0].toarray()
     )
-    res = sim.model.solve(q, params, atol=sim.atol)
+    res = sim.model.equilibrium(q, params, atol=sim.atol)
     assert res.iterations == 0
     np.testing.assert_array_equal(res.x, q)
 
@@ -177,7 +177,7 @@ def test_coulomb_cone_holds_small_mu_slides_large_mu_sticks(poked):
         touching = _touching(sim, st)
         lam_lagged = st.friction["friction_normal_force"][0]
         lam_now = sim.model.plane_normal_forces(st.q)[0]
-        f = sim.model.friction_forces(st.q, sim._params_for(st.q, **st.friction))[0]
+        f = sim.model.friction_forces(st.q, sim.params_at(st.q, **st.friction))[0]
         mag = np.linalg.norm(f, axis=1)
         assert np.all(np.abs(f[:, 2]) <= 1e-12 * mag.max())  # friction is tangential to the ground
         # Cone on the lagged normal force: f₁ ≤ 1 exactly, so only round-off (1e-12) is allowed.
@@ -227,7 +227,7 @@ def test_friction_reduces_ground_slip_monotonically_and_keeps_vertical_balance(p
         np.testing.assert_allclose(unbalance, -net_vertical_residual(sim, st), rtol=0, atol=1e-11)
         assert abs(unbalance) < 5 * sim.atol  # a signed sum of residuals ≤ atol each: measured ≤ 0.7 atol
         if mu > 0:
-            f = sim.model.friction_forces(st.q, sim._params_for(st.q, **st.friction))[0]
+            f = sim.model.friction_forces(st.q, sim.params_at(st.q, **st.friction))[0]
             total = np.abs(f).sum()
             # Centred poke: the friction forces cancel by symmetry up to the mesh's asymmetry
             # (the pinned vertices carry the rest); measured < 1 % of Σ|f_v|.

@@ -10,8 +10,10 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax.physics import ATMOSPHERIC_PRESSURE
-from shelljax.shell3d._model import BARRIER_STEP_FRACTION, GRAVITY, body_gaps
-from shelljax.solve import SparseSolver
+from shelljax.shell3d import EquilibriumProblem, SparseSolver
+from shelljax.shell3d._contact import BARRIER_STEP_FRACTION, body_gaps
+from shelljax.shell3d._energy import GRAVITY
+from shelljax.shell3d._steps import feasible_start
 
 from _balance import net_vertical_residual
 
@@ -60,7 +62,7 @@ def test_sealed_gas_conserves_pv_and_forces_balance(sealed):
         # Independent of the gas law's bookkeeping: the sealed equilibrium must be an equilibrium
         # of the prescribed-pressure model at the gas's current pressure (same wall forces).
         prescribed = sealed.model.with_config(dataclasses.replace(sealed.model.config, gas="prescribed"))
-        params = sealed._params_for(st.q, gauge_pressure=obs["pressure"])
+        params = sealed.params_at(st.q, gauge_pressure=obs["pressure"])
         residual = np.where(prescribed.free, prescribed.host_gradient(st.q, params), 0.0)
         assert np.max(np.abs(residual)) < 10 * sealed.atol
         # Global balance: the only vertical loads are the indenter and the ground (pins are
@@ -142,7 +144,7 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     pressurized equilibrium encloses the scan's volume (to 1e-6). A loose force tolerance (1e-3 N,
     ~100× the per-vertex pressure load × 1e-6) used to stall this fixed point: the forward solves
     stopped before the volume could move; the rest solve now tightens it to the volume target."""
-    from shelljax.shell3d._mesh import signed_volume
+    from shelljax.geometry import signed_volume
 
     sim = s3.Indentation(ball, E, NU, PG, gas="prescribed", indenter_radius=0.01, progress=False,
                          force_tolerance=force_tolerance)  # fmt: skip
@@ -185,7 +187,7 @@ def test_rim_refinement_on_ring_and_irregular_meshes():
 
 def test_newton_start_keeps_the_converged_contact_gaps(sealed):
     """Vertices in the barrier's range keep their last converged gap (not ĝ/4: Newton on a log
-    barrier started far above its equilibrium gap takes damped iterations, see _feasible_start);
+    barrier started far above its equilibrium gap takes damped iterations, see shell3d._steps.feasible_start);
     new penetrations go to ĝ/4; every other vertex stays where the predictor put it."""
     q_prev = sealed.solve(depth=0.004).q
     ghat = sealed.activation_distance
@@ -196,7 +198,7 @@ def test_newton_start_keeps_the_converged_contact_gaps(sealed):
     outside = np.linalg.norm(x_prev - q_prev[-3:], axis=1) - sealed.indenter_radius >= ghat
     k = int(np.flatnonzero(outside)[np.argmin(np.linalg.norm(x_prev[outside] - q_prev[-3:], axis=1))])
     guess[3 * k : 3 * k + 3] = guess[-3:] + 0.5 * (x_prev[k] - guess[-3:])
-    start = sealed._feasible_start(guess, sealed.model, q_prev)
+    start = feasible_start(guess, sealed.model.config, sealed.activation_distance, q_prev)
 
     def gaps(q):
         x = q[:-3].reshape(-1, 3)
@@ -217,24 +219,24 @@ def test_newton_start_keeps_the_converged_contact_gaps(sealed):
 
 def test_line_search_projection_stops_only_the_vertices_a_step_would_drive_into_a_body(sealed):
     """Newton's first step of a 4 mm poke from the resting ball drives a few vertices through
-    the ground. The line search's projection (ShellModel.feasible_trial) stops exactly those
+    the ground. The line search's projection (EquilibriumProblem.feasible_trial) stops exactly those
     short, at BARRIER_STEP_FRACTION of their gap, lets every other vertex take the whole step,
     and the projected full step is feasible and lowers the energy: it is accepted without
     halving, where the plain step is infeasible and would be halved as a whole."""
     model = sealed.model
     guess = sealed.q_reference.copy()
     guess[-3:] = sealed.touch_center - np.array([0.0, 0.0, 0.004])
-    q = sealed._feasible_start(guess, model, sealed.q_reference)
-    params = sealed._params_for(q)
+    q = feasible_start(guess, model.config, sealed.activation_distance, sealed.q_reference)
+    params = sealed.params_at(q)
     free = model.free
     gradient = model.host_gradient(q, params)
     g = np.where(free, gradient, 0.0)
     mat, rank_one = model.host_hessian(q, params, False, gradient)
-    step = np.where(free, -SparseSolver(mat, rank_one, symmetric=True, definite=True).solve(g), 0.0)
+    step = np.where(free, -SparseSolver(mat, rank_one, symmetric=True, definite=True).apply_inverse(g), 0.0)
     trial = q + step
     assert not np.isfinite(model.host_energy(trial, params))  # plain Newton would have to halve
 
-    projected = model.feasible_trial(q, trial)
+    projected = EquilibriumProblem(model, model.host_params(params)).feasible_trial(q, trial)
     ghat = model.config.contact.activation_distance
     start, plain, after = body_gaps(q, model.config), body_gaps(trial, model.config), body_gaps(projected, model.config)
     stopped = np.zeros(model.config.n_vertices, dtype=bool)

@@ -6,18 +6,58 @@ import numpy as np
 import pytest
 
 from shelljax import NoConvergenceError
-from shelljax.solve import (
+from shelljax.shell3d import (
+    AbstractEnergyProblem,
     SparseSolver,
     SparsityPattern,
-    element_positions,
     implicit_equilibrium,
     newton,
     release_factorizations,
 )
+from shelljax.shell3d._sparse import element_positions
+
+
+class _Direct(AbstractEnergyProblem):
+    """A test problem from plain functions energy(x), grad(x), hess(x, project), and optionally a
+    feasibility projection project(x, x_trial); Newton's steps are direct solves."""
+
+    free: np.ndarray
+    energy_fn: object
+    grad_fn: object
+    hess_fn: object
+    project_fn: object = None
+
+    def energy(self, x):
+        return self.energy_fn(x)
+
+    def gradient(self, x):
+        return self.grad_fn(x), None
+
+    def hessian(self, x, gradient, project):
+        return self.hess_fn(x, project)
+
+    def feasible_trial(self, x, x_trial):
+        return None if self.project_fn is None else self.project_fn(x, x_trial)
+
+
+class _Inexact(_Direct):
+    """:class:`_Direct` with Hessian-vector products operator(x): Newton's steps are CG solves."""
+
+    operator_fn: object = None
+
+    def hessian_operator(self, x, gradient):
+        return self.operator_fn(x)
+
+
+def _problem(energy, grad, hess, free, hessian_operator=None, project=None):
+    free = np.asarray(free, dtype=bool)
+    if hessian_operator is None:
+        return _Direct(free, energy, grad, hess, project)
+    return _Inexact(free, energy, grad, hess, project, hessian_operator)
 
 
 def test_pattern_assembles_the_dense_sum_and_folds_pins(monkeypatch):
-    import shelljax.solve._sparse as sparse_module
+    import shelljax.shell3d._sparse as sparse_module
 
     rng = np.random.default_rng(0)
     n = 7
@@ -44,7 +84,7 @@ def test_pattern_assembles_the_dense_sum_and_folds_pins(monkeypatch):
 def test_projected_assembly_sums_clamped_element_matrices(monkeypatch):
     """Independent computation: clamp each symmetric element matrix through its own eigen-
     decomposition (np.linalg.eig, unsorted, general solver) and sum densely."""
-    import shelljax.solve._sparse as sparse_module
+    import shelljax.shell3d._sparse as sparse_module
 
     monkeypatch.setattr(sparse_module, "_PROJECTION_CHUNK", 4)  # 6 elements: two chunks
     rng = np.random.default_rng(7)
@@ -78,7 +118,7 @@ def test_sherman_morrison_matches_dense_solve():
     u = rng.normal(size=n)
     c = 3.7
     b = rng.normal(size=n)
-    x = SparseSolver(a, (c, u)).solve(b)
+    x = SparseSolver(a, (c, u)).apply_inverse(b)
     np.testing.assert_allclose(x, np.linalg.solve(a.toarray() + c * np.outer(u, u), b), rtol=1e-10)
 
 
@@ -104,19 +144,19 @@ def _quartic_problem(n=12):
 def test_newton_converges_in_force_units_and_reports_failure():
     energy, grad, hess, b = _quartic_problem()
     free = np.ones(b.size, dtype=bool)
-    res = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
+    res = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
     assert np.max(np.abs(grad(res.x))) <= 1e-12
     # Quadratic convergence: the last residuals drop super-linearly.
     h = res.history
     assert h[-1] < 1e-3 * h[-2] or h[-1] < 1e-14
     assert res.factorizations == res.iterations
     with pytest.raises(NoConvergenceError) as err:
-        newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, max_iter=2)
+        newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, max_iter=2)
     assert len(err.value.history) == 3 and "residual history" in str(err.value)
 
 
 def test_newton_reuses_factorizations_only_while_they_contract():
-    from shelljax.solve._newton import REUSE_CONTRACTION
+    from shelljax.shell3d._newton import REUSE_CONTRACTION
 
     energy, grad, hess, b = _quartic_problem(40)
     free = np.ones(b.size, dtype=bool)
@@ -126,8 +166,8 @@ def test_newton_reuses_factorizations_only_while_they_contract():
         factorized.append(len(factorized))
         return hess(x, project)
 
-    exact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
-    lagged = newton(energy, grad, counting_hess, np.zeros(b.size), free, atol=1e-12)
+    exact = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
+    lagged = newton(_problem(energy, grad, counting_hess, free), np.zeros(b.size), atol=1e-12)
     assert np.max(np.abs(grad(lagged.x))) <= 1e-12
     assert lagged.factorizations == len(factorized) < exact.factorizations
     # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
@@ -149,8 +189,8 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
         matrix = hess(x, False)[0]
         return lambda v: matrix @ v
 
-    exact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, reuse_factorization=False)
-    inexact = newton(energy, grad, hess, np.zeros(b.size), free, atol=1e-12, hessian_operator=operator)
+    exact = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
+    inexact = newton(_problem(energy, grad, hess, free, hessian_operator=operator), np.zeros(b.size), atol=1e-12)
     assert np.max(np.abs(grad(inexact.x))) <= 1e-12
     # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
     np.testing.assert_allclose(inexact.x, exact.x, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
@@ -160,8 +200,7 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
     # Handed to a nearby problem (5 % more load), it is all that problem needs either.
     shifted = lambda x: grad(x) - 0.05 * b  # noqa: E731
     energy_shifted = lambda x: energy(x) - 0.05 * b @ x  # noqa: E731
-    again = newton(energy_shifted, shifted, hess, inexact.x, free, atol=1e-12, hessian_operator=operator,
-                   factorization=inexact.last_factorization)  # fmt: skip
+    again = newton(_problem(energy_shifted, shifted, hess, free, hessian_operator=operator), inexact.x, atol=1e-12, factorization=inexact.last_factorization)  # fmt: skip
     assert np.max(np.abs(shifted(again.x))) <= 1e-12
     assert again.factorizations == 0 and again.last_factorization is inexact.last_factorization
 
@@ -210,10 +249,10 @@ def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minim
 
     start = 0.1 * np.arange(n) + 0.5
     free = np.ones(n, dtype=bool)
-    plain = newton(energy, grad, hess, start, free, atol=1e-10, reuse_factorization=False)
+    plain = newton(_problem(energy, grad, hess, free), start, atol=1e-10, reuse_factorization=False)
     assert len(infeasible) > 0
     infeasible.clear()
-    projected = newton(energy, grad, hess, start, free, atol=1e-10, reuse_factorization=False, project=keep_gap)
+    projected = newton(_problem(energy, grad, hess, free, project=keep_gap), start, atol=1e-10, reuse_factorization=False)
     assert infeasible == [] and len(trials) >= projected.iterations
     for res in (plain, projected):
         assert np.max(np.abs(grad(res.x))) <= 1e-10
@@ -226,7 +265,7 @@ def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minim
 
 
 def test_preconditioned_cg_gives_up_on_a_poor_preconditioner_or_negative_curvature():
-    from shelljax.solve._newton import CG_EXTRAPOLATE_AFTER, CG_MAX_ITERATIONS, _preconditioned_cg
+    from shelljax.shell3d._newton import CG_EXTRAPOLATE_AFTER, CG_MAX_ITERATIONS, _preconditioned_cg
 
     rng = np.random.default_rng(3)
     spectrum = np.logspace(0, 6, 200)  # condition number 1e6: unpreconditioned CG needs far more steps
@@ -263,19 +302,19 @@ def test_cholesky_and_lu_paths_agree_with_dense_solves():
     b = rng.normal(size=(n, 2))
     first = SparseSolver(spd, symmetric=True)
     assert first.method == "cholesky"
-    np.testing.assert_allclose(first.solve(b), np.linalg.solve(spd.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(first.apply_inverse(b), np.linalg.solve(spd.toarray(), b), rtol=1e-10)
     # Same pattern, other values: the second factorization reuses the first's symbolic analysis,
     # and the first solver must still solve its own matrix afterwards.
     other = (spd + sp.diags(np.linspace(1.0, 5.0, n))).tocsr()
     second = SparseSolver(other, symmetric=True)
-    np.testing.assert_allclose(second.solve(b[:, 0]), np.linalg.solve(other.toarray(), b[:, 0]), rtol=1e-10)
-    np.testing.assert_allclose(first.solve(b[:, 0]), np.linalg.solve(spd.toarray(), b[:, 0]), rtol=1e-10)
+    np.testing.assert_allclose(second.apply_inverse(b[:, 0]), np.linalg.solve(other.toarray(), b[:, 0]), rtol=1e-10)
+    np.testing.assert_allclose(first.apply_inverse(b[:, 0]), np.linalg.solve(spd.toarray(), b[:, 0]), rtol=1e-10)
     fallback = SparseSolver(indefinite, symmetric=True)
     assert fallback.method == "lu"  # not positive definite
-    np.testing.assert_allclose(fallback.solve(b), np.linalg.solve(indefinite.toarray(), b), rtol=1e-8)
+    np.testing.assert_allclose(fallback.apply_inverse(b), np.linalg.solve(indefinite.toarray(), b), rtol=1e-8)
     lu = SparseSolver(nonsymmetric)  # the default never assumes symmetry
     assert lu.method == "lu"
-    np.testing.assert_allclose(lu.solve(b), np.linalg.solve(nonsymmetric.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(lu.apply_inverse(b), np.linalg.solve(nonsymmetric.toarray(), b), rtol=1e-10)
 
 
 def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
@@ -287,7 +326,7 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
 
     import scipy.sparse as sp
 
-    import shelljax.solve._sparse as sparse_module
+    import shelljax.shell3d._sparse as sparse_module
 
     def spd(n, seed):
         a = sp.random(n, n, density=0.2, random_state=seed)
@@ -305,7 +344,7 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
         gc.enable()
     # The first pattern still solves (its analysis is rebuilt).
     b = np.ones(30)
-    np.testing.assert_allclose(SparseSolver(first, symmetric=True).solve(b), np.linalg.solve(first.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(SparseSolver(first, symmetric=True).apply_inverse(b), np.linalg.solve(first.toarray(), b), rtol=1e-10)
     # release_factorizations frees the kept analysis too (the 3D engine calls it once its free
     # shell is solved); a solver made before still solves, and a new one rebuilds the analysis.
     kept = SparseSolver(second, symmetric=True)
@@ -313,15 +352,15 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
     release_factorizations()
     assert not sparse_module._ANALYSED and not sparse_module._nested_dissection(second)._cholesky
     b = np.arange(31.0)
-    np.testing.assert_allclose(kept.solve(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(kept.apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
     del kept
     assert analysis() is None
-    np.testing.assert_allclose(SparseSolver(second, symmetric=True).solve(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(SparseSolver(second, symmetric=True).apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
 
 
 def test_nodal_pattern_build_equals_the_entrywise_one():
     """The shell models' patterns are built from node pairs; the entrywise build is the reference."""
-    from shelljax.solve._sparse import _dof_pattern, _nodal_blocks, _nodal_pattern
+    from shelljax.shell3d._sparse import _dof_pattern, _nodal_blocks, _nodal_pattern
 
     rng = np.random.default_rng(5)
     n_nodes = 30
@@ -362,19 +401,22 @@ def test_implicit_equilibrium_forward_and_reverse_match_finite_differences():
     def residual(x, th):
         return lap_j @ x + x**3 - th["a"] * jnp.asarray(b) - th["c"]
 
-    def solve_host(th):
+    def minimise_at(th):
         a, c = float(th["a"]), float(th["c"])
         return newton(
-            lambda x: 0.5 * x @ (lap @ x) + np.sum(x**4) / 4 - a * b @ x - c * x.sum(),
-            lambda x: np.where(free, lap @ x + x**3 - a * b - c, 0.0),
-            lambda x, p: _fold(lap + sp.diags(3 * x**2), free),
-            np.zeros(n), free, atol=1e-13,
+            _problem(
+                lambda x: 0.5 * x @ (lap @ x) + np.sum(x**4) / 4 - a * b @ x - c * x.sum(),
+                lambda x: np.where(free, lap @ x + x**3 - a * b - c, 0.0),
+                lambda x, p: _fold(lap + sp.diags(3 * x**2), free),
+                free,
+            ),
+            np.zeros(n), atol=1e-13,
         ).x
 
     def hessian_host(x, th):
         return _fold(lap + sp.diags(3 * x**2), free)
 
-    eq = implicit_equilibrium(solve_host, residual, hessian_host, free, n)
+    eq = implicit_equilibrium(minimise_at, residual, hessian_host, free, n)
     theta = {"a": jnp.asarray(1.3), "c": jnp.asarray(0.4)}
     f = lambda th: jnp.sum(eq(th) ** 2)  # noqa: E731
     g = jax.grad(f)(theta)
@@ -400,7 +442,7 @@ def _fold(mat, free):
 
 def test_newton_runs_with_single_threaded_blas_and_restores_it():
     # OpenBLAS threads spinning after CG's dot products slowed the XLA work between them 1.6×
-    # (solve/_newton.py): inside the loop NumPy's BLAS must run on one thread, outside as before.
+    # (shell3d/_newton.py): inside the loop NumPy's BLAS must run on one thread, outside as before.
     from threadpoolctl import threadpool_info
 
     def blas_threads():
@@ -414,7 +456,7 @@ def test_newton_runs_with_single_threaded_blas_and_restores_it():
         seen.append(blas_threads())
         return energy(x)
 
-    result = newton(watched_energy, grad, hess, np.zeros(b.size), np.ones(b.size, dtype=bool), atol=1e-10)
+    result = newton(_problem(watched_energy, grad, hess, np.ones(b.size, dtype=bool)), np.zeros(b.size), atol=1e-10)
     assert np.max(np.abs(grad(result.x))) <= 1e-10
     assert seen and all(threads and max(threads) == 1 for threads in seen)
     assert blas_threads() == before

@@ -3,14 +3,11 @@
 No 3D solve: the curves were made by experiments/make_virtual_sessions.py --curves.
 """
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-import make_virtual_sessions as mvs  # noqa: E402
+import shelljax.virtual as mvs
+from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +19,8 @@ def test_curves_cover_the_protocol(curves):
     assert len(curves) >= 5
     for c in curves:
         # the paper's 5–20 N; the travel search stops within FORCE_MATCH (10× below the force noise)
-        np.testing.assert_allclose(c["force"], mvs.FORCES, rtol=0, atol=mvs.FORCE_MATCH)
-        assert c["radius"] == mvs.RADIUS and c["poisson_ratio"] == mvs.POISSON
+        np.testing.assert_allclose(c["force"], PAPER_FORCES, rtol=0, atol=mvs.FORCE_MATCH)
+        assert c["radius"] == mvs.RADIUS and c["poisson_ratio"] == DEFAULT_POISSON_RATIO
         # Mesh-converged generator: w0 moves ≤ 0.13 % from 12k to 24k faces (docs/estimators.md).
         assert c["n_faces"] > 12000
 
@@ -65,7 +62,7 @@ def test_session_drawing_is_reproducible(curves):
     np.testing.assert_array_equal(a.force, b.force)
     np.testing.assert_array_equal(a.wrinkle_counts, b.wrinkle_counts)
     assert not np.array_equal(a.depth, c.depth)
-    assert a.force.size == mvs.N_TRIALS * len(mvs.FORCES) and a.wrinkle_counts.size == mvs.N_TRIALS
+    assert a.force.size == mvs.N_TRIALS * len(PAPER_FORCES) and a.wrinkle_counts.size == mvs.N_TRIALS
     # 0.5 mm ruler: depths are multiples of the rounding step.
     np.testing.assert_allclose(a.depth / mvs.DEPTH_ROUNDING, np.round(a.depth / mvs.DEPTH_ROUNDING), atol=1e-9)
 
@@ -140,7 +137,7 @@ class _FakeIndentation:
         t = float(q[0])
         return 150.0 * t + 2000.0 * t**2  # N for t in m: 5 N at ≈ 27 mm, 20 N at ≈ 68 mm
 
-    def _params_for(self, q):
+    def params_at(self, q):
         return {}
 
     def _depth_step(self, history, depth):
@@ -156,42 +153,42 @@ class _FakeIndentation:
 
 @pytest.fixture
 def fake_force(monkeypatch):
-    import shelljax.shell3d as s3
+    import shelljax.shell3d._search as search
 
-    monkeypatch.setattr(s3, "observables", lambda sim, q, params: {"force": _FakeIndentation.force(q)})
+    monkeypatch.setattr(search, "observables", lambda sim, q, params: {"force": _FakeIndentation.force(q)})
 
 
 def test_force_levels_by_travel_hit_every_level(fake_force, tmp_path):
     sim = _FakeIndentation()
     ckpt = tmp_path / "levels.npz"
-    levels = mvs._force_levels_by_travel(sim, mvs.FORCES, ckpt)
+    levels = mvs.force_levels_by_travel(sim, PAPER_FORCES, mvs.Checkpoint(ckpt))
     forces = np.array([f for f, _ in levels])
-    np.testing.assert_allclose(forces, mvs.FORCES, atol=mvs.FORCE_MATCH)
+    np.testing.assert_allclose(forces, PAPER_FORCES, atol=mvs.FORCE_MATCH)
     # the state returned is the one whose force was recorded
     np.testing.assert_array_equal(forces, [_FakeIndentation.force(q) for _, q in levels])
     # 68 mm of travel in 5 mm steps is 14 solves; secant steps on a smooth F find each level in a
     # few more (a bisection to 1 mN would take ≈ 12 per level)
-    assert sim.solves <= 14 + 3 * len(mvs.FORCES)
+    assert sim.solves <= 14 + 3 * len(PAPER_FORCES)
     # a restarted run finds every level in its checkpoint without solving again
     again = _FakeIndentation()
-    resumed = mvs._force_levels_by_travel(again, mvs.FORCES, ckpt)
+    resumed = mvs.force_levels_by_travel(again, PAPER_FORCES, mvs.Checkpoint(ckpt))
     assert again.solves == 0
     np.testing.assert_array_equal([f for f, _ in resumed], forces)
 
 
 def test_force_levels_by_travel_halve_failed_steps(fake_force):
     sim = _FakeIndentation(max_newton_step=2e-3)  # every 5 mm step fails twice before it succeeds
-    levels = mvs._force_levels_by_travel(sim, (5.0, 10.0), None)
+    levels = mvs.force_levels_by_travel(sim, (5.0, 10.0), None)
     np.testing.assert_allclose([f for f, _ in levels], (5.0, 10.0), atol=mvs.FORCE_MATCH)
     # with no halvings left the failure surfaces instead of a state at the wrong force
     from shelljax import NoConvergenceError
 
     with pytest.raises(NoConvergenceError):
-        mvs._force_levels_by_travel(_FakeIndentation(max_newton_step=1e-4), (5.0,), None)
+        mvs.force_levels_by_travel(_FakeIndentation(max_newton_step=1e-4), (5.0,), None)
 
 
 def test_checkpoint_of_an_older_format_is_refused(tmp_path):
     old = tmp_path / "old.npz"
     np.savez(old, forces=[5.0], states=np.zeros((1, 3)))  # the force-controlled format: no travels
     with pytest.raises(SystemExit, match="older version"):
-        mvs._load_checkpoint(old)
+        mvs.Checkpoint(old).load()

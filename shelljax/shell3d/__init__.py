@@ -10,12 +10,25 @@ Quick start (SI units)::
     print(state.observables())         # force [N], w0/H/D_u/D_l/d [m], pressure [Pa], volume [m³]
     state.export("poked.obj"); state.plot("poked.png")
     state.wrinkles(max_radius=0.08, ring_width=0.005).count   # radial wrinkles (angular Fourier)
+
+Lower layers, for benchmarks and verification: :class:`ShellModel` (energy, gradient, sparse
+Hessian, :meth:`ShellModel.equilibrium`), the Newton solver (:func:`newton` on an
+:class:`AbstractEnergyProblem`), the sparse factorization (:class:`SparseSolver`) and implicit
+differentiation (:func:`implicit_equilibrium`).
 """
 
-from ._energy import face_energy, fundamental_forms, rest_geometry
+from ._config import ContactConfig, ModelConfig
+from ._continuation import continuation
+from ._energy import face_energy, fundamental_forms, rest_geometry, total_energy
+from ._hessian import face_hessians
+from ._implicit import implicit_equilibrium
 from ._indent import Indentation, IndentationState, Shell, ball, load
-from ._mesh import ShellMesh, signed_volume, sphere_mesh, random_sphere_mesh
-from ._model import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
+from ._mesh import ShellMesh, random_sphere_mesh, sphere_mesh
+from ._model import EquilibriumProblem, ShellModel, rigid_mode_pins
+from ._newton import AbstractEnergyProblem, NewtonResult, newton
+from ._params import ShellParams
 from ._observables import observables
 from ._rest import solve_rest_shape
+from ._search import match_forces, solve_travels
+from ._sparse import SparseSolver, SparsityPattern, release_factorizations
 from ._wrinkles import WrinkleSpectrum, wrinkle_spectrum

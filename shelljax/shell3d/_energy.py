@@ -6,21 +6,37 @@ flap vertices (the face and the three vertices across its edges), taken as the h
 the face plane — the curvature of the rotation-free "basic shell triangle" family (Oñate & Zárate
 2000, Int. J. Numer. Meth. Eng. 47, 557). It reproduces the curvature of any quadratic surface
 exactly, hence is consistent on irregular meshes. The midedge-average operator of libshell
-(Grinspun et al. 2006) was tried first and rejected: on our sphere meshes its rest curvature
-ā⁻¹b̄ deviates from −I/R by up to ±16 % (icosphere) and ±75 % (graded ring mesh), which would bias
-the bending stiffness by as much. Outward normals give b ≈ −a/R on a sphere of radius R.
+(Grinspun et al. 2006) is not used: on our sphere meshes its rest curvature ā⁻¹b̄ deviates from
+−I/R by up to ±16 % (icosphere) and ±75 % (graded ring mesh), which would bias the bending
+stiffness by as much. Outward normals give b ≈ −a/R on a sphere of radius R.
 
 Energy densities come from :mod:`shelljax.physics` (shared with the axisymmetric engine); each face
 contributes ``rest_area · (W_membrane + W_bending)``.
+
+The total potential energy of the model (:func:`total_energy`) adds the gas, the contacts, the
+ground friction, the indenter force, nodal forces and the weight to the faces' energies (the
+formula is in :mod:`shelljax.shell3d._model`).
 """
 
 from __future__ import annotations
 
+import functools
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
-from ..physics import bending_density, neo_hookean_membrane_density
+from ..physics import (
+    adiabatic_gas_energy,
+    bending_density,
+    isothermal_gas_energy,
+    neo_hookean_membrane_density,
+    prescribed_pressure_energy,
+)
+from ._config import ModelConfig, split_dofs
+from ._contact import friction_potential, min_gap, plane_contact_energy, sphere_contact_energy
+from ._mesh import ShellMesh
 
 Stencil = Float[Array, "6 3"]
 Matrix2 = Float[Array, "2 2"]
@@ -108,3 +124,93 @@ def rest_geometry(rest_stencils: Float[Array, "F 6 3"]):
     a, b = jax.vmap(fundamental_forms)(rest_stencils)
     area = 0.5 * jnp.sqrt(a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] ** 2)
     return a, b, area
+
+
+GRAVITY = 9.81  # [m/s²]
+
+
+class ShellGeometry(eqx.Module):
+    """Per-face rest data and per-vertex weights (arrays; not part of the jit key)."""
+
+    stencil: Int[Array, "F 6"]
+    rest_metric: Float[Array, "F 2 2"]
+    rest_curvature: Float[Array, "F 2 2"]
+    rest_area: Float[Array, " F"]
+    vertex_area: Float[Array, " V"]
+
+
+def make_geometry(mesh: ShellMesh, rest_vertices) -> ShellGeometry:
+    """Rest fundamental forms of ``mesh``'s topology at ``rest_vertices`` (V, 3) [m]."""
+    stencil = jnp.asarray(mesh.stencil)
+    rest = jnp.asarray(rest_vertices, dtype=jnp.float64)
+    metric, curvature, area = rest_geometry(rest[stencil])
+    vertex_area = jnp.zeros(mesh.n_vertices).at[stencil[:, :3]].add(area[:, None] / 3.0)
+    return ShellGeometry(stencil, metric, curvature, area, vertex_area)
+
+
+def volume(x: Float[Array, "V 3"], stencil) -> Float[Array, ""]:
+    """Enclosed volume [m³] of the closed mesh at vertex positions x (V, 3) [m]."""
+    return jnp.sum(jax.vmap(face_volume)(x[stencil[:, :3]]))
+
+
+def gas_energy(vol, params, config: ModelConfig):
+    """Gas potential Π(V) [J] (see :mod:`shelljax.physics._gas`)."""
+    p_g = params.gauge_pressure
+    if config.gas == "prescribed":
+        return prescribed_pressure_energy(vol, p_g)
+    p_atm = params.outside_pressure
+    v0 = params.reference_volume
+    if config.gas == "isothermal":
+        return isothermal_gas_energy(vol, v0, p_g, atmospheric_pressure=p_atm)
+    return adiabatic_gas_energy(vol, v0, p_g, config.heat_capacity_ratio, atmospheric_pressure=p_atm)
+
+
+def gauge_pressure(q, params, geometry: ShellGeometry, config: ModelConfig):
+    """Current gauge pressure −dΠ/dV [Pa] of the gas."""
+    x, _ = split_dofs(q, config)
+    vol = volume(x, geometry.stencil)
+    return -jax.grad(gas_energy)(vol, params, config)
+
+
+def elastic_energy(x, params, geometry):
+    """Membrane + bending energy [J] of the whole shell."""
+    p = x[geometry.stencil]
+    e = jax.vmap(face_energy, in_axes=(0, 0, 0, 0, None, None, None, None))(
+        p, geometry.rest_metric, geometry.rest_curvature, geometry.rest_area,
+        params.thickness, params.young_modulus, params.poisson_ratio, 0.0,
+    )
+    return jnp.sum(e)
+
+
+def total_energy(q, params, geometry: ShellGeometry, config: ModelConfig):
+    """Total potential energy E(q) [J] (formula: :mod:`shelljax.shell3d._model`)."""
+    x, c = split_dofs(q, config)
+    e = elastic_energy(x, params, geometry)
+    e = e + gas_energy(volume(x, geometry.stencil), params, config)
+    if config.contact.indenter_radius is not None:
+        e = e + sphere_contact_energy(x, c, geometry, config)
+    for plane in config.contact.planes:
+        e = e + plane_contact_energy(x, plane, geometry, config)
+    if config.contact.has_friction:
+        e = e + friction_potential(x, params, config)
+    if config.force_control:
+        e = e + params.indenter_force * c[2]
+    if params.nodal_forces is not None:
+        e = e - jnp.sum(params.nodal_forces * x)
+    if params.mass is not None:
+        weights = geometry.vertex_area / jnp.sum(geometry.vertex_area)
+        e = e + params.mass * GRAVITY * jnp.sum(weights * x[:, 2])
+    return e
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def search_energy(q, params, geometry, config):
+    """Total energy [J] for Newton's line search: +inf where a barrier is crossed or not finite."""
+    e = total_energy(q, params, geometry, config)
+    if config.contact.kind == "barrier":
+        e = jnp.where(min_gap(q, geometry, config) > 0.0, e, jnp.inf)
+    return jnp.where(jnp.isfinite(e), e, jnp.inf)
+
+
+#: ∇E(q) [N], jitted.
+energy_gradient = jax.jit(jax.grad(total_energy), static_argnames=("config",))

@@ -27,6 +27,7 @@ result depends on the continuation steps (``max_step``), as a real poke depends 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 
@@ -36,12 +37,18 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE
-from ..solve import continuation, implicit_equilibrium, release_factorizations
+from ._config import ContactConfig, ModelConfig
+from ._continuation import continuation
+from ._implicit import implicit_equilibrium
 from ._mesh import ShellMesh, sphere_mesh
-from ._model import ContactConfig, ModelConfig, ShellModel, body_gaps, place_at_gaps, rigid_mode_pins
-from ._wrinkles import wrinkle_spectrum
+from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
+from ._params import ShellParams
 from ._rest import solve_rest_scale, solve_rest_shape
+from ._search import match_forces, solve_travels
+from ._steps import accumulate_slip, feasible_start, initial_slip, secant_predict
+from ._sparse import release_factorizations
+from ._wrinkles import wrinkle_spectrum
 
 #: Lagging stops once the normal forces change by less than this fraction of their largest value.
 FRICTION_LAG_TOLERANCE = 0.01
@@ -93,7 +100,7 @@ class IndentationState:
     touched the ground (gap < activation distance), with or without friction. ``factorizations``:
     Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
     a factorization while it keeps converging fast); ``products``: the Hessian-vector products of
-    its conjugate-gradient steps (:func:`shelljax.solve.newton`).
+    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`).
     """
 
     sim: "Indentation"
@@ -119,7 +126,7 @@ class IndentationState:
 
     def observables(self) -> dict:
         """Observables (SI): see :func:`shelljax.shell3d.observables`."""
-        return _observables(self.sim, self.q, self.sim._params_for(self.q, **self.friction))
+        return _observables(self.sim, self.q, self.sim.params_at(self.q, **self.friction))
 
     def wrinkles(self, max_radius: float, ring_width: float, max_mode: int = 60):
         """Angular spectrum of the normal displacement from the inflated reference state, on rings
@@ -140,6 +147,31 @@ class IndentationState:
         from ._export import plot_state
 
         plot_state(self, path)
+
+
+def _is_count(value, least: int) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= least
+
+
+def _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
+                     friction_iterations, max_newton_iterations) -> None:
+    """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
+    if not young_modulus > 0:
+        raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
+    if not -1.0 < poisson_ratio < 0.5:
+        raise InvalidInputError(f"poisson_ratio: must be in (-1, 0.5), got {poisson_ratio}.")
+    if not gauge_pressure >= 0:
+        raise InvalidInputError(f"gauge_pressure: must be ≥ 0 Pa, got {gauge_pressure}.")
+    if not indenter_radius > 0:
+        raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
+    if rest_shape not in ("solve", "exact", "scan"):
+        raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
+    if not _is_count(friction_iterations, 0):
+        raise InvalidInputError(
+            f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
+        )
+    if not _is_count(max_newton_iterations, 1):
+        raise InvalidInputError(f"max_newton_iterations: must be an integer ≥ 1, got {max_newton_iterations!r}.")
 
 
 class Indentation:
@@ -190,93 +222,80 @@ class Indentation:
         slip_tolerance: float | None = None,
         friction_iterations: int = 2,
     ):
-        if not young_modulus > 0:
-            raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
-        if not -1.0 < poisson_ratio < 0.5:
-            raise InvalidInputError(f"poisson_ratio: must be in (-1, 0.5), got {poisson_ratio}.")
-        if not gauge_pressure >= 0:
-            raise InvalidInputError(f"gauge_pressure: must be ≥ 0 Pa, got {gauge_pressure}.")
-        if not indenter_radius > 0:
-            raise InvalidInputError(f"indenter_radius: must be > 0 m, got {indenter_radius}.")
-        if rest_shape not in ("solve", "exact", "scan"):
-            raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
-        if not (isinstance(friction_iterations, (int, np.integer)) and not isinstance(friction_iterations, bool)
-                and friction_iterations >= 0):
-            raise InvalidInputError(
-                f"friction_iterations: must be an integer ≥ 0 (re-solves per load step), got {friction_iterations!r}."
-            )
-        if not (isinstance(max_newton_iterations, (int, np.integer)) and not isinstance(max_newton_iterations, bool)
-                and max_newton_iterations >= 1):
-            raise InvalidInputError(f"max_newton_iterations: must be an integer ≥ 1, got {max_newton_iterations!r}.")
+        _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
+                         friction_iterations, max_newton_iterations)  # fmt: skip
+        ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
-        ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.shell = shell
         self.progress = progress
-        mesh = shell.mesh
+        scan = self._place_scan(shell.mesh, contact, activation_distance)
+        self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
+        self.max_step = max_step or 0.02 * self.size
+        #: The model parameters at the indenter's start (:class:`ShellParams`, SI).
+        self.base_params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness),
+                                       float(gauge_pressure), mass=None if mass is None else float(mass))  # fmt: skip
+        self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
+        self._fixed = rigid_mode_pins(scan)
+        self._reference_state(scan, rest_shape, gas, indenter_radius)
+        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
+        contact_cfg = ContactConfig(
+            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
+            activation_distance=float(self.activation_distance), reference_pressure=float(max(gauge_pressure, 1e3)),
+            friction=friction, slip_tolerance=slip_tolerance,
+        )  # fmt: skip
+        self.friction = contact_cfg.friction
+        self.model = ShellModel(shell.mesh, self.rest, ModelConfig(shell.mesh.n_vertices, gas=gas, contact=contact_cfg),
+                                self._fixed)  # fmt: skip
+        self._force_model = None
+        self._kept_factorization = (None, None)
+
+    def _place_scan(self, mesh: ShellMesh, contact: str, activation_distance: float | None) -> np.ndarray:
+        """The scan (V, 3) [m] standing on the ground (half the barrier's range ĝ above it); sets
+        the shell's ``size`` [m], the barrier's initial gap ``gap0`` and ``activation_distance`` ĝ."""
         scan = mesh.vertices - np.array([0.0, 0.0, mesh.vertices[:, 2].min()])
         size = float(np.ptp(scan, axis=0).max())
         self.size = size
         self.gap0 = (activation_distance or 2e-4 * size / 0.13) if contact == "barrier" else 0.0
         ghat = activation_distance or (2e-4 * size / 0.13 if contact == "barrier" else 2e-5 * size / 0.13)
         self.activation_distance = ghat
-        scan = scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
-        self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * size
-        self.max_step = max_step or 0.02 * size
-        self.base_params = {
-            "young_modulus": jnp.asarray(float(young_modulus)),
-            "poisson_ratio": jnp.asarray(float(poisson_ratio)),
-            "thickness": jnp.asarray(float(shell.thickness)),
-            "gauge_pressure": jnp.asarray(float(gauge_pressure)),
-            "indenter_center": jnp.zeros(3),
-            "indenter_force": jnp.asarray(0.0),
-        }
-        if mass is not None:
-            self.base_params["mass"] = jnp.asarray(float(mass))
-        top = int(np.argmax(scan[:, 2]))
-        self.top, self.bottom = top, int(np.argmin(scan[:, 2]))
-        fixed = rigid_mode_pins(scan)
-        # 1. Rest shape: free shell (no contacts) under the prescribed pressure; the bottom vertex's
-        #    height is pinned only to remove the vertical translation.
-        free_fixed = fixed.copy()
+        return scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
+
+    def _reference_state(self, scan, rest_shape: str, gas: str, indenter_radius: float) -> None:
+        """Rest shape and pressurized reference state of the free shell (no contacts): sets
+        ``rest``, ``q_reference``, ``rest_mismatch``, ``reference_volume`` [m³], ``top_height``
+        [m], ``touch_center`` [m] (the indenter at first touch) and the sealed gas's parameters."""
+        # The bottom vertex's height is pinned only to remove the vertical translation.
+        free_fixed = self._fixed.copy()
         free_fixed[3 * self.bottom + 2] = True
+        mesh = self.shell.mesh
         free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), free_fixed)
         q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
-        if rest_shape == "exact" and gauge_pressure > 0:
+        pressurized = float(self.base_params.gauge_pressure) > 0
+        if rest_shape == "exact" and pressurized:
             self.rest = solve_rest_shape(free_model, scan, self.base_params, atol=self.atol)
-        elif rest_shape == "solve" and gauge_pressure > 0:
+        elif rest_shape == "solve" and pressurized:
             self.rest, q_scan, _ = solve_rest_scale(free_model, scan, self.base_params, atol=self.atol)
         else:
             self.rest = scan
         free_model = free_model.with_rest(self.rest)
-        ref = free_model.solve(q_scan, self.base_params, atol=self.atol, name="reference state")
+        ref = free_model.equilibrium(q_scan, self.base_params, atol=self.atol, name="reference state")
         #: Largest distance [m] between the pressurized reference state and the scan.
         self.rest_mismatch = float(np.max(np.linalg.norm(ref.x[:-3].reshape(-1, 3) - scan, axis=1)))
         self.q_reference = ref.x
         self.reference_volume = float(free_model.volume(jnp.asarray(ref.x)))
-        # The free shell is done with: its factor (0.5 GiB at 80k faces) would otherwise live on
-        # through the contact model's compilation, until that model's first factorization.
+        # The free shell is done with: its factor would otherwise live on through the contact
+        # model's compilation, until that model's first factorization.
         release_factorizations()
         if gas != "prescribed":
-            self.base_params["reference_volume"] = jnp.asarray(self.reference_volume)
-            self.base_params["atmospheric_pressure"] = jnp.asarray(ATMOSPHERIC_PRESSURE)
+            self.base_params = self.base_params.replace(reference_volume=self.reference_volume,
+                                                        atmospheric_pressure=ATMOSPHERIC_PRESSURE)  # fmt: skip
         x_ref = ref.x[:-3].reshape(-1, 3)
-        self.top_height = float(x_ref[top, 2])
+        self.top_height = float(x_ref[self.top, 2])
         self.indenter_radius = float(indenter_radius)
-        self.touch_center = np.array([x_ref[top, 0], x_ref[top, 1], self.top_height + indenter_radius + 0.5 * self.gap0])
+        self.touch_center = np.array([x_ref[self.top, 0], x_ref[self.top, 1],
+                                      self.top_height + indenter_radius + 0.5 * self.gap0])  # fmt: skip
         self.q_reference[-3:] = self.touch_center
-        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
-        contact_cfg = ContactConfig(
-            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
-            activation_distance=float(ghat), reference_pressure=float(max(gauge_pressure, 1e3)),
-            friction=friction, slip_tolerance=slip_tolerance,
-        )
-        self.friction = contact_cfg.friction
-        cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact_cfg)
-        self.model = ShellModel(mesh, self.rest, cfg, fixed)
-        self._fixed = fixed
-        self._force_model = None
-        self._kept_factorization = (None, None)
 
     def with_friction(self, friction: float, slip_tolerance: float | None = None) -> "Indentation":
         """The same simulation (shell, rest shape, reference state, settings) with another ground
@@ -284,11 +303,11 @@ class Indentation:
         and keeps the sparsity pattern; μ is a traced value in the compiled functions, so every
         μ > 0 with the same ε shares one compilation."""
         contact = dataclasses.replace(self.model.config.contact, friction=friction, slip_tolerance=slip_tolerance)
-        other = object.__new__(Indentation)
-        other.__dict__.update(self.__dict__)
+        other = copy.copy(self)
         other.model = self.model.with_config(dataclasses.replace(self.model.config, contact=contact))
         other.friction = contact.friction
         other._force_model = None
+        other._kept_factorization = (None, None)
         return other
 
     @property
@@ -302,44 +321,22 @@ class Indentation:
         return self._force_model
 
     # ------------------------------------------------------------------------------------------
-    def _params_for(self, q, **extra):
-        p = dict(self.base_params)
-        p["indenter_center"] = jnp.asarray(q[-3:])
-        p.update({k: jnp.asarray(v) for k, v in extra.items()})
-        return p
+    def params_at(self, q, **extra) -> ShellParams:
+        """The model parameters (:class:`ShellParams`, SI) at state ``q`` (3V + 3,) [m]: the
+        simulation's, with the indenter center of ``q`` and the ``extra`` entries (e.g. a state's
+        lagged ``friction`` data, or ``indenter_force`` [N])."""
+        return self.base_params.replace(indenter_center=q[-3:], **extra)
 
-    def _feasible_start(self, q, model, q_prev=None):
-        """Newton's start from the guess ``q``: the barrier energy finite and near equilibrium.
-
-        A vertex that was within the barrier's range ĝ of a body in the converged state
-        ``q_prev`` gets back the gap it had there; any other vertex closer than ĝ/4 to a body (or
-        inside it) is put at ĝ/4. Why not ĝ/4 for all: vertices pressed by the indenter sit at
-        gaps of a few µm (ĝ/100 and less), and Newton on a log barrier started far above its
-        equilibrium gap g* can only take steps of length ≈ g*/g (longer ones cross the body),
-        which cost 4–5 damped iterations of the whole shell per load step. A vertex's contact
-        force changes little from one load step to the next, and so does its gap.
-        """
-        if model.config.contact.kind != "barrier":
-            return q
-        ghat = self.activation_distance
-        floor = 0.25 * ghat
-        gaps_prev = None if q_prev is None else body_gaps(q_prev, model.config)
-
-        def target(body, gap):
-            goal = np.where(gap < floor, floor, np.nan)
-            if gaps_prev is not None:
-                goal = np.where(gaps_prev[body] < ghat, np.maximum(gaps_prev[body], 1e-6 * ghat), goal)
-            return goal
-
-        return place_at_gaps(q, model.config, target)
+    _params_for = params_at  # the old private name, still used by tests/_balance.py
 
     def _step(self, model, q_guess, params, label, q_prev=None):
-        q0 = self._feasible_start(q_guess, model, q_prev)
-        # The last load step's last factorization preconditions this one (same model only).
-        kept_model, kept = self._kept_factorization
-        res = model.solve(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
-                          factorization=kept if kept_model is model else None, name=label)  # fmt: skip
-        self._kept_factorization = (model, res.last_factorization)
+        q0 = feasible_start(q_guess, model.config, self.activation_distance, q_prev)
+        # The last load step's last factorization preconditions this one (same control mode only).
+        control = "force" if model.config.force_control else "depth"
+        kept_control, kept = self._kept_factorization
+        res = model.equilibrium(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
+                                factorization=kept if kept_control == control else None, name=label)  # fmt: skip
+        self._kept_factorization = (control, res.last_factorization)
         return res
 
     def _lagged_step(self, model, q_guess, params, label, q_start):
@@ -353,7 +350,7 @@ class Indentation:
             "friction_anchor": np.array(q_start[:-3].reshape(-1, 3)),
             "friction_normal_force": model.plane_normal_forces(q_start),
         }
-        res = self._step(model, q_guess, {**params, **lagged}, label, q_start)
+        res = self._step(model, q_guess, params.replace(**lagged), label, q_start)
         iterations, factorizations, products = res.iterations, res.factorizations, res.products
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.x)
@@ -362,26 +359,12 @@ class Indentation:
             if change < FRICTION_LAG_TOLERANCE or k == self.friction_iterations:
                 break
             lagged = {**lagged, "friction_normal_force": current}
-            res = self._step(model, res.x, {**params, **lagged}, f"{label} (friction lag {k + 1})", res.x)
+            res = self._step(model, res.x, params.replace(**lagged), f"{label} (friction lag {k + 1})", res.x)
             iterations += res.iterations
             factorizations += res.factorizations
             products += res.products
         res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations, products=products)
         return res, lagged, change
-
-    def _accumulate_slip(self, slip, q_start, q_end):
-        """Add the tangential motion of the vertices touching the ground at ``q_end`` to ``slip``."""
-        if slip is None:
-            return None
-        point, normal = (np.asarray(v, dtype=np.float64) for v in self.model.config.contact.planes[0])
-        x0, x1 = q_start[:-3].reshape(-1, 3), q_end[:-3].reshape(-1, 3)
-        touching = (x1 - point) @ normal < self.activation_distance
-        d = x1 - x0
-        d = d - (d @ normal)[:, None] * normal
-        return slip + np.where(touching[:, None], d, 0.0)
-
-    def _initial_slip(self):
-        return np.zeros((self.model.mesh.n_vertices, 3)) if self.model.config.contact.planes else None
 
     def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
         """Equilibrium at indenter travel ``depth`` [m] (from first touch) or at ``force`` [N]."""
@@ -412,13 +395,13 @@ class Indentation:
         if any(b < a for a, b in zip(depths[:-1], depths[1:])) or depths[0] < 0:
             raise InvalidInputError("depths: must be non-negative and increasing.")
         history = [(0.0, self.q_reference)]
-        slip = [self._initial_slip()]
+        slip = [initial_slip(self.model.config)]
 
         def step(depth, _prev):
             for d in self._substeps(history[-1][0], depth):
                 q_start = history[-1][1]
                 res, lagged, change = self._depth_step(history, d)
-                slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
+                slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
                 history.append((d, res.x))
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
                                     res.factorizations, res.products)  # fmt: skip
@@ -434,25 +417,25 @@ class Indentation:
     def _depth_step(self, history, depth: float):
         """One displacement-controlled load step to travel ``depth`` [m] from the last state of
         ``history`` [(travel, q)], secant-predicted: (NewtonResult, friction params, lag change)."""
-        guess = self._predict(history, depth)
+        guess = secant_predict(history, depth)
         guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
-        return self._lagged_step(self.model, guess, self._params_for(guess), f"indentation depth {depth:.4g} m",
+        return self._lagged_step(self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m",
                                  history[-1][1])  # fmt: skip
 
     def force_curve(self, forces) -> list[IndentationState]:
         """Force-controlled continuation through increasing indenter ``forces`` [N]."""
         forces = [float(f) for f in forces]
         history = [(0.0, self.q_reference)]
-        slip = [self._initial_slip()]
+        slip = [initial_slip(self.model.config)]
 
         def step(force, _prev):
-            guess = self._predict(history, force)
-            params = self._params_for(guess, indenter_force=force)
+            guess = secant_predict(history, force)
+            params = self.params_at(guess, indenter_force=force)
             q_start = history[-1][1]
             res, lagged, change = self._lagged_step(
                 self.force_model, guess, params, f"indentation force {force:.4g} N", q_start
             )
-            slip[0] = self._accumulate_slip(slip[0], q_start, res.x)
+            slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
             history.append((force, res.x))
             depth = float(self.touch_center[2] - res.x[-1])
             return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
@@ -460,14 +443,19 @@ class Indentation:
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 
-    @staticmethod
-    def _predict(history, value):
-        if len(history) < 2:
-            return history[-1][1].copy()
-        (a, qa), (b, qb) = history[-2], history[-1]
-        if b == a:
-            return qb.copy()
-        return qb + (qb - qa) * (value - b) / (b - a)
+    def travel_states(self, travels, *, solved=None, on_solve=None) -> list[tuple[float, np.ndarray]]:
+        """[(travel [m], state q)] at each of the indenter ``travels`` (increasing), solved as
+        :meth:`curve` does; see :func:`shelljax.shell3d.solve_travels` for ``solved`` and
+        ``on_solve`` (resuming and checkpointing a long run)."""
+        return solve_travels(self, travels, solved=solved, on_solve=on_solve)
+
+    def states_at_forces(self, forces, *, tolerance: float, solved=None, on_solve=None,
+                         max_solves: int = 40) -> list[tuple[float, np.ndarray]]:
+        """[(force [N], state q)] at each of the indenter ``forces`` (increasing) to within
+        ``tolerance`` [N], solved under displacement control at the travel that matches each
+        force: see :func:`shelljax.shell3d.match_forces`."""
+        return match_forces(self, forces, tolerance=tolerance, solved=solved, on_solve=on_solve,
+                            max_solves=max_solves)  # fmt: skip
 
     # ------------------------------------------------------------------------------------------
     def force_function(self, depth: float):
@@ -475,7 +463,7 @@ class Indentation:
 
         θ is a dict with any of ``gauge_pressure`` [Pa], ``young_modulus`` [Pa], ``thickness`` [m]
         (others keep their values). The equilibrium is differentiated implicitly (forward and
-        reverse mode, see :func:`shelljax.solve.implicit_equilibrium`). The rest shape (and a sealed
+        reverse mode, see :func:`shelljax.shell3d.implicit_equilibrium`). The rest shape (and a sealed
         gas's reference volume) are held at their values for the nominal parameters: this is the
         sensitivity of the forward model with a fixed stress-free shape. With friction, the lagged
         anchors and normal forces of the nominal solve are held fixed too (the last load step's
@@ -486,13 +474,9 @@ class Indentation:
         cache = {"q": state0.q}
 
         def params_of(theta):
-            p = dict(self.base_params)
-            p["indenter_center"] = jnp.asarray(state0.q[-3:])
-            p.update({k: jnp.asarray(v) for k, v in state0.friction.items()})
-            p.update(theta)
-            return p
+            return self.params_at(state0.q, **state0.friction).replace(**theta)
 
-        def solve_host(theta):
+        def minimise_at(theta):
             q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal", cache["q"])
             cache["q"] = q.x
             return q.x
@@ -503,7 +487,7 @@ class Indentation:
         def hessian_host(q, theta):
             return model.host_hessian(q, params_of(theta), project=False)
 
-        equilibrium = implicit_equilibrium(solve_host, residual, hessian_host, model.free, model.n_dofs)
+        equilibrium = implicit_equilibrium(minimise_at, residual, hessian_host, model.free, model.n_dofs)
 
         def force(theta):
             q = equilibrium(theta)

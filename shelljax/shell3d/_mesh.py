@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..geometry import signed_volume
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -59,12 +60,6 @@ class ShellMesh:
     @property
     def n_faces(self) -> int:
         return int(self.faces.shape[0])
-
-
-def signed_volume(vertices, faces) -> float:
-    """Enclosed volume [m³] of a closed mesh (positive when its faces are oriented outward)."""
-    p = np.asarray(vertices)[np.asarray(faces)]
-    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
 
 
 def _flap_stencil(faces: np.ndarray, n_vertices: int, name: str) -> np.ndarray:
@@ -160,7 +155,7 @@ def random_sphere_mesh(
 
     ``sphere_mesh``'s rings carry a 6-sector pattern that a poke excites (modes 6, 12, ...), and a
     golden-angle spiral of vertices carries its parastichies (measured: every leading mode of a
-    poked spiral mesh was a Fibonacci number, 5 … 55), so wrinkle counts near those numbers cannot
+    poked spiral mesh is a Fibonacci number), so wrinkle counts near those numbers cannot
     be told from the mesh. Here the vertices are seeded random points (no long-range order) whose
     density follows a target edge length s(θ): ``top_spacing`` [m] up to the arc distance
     ``refined_arc`` [m] from the top pole, then growing at ``growth`` (edge length per unit arc
@@ -169,8 +164,6 @@ def random_sphere_mesh(
     uniform; ``smoothing_iterations`` half-steps to the neighbours' mean spread the clusters. The
     triangulation is the sphere's Delaunay one (the convex hull), with one vertex at each pole.
     """
-    from scipy.spatial import ConvexHull
-
     bottom_spacing = top_spacing if bottom_spacing is None else bottom_spacing
     if not (radius > 0 and 0 < top_spacing <= max_spacing and 0 < bottom_spacing <= max_spacing
             and refined_arc >= 0 and growth > 0):
@@ -179,6 +172,15 @@ def random_sphere_mesh(
             f"max_spacing (got {top_spacing}, {bottom_spacing}, {max_spacing}), refined_arc ≥ 0 "
             f"(got {refined_arc}) and growth > 0 (got {growth})."
         )
+    verts = _random_sphere_points(radius, top_spacing, max_spacing, bottom_spacing, refined_arc, growth, seed)
+    verts = _smooth_on_sphere(verts, radius, smoothing_iterations)
+    verts, faces = _hull_without_valence_three(verts)
+    return ShellMesh.from_arrays(verts, _outward(verts, faces), name=f"random sphere (seed {seed})")
+
+
+def _random_sphere_points(radius, top_spacing, max_spacing, bottom_spacing, refined_arc, growth, seed) -> np.ndarray:
+    """Poles and seeded random points [m] whose density follows the target edge length s(θ):
+    polar angles stratified band by band, azimuths uniform."""
     theta = np.linspace(0.0, np.pi, 20001)  # polar angle from the bottom pole [rad]
     arc_top, arc_bottom = radius * (np.pi - theta), radius * theta
     spacing = np.minimum.reduce([
@@ -194,12 +196,19 @@ def random_sphere_mesh(
     quantile = (np.arange(n_inner) + rng.uniform(0.0, 1.0, n_inner)) / n_inner
     polar = np.interp(quantile * count[-1], count, theta)
     azimuth = rng.uniform(0.0, 2.0 * np.pi, n_inner)
-    verts = np.concatenate([
+    return np.concatenate([
         [[0.0, 0.0, -radius]],
         radius * np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)], -1),
         [[0.0, 0.0, radius]],
     ])
-    for _ in range(smoothing_iterations):
+
+
+def _smooth_on_sphere(verts: np.ndarray, radius: float, iterations: int) -> np.ndarray:
+    """``iterations`` half-steps of every vertex but the poles to its hull neighbours' mean,
+    projected back onto the sphere: spreads the random clusters."""
+    from scipy.spatial import ConvexHull
+
+    for _ in range(iterations):
         faces = ConvexHull(verts).simplices
         edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
         total = np.zeros_like(verts)
@@ -210,10 +219,16 @@ def random_sphere_mesh(
         step[[0, -1]] = 0.0  # the poles stay
         verts = verts + step
         verts *= radius / np.linalg.norm(verts, axis=1, keepdims=True)
+    return verts
+
+
+def _hull_without_valence_three(verts: np.ndarray):
+    """(vertices, faces) of the sphere's Delaunay triangulation (the convex hull) with every
+    valence-3 vertex dropped: its faces' flap stencils would repeat a vertex, which makes the
+    bending's six-point curvature fit singular (the poles never are)."""
+    from scipy.spatial import ConvexHull
+
     faces = ConvexHull(verts).simplices.astype(np.int64)
-    # A valence-3 vertex gives its faces' flap stencils a repeated vertex, and the bending's
-    # six-point curvature fit is then singular (measured: one face at 6× the sphere's curvature,
-    # an infinite energy in the rest-shape solve): drop such vertices (the poles never are).
     for _ in range(10):
         valence = np.bincount(faces.ravel(), minlength=len(verts))
         keep = valence >= 4
@@ -221,11 +236,16 @@ def random_sphere_mesh(
             break
         verts = verts[keep]
         faces = ConvexHull(verts).simplices.astype(np.int64)
+    return verts, faces
+
+
+def _outward(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``faces`` of a star-shaped mesh about the origin, each wound with its normal outward."""
     p = verts[faces]
     normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     flip = np.einsum("ij,ij->i", normal, p.mean(axis=1)) < 0
     faces[flip] = faces[flip][:, ::-1]
-    return ShellMesh.from_arrays(verts, faces, name=f"random sphere (seed {seed})")
+    return faces
 
 
 def _ring_sphere(radius, spacing_max, spacing_pole, growth, name) -> ShellMesh:

@@ -15,7 +15,7 @@ indenter on the vertical axis through the top vertex:
 * ``D_l_mesh``: geometric ground-contact diameter, 2 × the largest distance from the axis of a
   vertex within the contact activation distance ĝ of the ground. It overestimates the disc by
   the ring where the shell lifts off by less than ĝ, plus up to one edge length of vertex
-  resolution (0.13 m ball, ĝ = 0.4 mm, 2000 faces, 5 N: D_l_mesh = 80 mm, D_l = 70 mm).
+  resolution.
 * ``d``: sunken depth, rim height minus top-vertex height.
 * ``pressure`` (gauge) and ``volume`` of the gas; ``ground_reaction``: vertical force of the
   ground on the shell (equals F plus the weight at equilibrium).
@@ -37,14 +37,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..physics import plane_gap
-from ._model import plane_contact_energy, sphere_contact_energy, _split
+from ._config import split_dofs
+from ._contact import plane_contact_energy, sphere_contact_energy
 
 
 def observables(sim, q, params) -> dict:
-    """Observables dict of a solved indentation state ``q`` (see the module docstring)."""
+    """Observables dict of a solved indentation state ``q`` of ``sim`` (an :class:`Indentation`)
+    with its parameters ``params`` (``sim.params_at(q, **friction)``); see the module docstring."""
     model = sim.model
     qj = jnp.asarray(q)
-    x, c = _split(qj, model.config)
+    x, c = split_dofs(qj, model.config)
     f_ind = -jax.grad(lambda cc: sphere_contact_energy(x, cc, model.geometry, model.config))(c)
     out = {"force": float(f_ind[2])}
     ground = 0.0
@@ -95,7 +97,7 @@ def _parabola_peak(r, z, r0):
     """Peak (r*, z*) of z(r) from a parabola through the ring heights near r0 (ring meshes).
 
     Only the upper half of the shell is searched: a vertex near the ground can share the rim's
-    radius (on an icosphere the refinement then ran to H = 340 mm on a 260 mm ball). Without three
+    radius, and would then bend the parabola far above the ball. Without three
     real rings there (irregular meshes, or rings split by wrinkles) the highest vertex is the rim.
     """
     fallback = (r0, float(z.max()))

@@ -10,8 +10,8 @@ matching equations (net force and torque) hold identically.
 
 Stops when max |r| ≤ ``atol`` [N]; then the forward solve from X reproduces the scan up to
 ``atol`` divided by the shell's stiffness. A failure raises NoConvergenceError with the history
-of max |r| [N]. (A plain fixed point X ← X + x_s − x*(X) was tried first and diverges: a
-pressurized membrane amplifies short-wavelength bumps of its rest shape.)
+of max |r| [N]. (A plain fixed point X ← X + x_s − x*(X) diverges: a pressurized membrane
+amplifies short-wavelength bumps of its rest shape.)
 """
 
 from __future__ import annotations
@@ -20,9 +20,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import NoConvergenceError
-from ..solve import SparseSolver
-from ._mesh import signed_volume
-from ._model import rest_jacobian_values
+from ..geometry import signed_volume
+from ._hessian import rest_jacobian_values
+from ._model import ShellModel
+from ._newton import AbstractRootProblem, newton
+from ._params import ShellParams
+
+
+def _membrane_strain(scan, faces, params) -> tuple[float, float]:
+    """(small-strain membrane strain P R (1−ν) / (2 E h) [-] of the scan's equivalent sphere,
+    R = 3V/A, the scan's area A [m²])."""
+    edges1, edges2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(edges1, edges2), axis=1).sum()
+    radius = 3.0 * signed_volume(scan, faces) / area
+    p, nu, e, h = (float(params.gauge_pressure), float(params.poisson_ratio), float(params.young_modulus),
+                   float(params.thickness))  # fmt: skip
+    return p * radius * (1 - nu) / (2 * e * h), area
 
 
 def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
@@ -32,58 +45,65 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
     gas; ``params``: its parameters (gauge pressure P_g [Pa], E [Pa], ν, h [m]); ``atol`` [N].
     """
     scan = np.asarray(scan, dtype=np.float64)
-    mesh = model.mesh
-    area = 0.5 * np.linalg.norm(
-        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
-        axis=1,
-    ).sum()
-    radius = 3.0 * signed_volume(scan, mesh.faces) / area
-    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
+    strain, _ = _membrane_strain(scan, model.mesh.faces, params)
     centroid = scan.mean(axis=0)
     rest = centroid + (scan - centroid) / (1.0 + strain)
     q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
     # Continuation in pressure: at full pressure, Newton from the small-strain guess can stall on
     # coarse meshes; each level starts from the previous level's rest shape.
-    target = float(np.asarray(params["gauge_pressure"]))
+    target = float(params.gauge_pressure)
     for level in (0.25, 0.5, 0.75, 1.0):
-        level_params = dict(params, gauge_pressure=jnp.asarray(target * level))
+        level_params = params.replace(gauge_pressure=target * level)
         rest = _newton_rest(model, scan, q_scan, rest, level_params, atol, max_iter, level == 1.0)
     return rest
 
 
+class RestShapeProblem(AbstractRootProblem):
+    """r(X) = ∇ₓE(x_s; X) [N] on the free dofs, as a function of the rest vertices X (flattened, with
+    the model's 3 indenter dofs, fixed, at the end), at the scan's state ``q_scan``."""
+
+    model: ShellModel
+    scan: np.ndarray
+    q_scan: np.ndarray
+    params: ShellParams
+    free: np.ndarray
+
+    def __init__(self, model: ShellModel, scan, q_scan, params: ShellParams):
+        self.model, self.scan, self.q_scan, self.params = model, scan, q_scan, params
+        self.free = model.free
+
+    def _rest(self, x) -> np.ndarray:
+        return x[: 3 * self.model.mesh.n_vertices].reshape(-1, 3)
+
+    def residual(self, x) -> np.ndarray:
+        return self.model.with_rest(self._rest(x)).host_gradient(self.q_scan, self.params)
+
+    def jacobian(self, x):
+        stencil = jnp.asarray(self.model.mesh.stencil)
+        data = rest_jacobian_values(jnp.asarray(self.scan), jnp.asarray(self._rest(x)), stencil, self.params,
+                                    self.model.pattern)  # fmt: skip
+        return self.model.pattern.matrix(data)
+
+
 def _newton_rest(model, scan, q_scan, rest, params, atol, max_iter, final):
-    mesh = model.mesh
-    free = model.free
-    n3 = 3 * mesh.n_vertices
-    pattern = model.pattern
-    stencil = jnp.asarray(mesh.stencil)
-    history = []
-    for _ in range(max_iter):
-        r = np.where(free, model.with_rest(rest).host_gradient(q_scan, params), 0.0)
-        history.append(float(np.max(np.abs(r))))
-        if history[-1] <= atol or (not final and history[-1] <= 1e3 * atol):
-            return rest
-        data = rest_jacobian_values(jnp.asarray(scan), jnp.asarray(rest), stencil, params, pattern)
-        jac = pattern.matrix(data)
-        step = SparseSolver(jac).solve(-r)
-        # Backtrack on the residual norm: the first steps can overshoot on stiff short modes.
-        alpha, r_norm = 1.0, np.linalg.norm(r)
-        for _ in range(20):
-            trial = rest + alpha * step[:n3].reshape(-1, 3)
-            r_try = np.where(free, model.with_rest(trial).host_gradient(q_scan, params), 0.0)
-            if np.all(np.isfinite(r_try)) and np.linalg.norm(r_try) < r_norm:
-                break
-            alpha *= 0.5
-        else:
-            break
-        rest = trial
-    raise NoConvergenceError(
-        f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
-        f"{history[-1]:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
-        "E and h.",
-        history,
-    )
+    """Newton on the rest vertices from ``rest`` to max |r| ≤ ``atol`` [N] (1000 ``atol`` unless
+    ``final``: a pressure level on the way only needs to get close). Backtracking on ‖r‖: the first
+    steps can overshoot on stiff short modes."""
+    problem = RestShapeProblem(model, scan, q_scan, params)
+    x0 = np.concatenate([np.asarray(rest).ravel(), np.zeros(3)])
+    try:
+        res = newton(problem, x0, atol=atol if final else 1e3 * atol, max_iter=max_iter, max_halvings=20,
+                     armijo=0.0, reuse_factorization=False, name="rest shape")  # fmt: skip
+    except NoConvergenceError as err:
+        history = err.history
+        last = history[-1] if history else float("nan")
+        raise NoConvergenceError(
+            f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
+            f"{last:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
+            "E and h.",
+            history,
+        ) from err
+    return problem._rest(res.x)
 
 
 def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, max_iter: int = 20):
@@ -97,21 +117,13 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     stalls. The fixed point s ← s (V_scan / V(s))^(1/3) contracts by about the membrane strain.
     """
     scan = np.asarray(scan, dtype=np.float64)
-    mesh = model.mesh
-    v_scan = signed_volume(scan, mesh.faces)
-    area = 0.5 * np.linalg.norm(
-        np.cross(scan[mesh.faces[:, 1]] - scan[mesh.faces[:, 0]], scan[mesh.faces[:, 2]] - scan[mesh.faces[:, 0]]),
-        axis=1,
-    ).sum()
-    radius = 3.0 * v_scan / area
-    p = {k: float(np.asarray(v)) for k, v in params.items() if np.ndim(v) == 0}
-    strain = p["gauge_pressure"] * radius * (1 - p["poisson_ratio"]) / (2 * p["young_modulus"] * p["thickness"])
-    if p["gauge_pressure"] > 0:
-        # A force residual δ [N] per vertex moves the volume by about 3 × strain × δ / (p A_v)
-        # (relative), with p A_v the vertex's pressure load. The caller's atol scales with the
-        # object's size, not with A_v, so on fine meshes (80k faces) or with a loose tolerance the
-        # forward solves stopped before the volume could reach rtol and the fixed point stalled.
-        atol = min(atol, rtol * p["gauge_pressure"] * area / len(scan))
+    v_scan = signed_volume(scan, model.mesh.faces)
+    strain, area = _membrane_strain(scan, model.mesh.faces, params)
+    pressure = float(params.gauge_pressure)
+    if pressure > 0:
+        # A force residual δ per vertex moves the volume by ≈ 3 strain δ / (p A_v): bound δ so
+        # that the volume can reach rtol on fine meshes, whose vertex loads p A_v are small.
+        atol = min(atol, rtol * pressure * area / len(scan))
     bottom = int(np.argmin(scan[:, 2]))
     anchor = scan[bottom].copy()  # the pinned bottom vertex stays put
     scale = 1.0 / (1.0 + strain)
@@ -119,7 +131,7 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     history = []
     for _ in range(max_iter):
         rest = anchor + (scan - anchor) * scale
-        q = model.with_rest(rest).solve(q, params, atol=atol, name="rest-scale forward solve").x
+        q = model.with_rest(rest).equilibrium(q, params, atol=atol, name="rest-scale forward solve").x
         vol = float(model.volume(jnp.asarray(q)))
         history.append(abs(vol / v_scan - 1.0))
         if history[-1] <= rtol:

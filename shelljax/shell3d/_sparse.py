@@ -132,9 +132,8 @@ def assemble_values(maps, nnz: int, element_matrices) -> jax.Array:
     scattered through a pattern's ``maps`` into ``nnz`` entries.
 
     Inside a jitted function, pass ``maps`` as an argument rather than closing over a pattern:
-    captured, they become constants of the XLA program (copied by the compiler and into the
-    compilation cache), and the assembly ran slower (0.50 against 0.32 s at 20k faces,
-    docs/shell3d.md).
+    captured, they become constants of the XLA program, copied by the compiler and into the
+    compilation cache, which slows the assembly (docs/shell3d.md, *Benchmark*).
     """
     data = jnp.zeros(nnz, dtype=jnp.float64)
     for (base, stride), values in zip(maps, element_matrices):
@@ -150,7 +149,7 @@ def element_positions(base, stride, size: int):
     m × m node-pair blocks of b × b dofs (b = k / m: 3 for the shell models' nodal patterns, 1
     otherwise) and the ``stride`` (n_e, m) between that block's rows (a CSR row's length):
     entry (b i + r, b j + c) sits at base[i, j] + r stride[i] + c. The expanded map (k² integers
-    per element, 99 MB at 80k faces) exists only chunk by chunk.
+    per element) exists only chunk by chunk.
     """
     n, m = base.shape[0], base.shape[1]
     block = size // m
@@ -211,7 +210,7 @@ def _nodal_pattern(nodal, n_nodes: int):
     Each node pair (I, J) owns a 3×3 block; row 3I+a lists the blocks of node I's neighbours J in
     increasing order, so entry (3I+a, 3J+b) sits at 9·ptr(I) + 3a·count(I) + 3·rank(J) + b, with
     ptr(I) the number of pairs of the nodes before I and rank(J) J's place among I's neighbours.
-    On an 80k-face mesh this sorts 2.9M keys instead of 26M (the old build's peak memory).
+    It sorts 9× fewer keys, which bounds the build's peak memory on fine meshes.
     """
     keys = [(blk[:, :, None] * n_nodes + blk[:, None, :]).ravel() for blk in nodal]
     diag = np.arange(n_nodes, dtype=np.int64) * (n_nodes + 1)  # unit pivots of fixed dofs
@@ -267,8 +266,7 @@ class SparseSolver:
         self._perm = ordering.perm
         self._cholesky = None
         if symmetric:
-            # On the 20k-face ball (30k dofs) one numeric Cholesky takes 0.3 s against 2.5 s for
-            # SuperLU's LU on the same ordering (docs/shell3d.md).
+            # Cholesky is several times faster than LU on the same ordering (docs/shell3d.md).
             self._cholesky = _Cholesky.factorize(matrix, ordering)
         if self._cholesky is None and definite:
             raise NoConvergenceError(
@@ -292,8 +290,8 @@ class SparseSolver:
         """"cholesky" or "lu": which factorization holds K."""
         return "lu" if self._cholesky is None else "cholesky"
 
-    def solve(self, rhs) -> np.ndarray:
-        """Solve (K + c u uᵀ) x = rhs; rhs (n,) or (n, m)."""
+    def apply_inverse(self, rhs) -> np.ndarray:
+        """x = (K + c u uᵀ)⁻¹ rhs by back-substitution; rhs (n,) or (n, m)."""
         y = self._solve_sparse(np.asarray(rhs, dtype=np.float64))
         if self._rank_one is not None:
             c, u, z, denom = self._rank_one
@@ -304,7 +302,7 @@ class SparseSolver:
     def _solve_sparse(self, rhs: np.ndarray) -> np.ndarray:
         """K⁻¹ rhs through the factorization."""
         if self._cholesky is not None:
-            return self._cholesky.solve(rhs)
+            return self._cholesky.apply_inverse(rhs)
         # SuperLU holds P K Pᵀ: solve (P K Pᵀ) (P x) = P rhs.
         out = np.empty_like(rhs)
         out[self._perm] = self._lu.solve(np.ascontiguousarray(rhs[self._perm]))
@@ -321,8 +319,7 @@ def _return_free_heap() -> None:
 
     Each Newton iteration allocates and frees tens of MB (CSR values, CHOLMOD's permuted copy and
     workspace, the projection's batches); glibc keeps what it cannot return from the top of its
-    heaps, so over a long curve the resident size crept up by ≈ 0.1 GiB at 80k faces without more
-    being in use. A no-op where there is no glibc.
+    heaps, so the resident size would creep up over a long curve. A no-op where there is no glibc.
     """
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
@@ -333,11 +330,8 @@ def _return_free_heap() -> None:
 def _superlu(permuted: sp.csc_matrix):
     """SuperLU of an already permuted matrix (NoConvergenceError if singular)."""
     try:
-        # Symmetric mode (diagonal pivots) on the METIS nested-dissection ordering of the
-        # Hessian's graph: on the 20k-face ball (30k dofs) this factorizes in 1.5 s with 20M
-        # fill, against 2.6 s / 25M for SuperLU's own minimum degree on AᵀA+A and 15 s for its
-        # default COLAMD with partial pivoting. If the diagonal pivots lose accuracy (indefinite
-        # or nonsymmetric matrix), fall back to threshold pivoting.
+        # Symmetric mode (diagonal pivots) on the METIS ordering has the least fill; if the
+        # diagonal pivots lose accuracy (indefinite or nonsymmetric matrix), threshold pivoting.
         lu = spla.splu(permuted, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         probe = np.ones(permuted.shape[0])
         residual = np.linalg.norm(permuted @ lu.solve(probe) - probe) / np.sqrt(permuted.shape[0])
@@ -379,13 +373,11 @@ class _Cholesky:
         except ArithmeticError:  # not positive definite (CHOLMOD reports the failing column)
             analysis.owner = None
             return False
-        # A weak reference: a strong one would make a cycle (factor ↔ analysis) that keeps an
-        # evicted analysis (its CHOLMOD factor: 0.5 GiB at 80k faces) alive until Python's cycle
-        # collector happens to run.
+        # Weak: a cycle (factor ↔ analysis) would keep an evicted analysis alive until the GC runs.
         analysis.owner = weakref.ref(self)
         return True
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def apply_inverse(self, rhs: np.ndarray) -> np.ndarray:
         import cvxopt
         from cvxopt import cholmod
 
@@ -415,7 +407,7 @@ class _CholeskyAnalysis:
         import cvxopt
         from cvxopt import cholmod
 
-        cholmod.options["supernodal"] = 2  # always supernodal (BLAS-3); simplicial is 20× slower here
+        cholmod.options["supernodal"] = 2  # always supernodal (BLAS-3): simplicial is far slower here
         n = matrix.shape[0]
         positions = sp.csr_matrix((np.arange(1, matrix.nnz + 1, dtype=np.float64), matrix.indices, matrix.indptr), shape=(n, n))
         lower = sp.tril(positions, format="csc")
@@ -435,8 +427,7 @@ class _Ordering:
     _cholesky: list = dataclasses.field(default_factory=list)  # lazily built _CholeskyAnalysis
 
     def permute(self, matrix: sp.csr_matrix) -> sp.csc_matrix:
-        """P A Pᵀ in CSC form (for SuperLU, which is rarely used now: built per call rather than
-        keeping a scatter map of the size of the pattern for every cached ordering)."""
+        """P A Pᵀ in CSC form for SuperLU (built per call: no scatter map kept per ordering)."""
         permuted = matrix[self.perm][:, self.perm].tocsc()
         permuted.sort_indices()
         return permuted
@@ -444,10 +435,9 @@ class _Ordering:
     def cholesky_analysis(self, matrix: sp.csr_matrix) -> _CholeskyAnalysis:
         """CHOLMOD's symbolic analysis of this pattern on this ordering (built on first use).
 
-        An analysis holds its pattern's factor storage (≈ 0.9 GiB at 80k faces), so only the
-        ``_CHOLESKY_KEPT`` most recently analysed patterns keep theirs: the free shell's of the
-        rest-shape solve is dropped once the contact model factorizes (switching back and forth
-        costs one symbolic analysis per switch, 0.1 s at 20k faces).
+        An analysis holds its pattern's factor storage, so only the ``_CHOLESKY_KEPT`` most
+        recently analysed patterns keep theirs: the free shell's of the rest-shape solve is
+        dropped once the contact model factorizes (switching back costs one symbolic analysis).
         """
         if not self._cholesky:
             while len(_ANALYSED) >= _CHOLESKY_KEPT:  # drop before building: never two at once
@@ -462,7 +452,7 @@ _ANALYSED: list = []  # orderings holding a Cholesky analysis, oldest first
 
 
 def release_factorizations() -> None:
-    """Free every cached Cholesky analysis, and with it its factor storage (0.5 GiB at 80k faces).
+    """Free every cached Cholesky analysis, and with it its factor storage.
 
     For a caller done with a sparsity pattern: a later factorization of that pattern redoes its
     symbolic analysis (orderings stay cached).

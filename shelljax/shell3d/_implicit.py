@@ -21,11 +21,11 @@ from ._sparse import SparseSolver
 
 
 def implicit_equilibrium(
-    solve_host: Callable, residual: Callable, hessian_host: Callable, free, n_dofs: int
+    minimise_host: Callable, residual: Callable, hessian_host: Callable, free, n_dofs: int
 ) -> Callable:
     """Build ``theta -> x*`` (custom JVP) from a host solver and a JAX residual.
 
-    ``solve_host(theta) -> (n,)`` runs on numpy values of the parameter pytree ``theta``;
+    ``minimise_host(theta) -> (n,)`` runs on numpy values of the parameter pytree ``theta``;
     ``residual(x, theta) -> (n,)`` is the JAX energy gradient; ``hessian_host(x, theta)`` returns
     ``(csr_matrix with fixed dofs folded in, rank_one | None)`` for the exact Hessian; ``free`` is
     the (n,) bool mask of free dofs (the fixed ones do not move with θ).
@@ -33,13 +33,13 @@ def implicit_equilibrium(
     mask = jnp.asarray(np.asarray(free, dtype=np.float64))
     out_shape = jax.ShapeDtypeStruct((n_dofs,), jnp.float64)
 
-    def _host_solve(theta):
+    def _host_minimise(theta):
         theta_np = jax.tree_util.tree_map(np.asarray, theta)
-        return np.asarray(solve_host(theta_np), dtype=np.float64)
+        return np.asarray(minimise_host(theta_np), dtype=np.float64)
 
     @jax.custom_jvp
     def equilibrium(theta):
-        return jax.pure_callback(_host_solve, out_shape, theta)
+        return jax.pure_callback(_host_minimise, out_shape, theta)
 
     @equilibrium.defjvp
     def _equilibrium_jvp(primals, tangents):
@@ -51,15 +51,15 @@ def implicit_equilibrium(
             hv = jax.jvp(lambda y: residual(y, theta), (x,), (mask * v,))[1]
             return mask * hv + (1.0 - mask) * v
 
-        def solve(_matvec, b):
+        def tangent_solve(_matvec, b):
             def host(x_, theta_, b_):
                 theta_np = jax.tree_util.tree_map(np.asarray, theta_)
                 mat, rank_one = hessian_host(np.asarray(x_), theta_np)
-                return SparseSolver(mat, rank_one, symmetric=True).solve(np.asarray(b_))
+                return SparseSolver(mat, rank_one, symmetric=True).apply_inverse(np.asarray(b_))
 
             return jax.pure_callback(host, out_shape, x, theta, b)
 
-        dx = jax.lax.custom_linear_solve(matvec, -mask * dr, solve, symmetric=True)
+        dx = jax.lax.custom_linear_solve(matvec, -mask * dr, tangent_solve, symmetric=True)
         return x, dx
 
     return equilibrium

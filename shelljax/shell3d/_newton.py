@@ -1,0 +1,365 @@
+"""Damped Newton for energy minimisation with sparse Hessians (host-side loop).
+
+The problem is one :class:`AbstractEnergyProblem`: energy, gradient and Hessian of the unknowns x,
+the mask of free dofs, and optionally exact Hessian-vector products and a feasibility projection.
+Convergence is measured in force units: the largest free component of the energy gradient [N]
+(for positions in m and energies in J). A backtracking line search on the energy rejects any
+trial point whose energy is not finite, which is how contact barriers stay feasible (the energy
+returns +inf for a penetrating configuration). A problem with such barriers can also define
+``feasible_trial``, which maps each trial point to a feasible one near it (a projected search
+path, as in projected Newton methods for bounds): a step that only a few barrier vertices would
+overshoot then moves everything else the whole way instead of being halved as a whole.
+
+Each iteration first tries the exact Hessian (quadratic convergence); if it is not positive
+definite (its Cholesky factorization fails) or its step is not a descent direction, it retries
+with the per-element PSD-projected Hessian and finally with a diagonal shift. An indefinite
+Hessian is never solved by LU here: its Newton step heads for saddles as readily as for minima.
+A failure raises :class:`shelljax.NoConvergenceError` carrying the residual history; a result is
+never returned without meeting the tolerance.
+
+Once a full Newton step has been taken, the next iteration first reuses the last factorization
+(a lagged-Hessian or Shamanskii step: one back-substitution instead of an assembly and a
+factorization, which dominate the cost on large meshes). The reused factorization is kept while
+each such step is a full step that cuts the residual at least ``REUSE_CONTRACTION``-fold;
+otherwise the step is still taken if the line search accepts it, and the next iteration
+refactorizes. A reused direction is used only if it descends.
+
+Given exact Hessian-vector products (``hessian_operator``), a kept factorization is used instead as
+the preconditioner of conjugate gradients on the exact Hessian (an inexact Newton step, solved to
+a forcing tolerance of the gradient's norm). It is kept for as long as CG converges within
+``CG_MAX_ITERATIONS`` products, also across calls (``factorization=``: a load step starts from the
+previous step's last factorization), so the solver refactorizes only where the Hessian has moved.
+
+The loop runs with NumPy's BLAS limited to one thread: an idle OpenBLAS thread spinning after CG's
+dot products steals the core that XLA's products use (docs/shell3d.md, *Solver*).
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
+
+from .._errors import NoConvergenceError
+from ._sparse import SparseSolver
+
+
+#: A step with a reused factorization must cut the largest free force by at least this factor
+#: (and be a full step) for the factorization to be reused again.
+REUSE_CONTRACTION = 4.0
+#: Inexact Newton: CG stops once ‖H d + g‖₂ ≤ η ‖g‖₂, with the forcing term η of Eisenstat and
+#: Walker (1996, choice 2: η = 0.9 (‖gₖ‖/‖gₖ₋₁‖)²) clipped to [CG_FORCING_MIN, CG_FORCING_MAX]:
+#: loose while the nonlinearity dominates the step's error, tight (superlinear) near the solution.
+CG_FORCING_MAX = 0.1
+CG_FORCING_MIN = 1e-6
+#: A kept factorization that needs more products than this is refactorized at the current iterate.
+CG_MAX_ITERATIONS = 12
+#: From this many products on, CG gives up as soon as its mean contraction per product so far,
+#: extrapolated, would not reach the forcing tolerance within CG_MAX_ITERATIONS.
+CG_EXTRAPOLATE_AFTER = 4
+
+
+class AbstractEnergyProblem(eqx.Module):
+    """An energy to minimise over the ``free`` dofs of x (host arrays, SI units).
+
+    Subclasses define ``energy``, ``gradient`` and ``hessian``. ``gradient`` returns the
+    unmasked gradient with opaque data that ``hessian`` and ``hessian_operator`` may reuse at the
+    same x (e.g. a linearization); Newton hands that pair back to them at the iterate it came from.
+    Two optional methods are None here and may be defined by a subclass:
+
+    - ``hessian_operator(x, gradient) -> (v ↦ H(x) v)``: exact Hessian-vector products [N], which
+      make Newton's steps preconditioned CG solves (module docstring);
+    - ``feasible_trial(x, x_trial) -> x_trial' | None``: the line search's trial points become
+      ``feasible_trial(x, x + α d)`` and its sufficient-decrease test uses the first-order change
+      ∇E·(x_trial' − x) of the projected point (None: no projection, the plain Armijo test).
+    """
+
+    free: eqx.AbstractVar[np.ndarray]
+
+    hessian_operator = None
+    feasible_trial = None
+    #: Whether ``hessian`` is symmetric: Newton then factorizes it by Cholesky and falls back to the
+    #: PSD-projected and shifted Hessians; otherwise (a root problem) by LU, without fallback.
+    symmetric = True
+
+    @abc.abstractmethod
+    def energy(self, x: np.ndarray) -> float:
+        """Energy [J] at x; +inf where x is infeasible."""
+
+    @abc.abstractmethod
+    def gradient(self, x: np.ndarray) -> tuple[np.ndarray, Any]:
+        """(∇E(x) (n,) [N] with the fixed dofs included, data reusable at x or None)."""
+
+    @abc.abstractmethod
+    def hessian(self, x: np.ndarray, gradient: tuple[np.ndarray, Any], project: bool):
+        """(csr_matrix with the fixed dofs folded in, rank_one (c, u) for an extra c u uᵀ or None);
+        with ``project``, the per-element PSD-projected Hessian."""
+
+    def slope(self, gradient: np.ndarray, direction: np.ndarray) -> float:
+        """Directional derivative of the energy along ``direction`` (``gradient``: the masked one)."""
+        return float(gradient @ direction)
+
+
+class AbstractRootProblem(AbstractEnergyProblem):
+    """Equations r(x) = 0 over the ``free`` dofs with a sparse, possibly nonsymmetric Jacobian,
+    solved by the same Newton: its energy is the merit ½‖r‖², its steps d = −J⁻¹ r (along which the
+    merit's slope is −‖r‖²), and it converges on max |r| [the unit of r].
+
+    Subclasses define ``residual(x) -> r (n,)`` and ``jacobian(x) -> csr_matrix`` (fixed dofs
+    folded in). Each energy evaluation computes r: the line search's decrease test is on ‖r‖.
+    """
+
+    symmetric = False
+
+    @abc.abstractmethod
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """r(x) (n,), unmasked."""
+
+    @abc.abstractmethod
+    def jacobian(self, x: np.ndarray):
+        """∂r/∂x as a csr_matrix with the fixed dofs folded in."""
+
+    def energy(self, x):
+        r = np.where(self.free, self.residual(x), 0.0)
+        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
+
+    def gradient(self, x):
+        return self.residual(x), None
+
+    def hessian(self, x, gradient, project):
+        return self.jacobian(x), None
+
+    def slope(self, gradient, direction):
+        return -float(gradient @ gradient)
+
+
+@dataclasses.dataclass(frozen=True)
+class NewtonResult:
+    """Converged state ``x`` with its residual history [N] (max |free gradient| per iterate) and
+    the number of Hessian ``factorizations`` it took (≤ iterations: see factorization reuse), the
+    Hessian-vector ``products`` of its CG solves, and the ``last_factorization`` (a SparseSolver or
+    None) to precondition a nearby minimisation with."""
+
+    x: np.ndarray
+    iterations: int
+    history: list
+    energy: float
+    factorizations: int = 0
+    products: int = 0
+    last_factorization: object = dataclasses.field(default=None, repr=False)
+
+
+def newton(
+    problem: AbstractEnergyProblem,
+    x0,
+    *,
+    atol: float,
+    max_iter: int = 60,
+    max_halvings: int = 40,
+    armijo: float = 1e-4,
+    reuse_factorization: bool = True,
+    factorization=None,
+    name: str = "Newton",
+) -> NewtonResult:
+    """Minimise ``problem``'s energy from ``x0`` to max |∇E| ≤ ``atol`` [N] over its free dofs.
+
+    ``reuse_factorization``: try the last factorization before a new one (module docstring);
+    ``factorization``: a kept factorization to start with. Raises NoConvergenceError with the
+    history.
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name)
+        return run.minimise(x0, max_iter)
+
+
+class _NewtonRun:
+    """The state of one Newton minimisation: iterate, residual history, kept factorizations."""
+
+    def __init__(self, problem, atol, max_halvings, armijo, reuse_factorization, factorization, name):
+        self.problem, self.atol, self.name = problem, atol, name
+        self.max_halvings, self.armijo, self.reuse = max_halvings, armijo, reuse_factorization
+        self.free = np.asarray(problem.free, dtype=bool)
+        self.inexact = problem.hessian_operator is not None
+        self.factorizations = self.products = 0
+        self.forcing = CG_FORCING_MAX
+        # the last factorization, while lagged steps keep converging fast (or CG with it does)
+        self.reusable = self.solver = factorization if reuse_factorization else None
+
+    def minimise(self, x0, max_iter: int) -> NewtonResult:
+        self.x = np.array(x0, dtype=np.float64)
+        self.e = float(self.problem.energy(self.x))
+        if not np.isfinite(self.e):
+            raise NoConvergenceError(f"{self.name}: the initial state is infeasible (energy = {self.e}).")
+        self._evaluate_gradient()
+        self.history = [float(np.max(np.abs(self.g)))]
+        for it in range(max_iter):
+            if self.history[-1] <= self.atol:
+                return self._result(it)
+            if not np.isfinite(self.history[-1]):
+                break
+            step, slope, reused = self._direction(it)
+            alpha, x_try, e_try = self._line_search(step, slope)
+            if alpha is None:
+                if reused:  # a stale factorization is no reason to fail: refactorize and retry
+                    self.reusable = None
+                    continue
+                raise NoConvergenceError(
+                    f"{self.name}: line search failed at iteration {it} (no sufficient decrease after "
+                    f"{self.max_halvings} halvings; step norm {np.linalg.norm(step):.3e}).",
+                    self.history,
+                )
+            self._accept(x_try, e_try, alpha, reused)
+        if self.history[-1] <= self.atol:
+            return self._result(max_iter)
+        raise NoConvergenceError(
+            f"{self.name}: residual {self.history[-1]:.3e} N above tolerance {self.atol:.3e} N after {max_iter} "
+            "iterations. Use smaller continuation steps or allow more iterations (max_iter; "
+            "shell3d.Indentation(max_newton_iterations=...)).",
+            self.history,
+        )
+
+    def _result(self, iterations: int) -> NewtonResult:
+        return NewtonResult(x=self.x, iterations=iterations, history=self.history, energy=self.e,
+                            factorizations=self.factorizations, products=self.products,
+                            last_factorization=self.solver)  # fmt: skip
+
+    def _evaluate_gradient(self) -> None:
+        self.current = self.problem.gradient(self.x)
+        self.g = np.where(self.free, self.current[0], 0.0)
+
+    def _direction(self, it: int):
+        """(step, slope g·step, whether a kept factorization gave it): a descent direction."""
+        if self.reusable is not None:
+            d = self._reused_direction()
+            if d is not None and np.all(np.isfinite(d)) and self.problem.slope(self.g, d) < 0.0:
+                return d, self.problem.slope(self.g, d), True
+        for mode in ("exact", "projected", "shifted") if self.problem.symmetric else ("exact",):
+            d = self._factorized_direction(mode)
+            if d is None:
+                continue
+            slope = self.problem.slope(self.g, d)
+            if np.all(np.isfinite(d)) and slope < 0.0:
+                return d, slope, False
+        raise NoConvergenceError(
+            f"{self.name}: no descent direction at iteration {it} (Hessian singular or indefinite "
+            "even after projection and shift).",
+            self.history,
+        )
+
+    def _reused_direction(self):
+        """Newton step through the kept factorization: directly, or as CG's preconditioner."""
+        free, reusable = self.free, self.reusable
+        if not self.inexact:
+            return np.where(free, -reusable.apply_inverse(self.g), 0.0)
+        product = self.problem.hessian_operator(self.x, self.current)
+        d, used = _preconditioned_cg(lambda v: np.where(free, product(v), 0.0),
+                                     lambda r: np.where(free, reusable.apply_inverse(r), 0.0), self.g,
+                                     self.forcing)  # fmt: skip
+        self.products += used
+        if d is None:
+            self.reusable = None
+        return d
+
+    def _factorized_direction(self, mode: str):
+        """Newton step through a fresh factorization of the ``mode`` Hessian, or None if it is
+        not positive definite."""
+        try:
+            mat, rank_one = self.problem.hessian(self.x, self.current, mode != "exact")
+            if mode == "shifted":
+                diag = np.abs(mat.diagonal())
+                mat = mat + 1e-3 * np.mean(diag) * sp.identity(mat.shape[0], format="csr")
+            symmetric = self.problem.symmetric
+            self.solver = SparseSolver(mat, rank_one, symmetric=symmetric, definite=symmetric)
+            self.factorizations += 1
+            d = -self.solver.apply_inverse(self.g)
+        except NoConvergenceError:
+            return None
+        return np.where(self.free, d, 0.0)
+
+    def _line_search(self, step, slope):
+        """(α, x_try, E(x_try)) of the first accepted halving of ``step``; α None if none is."""
+        alpha = 1.0
+        gnorm = float(np.linalg.norm(self.g))
+        for _ in range(self.max_halvings):
+            x_try = self.x + alpha * step
+            predicted = alpha * slope
+            projected = None if self.problem.feasible_trial is None else self.problem.feasible_trial(self.x, x_try)
+            if projected is not None:
+                x_try = projected
+                predicted = min(float(self.g @ (x_try - self.x)), 0.0)
+            e_try = float(self.problem.energy(x_try))
+            if np.isfinite(e_try):
+                if e_try <= self.e + self.armijo * predicted:
+                    return alpha, x_try, e_try
+                if abs(e_try - self.e) <= 1e-11 * max(abs(self.e), 1e-300):
+                    # Energy differences below round-off: accept if the residual decreases.
+                    g_try = np.where(self.free, self.problem.gradient(x_try)[0], 0.0)
+                    if float(np.linalg.norm(g_try)) < gnorm:
+                        return alpha, x_try, e_try
+            alpha *= 0.5
+        return None, None, None
+
+    def _accept(self, x_try, e_try, alpha: float, reused: bool) -> None:
+        """Move to the accepted point; update CG's forcing term and the kept factorization."""
+        gnorm = float(np.linalg.norm(self.g))
+        self.x, self.e = x_try, e_try
+        self._evaluate_gradient()
+        self.history.append(float(np.max(np.abs(self.g))))
+        # A linear residual of atol/2 in the 2-norm is below atol in every component: never ask more.
+        gnew = float(np.linalg.norm(self.g))
+        forcing = max(0.9 * (gnew / gnorm) ** 2, 0.5 * self.atol / max(gnew, 1e-300))
+        self.forcing = float(np.clip(forcing, CG_FORCING_MIN, CG_FORCING_MAX))
+        full_step = alpha == 1.0
+        if self.inexact:  # a preconditioner: kept while CG converges with it
+            self.reusable = (self.reusable if reused else self.solver) if self.reuse else None
+        elif reused:
+            keep = full_step and self.history[-1] * REUSE_CONTRACTION <= self.history[-2]
+            self.reusable = self.reusable if keep else None
+        else:
+            self.reusable = self.solver if (self.reuse and full_step) else None
+
+
+def _preconditioned_cg(product, precondition, g, forcing):
+    """(d, products): CG on H d = −g preconditioned by ``precondition`` (≈ H⁻¹), to
+    ``forcing`` ‖g‖₂; d is None where it did not converge in ``CG_MAX_ITERATIONS`` products, is
+    not on course to (``CG_EXTRAPOLATE_AFTER``), or met a direction of non-positive curvature
+    (then a factorization at x decides the step)."""
+    residual = -g
+    z = precondition(residual)
+    direction = z
+    rz = float(residual @ z)
+    d = np.zeros_like(g)
+    start = float(np.linalg.norm(g))
+    target = forcing * start
+    for k in range(1, CG_MAX_ITERATIONS + 1):
+        hp = product(direction)
+        curvature = float(direction @ hp)
+        if not (curvature > 0.0 and rz > 0.0):
+            return None, k
+        a = rz / curvature
+        d = d + a * direction
+        residual = residual - a * hp
+        remaining = float(np.linalg.norm(residual))
+        if remaining <= target:
+            return d, k
+        if k >= CG_EXTRAPOLATE_AFTER and not _on_course(start, remaining, target, k):
+            return None, k
+        z = precondition(residual)
+        rz, rz_old = float(residual @ z), rz
+        direction = z + (rz / rz_old) * direction
+    return None, CG_MAX_ITERATIONS
+
+
+def _on_course(start: float, remaining: float, target: float, used: int) -> bool:
+    """Whether CG, having contracted its residual from ``start`` to ``remaining`` in ``used``
+    products, reaches ``target`` within ``CG_MAX_ITERATIONS`` products at the same mean rate."""
+    rate = (remaining / start) ** (1.0 / used)
+    return rate < 1.0 and used + np.log(target / remaining) / np.log(rate) <= CG_MAX_ITERATIONS
+
+
+__all__ = ["AbstractEnergyProblem", "AbstractRootProblem", "NewtonResult", "newton"]
