@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import platform
 import shutil
+import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -13,6 +16,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from . import __version__
+from ._compile_log import compile_log
 from ._errors import ShelljaxError
 from ._memory_mappings import release_compiled_programs_if_crowded
 from .config import ExperimentConfig, load_config
@@ -101,9 +105,22 @@ def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_di
     return block, post
 
 
-def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path):
+@contextlib.contextmanager
+def _stage(name: str, stages: list[dict], verbose: bool):
+    """Time a stage of the run and what JAX compiled in it; append the record to ``stages``."""
+    start = time.perf_counter()
+    with compile_log() as log:
+        yield
+    wall = time.perf_counter() - start
+    stages.append({"stage": name, "wall_seconds": wall, **log.to_dict()})
+    if verbose:
+        tqdm.write(f"{name}: {wall:.1f} s; {log.summary()}", file=sys.stderr)
+
+
+def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
+                        stages: list[dict], verbose: bool):  # fmt: skip
     """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
-    result or None). bayes starts from the fit when it converged.
+    result or None). bayes starts from the fit when it converged; each method is a timed stage.
 
     A failure is recorded in the block (``error``) and reported, not raised: one bad session must
     not lose the others' results.
@@ -113,11 +130,12 @@ def _simulation_methods(session: Session, config: ExperimentConfig, options: Est
     out, fit = {}, None
     for method in methods:
         try:
-            if method == "fit":
-                fit = run_estimator("fit", session, options, model=model)
-                out[method] = (_block(fit), fit)
-            else:
-                out[method] = _bayes_block(session, options, model, fit, run_dir, config.figures)
+            with _stage(f"{session.source.name}: {method}", stages, verbose):
+                if method == "fit":
+                    fit = run_estimator("fit", session, options, model=model)
+                    out[method] = (_block(fit), fit)
+                else:
+                    out[method] = _bayes_block(session, options, model, fit, run_dir, config.figures)
         except ShelljaxError as err:
             warnings.warn(f"{method} failed on {session.source}: {err}", stacklevel=2)
             out[method] = ({"error": f"{type(err).__name__}: {err}"}, None)
@@ -153,7 +171,7 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
 
 
 def _estimate_session_entry(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                            used_in_calibration: bool, held_out: list):  # fmt: skip
+                            used_in_calibration: bool, held_out: list, stages: list[dict], verbose: bool):  # fmt: skip
     """Every configured estimator on one session: (results.json entry, summary-figure row)."""
     entry = {"object": session.object_name, "session": str(session.source),
              "used_in_calibration": used_in_calibration, "input_files": session.input_files,
@@ -167,7 +185,7 @@ def _estimate_session_entry(session: Session, config: ExperimentConfig, options:
         manometer = session.manometer_gauge_pressure
         if manometer is not None and not used_in_calibration:
             held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
-    for method, (block, result) in _simulation_methods(session, config, options, run_dir).items():
+    for method, (block, result) in _simulation_methods(session, config, options, run_dir, stages, verbose).items():
         entry["estimates"][method] = block
         if result is not None:
             row["estimates"][method] = _plotted(result.estimates)
@@ -216,9 +234,10 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     summary_rows: list[dict] = []
     held_out: list[tuple[str, float, float, float]] = []
     calibration_files = {str(s.source) for s in calibration_sessions}
+    stages: list[dict] = []
     for session in tqdm(sessions, desc="estimating", disable=disable):
-        entry, row = _estimate_session_entry(session, config, options, run_dir,
-                                             str(session.source) in calibration_files, held_out)  # fmt: skip
+        entry, row = _estimate_session_entry(session, config, options, run_dir, str(session.source) in calibration_files,
+                                             held_out, stages, verbose=progress is not False)  # fmt: skip
         summary_rows.append(row)
         results["sessions"].append(entry)
         release_compiled_programs_if_crowded()  # each object compiles its own engine
@@ -234,6 +253,8 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
         if summary_rows:
             plot_estimate_summary(summary_rows, run_dir / "figures" / "estimates.png")
             results["summary_figure"] = "figures/estimates.png"
+    results["compilation"] = {"stages": stages, "unit": "s",
+                              "total_seconds": sum(s["total_seconds"] for s in stages)}  # fmt: skip
     (run_dir / "results.json").write_text(json.dumps(results, indent=2))
     return run_dir
 

@@ -14,6 +14,6 @@ def net_vertical_residual(sim, state, model=None) -> float:
     comparing the two forces to a tolerance, and independent of how far below atol Newton stopped.
     """
     model = model or sim.model
-    params = model._host_params(sim._params_for(state.q, **state.friction))
+    params = model.host_params(sim.params_at(state.q, **state.friction))
     gradient = np.asarray(model.gradient(jnp.asarray(state.q), params))
     return float(np.sum(gradient[:-3].reshape(-1, 3)[:, 2]))

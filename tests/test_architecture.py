@@ -21,7 +21,7 @@ PACKAGE = ROOT / "shelljax"
 LAYERS = {  # rank: a module may import ranks ≤ its own
     "paper": 0, "_errors": 0,
     "physics": 1, "session": 1, "geometry": 1, "sensing": 1,
-    "axisym": 2, "shell3d": 2, "_parallel": 2, "_hilbert": 2, "_memory_mappings": 2,
+    "axisym": 2, "shell3d": 2, "_parallel": 2, "_hilbert": 2, "_memory_mappings": 2, "_compile_log": 2,
     "estimate": 3, "diagnose": 3, "virtual": 3, "dynamics": 3,
     "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4,
 }  # fmt: skip
@@ -123,12 +123,26 @@ def _numbers(path: Path) -> set[float]:
         (1.33, "physics/_shell_theory.py"),  # the wrinkle law's prefactor
         (2.52, "physics/_shell_theory.py"),  # the wrinkling onset
         (0.64, "paper.py"),  # the paper's k_s
-        (8e-3, "paper.py"),  # the paper's finger radius
     ],
 )
 def test_each_constant_of_the_paper_is_defined_once(value, home):
     where = [str(p.relative_to(PACKAGE)) for p in _package_files() if value in _numbers(p)]
     assert where == [home], f"{value} is written in {where}; its one home is {home}"
+
+
+def test_the_finger_radius_default_is_the_papers():
+    written = []
+    for path in _package_files():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = node.args.args[len(node.args.args) - len(node.args.defaults):] + node.args.kwonlyargs
+                defaults = node.args.defaults + node.args.kw_defaults
+                written += [f"{path.relative_to(PACKAGE)}:{node.lineno}" for a, d in zip(args, defaults)
+                            if a.arg == "indenter_radius" and isinstance(d, ast.Constant) and isinstance(d.value, float)]  # fmt: skip
+            elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+                if node.target.id == "indenter_radius" and isinstance(node.value, ast.Constant) and isinstance(node.value.value, float):
+                    written.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    assert not written, f"indenter_radius defaults written as numbers (use shelljax.paper.PAPER_INDENTER_RADIUS): {written}"
 
 
 @pytest.mark.parametrize(

@@ -54,10 +54,9 @@ SHAPE_VARIANTS = (  # label, CurvePhysics overrides / parameter changes, force f
 
 def calibration_sessions(ball: str) -> list:
     """The bundled calibration sessions of ``ball`` ("pezzi" or "yoga"), by pressure."""
-    from ..config import bundled_data_dir
-    from ..session import load_session
+    from ..session import bundled_sessions, load_session
 
-    return [load_session(p) for p in sorted((bundled_data_dir() / "sessions").glob(f"calib_{ball}_*.toml"))]
+    return [load_session(p) for p in bundled_sessions(f"calib_{ball}_*.toml")]
 
 
 def _scan_rows(study, data, ball: str, scans: dict):

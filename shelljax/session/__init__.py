@@ -1,5 +1,6 @@
 """Measurement sessions: the TOML/CSV format, its validation, and the Session record (SI units)."""
 
+from ._bundled import bundled_sessions
 from ._load import SCHEMA_VERSION, file_sha256, load_session
 from ._schema import SHAPE_OBSERVABLES, Session
 from ._units import FORCE_UNITS, LENGTH_UNITS, MASS_UNITS, PRESSURE_UNITS

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..paper import PAPER_INDENTER_RADIUS
 from ..physics import ATMOSPHERIC_PRESSURE
 from ._config import ContactConfig, ModelConfig
 from ._continuation import continuation
@@ -208,7 +209,7 @@ class Indentation:
         gauge_pressure: float = 0.0,
         *,
         gas: str = "prescribed",
-        indenter_radius: float = 0.008,
+        indenter_radius: float = PAPER_INDENTER_RADIUS,
         ground: bool = True,
         mass: float | None = None,
         contact: str = "barrier",
@@ -327,7 +328,6 @@ class Indentation:
         lagged ``friction`` data, or ``indenter_force`` [N])."""
         return self.base_params.replace(indenter_center=q[-3:], **extra)
 
-    _params_for = params_at  # the old private name, still used by tests/_balance.py
 
     def _step(self, model, q_guess, params, label, q_prev=None):
         q0 = feasible_start(q_guess, model.config, self.activation_distance, q_prev)

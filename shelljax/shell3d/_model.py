@@ -158,7 +158,6 @@ class ShellModel(eqx.Module):
             params = params.replace(friction_coefficient=self.config.contact.friction)
         return params
 
-    _host_params = host_params  # the old private name, still used by tests/_balance.py
 
     def host_energy(self, q, params) -> float:
         """Energy [J] for Newton's line search (+inf where infeasible)."""
