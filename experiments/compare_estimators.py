@@ -1,4 +1,4 @@
-"""Closed form vs fit vs bayes on virtual experiments from the 3D engine (issue 4, item 3).
+"""Closed form vs fit vs bayes on virtual experiments from the 3D engine.
 
 Sessions: ``shelljax.virtual`` (noise-free 3D curves bundled in
 ``shelljax/data/virtual/curves.json``, noisy sessions drawn reproducibly). For P_g [Pa] and E [Pa]

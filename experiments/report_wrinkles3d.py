@@ -1,5 +1,5 @@
 """3D wrinkle counts against the axisymmetric count and n ≈ 1.33 τ^½, and a full-size
-cross-validation of the two engines (issue 6, items 2 and 4).
+cross-validation of the two engines.
 
 Pezzi-like ball (R = 0.13 m, P_g = 1.3 kPa, E = 2.34 MPa, ν = 0.4, prescribed gas, 8 mm finger,
 ground) with the wall thickness h chosen so that τ = P_g R² / √(E h B) = 10, 40, 100. For each τ,
