@@ -12,7 +12,7 @@ from shelljax import InvalidInputError, NoConvergenceError
 from shelljax.physics import ATMOSPHERIC_PRESSURE
 from shelljax.shell3d import EquilibriumProblem, SparseSolver
 from shelljax.shell3d._contact import BARRIER_STEP_FRACTION, body_gaps
-from shelljax.shell3d._energy import GRAVITY
+from shelljax.physics import STANDARD_GRAVITY as GRAVITY
 from shelljax.shell3d._steps import feasible_start
 
 from _balance import net_vertical_residual

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from ..physics import (
+    STANDARD_GRAVITY,
     adiabatic_gas_energy,
     bending_density,
     isothermal_gas_energy,
@@ -126,9 +127,6 @@ def rest_geometry(rest_stencils: Float[Array, "F 6 3"]):
     return a, b, area
 
 
-GRAVITY = 9.81  # [m/s²]
-
-
 class ShellGeometry(eqx.Module):
     """Per-face rest data and per-vertex weights (arrays; not part of the jit key)."""
 
@@ -199,7 +197,7 @@ def total_energy(q, params, geometry: ShellGeometry, config: ModelConfig):
         e = e - jnp.sum(params.nodal_forces * x)
     if params.mass is not None:
         weights = geometry.vertex_area / jnp.sum(geometry.vertex_area)
-        e = e + params.mass * GRAVITY * jnp.sum(weights * x[:, 2])
+        e = e + params.mass * STANDARD_GRAVITY * jnp.sum(weights * x[:, 2])
     return e
 
 
