@@ -2,7 +2,7 @@
 
 * a module imports only from its own layer or the layers below it;
 * the data layer does not import JAX;
-* no package file is over 600 lines;
+* no package file is over 600 lines, no function over 80;
 * scripts and notebooks import public names only and patch no ``sys.path``;
 * the paper's laws and constants are defined once.
 """
@@ -27,6 +27,7 @@ LAYERS = {  # rank: a module may import ranks ≤ its own
 }  # fmt: skip
 DATA_LAYER = ("session", "geometry", "sensing")
 MAX_FILE_LINES = 600
+MAX_FUNCTION_LINES = 80
 
 
 def _package_files():
@@ -89,6 +90,15 @@ def test_data_layer_does_not_import_jax():
 def test_no_package_file_is_over_600_lines():
     long = {str(p.relative_to(ROOT)): n for p in _package_files() if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES}
     assert not long, long
+
+
+def test_no_package_function_is_over_80_lines():
+    long = [
+        f"{p.relative_to(ROOT)}:{n.lineno} {n.name} ({n.end_lineno - n.lineno + 1} lines)"
+        for p in _package_files() for n in ast.walk(ast.parse(p.read_text()))
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > MAX_FUNCTION_LINES
+    ]  # fmt: skip
+    assert not long, "split these into named steps:\n" + "\n".join(long)
 
 
 def _script_sources():
