@@ -113,10 +113,11 @@ def test_default_fit_recovers_held_out_pressures(tmp_path):
     table = summary_table(results).splitlines()
     assert "P_g closed-form [kPa]" in table[0] and "E fit [MPa]" in table[0]
     assert [line.split()[0] for line in table[2:5]] == names
-    # one timed stage per fit, each compile time inside its wall time
+    # one timed stage per fit, with its compile record (threads may compile at once, so the
+    # compile seconds are not bounded by the wall time)
     stages = results["compilation"]["stages"]
     assert [s["stage"] for s in stages] == [f"{n}.toml: fit" for n in names]
-    assert all(0.0 <= s["total_seconds"] <= s["wall_seconds"] for s in stages)
+    assert all(s["wall_seconds"] > 0.0 and s["total_seconds"] >= 0.0 and "programs_compiled" in s for s in stages)
 
 
 def test_run_directories_are_fresh(tmp_path):
