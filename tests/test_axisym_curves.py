@@ -2,6 +2,7 @@
 
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -53,6 +54,29 @@ def test_uneven_chunks_match_one_vmapped_batch(batch_result):
     # plausibility: its P_g, E and h lie between the other two balls' (ν aside), and so does its
     # depth at 20 N (as measured; a reordered or leaked row would break the ordering)
     assert res.w0[1, -1] < chunked.w0[2, -1] < res.w0[0, -1]
+
+
+def test_a_curve_the_walk_loses_is_solved_again_from_its_cold_start(batch_result, monkeypatch):
+    """A walked lane that fails on a curve (a neighbour's equilibrium can mislead Newton) must not
+    lose it: the curve is solved again alone. The walk's failure is simulated on the first curve."""
+    from shelljax.axisym import _api
+
+    params, res = batch_result
+    three = np.vstack([params, [[1500.0, 2.6e6, 8e-4, 0.45]]])
+    real = _api.indentation_curves_raw
+
+    def walk_loses_the_pezzi_ball(rows, forces, setup, chunk=0, physics=None):
+        out = real(rows, forces, setup, chunk, physics)
+        if chunk == 0:
+            return out
+        lost = jnp.all(rows == jnp.asarray(PEZZI), axis=1)[:, None]
+        return eqx.tree_at(lambda r: (r.converged, r.w0), out,
+                           (out.converged & ~lost, jnp.where(lost, jnp.nan, out.w0)))  # fmt: skip
+
+    monkeypatch.setattr(_api, "indentation_curves_raw", walk_loses_the_pezzi_ball)
+    walked = indentation_curves(three, FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
+    assert bool(np.all(walked.converged))
+    np.testing.assert_allclose(walked.w0[:2], res.w0, rtol=_NEWTON_RTOL)
 
 
 # A walked batch starts each curve from its lane's previous one, so its equilibria agree with

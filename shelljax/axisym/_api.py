@@ -218,6 +218,16 @@ def _check_physics(physics: CurvePhysics, batch: int) -> np.ndarray:
     return np.stack(columns, axis=1)
 
 
+def _retry_from_cold_starts(res: CurveResult, rows, solve, workers) -> CurveResult:
+    """The curves a walked batch lost, solved again each from its own cold start: a neighbour's
+    equilibrium can lead Newton astray where the cold start converges."""
+    failed = np.flatnonzero(~np.asarray(res.converged).all(axis=1))
+    if failed.size == 0:
+        return res
+    again = map_batch(solve, rows[failed], workers)
+    return jax.tree_util.tree_map(lambda whole, part: jnp.asarray(whole).at[failed].set(part), res, again)
+
+
 def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
                        chunk: int = 8, workers: int | None = None, physics: CurvePhysics | None = None,
                        **setup_kwargs) -> CurveResult:
@@ -242,12 +252,15 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     setup = Setup(radius=float(radius), **setup_kwargs)  # raises InvalidInputError on a bad field
     columns = _check_physics(CurvePhysics.defaults(setup) if physics is None else physics, p.shape[0])
 
-    def solve(rows):
+    def solve(rows, lanes=chunk):
         # the physics columns travel with their params through map_batch's split
-        return indentation_curves_raw(rows[:, :4], f, setup, chunk,
+        return indentation_curves_raw(rows[:, :4], f, setup, lanes,
                                       CurvePhysics(**{name: rows[:, 4 + j] for j, name in enumerate(_PHYSICS_BOUNDS)}))
 
-    res = map_batch(solve, np.concatenate([p, columns], axis=1), workers)
+    rows = np.concatenate([p, columns], axis=1)
+    res = map_batch(solve, rows, workers)
+    if chunk > 0:
+        res = _retry_from_cold_starts(res, rows, lambda r: solve(r, 0), workers)
     if raise_on_failure:
         conv = np.asarray(res.converged)
         if not conv.all():
