@@ -133,7 +133,7 @@ def lagged_contact(system: AbstractDynamicSystem, x: Float[Array, " n"]):
     points = system.contact_points(x)
     k = points.shape[0]
     forces = [jnp.maximum(p.law.force(p.gap(points)), 0.0) for p in system.planes]
-    weights = [p.law.damping_weight(p.gap(points)) for p in system.planes]
+    weights = [system.damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes]
     stack = lambda rows: jnp.stack(rows) if rows else jnp.zeros((0, k))  # noqa: E731
     return points, stack(forces), stack(weights)
 

@@ -69,6 +69,11 @@ class AbstractDynamicSystem(eqx.Module):
         """(gauge pressure [Pa], enclosed volume [m³]); NaN for a system without gas."""
         return jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)
 
+    def damping_weights(self, weights: Float[Array, " k"]) -> Float[Array, " k"]:
+        """The contact points' damping weights [-] against one plane from its law's weights (k,)
+        [-]; the identity by default (each touching point is a dashpot c)."""
+        return weights
+
     def surface_faces(self) -> Int[np.ndarray, "f 3"] | None:
         """Triangles of the nodes for mesh output, or None."""
         return None

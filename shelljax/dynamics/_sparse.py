@@ -1,0 +1,87 @@
+"""``SparseNewton``: the step minimiser of the 3D shell, on the engine's sparse factorisation.
+
+Newton's loop is the dense minimiser's (traceable: it runs inside ``jit`` and ``lax.scan``); only
+the linear solve differs. The Hessian of the incremental potential is assembled without ever
+being densified,
+
+    ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks) + c u uᵀ,
+
+K_shell the shell's sparse Hessian (membrane, bending and the gas's per-face part, on the
+engine's sparsity pattern), the point blocks the planes' contact, damping and friction 3×3 blocks
+at every vertex, and c u uᵀ the sealed gas's rank-one term (Sherman–Morrison). The values are
+computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.SparseSolver`, its
+symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
+derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
+A Hessian that is not positive definite gives NaN, and Newton then takes a scaled descent step.
+β's gas rank-one term at xₙ is left out of Newton's matrix (an approximation of its step only).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+
+from .._errors import InvalidInputError, NoConvergenceError
+from ..shell3d import SparseSolver
+from ._minimise import AbstractMinimiser, newton_loop
+from ._shell import PATTERNS, ShellDynamicSystem
+
+
+def _host_solve(key, data, blocks, diag, c2, u, free, rhs):
+    """(K + blockdiag + diag + c u uᵀ)⁻¹ rhs on the free dofs (host; NaN if not positive definite)."""
+    pattern = PATTERNS[int(key)]
+    n = blocks.shape[0] * 3
+    k = pattern.matrix(np.asarray(data))[:n, :n]
+    v = blocks.shape[0]
+    block = sp.bsr_matrix((np.asarray(blocks), np.arange(v), np.arange(v + 1)), shape=(n, n)).tocsr()
+    a = (k + block + sp.diags(np.asarray(diag))).tocsr()
+    free = np.asarray(free)
+    a = a[free][:, free]
+    c2 = float(c2)
+    rank = (c2, np.asarray(u)[free]) if c2 != 0.0 else None
+    try:
+        solver = SparseSolver(a, rank, symmetric=True, definite=True)
+    except NoConvergenceError:
+        return np.full(rhs.shape, np.nan)
+    return np.asarray(solver.apply_inverse(np.asarray(rhs)), dtype=np.float64)
+
+
+class SparseNewton(AbstractMinimiser):
+    """Newton's method on a :class:`ShellDynamicSystem` step with the sparse Hessian (module doc).
+
+    Converged when the Newton step's largest component is below ``step_tolerance`` [m];
+    ``max_steps`` bounds the iterations and ``max_halvings`` the feasibility-keeping line search.
+    """
+
+    step_tolerance: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=30)
+    max_halvings: int = eqx.field(static=True, default=40)
+
+    def linear_solve(self, potential, y, rhs):
+        system = potential.system
+        if not isinstance(system, ShellDynamicSystem):
+            raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
+        x = potential.full(y)
+        data, c2, u = system.hessian_parts(x)
+        diag = potential.inertia_weight
+        if potential.rayleigh is not None:
+            diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
+            data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
+        blocks = potential.point_hessian_blocks(x)
+        out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
+        solve = functools.partial(_host_solve, system.pattern_key)
+        return jax.pure_callback(solve, out, data, blocks, diag, c2, u, potential.free_dofs, rhs, vmap_method="sequential")
+
+    def _direction(self, potential, y, g):
+        p = self.linear_solve(potential, y, -g)
+        # A Hessian that is not positive definite gives NaN: fall back to descent scaled by the inertia.
+        ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
+        return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
+
+    def minimise(self, potential, y0):
+        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g))
