@@ -12,7 +12,8 @@ at every vertex, and c u uᵀ the sealed gas's rank-one term (Sherman–Morrison
 computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.SparseSolver`, its
 symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
 derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
-A Hessian that is not positive definite gives NaN, and Newton then takes a scaled descent step.
+Newton's step shifts a Hessian that is not positive definite by a multiple of its mean diagonal;
+the implicit derivative's solve is never shifted.
 β's gas rank-one term at xₙ is left out of Newton's matrix (an approximation of its step only).
 """
 
@@ -32,8 +33,11 @@ from ._minimise import AbstractMinimiser, newton_loop
 from ._shell import PATTERNS, ShellDynamicSystem
 
 
-def _host_solve(key, data, blocks, diag, c2, u, free, rhs):
-    """(K + blockdiag + diag + c u uᵀ)⁻¹ rhs on the free dofs (host; NaN if not positive definite)."""
+def _host_solve(key, shift, data, blocks, diag, c2, u, free, rhs):
+    """(K + blockdiag + diag + c u uᵀ)⁻¹ rhs on the free dofs (host; NaN if not positive definite).
+
+    With ``shift``, a matrix that is not positive definite is shifted by 1e-2, 1e-1, 1 times its
+    mean diagonal until it is (Newton's step then is a descent direction)."""
     pattern = PATTERNS[int(key)]
     n = blocks.shape[0] * 3
     k = pattern.matrix(np.asarray(data))[:n, :n]
@@ -44,11 +48,15 @@ def _host_solve(key, data, blocks, diag, c2, u, free, rhs):
     a = a[free][:, free]
     c2 = float(c2)
     rank = (c2, np.asarray(u)[free]) if c2 != 0.0 else None
-    try:
-        solver = SparseSolver(a, rank, symmetric=True, definite=True)
-    except NoConvergenceError:
-        return np.full(rhs.shape, np.nan)
-    return np.asarray(solver.apply_inverse(np.asarray(rhs)), dtype=np.float64)
+    mean = float(np.mean(np.abs(a.diagonal())))
+    for factor in (0.0, 1e-2, 1e-1, 1.0) if shift else (0.0,):
+        try:
+            shifted = a + factor * mean * sp.identity(a.shape[0], format="csr") if factor else a
+            solver = SparseSolver(shifted, rank, symmetric=True, definite=True)
+        except NoConvergenceError:
+            continue
+        return np.asarray(solver.apply_inverse(np.asarray(rhs)), dtype=np.float64)
+    return np.full(rhs.shape, np.nan)
 
 
 class SparseNewton(AbstractMinimiser):
@@ -59,10 +67,13 @@ class SparseNewton(AbstractMinimiser):
     """
 
     step_tolerance: float = eqx.field(static=True, default=1e-10)
-    max_steps: int = eqx.field(static=True, default=30)
+    max_steps: int = eqx.field(static=True, default=50)
     max_halvings: int = eqx.field(static=True, default=40)
 
     def linear_solve(self, potential, y, rhs):
+        return self._solve(potential, y, rhs, False)
+
+    def _solve(self, potential, y, rhs, shift: bool):
         system = potential.system
         if not isinstance(system, ShellDynamicSystem):
             raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
@@ -74,12 +85,12 @@ class SparseNewton(AbstractMinimiser):
             data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
         blocks = potential.point_hessian_blocks(x)
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
-        solve = functools.partial(_host_solve, system.pattern_key)
+        solve = functools.partial(_host_solve, system.pattern_key, shift)
         return jax.pure_callback(solve, out, data, blocks, diag, c2, u, potential.free_dofs, rhs, vmap_method="sequential")
 
     def _direction(self, potential, y, g):
-        p = self.linear_solve(potential, y, -g)
-        # A Hessian that is not positive definite gives NaN: fall back to descent scaled by the inertia.
+        p = self._solve(potential, y, -g, True)
+        # Only a failed shift gives NaN: fall back to descent scaled by the inertia.
         ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
         return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
 
