@@ -6,6 +6,7 @@ every test cheap; the expensive checks of the issue are experiments/verify_dynam
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 
@@ -69,9 +70,10 @@ def test_bounce_conserves_energy_without_damping(system):
 
 
 def test_contact_damping_calibrates_the_cor(system):
-    # Backward Euler at 1 ms: cheap and stable; its numerical dissipation is part of what c is calibrated against.
-    height, dt = 0.02, 1e-3
+    # Backward Euler at 2 ms: cheap and stable; its numerical dissipation is part of what c is calibrated against.
+    height, dt = 0.02, 2e-3
 
+    @functools.cache  # Brent's method asks for the bracket's ends again
     def cor(c):
         damped = system.with_planes([eqx.tree_at(lambda p: p.damping, system.planes[0], jnp.asarray(c))])
         traj = d.simulate(damped, _impact_state(damped, height), dt, 0.06, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(),
@@ -79,9 +81,10 @@ def test_contact_damping_calibrates_the_cor(system):
         first = d.measured_cor(traj)[0]
         return math.sqrt(first.bounce_height_m / (first.speed_in_m_per_s**2 / (2 * G)))
 
-    cal = d.calibrate_contact_damping(cor, 0.5, (0.0, 20.0), rtol=1e-2)
+    # COR(c) falls from ~0.7 at c = 0 to 0.56 at c = 2 N·s/m on this ball at Δt = 2 ms; a bracket around the target saves runs.
+    cal = d.calibrate_contact_damping(cor, 0.6, (0.0, 3.0), rtol=1e-2)
     # The issue's criterion: within 2 % of the target COR.
-    assert abs(cal.cor - 0.5) < 0.02 * 0.5
+    assert abs(cal.cor - 0.6) < 0.02 * 0.6
     assert cal.damping > 0.0
 
 
@@ -106,13 +109,12 @@ def test_gradient_of_bounce_height_through_contact_onset(system):
     assert float(grad) > 1e-5
 
 
-def test_contact_damping_is_normalised_over_the_touching_vertices(system):
+def test_contact_damping_is_one_dashpot_on_the_centre_of_mass(system):
     raw = jnp.zeros(system.node_masses.shape).at[:20].set(1.0)
-    w = system.damping_weights(raw)
-    # Several touching vertices share one dashpot c; a lone vertex of mean area keeps its own.
-    assert float(jnp.sum(w)) == pytest.approx(1.0, rel=1e-12)
-    lone = system.damping_weights(jnp.zeros_like(raw).at[0].set(1.0))
-    assert float(jnp.sum(lone)) <= 1.0 + 1e-12
+    # Many touching vertices: weight 1 (one dashpot c on the body, whatever the mesh); none: 0.
+    assert float(system.body_damping_weights(raw)) == 1.0
+    assert float(system.body_damping_weights(jnp.zeros_like(raw))) == 0.0
+    assert float(jnp.max(system.damping_weights(raw))) == 0.0
 
 
 def test_replica_round_trip(shell, tmp_path):

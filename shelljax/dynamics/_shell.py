@@ -9,9 +9,11 @@ are the dynamics core's planes, with every vertex a contact point.
 ``shell_system`` builds one from a :class:`shelljax.shell3d.Shell`: the rest shape comes from the
 engine's rest-shape solve, so the inflated shell ``inflated`` is in equilibrium at t = 0.
 
-Contact damping is mesh independent: each vertex's lagged weight w_j (its law's weight) is scaled
-by its rest area A_j and normalised by max(Σ w A, Ā) (Ā the mean vertex area), so that a patch of
-touching vertices moving together feels one dashpot c [N·s/m] in total, whatever the mesh.
+Contact damping is mesh independent: it is one dashpot c [N·s/m] on the centre of mass's velocity
+along each plane's normal, the paper's 1-DOF dashpot, (c / 2Δt) W ((x_com − x_comⁿ)·n)², weighted
+by W = min(1, Σⱼ wⱼ Aⱼ / Ā) from the vertices' lagged law weights wⱼ, rest areas Aⱼ and mean area
+Ā: 0 off contact, 1 once about one vertex's area touches. A dashpot on the touching vertices
+themselves would do nothing: held by the barrier, they hardly move along the normal.
 """
 
 from __future__ import annotations
@@ -88,9 +90,12 @@ class ShellDynamicSystem(AbstractDynamicSystem):
         return -jax.grad(gas_energy)(v, self.params, self.config), v
 
     def damping_weights(self, weights):
+        # A touching vertex hardly moves along the normal: the dashpot acts on the centre of mass instead.
+        return jnp.zeros_like(weights)
+
+    def body_damping_weights(self, weights):
         area = self.geometry.vertex_area
-        w = weights * area
-        return w / jnp.maximum(jnp.sum(w), jnp.mean(area))
+        return jnp.minimum(jnp.sum(weights * area) / jnp.mean(area), 1.0)
 
     def surface_faces(self):
         return np.asarray(self.faces)

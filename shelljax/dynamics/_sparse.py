@@ -4,11 +4,13 @@ Newton's loop is the dense minimiser's (traceable: it runs inside ``jit`` and ``
 the linear solve differs. The Hessian of the incremental potential is assembled without ever
 being densified,
 
-    ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks) + c u uᵀ,
+    ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks)
+              + c u uᵀ + Σ_planes (c_p Wⁿ_p / Δt) v_p v_pᵀ,
 
 K_shell the shell's sparse Hessian (membrane, bending and the gas's per-face part, on the
 engine's sparsity pattern), the point blocks the planes' contact, damping and friction 3×3 blocks
-at every vertex, and c u uᵀ the sealed gas's rank-one term (Sherman–Morrison). The values are
+at every vertex, c u uᵀ the sealed gas's rank-one term (Sherman–Morrison) and v_p = (mᵢ/M) n_p the
+centre-of-mass dashpots' (Woodbury, one column per plane). The values are
 computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.SparseSolver`, its
 symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
 derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
@@ -33,8 +35,19 @@ from ._minimise import AbstractMinimiser, newton_loop
 from ._shell import PATTERNS, ShellDynamicSystem
 
 
-def _host_solve(key, shift, data, blocks, diag, c2, u, free, rhs):
-    """(K + blockdiag + diag + c u uᵀ)⁻¹ rhs on the free dofs (host; NaN if not positive definite).
+def _woodbury(solver, columns, coeffs, rhs):
+    """(A + U D Uᵀ)⁻¹ rhs from a solver of A: y − Z D (I + Uᵀ Z D)⁻¹ Uᵀ y, Z = A⁻¹U (U: the columns)."""
+    y = solver.apply_inverse(rhs)
+    if not np.any(coeffs):
+        return y
+    z = solver.apply_inverse(columns.T)
+    small = np.eye(len(coeffs)) + (columns @ z) * coeffs[None, :]
+    return y - (z * coeffs[None, :]) @ np.linalg.solve(small, columns @ y)
+
+
+def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
+    """(K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; NaN if not
+    positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
 
     With ``shift``, a matrix that is not positive definite is shifted by 1e-2, 1e-1, 1 times its
     mean diagonal until it is (Newton's step then is a descent direction)."""
@@ -55,7 +68,8 @@ def _host_solve(key, shift, data, blocks, diag, c2, u, free, rhs):
             solver = SparseSolver(shifted, rank, symmetric=True, definite=True)
         except NoConvergenceError:
             continue
-        return np.asarray(solver.apply_inverse(np.asarray(rhs)), dtype=np.float64)
+        body = np.asarray(columns)[:, free]
+        return np.asarray(_woodbury(solver, body, np.asarray(coeffs, dtype=np.float64), np.asarray(rhs)), dtype=np.float64)
     return np.full(rhs.shape, np.nan)
 
 
@@ -84,9 +98,12 @@ class SparseNewton(AbstractMinimiser):
             diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
             data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
         blocks = potential.point_hessian_blocks(x)
+        share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
+        columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
+        coeffs = jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt if system.planes else jnp.zeros((0,))
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
         solve = functools.partial(_host_solve, system.pattern_key, shift)
-        return jax.pure_callback(solve, out, data, blocks, diag, c2, u, potential.free_dofs, rhs, vmap_method="sequential")
+        return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
 
     def _direction(self, potential, y, g):
         p = self._solve(potential, y, -g, True)

@@ -74,6 +74,11 @@ class AbstractDynamicSystem(eqx.Module):
         [-]; the identity by default (each touching point is a dashpot c)."""
         return weights
 
+    def body_damping_weights(self, weights: Float[Array, " k"]) -> Scalar:
+        """Weight W [-] of the dashpot c on the centre of mass's approach to one plane, from the
+        law's weights (k,) of the contact points; 0 by default (the dashpots sit on the points)."""
+        return jnp.asarray(0.0)
+
     def surface_faces(self) -> Int[np.ndarray, "f 3"] | None:
         """Triangles of the nodes for mesh output, or None."""
         return None
