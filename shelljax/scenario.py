@@ -163,6 +163,24 @@ def _plane(reader: _Reader, i: int, table) -> PlaneSpec:
     )  # fmt: skip
 
 
+def _dissipation(r: _Reader, diss: dict):
+    """(target COR or None, contact damping c [N·s/m] or None, calibration bracket [N·s/m])."""
+    cor = diss.get("cor")
+    damping = diss.get("contact_damping_N_s_per_m")
+    if cor is not None and damping is not None:
+        raise r.fail("dissipation.cor", cor, "given together with contact_damping_N_s_per_m", "give the measured COR (calibrated) or the damping, not both")
+    if cor is not None:
+        cor = r.number(diss, "cor", "dissipation.", positive=True)
+        if cor > 1.0:
+            raise r.fail("dissipation.cor", cor, "a COR is at most 1", "measure it as √(bounce height / drop height)")
+    if damping is not None:
+        damping = r.number(diss, "contact_damping_N_s_per_m", "dissipation.", nonnegative=True)
+    bracket = r.vector(diss, "calibration_bracket_N_s_per_m", "dissipation.", 2, [0.0, 200.0])
+    if not 0.0 <= bracket[0] < bracket[1]:
+        raise r.fail("dissipation.calibration_bracket_N_s_per_m", list(bracket), "needs 0 ≤ low < high", "write e.g. [0.0, 200.0]")
+    return cor, damping, bracket
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario TOML; InvalidInputError names the file, field, value and fix."""
     path = Path(path)
@@ -187,19 +205,7 @@ def load_scenario(path: str | Path) -> Scenario:
     duration = r.number(integ, "duration_s", "integrator.", positive=True, fix="give the duration in s, e.g. 1.0")
     if dt > duration:
         raise r.fail("integrator.dt_s", dt, f"longer than integrator.duration_s = {duration}", "give dt_s ≤ duration_s")
-    cor = diss.get("cor")
-    damping = diss.get("contact_damping_N_s_per_m")
-    if cor is not None and damping is not None:
-        raise r.fail("dissipation.cor", cor, "given together with contact_damping_N_s_per_m", "give the measured COR (calibrated) or the damping, not both")
-    if cor is not None:
-        cor = r.number(diss, "cor", "dissipation.", positive=True)
-        if cor > 1.0:
-            raise r.fail("dissipation.cor", cor, "a COR is at most 1", "measure it as √(bounce height / drop height)")
-    if damping is not None:
-        damping = r.number(diss, "contact_damping_N_s_per_m", "dissipation.", nonnegative=True)
-    bracket = r.vector(diss, "calibration_bracket_N_s_per_m", "dissipation.", 2, [0.0, 200.0])
-    if not 0.0 <= bracket[0] < bracket[1]:
-        raise r.fail("dissipation.calibration_bracket_N_s_per_m", list(bracket), "needs 0 ≤ low < high", "write e.g. [0.0, 200.0]")
+    cor, damping, bracket = _dissipation(r, diss)
     heights = init.get("drop_heights_m")
     if not isinstance(heights, list) or not heights or not all(isinstance(h, (int, float)) and not isinstance(h, bool) for h in heights):
         raise r.fail("initial.drop_heights_m", heights, "expected a non-empty list of heights in m", "write e.g. [0.5, 1.0]")
