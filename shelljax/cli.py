@@ -1,4 +1,4 @@
-"""Command line: ``shelljax run``, ``estimate``, ``diagnose``, ``validate``, and the sensor commands ``acquire``,
+"""Command line: ``shelljax run``, ``estimate``, ``diagnose``, ``simulate``, ``replica``, ``validate``, and the sensor commands ``acquire``,
 ``sensor-calibrate``, ``sensor-emulator`` (see docs/sensing.md)."""
 
 from __future__ import annotations
@@ -90,6 +90,30 @@ def summary_text(report: dict) -> str:
     return "\n".join(lines)
 
 
+def _cmd_simulate(args) -> int:
+    from .scenario import load_scenario, run_scenario
+
+    scenario = load_scenario(args.config)
+    summary = run_scenario(scenario, args.out, session=args.session, progress=not args.quiet)
+    p = summary["parameters"]
+    print(f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
+          f"{p['gas']} gas, {p['mesh_faces']} faces, contact damping c = {summary['contact_damping_N_s_per_m']:.4g} N·s/m")  # fmt: skip
+    for run in summary["runs"]:
+        for m in run["impacts"]:
+            print(f"  drop {run['drop_height_m']:.3g} m: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
+                  f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm")  # fmt: skip
+        print(f"  results: {run['directory']}/results.json")
+    return 0
+
+
+def _cmd_replica(args) -> int:
+    from .replica import export_replica
+
+    written = export_replica(args.session, args.out, method=args.method, gas=args.gas, cor=args.cor, mesh_faces=args.mesh_faces)
+    print(f"written: {', '.join(str(p) for p in written)}")
+    return 0
+
+
 def _cmd_validate(args) -> int:
     from .session import load_session
 
@@ -148,6 +172,22 @@ def build_parser() -> argparse.ArgumentParser:
                       help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
     diag.add_argument("--quiet", action="store_true", help="no progress bar")
     diag.set_defaults(func=_cmd_diagnose)
+
+    sim = sub.add_parser("simulate", help="run a dynamic scenario config (drop, bounce) into --out")
+    sim.add_argument("config", help="scenario config TOML, e.g. configs/drop.toml")
+    sim.add_argument("--out", default=None, help="output directory (default: the config's output_dir/name)")
+    sim.add_argument("--session", default=None, help="take P_g and E from this session's estimate (overrides the config)")
+    sim.add_argument("--quiet", action="store_true", help="no progress bars")
+    sim.set_defaults(func=_cmd_simulate)
+
+    rep = sub.add_parser("replica", help="export a session's digital replica: mesh (glTF) + replica.json")
+    rep.add_argument("session", help="session TOML file")
+    rep.add_argument("--out", required=True, help="output directory (created)")
+    rep.add_argument("--method", choices=["closed-form", "fit", "bayes"], default="fit", help="estimator of P_g and E")
+    rep.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic")
+    rep.add_argument("--cor", type=float, default=None, help="measured coefficient of restitution [-], if known")
+    rep.add_argument("--mesh-faces", type=int, default=2000, help="triangles of a sphere replica (sessions without a mesh)")
+    rep.set_defaults(func=_cmd_replica)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")
     val.add_argument("sessions", nargs="+")

@@ -62,54 +62,63 @@ class DenseNewton(AbstractMinimiser):
         return jnp.where(ok, p, -g / scale)
 
     def minimise(self, potential, y0):
-        f0 = potential.value(y0)
-        g0 = potential.gradient(y0)
-        history0 = jnp.full((self.max_steps,), jnp.nan, dtype=y0.dtype)
-
-        def line_search(y, f, g, p):
-            slope = g @ p
-            # Round-off in Φ_inc (its terms are far larger than their change near the minimum) is allowed.
-            allowance = 64.0 * jnp.finfo(y.dtype).eps * jnp.abs(f)
-
-            def bad(carry):
-                alpha, f_new, _ = carry
-                y_new = y + alpha * p
-                return ~(potential.is_feasible(y_new) & jnp.isfinite(f_new) & (f_new <= f + 1e-4 * alpha * slope + allowance))
-
-            def cond(carry):
-                return (carry[2] < self.max_halvings) & bad(carry)
-
-            def body(carry):
-                alpha, _, k = carry
-                alpha = 0.5 * alpha
-                return alpha, potential.value(y + alpha * p), k + 1
-
-            alpha, f_new, k = jax.lax.while_loop(cond, body, (jnp.asarray(1.0), potential.value(y + p), jnp.asarray(0)))
-            return alpha, f_new, ~bad((alpha, f_new, k))
-
-        def cond(c):
-            return (c["k"] < self.max_steps) & ~c["done"]
-
-        def body(c):
-            y, f, g, k = c["y"], c["f"], c["g"], c["k"]
-            history = c["history"].at[k].set(jnp.max(jnp.abs(g)))
-            p = self._direction(potential, y, g)
-            small = jnp.max(jnp.abs(p)) <= self.step_tolerance
-            alpha, f_new, found = line_search(y, f, g, p)
-            y_new = jnp.where(found, y + alpha * p, y)
-            f_new = jnp.where(found, f_new, f)
-            g_new = potential.gradient(y_new)
-            # A step below tolerance is convergence even when round-off in Φ_inc defeats the line search.
-            converged = small | jnp.all(g_new == 0.0)
-            done = converged | ~found
-            return dict(y=y_new, f=f_new, g=g_new, k=k + 1, done=done, converged=converged, history=history)
-
-        init = dict(y=y0, f=f0, g=g0, k=jnp.asarray(0), done=jnp.asarray(False), converged=jnp.asarray(False), history=history0)
-        out = jax.lax.while_loop(cond, body, init)
-        return MinimiserResult(out["y"], out["converged"], out["k"], out["history"])
+        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g))
 
     def linear_solve(self, potential, y, rhs):
         return jnp.linalg.solve(potential.dense_hessian(y), rhs)
+
+
+def newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], direction) -> MinimiserResult:
+    """Newton's method with a feasibility-keeping backtracking line search (traceable).
+
+    ``direction(y, g)`` gives the step [m] at y [m] with gradient g [N]; reads ``step_tolerance``
+    [m], ``max_steps`` and ``max_halvings`` from the minimiser.
+    """
+    f0 = potential.value(y0)
+    g0 = potential.gradient(y0)
+    history0 = jnp.full((minimiser.max_steps,), jnp.nan, dtype=y0.dtype)
+
+    def line_search(y, f, g, p):
+        slope = g @ p
+        # Round-off in Φ_inc (its terms are far larger than their change near the minimum) is allowed.
+        allowance = 64.0 * jnp.finfo(y.dtype).eps * jnp.abs(f)
+
+        def bad(carry):
+            alpha, f_new, _ = carry
+            y_new = y + alpha * p
+            return ~(potential.is_feasible(y_new) & jnp.isfinite(f_new) & (f_new <= f + 1e-4 * alpha * slope + allowance))
+
+        def cond(carry):
+            return (carry[2] < minimiser.max_halvings) & bad(carry)
+
+        def body(carry):
+            alpha, _, k = carry
+            alpha = 0.5 * alpha
+            return alpha, potential.value(y + alpha * p), k + 1
+
+        alpha, f_new, k = jax.lax.while_loop(cond, body, (jnp.asarray(1.0), potential.value(y + p), jnp.asarray(0)))
+        return alpha, f_new, ~bad((alpha, f_new, k))
+
+    def cond(c):
+        return (c["k"] < minimiser.max_steps) & ~c["done"]
+
+    def body(c):
+        y, f, g, k = c["y"], c["f"], c["g"], c["k"]
+        history = c["history"].at[k].set(jnp.max(jnp.abs(g)))
+        p = direction(y, g)
+        small = jnp.max(jnp.abs(p)) <= minimiser.step_tolerance
+        alpha, f_new, found = line_search(y, f, g, p)
+        y_new = jnp.where(found, y + alpha * p, y)
+        f_new = jnp.where(found, f_new, f)
+        g_new = potential.gradient(y_new)
+        # A step below tolerance is convergence even when round-off in Φ_inc defeats the line search.
+        converged = small | jnp.all(g_new == 0.0)
+        done = converged | ~found
+        return dict(y=y_new, f=f_new, g=g_new, k=k + 1, done=done, converged=converged, history=history)
+
+    init = dict(y=y0, f=f0, g=g0, k=jnp.asarray(0), done=jnp.asarray(False), converged=jnp.asarray(False), history=history0)
+    out = jax.lax.while_loop(cond, body, init)
+    return MinimiserResult(out["y"], out["converged"], out["k"], out["history"])
 
 
 @eqx.filter_custom_vjp

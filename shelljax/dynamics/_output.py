@@ -86,7 +86,7 @@ def _plots(trajectory: Trajectory, figures: Path) -> list[Path]:
     return written
 
 
-def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str) -> list[Path]:
+def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str, preview_gif: bool = True) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -103,6 +103,8 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
         mesh = trimesh.Trimesh(positions[k].reshape(-1, 3), trajectory.faces, process=False)
         written.append(frames / f"frame_{j:04d}.{mesh_format}")
         mesh.export(written[-1])
+    if not preview_gif:
+        return written
     fig = plt.figure(figsize=(4, 4))
     ax = fig.add_subplot(projection="3d")
     nodes = positions[picks].reshape(len(picks), -1, 3)
@@ -119,11 +121,13 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
 
 
 def write_results(
-    trajectory: Trajectory, out_dir: str | os.PathLike, *, max_frames: int = 30, mesh_format: str = "ply"
+    trajectory: Trajectory, out_dir: str | os.PathLike, *, max_frames: int = 30, mesh_format: str = "ply",
+    figures: bool = True, preview_gif: bool = True,
 ) -> list[Path]:
     """Write ``results.json``, the figures and (with faces) mesh frames and a GIF to ``out_dir``; the paths written.
 
-    ``mesh_format``: ``"ply"`` or ``"glb"`` (binary glTF), one file per frame, at most ``max_frames``.
+    ``mesh_format``: ``"ply"`` or ``"glb"`` (binary glTF), one file per frame, at most ``max_frames``
+    (0: none); ``figures``: the PNG plots; ``preview_gif``: the animation of the frames.
     """
     if mesh_format not in ("ply", "glb"):
         raise InvalidInputError(f"mesh_format must be 'ply' or 'glb' (binary glTF); got {mesh_format!r}.")
@@ -131,7 +135,7 @@ def write_results(
     (out / "figures").mkdir(parents=True, exist_ok=True)
     impacts = measured_cor(trajectory)
     _atomic_write_text(out / "results.json", json.dumps(results_dict(trajectory, impacts), indent=1))
-    written = [out / "results.json", *_plots(trajectory, out / "figures")]
-    if trajectory.faces is not None:
-        written += _mesh_frames(trajectory, out, max_frames, mesh_format)
+    written = [out / "results.json", *(_plots(trajectory, out / "figures") if figures else [])]
+    if trajectory.faces is not None and max_frames > 0:
+        written += _mesh_frames(trajectory, out, max_frames, mesh_format, preview_gif)
     return written

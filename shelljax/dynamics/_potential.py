@@ -37,6 +37,7 @@ class IncrementalPotential(eqx.Module):
     points_prev: Float[Array, "k 3"]
     normal_force_prev: Float[Array, "P k"]
     damping_weight_prev: Float[Array, "P k"]
+    body_damping_prev: Float[Array, " P"]
     rayleigh: Rayleigh | None
     free_dofs: Int[Array, " m"]
     prescribed_dofs: Int[Array, " p"]
@@ -91,7 +92,7 @@ class IncrementalPotential(eqx.Module):
         inertia = 0.5 * jnp.sum(self.inertia_weight * (x - self.x_hat) ** 2)
         points = self.system.contact_points(x)
         planes = sum((self.plane_energy(i, points) for i in range(len(self.system.planes))), jnp.asarray(0.0))
-        total = inertia + self.system.internal_energy(x, self.time) + planes
+        total = inertia + self.system.internal_energy(x, self.time) + planes + self.body_damping(x)
         if self.rayleigh is not None:
             d = x - self.x_prev
             t_prev = self.time - self.dt
@@ -99,6 +100,14 @@ class IncrementalPotential(eqx.Module):
             mass = self.system.lumped_mass()
             quad = self.rayleigh.mass_coefficient * jnp.sum(mass * d * d) + self.rayleigh.stiffness_coefficient * (d @ kd)
             total = total + quad / (2.0 * self.dt)
+        return total
+
+    def body_damping(self, x: Float[Array, " n"]) -> Scalar:
+        """Σ_planes (c / 2Δt) Wⁿ ((x_com − x_comⁿ)·n)² [J]: the dashpot on the body's approach (see the system's ``body_damping_weights``)."""
+        step = self.system.centre_of_mass(x) - self.system.centre_of_mass(self.x_prev)
+        total = jnp.asarray(0.0)
+        for i, plane in enumerate(self.system.planes):
+            total = total + plane.damping / (2.0 * self.dt) * self.body_damping_prev[i] * (step @ plane.normal) ** 2
         return total
 
     def value(self, y: Float[Array, " m"]) -> Scalar:
@@ -133,7 +142,7 @@ def lagged_contact(system: AbstractDynamicSystem, x: Float[Array, " n"]):
     points = system.contact_points(x)
     k = points.shape[0]
     forces = [jnp.maximum(p.law.force(p.gap(points)), 0.0) for p in system.planes]
-    weights = [p.law.damping_weight(p.gap(points)) for p in system.planes]
+    weights = [system.damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes]
     stack = lambda rows: jnp.stack(rows) if rows else jnp.zeros((0, k))  # noqa: E731
     return points, stack(forces), stack(weights)
 
@@ -158,6 +167,7 @@ def incremental_potential(
     x = state.position
     free, prescribed = free_dofs(system, x.shape[0])
     points, forces, weights = lagged_contact(system, x)
+    body = jnp.stack([system.body_damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes]) if system.planes else jnp.zeros((0,))
     mass = system.lumped_mass()
     return IncrementalPotential(
         system=system,
@@ -169,6 +179,7 @@ def incremental_potential(
         points_prev=points,
         normal_force_prev=forces,
         damping_weight_prev=weights,
+        body_damping_prev=body,
         rayleigh=rayleigh,
         free_dofs=free,
         prescribed_dofs=prescribed,

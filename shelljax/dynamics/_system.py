@@ -69,6 +69,16 @@ class AbstractDynamicSystem(eqx.Module):
         """(gauge pressure [Pa], enclosed volume [m³]); NaN for a system without gas."""
         return jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)
 
+    def damping_weights(self, weights: Float[Array, " k"]) -> Float[Array, " k"]:
+        """The contact points' damping weights [-] against one plane from its law's weights (k,)
+        [-]; the identity by default (each touching point is a dashpot c)."""
+        return weights
+
+    def body_damping_weights(self, weights: Float[Array, " k"]) -> Scalar:
+        """Weight W [-] of the dashpot c on the centre of mass's approach to one plane, from the
+        law's weights (k,) of the contact points; 0 by default (the dashpots sit on the points)."""
+        return jnp.asarray(0.0)
+
     def surface_faces(self) -> Int[np.ndarray, "f 3"] | None:
         """Triangles of the nodes for mesh output, or None."""
         return None

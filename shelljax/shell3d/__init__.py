@@ -19,8 +19,10 @@ differentiation (:func:`implicit_equilibrium`).
 
 from ._config import ContactConfig, ModelConfig
 from ._continuation import continuation
-from ._energy import face_energy, fundamental_forms, rest_geometry, total_energy
-from ._hessian import face_hessians
+from ._energy import ShellGeometry, elastic_energy, face_energy, fundamental_forms, gas_energy, rest_geometry, total_energy
+from ._energy import volume as enclosed_volume
+from ._hessian import face_hessians, hessian_values
+from ._hessian import rank_one as gas_rank_one
 from ._implicit import implicit_equilibrium
 from ._indent import Indentation, IndentationState, Shell, ball, load
 from ._mesh import ShellMesh, random_sphere_mesh, sphere_mesh

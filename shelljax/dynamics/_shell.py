@@ -1,0 +1,173 @@
+"""The 3D shell engine in motion: ``ShellDynamicSystem``, an ``AbstractDynamicSystem`` on its energies.
+
+Degrees of freedom are the shell's vertex positions x (3V,) [m]. The internal energies are the
+engine's own (:mod:`shelljax.shell3d`): Neo-Hookean membrane and bending relative to the rest
+shape, the gas (prescribed gauge pressure, or a sealed ideal gas, isothermal or adiabatic, holding
+P_g at the inflated volume), and gravity on the lumped vertex masses. Contact, damping and friction
+are the dynamics core's planes, with every vertex a contact point.
+
+``shell_system`` builds one from a :class:`shelljax.shell3d.Shell`: the rest shape comes from the
+engine's rest-shape solve, so the inflated shell ``inflated`` is in equilibrium at t = 0.
+
+Contact damping is mesh independent: it is one dashpot c [N·s/m] on the centre of mass's velocity
+along each plane's normal, the paper's 1-DOF dashpot, (c / 2Δt) W ((x_com − x_comⁿ)·n)², weighted
+by W = min(1, Σⱼ wⱼ Aⱼ / Ā) from the vertices' lagged law weights wⱼ, rest areas Aⱼ and mean area
+Ā: 0 off contact, 1 once about one vertex's area touches. A dashpot on the touching vertices
+themselves would do nothing: held by the barrier, they hardly move along the normal.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .._errors import InvalidInputError
+from ..physics import ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY
+from ..shell3d import (
+    Indentation,
+    ModelConfig,
+    Shell,
+    ShellGeometry,
+    ShellModel,
+    ShellParams,
+    elastic_energy,
+    enclosed_volume,
+    gas_energy,
+    gas_rank_one,
+    hessian_values,
+)
+from ._contact import Plane, check_positive
+from ._system import AbstractDynamicSystem, gravity_vector
+
+#: Host sparsity patterns of the shells' Hessians, by ``ShellDynamicSystem.pattern_key``.
+PATTERNS: dict[int, object] = {}
+
+
+class ShellDynamicSystem(AbstractDynamicSystem):
+    """A closed Neo-Hookean shell with gas, gravity and planes (see the module docstring).
+
+    ``params``: the engine's :class:`ShellParams` (E [Pa], ν, h [m], P_g [Pa], the sealed gas's
+    reference volume [m³]); ``geometry``: rest data; ``config``: the engine's static setup (gas
+    model, γ); ``node_masses`` (V,) [kg]; ``faces`` (F, 3); ``inflated`` (3V,) [m]: the pressurized
+    equilibrium at rest; ``maps``, ``nnz``, ``pattern_key``: the sparse Hessian's pattern.
+    """
+
+    params: ShellParams
+    geometry: ShellGeometry
+    config: ModelConfig = eqx.field(static=True)
+    node_masses: Float[Array, " V"]
+    faces: Int[Array, "F 3"]
+    inflated: Float[Array, " n"]
+    planes: tuple[Plane, ...]
+    gravity: Float[Array, "3"]
+    maps: tuple
+    nnz: int = eqx.field(static=True)
+    pattern_key: int = eqx.field(static=True)
+
+    def lumped_mass(self):
+        return jnp.repeat(self.node_masses, 3)
+
+    def _q(self, x):
+        return jnp.concatenate([x, jnp.zeros(3, dtype=x.dtype)])
+
+    def volume(self, x: Float[Array, " n"]) -> Float[Array, ""]:
+        """Enclosed volume [m³] at positions x [m]."""
+        return enclosed_volume(x.reshape(-1, 3), self.geometry.stencil)
+
+    def internal_energies(self, x, t):
+        nodes = x.reshape(-1, 3)
+        return {
+            "elastic": elastic_energy(nodes, self.params, self.geometry),
+            "gas": gas_energy(self.volume(x), self.params, self.config),
+            "gravity": -jnp.sum(self.node_masses * (nodes @ self.gravity)),
+        }
+
+    def gas_state(self, x):
+        v = self.volume(x)
+        return -jax.grad(gas_energy)(v, self.params, self.config), v
+
+    def damping_weights(self, weights):
+        # A touching vertex hardly moves along the normal: the dashpot acts on the centre of mass instead.
+        return jnp.zeros_like(weights)
+
+    def body_damping_weights(self, weights):
+        area = self.geometry.vertex_area
+        return jnp.minimum(jnp.sum(weights * area) / jnp.mean(area), 1.0)
+
+    def surface_faces(self):
+        return np.asarray(self.faces)
+
+    def hessian_parts(self, x: Float[Array, " n"]):
+        """The internal energy's Hessian at x [m]: CSR values [N/m] on the pattern (faces and the
+        gas's per-face part; 3 trailing pinned dofs) and the sealed gas's rank-one c u uᵀ (c, u)."""
+        q = self._q(x)
+        data = hessian_values(q, self.params, self.geometry, self.config, self.maps, self.nnz)
+        if self.config.gas == "prescribed":
+            return data, jnp.asarray(0.0), jnp.zeros_like(x)
+        c2, u = gas_rank_one(q, self.params, self.geometry, self.config)
+        return data, c2, u[:-3]
+
+    def with_parameters(self, **changes) -> "ShellDynamicSystem":
+        """The same system with :class:`ShellParams` entries replaced (e.g. ``young_modulus``)."""
+        return eqx.tree_at(lambda s: s.params, self, self.params.replace(**changes))
+
+    def with_planes(self, planes) -> "ShellDynamicSystem":
+        """The same system against other planes."""
+        return eqx.tree_at(lambda s: s.planes, self, tuple(planes))
+
+
+def _node_masses(model: ShellModel, mass, wall_density, thickness) -> np.ndarray:
+    area = np.asarray(model.geometry.vertex_area)
+    if mass is None and wall_density is None:
+        raise InvalidInputError(
+            "the shell's mass is missing: give `mass` [kg] (a session's `mass`) or `wall_density` [kg/m³]."
+        )
+    if mass is not None and wall_density is not None:
+        raise InvalidInputError("give either `mass` [kg] or `wall_density` [kg/m³], not both.")
+    if mass is not None:
+        check_positive("mass [kg]", mass, "Give the object's mass, e.g. the session's `mass`.")
+        return float(mass) * area / area.sum()
+    check_positive("wall_density [kg/m³]", wall_density, "Give the wall material's density, e.g. 1100 kg/m³.")
+    return float(wall_density) * float(thickness) * area
+
+
+def shell_system(
+    shell: Shell,
+    young_modulus: float,
+    poisson_ratio: float,
+    gauge_pressure: float,
+    *,
+    gas: str = "isothermal",
+    mass: float | None = None,
+    wall_density: float | None = None,
+    planes=(),
+    gravity=STANDARD_GRAVITY,
+    heat_capacity_ratio: float = 1.4,
+) -> ShellDynamicSystem:
+    """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with E [Pa],
+    ν [-], gauge pressure P_g [Pa], ``gas`` ("prescribed", "isothermal", "adiabatic"), the mass
+    from ``mass`` [kg] (spread by rest area) or ``wall_density`` [kg/m³] × h × area, ``planes``
+    and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium.
+    """
+    sim = Indentation(shell, young_modulus, poisson_ratio, gauge_pressure, gas="prescribed", ground=False)
+    rest = np.asarray(sim.rest)
+    inflated = np.asarray(sim.q_reference[:-3])
+    n = shell.mesh.n_vertices
+    config = ModelConfig(n, gas=gas, heat_capacity_ratio=heat_capacity_ratio)
+    fixed = np.zeros(3 * n + 3, dtype=bool)
+    fixed[-3:] = True
+    model = ShellModel(shell.mesh, rest, config, fixed)
+    params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness), float(gauge_pressure))
+    if gas != "prescribed":
+        params = params.replace(reference_volume=float(sim.reference_volume), atmospheric_pressure=ATMOSPHERIC_PRESSURE)
+    key = len(PATTERNS)
+    PATTERNS[key] = model.pattern
+    return ShellDynamicSystem(
+        params=params, geometry=model.geometry, config=config,
+        node_masses=jnp.asarray(_node_masses(model, mass, wall_density, shell.thickness)),
+        faces=jnp.asarray(shell.mesh.faces), inflated=jnp.asarray(inflated), planes=tuple(planes),
+        gravity=gravity_vector(gravity), maps=model.pattern.maps, nnz=model.pattern.nnz, pattern_key=key,
+    )  # fmt: skip

@@ -1,0 +1,115 @@
+"""``SparseNewton``: the step minimiser of the 3D shell, on the engine's sparse factorisation.
+
+Newton's loop is the dense minimiser's (traceable: it runs inside ``jit`` and ``lax.scan``); only
+the linear solve differs. The Hessian of the incremental potential is assembled without ever
+being densified,
+
+    ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks)
+              + c u uᵀ + Σ_planes (c_p Wⁿ_p / Δt) v_p v_pᵀ,
+
+K_shell the shell's sparse Hessian (membrane, bending and the gas's per-face part, on the
+engine's sparsity pattern), the point blocks the planes' contact, damping and friction 3×3 blocks
+at every vertex, c u uᵀ the sealed gas's rank-one term (Sherman–Morrison) and v_p = (mᵢ/M) n_p the
+centre-of-mass dashpots' (Woodbury, one column per plane). The values are
+computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.SparseSolver`, its
+symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
+derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
+Newton's step shifts a Hessian that is not positive definite by a multiple of its mean diagonal;
+the implicit derivative's solve is never shifted.
+β's gas rank-one term at xₙ is left out of Newton's matrix (an approximation of its step only).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+
+from .._errors import InvalidInputError, NoConvergenceError
+from ..shell3d import SparseSolver
+from ._minimise import AbstractMinimiser, newton_loop
+from ._shell import PATTERNS, ShellDynamicSystem
+
+
+def _woodbury(solver, columns, coeffs, rhs):
+    """(A + U D Uᵀ)⁻¹ rhs from a solver of A: y − Z D (I + Uᵀ Z D)⁻¹ Uᵀ y, Z = A⁻¹U (U: the columns)."""
+    y = solver.apply_inverse(rhs)
+    if not np.any(coeffs):
+        return y
+    z = solver.apply_inverse(columns.T)
+    small = np.eye(len(coeffs)) + (columns @ z) * coeffs[None, :]
+    return y - (z * coeffs[None, :]) @ np.linalg.solve(small, columns @ y)
+
+
+def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
+    """(K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; NaN if not
+    positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
+
+    With ``shift``, a matrix that is not positive definite is shifted by 1e-2, 1e-1, 1 times its
+    mean diagonal until it is (Newton's step then is a descent direction)."""
+    pattern = PATTERNS[int(key)]
+    n = blocks.shape[0] * 3
+    k = pattern.matrix(np.asarray(data))[:n, :n]
+    v = blocks.shape[0]
+    block = sp.bsr_matrix((np.asarray(blocks), np.arange(v), np.arange(v + 1)), shape=(n, n)).tocsr()
+    a = (k + block + sp.diags(np.asarray(diag))).tocsr()
+    free = np.asarray(free)
+    a = a[free][:, free]
+    c2 = float(c2)
+    rank = (c2, np.asarray(u)[free]) if c2 != 0.0 else None
+    mean = float(np.mean(np.abs(a.diagonal())))
+    for factor in (0.0, 1e-2, 1e-1, 1.0) if shift else (0.0,):
+        try:
+            shifted = a + factor * mean * sp.identity(a.shape[0], format="csr") if factor else a
+            solver = SparseSolver(shifted, rank, symmetric=True, definite=True)
+        except NoConvergenceError:
+            continue
+        body = np.asarray(columns)[:, free]
+        return np.asarray(_woodbury(solver, body, np.asarray(coeffs, dtype=np.float64), np.asarray(rhs)), dtype=np.float64)
+    return np.full(rhs.shape, np.nan)
+
+
+class SparseNewton(AbstractMinimiser):
+    """Newton's method on a :class:`ShellDynamicSystem` step with the sparse Hessian (module doc).
+
+    Converged when the Newton step's largest component is below ``step_tolerance`` [m];
+    ``max_steps`` bounds the iterations and ``max_halvings`` the feasibility-keeping line search.
+    """
+
+    step_tolerance: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=50)
+    max_halvings: int = eqx.field(static=True, default=40)
+
+    def linear_solve(self, potential, y, rhs):
+        return self._solve(potential, y, rhs, False)
+
+    def _solve(self, potential, y, rhs, shift: bool):
+        system = potential.system
+        if not isinstance(system, ShellDynamicSystem):
+            raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
+        x = potential.full(y)
+        data, c2, u = system.hessian_parts(x)
+        diag = potential.inertia_weight
+        if potential.rayleigh is not None:
+            diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
+            data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
+        blocks = potential.point_hessian_blocks(x)
+        share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
+        columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
+        coeffs = jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt if system.planes else jnp.zeros((0,))
+        out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
+        solve = functools.partial(_host_solve, system.pattern_key, shift)
+        return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
+
+    def _direction(self, potential, y, g):
+        p = self._solve(potential, y, -g, True)
+        # Only a failed shift gives NaN: fall back to descent scaled by the inertia.
+        ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
+        return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
+
+    def minimise(self, potential, y0):
+        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g))

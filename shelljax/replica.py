@@ -1,0 +1,98 @@
+"""Digital replicas: a session's estimated shell as a mesh (glTF) plus ``replica.json`` that a game
+engine, a VR scene or another simulator can load, and that :func:`load_replica` turns back into a
+:class:`shelljax.dynamics.ShellDynamicSystem`.
+
+``replica.json`` holds the gauge pressure P_g [Pa], Young's modulus E [Pa], Poisson's ratio ν [-],
+the wall thickness h [m], the mass [kg], the gas model, the COR [-] (null when unmeasured), each
+with its standard deviation (null when unknown), the mesh file and the units.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ._errors import InvalidInputError
+
+REPLICA_VERSION = 1
+_QUANTITIES = ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg", "cor")
+
+
+def _quantity(value, std=None) -> dict:
+    return {"value": None if value is None else float(value), "std": None if std is None else float(std)}
+
+
+def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, source: dict | None = None) -> list[Path]:
+    """Write ``replica.glb`` (the inflated mesh [m]) and ``replica.json`` to ``out_dir``.
+
+    ``quantities`` maps each of ``gauge_pressure_Pa``, ``youngs_modulus_Pa``, ``poisson_ratio``,
+    ``thickness_m``, ``mass_kg`` and ``cor`` to a value or a (value, std) pair (None: unknown).
+    """
+    import trimesh
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    mesh_path = out / "replica.glb"
+    trimesh.Trimesh(shell.mesh.vertices, shell.mesh.faces, process=False).export(mesh_path)
+    body = {"replica_version": REPLICA_VERSION, "mesh": mesh_path.name, "length_unit": "m", "gas": gas, "source": source or {}}
+    for name in _QUANTITIES:
+        q = quantities.get(name)
+        body[name] = _quantity(*q) if isinstance(q, tuple) else _quantity(q)
+    (out / "replica.json").write_text(json.dumps(body, indent=1))
+    return [mesh_path, out / "replica.json"]
+
+
+def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str = "fit", gas: str = "adiabatic",
+                   cor: float | None = None, mesh_faces: int = 2000) -> list[Path]:  # fmt: skip
+    """The replica of a session: P_g and E ± std from its ``method`` estimate, ν, h ± std, mass and
+    the mesh (the session's, or a sphere of its radius with ``mesh_faces`` triangles)."""
+    from . import shell3d as s3
+    from .scenario import estimated_parameters
+    from .session import load_session
+
+    session = load_session(session_path)
+    if session.mass is None:
+        raise InvalidInputError(f"{session.source}: field 'mass' is missing. Fix: add `mass = <kg>` to the session")
+    if cor is not None and not 0.0 < cor <= 1.0:
+        raise InvalidInputError(f"--cor {cor}: a COR is in (0, 1]. Fix: measure it as √(bounce height / drop height)")
+    p_g, e, stats = estimated_parameters(session, method)
+    mesh_path = getattr(session, "mesh_path", None)
+    shell = s3.load(mesh_path, session.thickness) if mesh_path else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
+    quantities = {
+        "gauge_pressure_Pa": (p_g, stats["gauge_pressure_Pa"]["std"]), "youngs_modulus_Pa": (e, stats["youngs_modulus_Pa"]["std"]),
+        "poisson_ratio": (session.poisson_ratio, None), "thickness_m": (session.thickness, session.thickness_std),
+        "mass_kg": (session.mass, None), "cor": (cor, None),
+    }  # fmt: skip
+    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method})
+
+
+def load_replica(directory: str | Path, *, planes=(), gravity=None):
+    """A :class:`shelljax.dynamics.ShellDynamicSystem` from a replica directory, with ``planes``;
+    also returns the replica's dictionary: ``(system, replica)``."""
+    from . import dynamics as d
+    from . import shell3d as s3
+    from .physics import STANDARD_GRAVITY
+
+    directory = Path(directory)
+    path = directory / "replica.json"
+    if not path.is_file():
+        raise InvalidInputError(f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`")
+    replica = json.loads(path.read_text())
+    for name in _QUANTITIES[:-1]:
+        if replica.get(name, {}).get("value") is None:
+            raise InvalidInputError(f"{path}: field '{name}.value' is missing. Fix: re-export the replica")
+    value = lambda k: float(replica[k]["value"])  # noqa: E731
+    shell = s3.load(directory / replica["mesh"], value("thickness_m"))
+    system = d.shell_system(shell, value("youngs_modulus_Pa"), value("poisson_ratio"), value("gauge_pressure_Pa"), gas=replica["gas"],
+                            mass=value("mass_kg"), planes=planes, gravity=STANDARD_GRAVITY if gravity is None else gravity)  # fmt: skip
+    return system, replica
+
+
+def replica_volume(directory: str | Path) -> float:
+    """Volume [m³] enclosed by a replica's mesh."""
+    import trimesh
+
+    mesh = trimesh.load(str(Path(directory) / "replica.glb"), force="mesh")
+    return float(np.abs(mesh.volume))
