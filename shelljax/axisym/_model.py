@@ -159,8 +159,8 @@ class CurvePhysics(eqx.Module):
 
     @classmethod
     def defaults(cls, setup: Setup, batch: int | None = None) -> "CurvePhysics":
-        """``setup``'s finger, gas volume ratio and contact stiffness, κ = 1, s = 0, q = 0, μ = 0:
-        scalars, or (batch,)."""
+        """``setup``'s finger and gas volume ratio, κ = 1, s = 0, q = 0, μ = 0: scalars, or (batch,);
+        the contact stiffness None (the Setup's, a compile-time constant)."""
         shape = () if batch is None else (int(batch),)
 
         def full(v):
@@ -168,7 +168,7 @@ class CurvePhysics(eqx.Module):
 
         return cls(indenter_radius=full(setup.indenter_radius), gas_volume_ratio=full(setup.gas_volume_ratio),
                    gas_exponent=full(1.0), stiffening=full(0.0), areal_weight=full(0.0),
-                   friction_coefficient=full(0.0), contact_stiffness=full(setup.contact_stiffness))  # fmt: skip
+                   friction_coefficient=full(0.0))  # fmt: skip
 
     def similar(self, scale) -> "CurvePhysics":
         """The physics of the similar ball with every length times ``scale`` [-]: a × scale, and

@@ -125,11 +125,12 @@ class AxisymForwardModel(AbstractForwardModel):
 
         scale = radius / self.setup.radius
         measured = self.reference_radius / self.setup.radius
-        physics = eqx.tree_at(lambda c: (c.indenter_radius, c.gas_volume_ratio, c.contact_stiffness),
-                              CurvePhysics.defaults(self.setup),
-                              (jnp.asarray(self.indenter_radius / measured, jnp.float64),
-                               jnp.asarray(self.gas_volume_ratio, jnp.float64),
-                               jnp.asarray(self.contact_stiffness * measured, jnp.float64)))  # fmt: skip
+        default = CurvePhysics.defaults(self.setup)
+        physics = CurvePhysics(indenter_radius=jnp.asarray(self.indenter_radius / measured, jnp.float64),
+                               gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
+                               gas_exponent=default.gas_exponent, stiffening=default.stiffening,
+                               areal_weight=default.areal_weight, friction_coefficient=default.friction_coefficient,
+                               contact_stiffness=jnp.asarray(self.contact_stiffness * measured, jnp.float64))  # fmt: skip
         return scale, physics
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
