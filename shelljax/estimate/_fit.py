@@ -69,7 +69,7 @@ OPTIMALITY_TOL = 1e-3  # [χ²] an optimum's remaining Gauss–Newton decrease; 
 
 
 @jax.jit
-def _forward_ok(problem: InverseProblem, u):
+def _forward_ok(problem, u):
     return problem.forward_ok(u)
 
 
@@ -85,17 +85,21 @@ def _with_dense_jacobian(fn):
     def dense(u):
         return fn(u)
 
+    def residuals_and_all(v):
+        out = fn(v)
+        return out[0], out
+
     @dense.defjvp
     def dense_jvp(primals, tangents):
         (u,), (du,) = primals, tangents
-        jac, (r, aux) = jax.jacfwd(lambda v: (lambda out: (out[0], out))(fn(v)), has_aux=True)(u)
-        zero = jax.tree_util.tree_map(_zero_tangent, aux)
-        return (r, aux), (jac @ du, zero)
+        jac, (r, aux) = jax.jacfwd(residuals_and_all, has_aux=True)(u)
+        return (r, aux), (jac @ du, jax.tree_util.tree_map(_zero_tangent, aux))
 
     return dense
 
 
 def _zero_tangent(x):
+    # the aux is not differentiated; a bool needs JAX's float0 tangent
     x = jnp.asarray(x)
     if jnp.issubdtype(x.dtype, jnp.inexact):
         return jnp.zeros_like(x)
@@ -107,7 +111,7 @@ def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
     # One compiled program; every forward-model call in it is another engine copy to compile, so
     # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    residuals = _with_dense_jacobian(lambda u: problem.residuals_and_prediction(u))
+    residuals = _with_dense_jacobian(problem.residuals_and_prediction)
     sol = optx.least_squares(lambda u, args: residuals(u), solver, u0, has_aux=True, max_steps=max_steps,
                              throw=False)  # fmt: skip
     # (sol.aux belongs to the iterate before the last accepted one; the state's to the optimum)
