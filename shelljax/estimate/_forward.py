@@ -62,7 +62,7 @@ class ScalingLawModel(AbstractForwardModel):
 WRINKLE_LAWS = ("mechanics", "scaling")
 
 
-ENGINE_RADIUS = 0.13  # [m] the engine's inflated radius; every session is reached by similarity
+ENGINE_RADIUS = 0.08  # [m] the engine's radius, the smallest bundled object's (docs: Compilation)
 
 
 class AxisymForwardModel(AbstractForwardModel):
