@@ -108,13 +108,13 @@ def test_sealed_gas_volume_comes_from_the_session_mesh():
     assert hammer.enclosed_volume == pytest.approx(volume, rel=1e-12)
     sealed = forward_model_for(hammer, gas="isothermal")
     # the hammer's head (R = 8 cm) belongs to a body of ≈ 2.9 spheres' volume
-    assert sealed.setup.gas_volume_ratio == pytest.approx(volume / (4 / 3 * np.pi * hammer.radius**3), rel=1e-12)
-    assert 2.5 < sealed.setup.gas_volume_ratio < 3.5
-    assert forward_model_for(hammer, gas="prescribed").setup.gas_volume_ratio == 1.0
+    assert sealed.gas_volume_ratio == pytest.approx(volume / (4 / 3 * np.pi * hammer.radius**3), rel=1e-12)
+    assert 2.5 < sealed.gas_volume_ratio < 3.5
+    assert forward_model_for(hammer, gas="prescribed").gas_volume_ratio == 1.0
     ball = load_session(bundled_data_dir() / "sessions" / "pezzi.toml")  # radius only: no mesh volume
-    assert ball.enclosed_volume is None and forward_model_for(ball, gas="isothermal").setup.gas_volume_ratio == 1.0
+    assert ball.enclosed_volume is None and forward_model_for(ball, gas="isothermal").gas_volume_ratio == 1.0
     with pytest.raises(InvalidInputError, match="gas_volume_ratio = -1.0 must be a positive number"):
         forward_model_for(ball, gas="isothermal", gas_volume_ratio=-1.0)
     open_scan = dataclasses.replace(hammer, enclosed_volume=None)  # a mesh that is not watertight
     with pytest.warns(UserWarning, match="not watertight"):
-        assert forward_model_for(open_scan, gas="isothermal").setup.gas_volume_ratio == 1.0
+        assert forward_model_for(open_scan, gas="isothermal").gas_volume_ratio == 1.0

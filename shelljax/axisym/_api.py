@@ -195,14 +195,15 @@ def _check(params, forces, radius):
 # (lowest allowed value, whether it is excluded) of each CurvePhysics field
 _PHYSICS_BOUNDS = {"indenter_radius": (0.0, True), "gas_volume_ratio": (0.0, True),
                    "gas_exponent": (0.0, False), "stiffening": (-np.inf, False), "areal_weight": (0.0, False),
-                   "friction_coefficient": (0.0, False)}
+                   "friction_coefficient": (0.0, False), "contact_stiffness": (0.0, True)}
 
 
-def _check_physics(physics: CurvePhysics, batch: int) -> np.ndarray:
+def _check_physics(physics: CurvePhysics, batch: int, setup: Setup) -> np.ndarray:
     """``physics`` as (batch, len(_PHYSICS_BOUNDS)) columns in field order, or InvalidInputError naming the field."""
     columns = []
     for name, (low, strict) in _PHYSICS_BOUNDS.items():
-        v = np.asarray(getattr(physics, name), dtype=float)
+        value = getattr(physics, name)
+        v = np.asarray(getattr(setup, name) if value is None else value, dtype=float)
         if v.shape not in ((), (batch,)):
             raise InvalidInputError(
                 f"indentation_curves: physics.{name} has shape {v.shape}; expected () or ({batch},) "
@@ -250,7 +251,7 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     """
     p, f = _check(params, forces, radius)
     setup = Setup(radius=float(radius), **setup_kwargs)  # raises InvalidInputError on a bad field
-    columns = _check_physics(CurvePhysics.defaults(setup) if physics is None else physics, p.shape[0])
+    columns = _check_physics(CurvePhysics.defaults(setup) if physics is None else physics, p.shape[0], setup)
 
     def solve(rows, lanes=chunk):
         # the physics columns travel with their params through map_batch's split

@@ -145,8 +145,8 @@ class CurvePhysics(eqx.Module):
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
-    ratio and μ (:meth:`similar`); its forces are scale² and its depths scale times as large (exactly
-    so with ``Setup.contact_stiffness`` [N/m³] ÷ scale too).
+    ratio and μ, and a contact stiffness k_c [N/m³] ÷ scale (:meth:`similar`); its forces are
+    scale² and its depths scale times as large.
     """
 
     indenter_radius: Float[Array, "*batch"]
@@ -155,10 +155,12 @@ class CurvePhysics(eqx.Module):
     stiffening: Float[Array, "*batch"]
     areal_weight: Float[Array, "*batch"]
     friction_coefficient: Float[Array, "*batch"] = 0.0
+    contact_stiffness: Float[Array, "*batch"] | None = None
 
     @classmethod
     def defaults(cls, setup: Setup, batch: int | None = None) -> "CurvePhysics":
-        """``setup``'s finger and gas volume ratio, κ = 1, s = 0, q = 0, μ = 0: scalars, or (batch,)."""
+        """``setup``'s finger and gas volume ratio, κ = 1, s = 0, q = 0, μ = 0: scalars, or (batch,);
+        the contact stiffness None (the Setup's, a compile-time constant)."""
         shape = () if batch is None else (int(batch),)
 
         def full(v):
@@ -169,16 +171,21 @@ class CurvePhysics(eqx.Module):
                    friction_coefficient=full(0.0))  # fmt: skip
 
     def similar(self, scale) -> "CurvePhysics":
-        """The physics of the similar ball with every length times ``scale`` [-]: a × scale."""
-        return eqx.tree_at(lambda c: c.indenter_radius, self, self.indenter_radius * scale)
+        """The physics of the similar ball with every length times ``scale`` [-]: a × scale, and
+        k_c ÷ scale where it is set."""
+        out = eqx.tree_at(lambda c: c.indenter_radius, self, self.indenter_radius * scale)
+        if self.contact_stiffness is None:
+            return out
+        return eqx.tree_at(lambda c: c.contact_stiffness, out, self.contact_stiffness / scale)
 
 
 def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_volume=1.0,
             ground_z=0.0, bending_scale=1.0, physics: CurvePhysics | None = None):
     f = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
     physics = CurvePhysics.defaults(setup) if physics is None else physics
+    stiffness = setup.contact_stiffness if physics.contact_stiffness is None else physics.contact_stiffness
     return Params(f(young), f(thick), f(nu), f(rest_radius), f(pressure), f(ref_volume),
-                  f(force), f(physics.indenter_radius), f(ground_z), f(setup.contact_stiffness),
+                  f(force), f(physics.indenter_radius), f(ground_z), f(stiffness),
                   f(bending_scale), f(physics.gas_volume_ratio), f(physics.gas_exponent),
                   f(physics.stiffening), f(physics.areal_weight), f(physics.friction_coefficient),
                   friction_slip_tolerance=f(setup.slip_tolerance()))

@@ -21,7 +21,7 @@ from .._errors import NoConvergenceError
 from ..session import Session
 from ._closed_form import estimate_session
 from ._forward import AbstractForwardModel
-from ._problem import OFFSET_SCALE, InverseProblem, build_problem
+from ._problem import ALL_NAMES, OFFSET_SCALE, InverseProblem, build_problem, padded_problem
 from ._result import Estimate
 
 _METHOD = "fit: Levenberg-Marquardt through {model}, Laplace (Gauss-Newton) errors"
@@ -69,8 +69,41 @@ OPTIMALITY_TOL = 1e-3  # [χ²] an optimum's remaining Gauss–Newton decrease; 
 
 
 @jax.jit
-def _forward_ok(problem: InverseProblem, u):
+def _forward_ok(problem, u):
     return problem.forward_ok(u)
+
+
+def _with_dense_jacobian(fn):
+    """``fn`` (u ↦ (residuals, aux)) whose linearisation is a matrix, computed once by forward mode.
+
+    optimistix applies a linearisation several times (materialised for the damped solve,
+    transposed for the gradient, applied for the predicted decrease), and each use of the engine's
+    tangent map is another copy of it for XLA to compile; a matrix costs nothing to reuse.
+    """
+
+    @jax.custom_jvp
+    def dense(u):
+        return fn(u)
+
+    def residuals_and_all(v):
+        out = fn(v)
+        return out[0], out
+
+    @dense.defjvp
+    def dense_jvp(primals, tangents):
+        (u,), (du,) = primals, tangents
+        jac, (r, aux) = jax.jacfwd(residuals_and_all, has_aux=True)(u)
+        return (r, aux), (jac @ du, jax.tree_util.tree_map(_zero_tangent, aux))
+
+    return dense
+
+
+def _zero_tangent(x):
+    # the aux is not differentiated; a bool needs JAX's float0 tangent
+    x = jnp.asarray(x)
+    if jnp.issubdtype(x.dtype, jnp.inexact):
+        return jnp.zeros_like(x)
+    return np.zeros(x.shape, jax.dtypes.float0)
 
 
 @functools.partial(jax.jit, static_argnames="max_steps")
@@ -78,7 +111,8 @@ def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
     # One compiled program; every forward-model call in it is another engine copy to compile, so
     # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    sol = optx.least_squares(problem.residuals_and_prediction, solver, u0, has_aux=True, max_steps=max_steps,
+    residuals = _with_dense_jacobian(problem.residuals_and_prediction)
+    sol = optx.least_squares(lambda u, args: residuals(u), solver, u0, has_aux=True, max_steps=max_steps,
                              throw=False)  # fmt: skip
     # (sol.aux belongs to the iterate before the last accepted one; the state's to the optimum)
     *prediction, forward_ok = sol.state.aux
@@ -142,16 +176,20 @@ def fit_session(
     start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
     problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
                             start_modulus=start_modulus, depth_noise=depth_noise, nuisance=nuisance)  # fmt: skip
-    u0 = jnp.zeros(problem.ndim)
-    if not bool(_forward_ok(problem, u0)):
+    # the padded problem: one compiled fit for every session of this model's structure
+    padded, columns, rows = padded_problem(problem)
+    u0 = jnp.zeros(len(ALL_NAMES))
+    out, converged, finite, promised_decrease = solve_least_squares(padded, u0, rtol, atol, max_steps)
+    # from a failed start every residual is the same constant, so LM cannot move and ends there
+    # unfinite: only then is the start checked (its program is compiled only then)
+    if not finite and not bool(_forward_ok(padded, u0)):
         raise NoConvergenceError(
             f"{session.source}: the forward model {type(model).__name__} fails at the closed-form "
             f"start (P_g = {start.gauge_pressure.value:.4g} Pa, E = {start_modulus:.4g} Pa); "
             "check the session's forces and geometry against the model's range"
         )
-    out, converged, finite, promised_decrease = solve_least_squares(problem, u0, rtol, atol, max_steps)
-    u, steps, residual = out["u"], out["steps"], out["residual"]
-    jac = np.asarray(out["jacobian"])
+    u, steps, residual = np.asarray(out["u"])[columns], out["steps"], np.asarray(out["residual"])[rows]
+    jac = np.asarray(out["jacobian"])[np.ix_(rows, columns)]
     if not converged and (raise_on_failure or not finite):
         phys = {k: float(v) for k, v in problem.physical(u).items()}
         raise NoConvergenceError(
@@ -164,7 +202,8 @@ def fit_session(
     chi2 = float(residual @ residual)
     return FitResult(
         estimates=_laplace_estimates(problem, u, covariance), covariance=covariance, chi2=chi2,
-        dof=int(residual.size - problem.ndim), steps=int(steps), predicted_depth=np.asarray(out["prediction"][0]),
+        dof=int(residual.size - problem.ndim), steps=int(steps),
+        predicted_depth=np.asarray(out["prediction"][0])[: problem.force.shape[0]],
         predicted_wrinkle_count=float(out["prediction"][1]), problem=problem, u=np.asarray(u),
         source=session.source, converged=converged,
     )  # fmt: skip

@@ -10,6 +10,7 @@ law and the axisymmetric shell engine are interchangeable.
 from __future__ import annotations
 
 import abc
+import dataclasses
 import warnings
 
 import equinox as eqx
@@ -61,28 +62,40 @@ class ScalingLawModel(AbstractForwardModel):
 WRINKLE_LAWS = ("mechanics", "scaling")
 
 
+ENGINE_RADIUS = 0.08  # [m] the engine's radius, the smallest bundled object's (docs: Compilation)
+
+
 class AxisymForwardModel(AbstractForwardModel):
     """The axisymmetric Neo-Hookean shell engine (``shelljax.axisym``) as a forward model.
 
-    A ball of inflated radius ``reference_radius`` R₀ [m] resting on the ground is poked by a
-    rigid spherical finger (force control). The curve is solved at ``n_grid`` forces evenly
-    spaced over [``force_min``, ``force_max``] [N] and interpolated linearly at the recorded forces
-    (the F–w(0) curve is smooth and nearly linear: the interpolation error is far below the
+    A ball of inflated radius R [m] resting on the ground is poked by a rigid spherical finger of
+    radius ``indenter_radius`` a [m] (force control). The curve is solved at ``n_grid`` forces
+    evenly spaced over [``force_min``, ``force_max``] [N] and interpolated linearly at the recorded
+    forces (the F–w(0) curve is smooth and nearly linear: the interpolation error is far below the
     depth noise; see tests). The wrinkle count is, with ``wrinkle_law = "mechanics"`` (default),
     the engine's mechanical count at the top force, where the protocol records it; with
-    ``"scaling"``, Vella et al.'s n = 1.33 τ^½ at the fitted parameters.
+    ``"scaling"``, Vella et al.'s n = 1.33 τ^½ at the fitted parameters. With a sealed gas it fills
+    ``gas_volume_ratio`` [-] times the ball's 4/3 π R³; ``contact_stiffness`` k_c [N/m³] is the
+    contact penalty.
 
-    Radius: the engine's R is a compile-time constant, so a radius R ≠ R₀ is reached through
-    exact similarity: scaling every length by s = R/R₀ at fixed E, P_g scales forces by s², so
-    w(F; h, R) = s·w(F/s²; h/s, R₀) and n(F; h, R) = n(F/s²; h/s, R₀). The finger radius and
-    penalty stiffness are the only quantities not rescaled; over the few-percent radius
-    uncertainty of a session their effect on w is negligible.
+    Every number of a session is a traced field, so one compiled program serves every object:
+    the engine (``setup``, static: mesh, gas law, solver) runs at ``ENGINE_RADIUS`` R₀ and reaches
+    R by exact similarity. Scaling every length by s = R/R₀ at fixed E, P_g scales forces by s²
+    and the penalty by 1/s, so w(F; h, a, k_c, R) = s·w(F/s²; h/s, a/s, k_c s, R₀) and
+    n(F; h, a, k_c, R) = n(F/s²; h/s, a/s, k_c s, R₀). The finger and the penalty are those of the
+    session's measured radius ``reference_radius`` R_m: a fitted R ≠ R_m keeps them at a R/R_m and
+    k_c R_m/R (over the few-percent radius uncertainty of a session their effect on w is
+    negligible). The engine's static finger radius is R₀: the traced one, always smaller, sets the
+    Newton step cap, as a does at R_m.
     """
 
     poisson_ratio: float
     reference_radius: float
     force_min: float
     force_max: float
+    indenter_radius: float
+    gas_volume_ratio: float
+    contact_stiffness: float
     n_grid: int = eqx.field(static=True)
     setup: object = eqx.field(static=True)
     wrinkle_law: str = eqx.field(static=True, default="mechanics")
@@ -90,24 +103,43 @@ class AxisymForwardModel(AbstractForwardModel):
     @classmethod
     def for_forces(cls, radius: float, forces, *, poisson_ratio: float = DEFAULT_POISSON_RATIO, n_grid: int = 7,
                    wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
-        """Model for a session of inflated radius R [m] and recorded ``forces`` [N]."""
+        """Model for a session of inflated radius R [m] and recorded ``forces`` [N]; ``setup_kwargs``
+        go to the engine's ``Setup`` (its finger, gas volume ratio and penalty become traced fields)."""
         from .._errors import InvalidInputError
         from ..axisym import Setup
 
         if wrinkle_law not in WRINKLE_LAWS:
             raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: use one of {', '.join(WRINKLE_LAWS)}")
         forces = jnp.asarray(forces)
-        return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()),
-                   poisson_ratio=poisson_ratio, n_grid=n_grid, setup=Setup(radius=float(radius), **setup_kwargs),
+        given = Setup(radius=float(radius), **setup_kwargs)  # checks every field
+        engine = dataclasses.replace(given, radius=ENGINE_RADIUS, indenter_radius=ENGINE_RADIUS, gas_volume_ratio=1.0,
+                                     contact_stiffness=Setup().contact_stiffness)  # fmt: skip
+        return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()), poisson_ratio=poisson_ratio,
+                   indenter_radius=given.indenter_radius, gas_volume_ratio=given.gas_volume_ratio,
+                   contact_stiffness=given.contact_stiffness, n_grid=n_grid, setup=engine,
                    wrinkle_law=wrinkle_law)  # fmt: skip
+
+    def engine_frame(self, radius):
+        """(s = R / R₀ [-], the engine's ``CurvePhysics`` at R₀ of the ball of radius R [m])."""
+        from ..axisym import CurvePhysics
+
+        scale = radius / self.setup.radius
+        measured = self.reference_radius / self.setup.radius
+        default = CurvePhysics.defaults(self.setup)
+        physics = CurvePhysics(indenter_radius=jnp.asarray(self.indenter_radius / measured, jnp.float64),
+                               gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
+                               gas_exponent=default.gas_exponent, stiffening=default.stiffening,
+                               areal_weight=default.areal_weight, friction_coefficient=default.friction_coefficient,
+                               contact_stiffness=jnp.asarray(self.contact_stiffness * measured, jnp.float64))  # fmt: skip
+        return scale, physics
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
         from ..axisym import indentation_curves_raw
 
-        scale = radius / self.reference_radius
+        scale, physics = self.engine_frame(radius)
         grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
         params = jnp.stack([gauge_pressure, young_modulus, thickness / scale, jnp.asarray(self.poisson_ratio, jnp.float64)])
-        curve = indentation_curves_raw(params[None], grid / scale**2, self.setup)
+        curve = indentation_curves_raw(params[None], grid / scale**2, self.setup, physics=physics)
         depth = jnp.interp(forces, grid, scale * curve.w0[0])
         if self.wrinkle_law == "mechanics":
             count = curve.wrinkle_count[0, -1]

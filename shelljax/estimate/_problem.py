@@ -209,3 +209,97 @@ def build_problem(
 def jacobian(problem: InverseProblem, u) -> Float[Array, "r d"]:
     """Jacobian of the whitened residuals with respect to u (forward mode)."""
     return jax.jacfwd(problem.residuals)(u)
+
+
+SAMPLE_QUANTUM = 32  # depth samples are padded to a multiple of this
+COUNT_QUANTUM = 8  # wrinkle counts are padded to a multiple of this
+ALL_NAMES = ("gauge_pressure", "young_modulus", "thickness", "radius", *OPTIONAL_PARAMETERS)
+_PRIORS = ("thickness", "radius", "force_gain")  # the Gaussian prior residuals, in InverseProblem's order
+
+
+class PaddedProblem(eqx.Module):
+    """:class:`InverseProblem` with every per-session size and switch traced, for the fit.
+
+    Every unknown of ``ALL_NAMES`` is present, ``free`` says which are fitted (a fixed one has a
+    residual of its own, u, and stays at 0); samples and counts are padded to a multiple of
+    ``SAMPLE_QUANTUM`` and ``COUNT_QUANTUM`` with masks (a padded residual is 0). So one compiled
+    fit serves every session of a forward model's structure.
+    """
+
+    model: AbstractForwardModel
+    force: Float[Array, " mp"]
+    depth: Float[Array, " mp"]
+    sample_mask: Bool[Array, " mp"]
+    counts: Float[Array, " kp"]
+    count_mask: Bool[Array, " kp"]
+    free: Bool[Array, " 6"]
+    depth_noise: Float[Array, ""]
+    thickness: Float[Array, ""]
+    thickness_std: Float[Array, ""]
+    radius: Float[Array, ""]
+    radius_std: Float[Array, ""]
+    reference_pressure: Float[Array, ""]
+    reference_modulus: Float[Array, ""]
+
+    def physical(self, u):
+        get = dict(zip(ALL_NAMES, jnp.where(self.free, u, 0.0)))
+        return {
+            "gauge_pressure": self.reference_pressure * jnp.exp(get["gauge_pressure"]),
+            "young_modulus": self.reference_modulus * jnp.exp(get["young_modulus"]),
+            "thickness": self.thickness * jnp.exp(get["thickness"]), "radius": self.radius * jnp.exp(get["radius"]),
+            "depth_offset": OFFSET_SCALE * get["depth_offset"], "force_gain": jnp.exp(get["force_gain"]),
+        }  # fmt: skip
+
+    def residuals_and_prediction(self, u, args=None):
+        """As :meth:`InverseProblem.residuals_and_prediction`, padded: depth rows, count rows,
+        then the thickness, radius and gain priors (each 0 where it is not fitted), then u of
+        every fixed unknown."""
+        p = self.physical(u)
+        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
+        depth = pred.depth + p["depth_offset"]
+        on = dict(zip(ALL_NAMES, self.free))
+        # a fixed unknown's σ may be 0: its prior row divides by 1 instead
+        std = {"thickness": self.thickness_std, "radius": self.radius_std, "force_gain": GAIN_STD}
+        mean = {"thickness": self.thickness, "radius": self.radius, "force_gain": 1.0}
+        priors = jnp.stack([(p[n] - mean[n]) / jnp.where(on[n], std[n], 1.0) for n in _PRIORS])
+        mask = jnp.concatenate([self.sample_mask, self.count_mask, jnp.stack([on[n] for n in _PRIORS])])
+        r = jnp.concatenate([(depth - self.depth) / self.depth_noise, pred.wrinkle_count - self.counts, priors])
+        r = jnp.where(mask, r, 0.0)
+        converged = pred.converged
+        ok = converged & jnp.all(jnp.isfinite(r))
+        r = jnp.where(mask, jnp.where(ok, r, FAILED_RESIDUAL), 0.0)
+        # a fixed unknown is pinned at 0 by a residual of its own: a zero Jacobian column would
+        # leave Levenberg–Marquardt's damped system singular as its damping vanishes
+        r = jnp.concatenate([r, jnp.where(self.free, 0.0, u)])
+        finite = jnp.all(jnp.isfinite(jnp.where(self.sample_mask, depth, 0.0))) & jnp.isfinite(pred.wrinkle_count)
+        return r, (depth, pred.wrinkle_count, converged & finite)
+
+    def forward_ok(self, u) -> Bool[Array, ""]:
+        return self.residuals_and_prediction(u)[1][2]
+
+
+def _pad(values, quantum: int, fill: float):
+    n = values.shape[0]
+    size = max(-(-n // quantum), 1) * quantum
+    return jnp.concatenate([jnp.asarray(values, jnp.float64), jnp.full(size - n, fill)]), jnp.arange(size) < n
+
+
+def padded_problem(problem: InverseProblem) -> tuple[PaddedProblem, np.ndarray, np.ndarray]:
+    """(the padded problem, the indices of ``problem``'s unknowns in its u, the indices of
+    ``problem``'s residuals in its residual vector)."""
+    force, sample_mask = _pad(problem.force, SAMPLE_QUANTUM, float(problem.force[0]))
+    depth, _ = _pad(problem.depth, SAMPLE_QUANTUM, 0.0)
+    counts, count_mask = _pad(problem.counts, COUNT_QUANTUM, 0.0)
+    f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
+    padded = PaddedProblem(
+        model=problem.model, force=force, depth=depth, sample_mask=sample_mask, counts=counts, count_mask=count_mask,
+        free=jnp.asarray([n in problem.names for n in ALL_NAMES]), depth_noise=f(problem.depth_noise),
+        thickness=f(problem.thickness), thickness_std=f(problem.thickness_std), radius=f(problem.radius),
+        radius_std=f(problem.radius_std), reference_pressure=f(problem.reference_pressure),
+        reference_modulus=f(problem.reference_modulus),
+    )  # fmt: skip
+    columns = np.asarray([ALL_NAMES.index(n) for n in problem.names])
+    m, k, mp, kp = problem.force.shape[0], problem.counts.shape[0], force.shape[0], counts.shape[0]
+    priors = [mp + kp + j for j, n in enumerate(_PRIORS) if n in problem.names]
+    rows = np.concatenate([np.arange(m), mp + np.arange(k), np.asarray(priors, int)])
+    return padded, columns, rows

@@ -138,11 +138,12 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
                disable=None if progress is None else not progress)
     for r_index, log_radius in enumerate(bar):
         # exact similarity (see AxisymForwardModel): lengths scale by s = R / R₀, forces by s²
-        scale = math.exp(log_radius) / model.reference_radius
+        scale, physics = model.engine_frame(math.exp(log_radius))
+        scale = float(scale)
         params = np.column_stack([np.exp(mesh[:, 0]), np.exp(mesh[:, 1]), np.exp(mesh[:, 2]) / scale,
                                   np.full(len(mesh), model.poisson_ratio)])  # fmt: skip
         curves = indentation_curves(params, grid / scale**2, radius=model.setup.radius, raise_on_failure=False,
-                                    workers=workers, **setup_fields)  # fmt: skip
+                                    workers=workers, physics=physics, **setup_fields)  # fmt: skip
         converged = np.asarray(curves.converged).all(axis=1)
         if not converged.all():
             bad = np.exp(mesh[np.argmin(converged)])
