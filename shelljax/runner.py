@@ -240,7 +240,7 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
                                              held_out, stages, verbose=progress is not False)  # fmt: skip
         summary_rows.append(row)
         results["sessions"].append(entry)
-        release_compiled_programs_if_crowded()  # each object compiles its own engine
+        release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate
 
     if calibration is not None:
         results["calibration"] = _calibration_record(calibration)

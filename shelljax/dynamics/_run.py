@@ -113,9 +113,9 @@ def step(
 ) -> tuple[DynamicState, StepRecord]:
     """One implicit step of Δt [s]: the new state and its record (check ``record.converged``)."""
     potential = incremental_potential(system, integrator, state, dt, rayleigh)
-    x_hat_full = potential.full(potential.free(potential.x_hat))
+    predicted = potential.free(potential.x_hat)
     # The prediction x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start.
-    start = jnp.where(potential.is_feasible(potential.free(x_hat_full)), potential.free(x_hat_full), potential.free(state.position))
+    start = jnp.where(potential.is_feasible(predicted), predicted, potential.free(state.position))
     feasible = potential.is_feasible(start)
     result = solve_step(potential, minimiser, jax.lax.stop_gradient(start))
     x_new = potential.full(result.y)
