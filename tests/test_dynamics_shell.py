@@ -20,6 +20,7 @@ import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax import dynamics as d
 from shelljax.cli import main
+from shelljax.physics import ATMOSPHERIC_PRESSURE, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
 from shelljax.scenario import load_scenario
 
@@ -107,6 +108,33 @@ def test_gradient_of_bounce_height_through_contact_onset(system):
     assert float(grad) == pytest.approx(float(fd), rel=1e-4, abs=1e-6)
     # Mid-compression the dashpot slows the descent: more damping, a higher proxy apex; far from noise.
     assert float(grad) > 1e-5
+
+
+@pytest.mark.parametrize("gas, exponent", [("isothermal", 1.0), ("adiabatic", 1.4)])
+def test_sealed_gas_energy_is_accurate_near_its_reference_volume(gas, exponent):
+    v0, u = 4.87e-4, 1e-7  # the test ball's volume [m³]; a Newton step's relative volume change
+    energy = {"isothermal": isothermal_gas_energy, "adiabatic": adiabatic_gas_energy}[gas]
+    value = float(energy(v0 * (1.0 + u), v0, P_G))
+    p_abs = ATMOSPHERIC_PRESSURE + P_G
+    series = v0 * (-P_G * u + 0.5 * exponent * p_abs * u**2 - exponent * (exponent + 1.0) * p_abs * u**3 / 6.0)
+    # The energy carries its own round-off (1e-16 relative), not that of p₀V₀/(γ − 1) ≈ 130 J (1e-14 J: 1e-8 relative here).
+    assert value == pytest.approx(series, rel=1e-12)
+
+
+def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_times_the_isothermal(shell, system):
+    # 12.5 ms at 0.25 ms: contact onset (step 6, where Newton used to stall) and 3 mm of compression.
+    adiabatic = d.shell_system(shell, E, NU, P_G, gas="adiabatic", mass=MASS, planes=system.planes)
+    traj = d.simulate(adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, CHUNK * 2.5e-4, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
+    # Quadratic Newton: the stall against round-off in Φ_inc ran into max_steps = 50.
+    assert np.max(traj["newton_iterations"]) <= 8
+    volume, pressure = traj["gas_volume_m3"], traj["gas_pressure_Pa"]
+    strain = (volume[0] - volume) / volume[0]
+    assert np.max(strain) > 5e-4
+    # The sealed isothermal gas's rise at the same volume change is P_abs ε / (1 − ε): the ratio by least squares.
+    isothermal = (ATMOSPHERIC_PRESSURE + P_G) * strain / (1.0 - strain)
+    ratio = np.sum(isothermal * (pressure - P_G)) / np.sum(isothermal**2)
+    # ΔP_adiabatic / ΔP_isothermal = γ (1 + (γ − 1) ε / 2 + …): at ε < 2e-3 the second order is < 4e-4.
+    assert ratio == pytest.approx(1.4, rel=1e-3), (ratio, np.max(strain))
 
 
 def test_contact_damping_is_one_dashpot_on_the_centre_of_mass(system):

@@ -14,6 +14,13 @@ gauge pressure acting on the wall. All pressures in Pa, volumes in m³, energies
   L = ln(V / V₀), φ(x) = (eˣ − 1)/x, which is analytic through κ = 1 (x = 0).
 
 Here p₀ = P_atm + P_g0 is the absolute pressure at the reference volume V₀.
+
+The sealed gases' energies vanish at V₀ and are evaluated from the volume change u = (V − V₀)/V₀
+as ln(V / V₀) = log1p(u) and (V₀ / V)^(γ−1) − 1 = expm1(−(γ − 1) log1p(u)), so they carry the
+round-off of their own (small) value, not of the terms p₀V₀ ≈ 50 J (isothermal) or
+p₀V₀/(γ − 1) ≈ 130 J (adiabatic, a 5 cm ball) whose difference they are: that round-off
+(≈ 1e-14 J) exceeds the decrease of a converging Newton step of a dynamic step's incremental
+potential, and its line search then stalls.
 """
 
 from __future__ import annotations
@@ -43,9 +50,8 @@ def isothermal_gas_energy(
 ):
     """Energy [J] of a sealed isothermal ideal gas at V [m³]; at V₀ [m³] its gauge pressure is P_g0 [Pa]."""
     p0 = atmospheric_pressure + reference_gauge_pressure
-    return -p0 * reference_volume * jnp.log(volume / reference_volume) + atmospheric_pressure * (
-        volume - reference_volume
-    )
+    change = volume - reference_volume
+    return -p0 * reference_volume * jnp.log1p(change / reference_volume) + atmospheric_pressure * change
 
 
 def adiabatic_gas_energy(
@@ -58,9 +64,8 @@ def adiabatic_gas_energy(
     """Energy [J] of a sealed adiabatic ideal gas (ratio γ [-]) at V [m³], gauge P_g0 [Pa] at V₀ [m³]."""
     p0 = atmospheric_pressure + reference_gauge_pressure
     gm1 = heat_capacity_ratio - 1.0
-    return p0 * reference_volume / gm1 * (
-        (reference_volume / volume) ** gm1 - 1.0
-    ) + atmospheric_pressure * (volume - reference_volume)
+    change = volume - reference_volume
+    return p0 * reference_volume / gm1 * jnp.expm1(-gm1 * jnp.log1p(change / reference_volume)) + atmospheric_pressure * change
 
 
 def isothermal_gauge_pressure(
@@ -114,7 +119,7 @@ def polytropic_gas_energy(
     1 the isothermal law, 1.4 the adiabatic one of air. Smooth in V and κ, through κ = 1 included.
     """
     p0 = atmospheric_pressure + reference_gauge_pressure
-    log_ratio = jnp.log(volume / reference_volume)
+    log_ratio = jnp.log1p((volume - reference_volume) / reference_volume)
     return -p0 * reference_volume * log_ratio * _exprel(
         (1.0 - exponent) * log_ratio
     ) + atmospheric_pressure * (volume - reference_volume)
