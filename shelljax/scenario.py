@@ -23,9 +23,9 @@ from ._errors import InvalidInputError, NoConvergenceError
 from .config import bundled_data_dir
 
 _TABLES = {
-    "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
+    "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
                "radius_m", "thickness_m", "poisson_ratio"},
-    "integrator": {"scheme", "dt_s", "duration_s"},
+    "integrator": {"scheme", "dt_s", "duration_s", "newton_step_tolerance_m"},
     "dissipation": {"cor", "calibration_bracket_N_s_per_m", "calibration_height_m", "contact_damping_N_s_per_m",
                     "rayleigh_mass_per_s", "rayleigh_stiffness_s"},
     "initial": {"drop_heights_m", "centre_m", "velocity_m_per_s"},
@@ -72,6 +72,7 @@ class Scenario:
     description: str
     output_dir: Path
     session: Path | None
+    mesh: Path | None
     estimate: str
     gauge_pressure: float | None
     youngs_modulus: float | None
@@ -85,6 +86,7 @@ class Scenario:
     scheme: str
     dt: float
     duration: float
+    step_tolerance: float
     cor: float | None
     bracket: tuple[float, float]
     calibration_height: float
@@ -149,14 +151,14 @@ def _table(reader: _Reader, data: dict, name: str) -> dict:
     return table
 
 
-def _session_path(reader: _Reader, value) -> Path | None:
+def _session_path(reader: _Reader, value, field: str = "object.session", example: str = "sessions/pezzi.toml") -> Path | None:
     if value is None:
         return None
     if not isinstance(value, str):
-        raise reader.fail("object.session", value, "expected a path", "write 'bundled:sessions/pezzi.toml' or a path relative to the config")
+        raise reader.fail(field, value, "expected a path", f"write 'bundled:{example}' or a path relative to the config")
     path = bundled_data_dir() / value.removeprefix("bundled:") if value.startswith("bundled:") else reader.path.parent / value
     if not path.is_file():
-        raise reader.fail("object.session", value, f"no such file ({path})", "fix the path: relative to the config, or 'bundled:sessions/...'")
+        raise reader.fail(field, value, f"no such file ({path})", f"fix the path: relative to the config, or 'bundled:{example}'")
     return path
 
 
@@ -281,6 +283,7 @@ def load_scenario(path: str | Path) -> Scenario:
     return Scenario(
         source=path, name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         output_dir=path.parent / str(data.get("output_dir", "runs")), session=session,
+        mesh=_session_path(r, obj.get("mesh"), "object.mesh", "meshes/hammer-coarse.stl"),
         estimate=r.choice(obj, "estimate", "object.", ("closed-form", "fit", "bayes"), "fit"),
         gauge_pressure=r.number(obj, "gauge_pressure_Pa", "object.", positive=True) if direct else None,
         youngs_modulus=r.number(obj, "youngs_modulus_Pa", "object.", positive=True) if direct else None,
@@ -292,6 +295,7 @@ def load_scenario(path: str | Path) -> Scenario:
         thickness=r.number(obj, "thickness_m", "object.", positive=True) if "thickness_m" in obj else None,
         poisson_ratio=r.number(obj, "poisson_ratio", "object.", positive=True) if "poisson_ratio" in obj else None,
         scheme=r.choice(integ, "scheme", "integrator.", ("newmark", "backward-euler"), "newmark"), dt=dt, duration=duration,
+        step_tolerance=r.number(integ, "newton_step_tolerance_m", "integrator.", default=1e-10, positive=True),
         cor=cor, bracket=bracket, contact_damping=damping,
         calibration_height=r.number(diss, "calibration_height_m", "dissipation.", default=1.0, positive=True),
         rayleigh=(r.number(diss, "rayleigh_mass_per_s", "dissipation.", default=0.0, nonnegative=True),
@@ -357,7 +361,7 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     thickness = pick(scenario.thickness, "thickness", "thickness_m", "m")
     nu = pick(scenario.poisson_ratio, "poisson_ratio", "poisson_ratio", "-")
     radius = pick(scenario.radius, "radius", "radius_m", "m")
-    mesh_path = getattr(session, "mesh_path", None) if session is not None else None
+    mesh_path = scenario.mesh or (getattr(session, "mesh_path", None) if session is not None else None)
     if mesh_path:
         shell = s3.load(mesh_path, thickness)
         if scenario.mesh_faces is not None and scenario.mesh_faces != shell.mesh.n_faces:
@@ -403,7 +407,7 @@ def _simulate(scenario: Scenario, system, state, duration: float, progress: bool
     from . import dynamics as d
 
     try:
-        return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(),
+        return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
                           rayleigh=_rayleigh(scenario), progress=progress)  # fmt: skip
     except NoConvergenceError as err:
         raise NoConvergenceError(f"{scenario.source}: field 'integrator.dt_s' = {scenario.dt}: {err} Fix: reduce integrator.dt_s", err.history) from err

@@ -197,11 +197,15 @@ def shell_system(
     """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with E [Pa],
     ν [-], gauge pressure P_g [Pa], ``gas`` ("prescribed", "isothermal", "adiabatic"), the mass
     from ``mass`` [kg] (spread by rest area) or ``wall_density`` [kg/m³] × h × area, ``planes``
-    and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium.
+    and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium, in the
+    mesh's frame (its lowest vertex where the mesh has it).
     """
     sim = Indentation(shell, young_modulus, poisson_ratio, gauge_pressure, gas="prescribed", ground=False)
-    rest = np.asarray(sim.rest)
-    inflated = np.asarray(sim.q_reference[:-3])
+    # The engine poses the mesh on its ground; its bottom vertex stays where it put it: move back to the mesh's frame.
+    bottom = int(np.argmin(shell.mesh.vertices[:, 2]))
+    shift = shell.mesh.vertices[bottom] - np.asarray(sim.q_reference[3 * bottom : 3 * bottom + 3])
+    rest = np.asarray(sim.rest) + shift
+    inflated = (np.asarray(sim.q_reference[:-3]).reshape(-1, 3) + shift).reshape(-1)
     n = shell.mesh.n_vertices
     config = ModelConfig(n, gas=gas, heat_capacity_ratio=heat_capacity_ratio)
     fixed = np.zeros(3 * n + 3, dtype=bool)
@@ -220,34 +224,30 @@ def shell_system(
     )  # fmt: skip
 
 
-def remeshed(shell: Shell, n_faces: int, *, smoothing: int = 5) -> Shell:
-    """``shell`` remeshed to about ``n_faces`` triangles (within 10 %) of near-uniform size, its
-    thickness [m] kept.
-
-    Edges are collapsed where the surface moves less than 5 % of the target edge length ℓ
-    (manifold3d's ``simplify``), then split to at most ℓ (``refine_to_length``; long, thin
-    triangles, such as a capsule's sides, become rows of short ones that can bend), then
-    smoothed tangentially ``smoothing`` times (each vertex half-way to its neighbours' mean,
-    the normal part removed) to raise the smallest angles.
+def remeshed(shell: Shell, n_faces: int) -> Shell:
+    """``shell`` with its edges split until it has about ``n_faces`` triangles (within 10 %), its
+    thickness [m] kept: long, thin triangles (a capsule's sides) become rows of short ones that
+    can bend. Only refines (manifold3d's ``refine_to_length``): the vertices stay on the mesh's
+    surface and no triangle gets a smaller angle. Coarsening by edge collapse folded faces onto
+    their neighbours, which the rest-shape solve cannot start from; give a coarser mesh instead.
     """
     import manifold3d
-    import trimesh
 
-    if not n_faces >= 8:
-        raise InvalidInputError(f"mesh_faces = {n_faces}: a closed mesh needs at least 8 triangles; give e.g. 1000.")
     mesh = shell.mesh
+    if n_faces < mesh.n_faces:
+        raise InvalidInputError(
+            f"mesh_faces = {n_faces}: the mesh {mesh.name} has {mesh.n_faces} faces and can only be refined; "
+            f"give mesh_faces ≥ {mesh.n_faces}, or a coarser mesh (e.g. object.mesh = \"bundled:meshes/hammer-coarse.stl\")."
+        )
     solid = manifold3d.Manifold(manifold3d.Mesh(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32)))
-    length = float(np.sqrt(4.0 * solid.surface_area() / (np.sqrt(3.0) * n_faces)))
-    for _ in range(8):
-        fine = solid.simplify(0.05 * length).refine_to_length(length)
-        if abs(fine.num_tri() - n_faces) < 0.1 * n_faces:
+    low, high = 1e-6 * float(np.ptp(mesh.vertices, axis=0).max()), float(np.ptp(mesh.vertices, axis=0).max())
+    for _ in range(40):  # bisection on the edge length [m]: the face count falls as it grows
+        length = float(np.sqrt(low * high))
+        fine = solid.refine_to_length(length)
+        if abs(fine.num_tri() - n_faces) < 0.1 * n_faces or high / low < 1.001:
             break
-        length *= float(np.sqrt(fine.num_tri() / n_faces))
+        low, high = (length, high) if fine.num_tri() > n_faces else (low, length)
     out = fine.to_mesh()
-    tm = trimesh.Trimesh(np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts), process=True)
-    v, neighbours = np.array(tm.vertices), tm.vertex_neighbors
-    for _ in range(smoothing):
-        step = np.array([v[n].mean(axis=0) for n in neighbours]) - v
-        normal = trimesh.Trimesh(v, tm.faces, process=False).vertex_normals
-        v = v + 0.5 * (step - np.sum(step * normal, axis=1)[:, None] * normal)
-    return Shell(mesh=ShellMesh.from_arrays(v, tm.faces, name=f"{mesh.name} remeshed to {len(tm.faces)} faces"), thickness=shell.thickness)
+    vertices = np.asarray(out.vert_properties[:, :3], dtype=float)
+    return Shell(mesh=ShellMesh.from_arrays(vertices, np.asarray(out.tri_verts, dtype=int), name=f"{mesh.name} refined to {fine.num_tri()} faces"),
+                 thickness=shell.thickness)  # fmt: skip
