@@ -99,8 +99,12 @@ def _cmd_simulate(args) -> int:
     print(f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
           f"{p['gas']} gas, {p['mesh_faces']} faces, contact damping c = {summary['contact_damping_N_s_per_m']:.4g} N·s/m")  # fmt: skip
     for run in summary["runs"]:
+        label = f"drop {run['drop_height_m']:.3g} m" if "drop_height_m" in run else "swing"
+        if "max_deviation_from_rigid_m" in run:
+            print(f"  swing: held vertices on the schedule to {run['held_error_m']:.2g} m, largest departure from the rigid "
+                  f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm, peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa")  # fmt: skip
         for m in run["impacts"]:
-            print(f"  drop {run['drop_height_m']:.3g} m: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
+            print(f"  {label}: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
                   f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm")  # fmt: skip
         print(f"  results: {run['directory']}/results.json")
     return 0

@@ -1,9 +1,10 @@
 """Dynamic scenarios from TOML configs: load, validate and run them (``shelljax simulate``).
 
-A scenario config (docs/dynamics.md, *Config schema*) names the object (a session, with P_g and E
+A scenario config (docs/dynamics.md, *Scenarios*) names the object (a session, with P_g and E
 from one of its estimators or given directly), the integrator, the dissipation (a measured COR
-that the contact damping is calibrated to, or the damping itself), the planes, the initial
-states (one run per drop height) and the outputs. ``load_scenario`` validates it, naming the
+that the contact damping is calibrated to, or the damping itself), the planes, optionally held
+vertices and their rotation schedule (``[prescribed]``: the hammer's swing, run once), the
+initial states (one run per drop height) and the outputs. ``load_scenario`` validates it, naming the
 file, the field, the value and the fix; ``run_scenario`` builds the 3D shell, calibrates the
 contact damping and writes every run's ``results.json``, figures and mesh frames.
 """
@@ -22,13 +23,14 @@ from ._errors import InvalidInputError, NoConvergenceError
 from .config import bundled_data_dir
 
 _TABLES = {
-    "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
+    "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
                "radius_m", "thickness_m", "poisson_ratio"},
-    "integrator": {"scheme", "dt_s", "duration_s"},
+    "integrator": {"scheme", "dt_s", "duration_s", "newton_step_tolerance_m"},
     "dissipation": {"cor", "calibration_bracket_N_s_per_m", "calibration_height_m", "contact_damping_N_s_per_m",
                     "rayleigh_mass_per_s", "rayleigh_stiffness_s"},
     "initial": {"drop_heights_m", "centre_m", "velocity_m_per_s"},
     "outputs": {"figures", "mesh_frames", "max_frames", "preview_gif"},
+    "prescribed": {"select", "within_m", "axis_point_m", "axis_direction", "times_s", "angles_deg"},
 }  # fmt: skip
 _PLANE_KEYS = {"name", "point_m", "normal", "contact", "activation_distance_m", "barrier_stiffness_J_per_m2", "friction", "slip_tolerance_m"}
 _TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes"}
@@ -48,6 +50,20 @@ class PlaneSpec:
 
 
 @dataclasses.dataclass(frozen=True)
+class PrescribedSpec:
+    """The ``[prescribed]`` table: held vertices (``"lowest"``: within ``within`` [m] of the lowest
+    point along gravity; or explicit indices) turned about the axis through ``axis_point`` [m]
+    along ``axis_direction`` by ``angles`` [deg] at ``times`` [s]."""
+
+    select: str | tuple[int, ...]
+    within: float
+    axis_point: tuple[float, float, float]
+    axis_direction: tuple[float, float, float]
+    times: tuple[float, ...]
+    angles: tuple[float, ...]
+
+
+@dataclasses.dataclass(frozen=True)
 class Scenario:
     """A validated scenario config (SI units; see the module docstring)."""
 
@@ -56,11 +72,12 @@ class Scenario:
     description: str
     output_dir: Path
     session: Path | None
+    mesh: Path | None
     estimate: str
     gauge_pressure: float | None
     youngs_modulus: float | None
     gas: str
-    mesh_faces: int
+    mesh_faces: int | None
     mass: float | None
     wall_density: float | None
     radius: float | None
@@ -69,6 +86,7 @@ class Scenario:
     scheme: str
     dt: float
     duration: float
+    step_tolerance: float
     cor: float | None
     bracket: tuple[float, float]
     calibration_height: float
@@ -82,6 +100,7 @@ class Scenario:
     mesh_frames: str
     max_frames: int
     preview_gif: bool
+    prescribed: PrescribedSpec | None = None
 
 
 class _Reader:
@@ -132,14 +151,14 @@ def _table(reader: _Reader, data: dict, name: str) -> dict:
     return table
 
 
-def _session_path(reader: _Reader, value) -> Path | None:
+def _session_path(reader: _Reader, value, field: str = "object.session", example: str = "sessions/pezzi.toml") -> Path | None:
     if value is None:
         return None
     if not isinstance(value, str):
-        raise reader.fail("object.session", value, "expected a path", "write 'bundled:sessions/pezzi.toml' or a path relative to the config")
+        raise reader.fail(field, value, "expected a path", f"write 'bundled:{example}' or a path relative to the config")
     path = bundled_data_dir() / value.removeprefix("bundled:") if value.startswith("bundled:") else reader.path.parent / value
     if not path.is_file():
-        raise reader.fail("object.session", value, f"no such file ({path})", "fix the path: relative to the config, or 'bundled:sessions/...'")
+        raise reader.fail(field, value, f"no such file ({path})", f"fix the path: relative to the config, or 'bundled:{example}'")
     return path
 
 
@@ -161,6 +180,52 @@ def _plane(reader: _Reader, i: int, table) -> PlaneSpec:
         friction=reader.number(table, "friction", prefix, default=0.0, nonnegative=True),
         slip_tolerance=reader.number(table, "slip_tolerance_m", prefix, default=1e-4, positive=True),
     )  # fmt: skip
+
+
+def _numbers(r: _Reader, table: dict, key: str, prefix: str, example: str) -> tuple[float, ...]:
+    value = table.get(key)
+    ok = isinstance(value, list) and len(value) >= 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not ok:
+        raise r.fail(prefix + key, value, "expected a list of at least 2 finite numbers", f"write e.g. {example}")
+    return tuple(float(v) for v in value)
+
+
+def _prescribed(r: _Reader, table: dict) -> PrescribedSpec:
+    """The validated ``[prescribed]`` table (held vertices and their rotation schedule)."""
+    p = "prescribed."
+    select = table.get("select", "lowest")
+    if isinstance(select, list):
+        if not select or not all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in select) or len(set(select)) != len(select):
+            raise r.fail(p + "select", select, "expected distinct vertex indices ≥ 0", 'write e.g. [0, 1, 2], or select = "lowest"')
+        select = tuple(select)
+    elif select != "lowest":
+        raise r.fail(p + "select", select, "unknown selection", 'use "lowest" (with within_m) or a list of vertex indices')
+    direction = r.vector(table, "axis_direction", p, 3)
+    if np.linalg.norm(direction) == 0.0:
+        raise r.fail(p + "axis_direction", list(direction), "must be nonzero", "give the rotation axis, e.g. [0.0, 1.0, 0.0]")
+    times = _numbers(r, table, "times_s", p, "[0.0, 0.5, 0.8, 1.5]")
+    if times[0] < 0.0 or any(b <= a for a, b in zip(times, times[1:])):
+        raise r.fail(p + "times_s", list(times), "times must start at ≥ 0 s and increase strictly", "write e.g. [0.0, 0.5, 0.8, 1.5]")
+    angles = _numbers(r, table, "angles_deg", p, "[0.0, -30.0, 30.0, 30.0]")
+    if len(angles) != len(times):
+        raise r.fail(p + "angles_deg", list(angles), f"{len(angles)} angles for {len(times)} times", "give one angle (deg) per entry of prescribed.times_s")
+    return PrescribedSpec(select=select, within=r.number(table, "within_m", p, default=0.01, positive=True),
+                          axis_point=r.vector(table, "axis_point_m", p, 3), axis_direction=direction, times=times, angles=angles)  # fmt: skip
+
+
+def _drop_heights(r: _Reader, init: dict, held: bool) -> tuple[float, ...]:
+    """The drop heights [m]; none (one run from the posed start) for a held object without them."""
+    heights = init.get("drop_heights_m")
+    if held:
+        if heights is not None:
+            raise r.fail("initial.drop_heights_m", heights, "a held object ([prescribed]) is not dropped", "remove initial.drop_heights_m: the swing runs once")
+        return ()
+    if not isinstance(heights, list) or not heights or not all(isinstance(h, (int, float)) and not isinstance(h, bool) for h in heights):
+        raise r.fail("initial.drop_heights_m", heights, "expected a non-empty list of heights in m", "write e.g. [0.5, 1.0]")
+    for h in heights:
+        if not (math.isfinite(h) and h >= 0.0):
+            raise r.fail("initial.drop_heights_m", heights, f"drop height {h} m is negative", "give the lowest point's height above the ground, ≥ 0 m")
+    return tuple(float(h) for h in heights)
 
 
 def _dissipation(r: _Reader, diss: dict):
@@ -195,6 +260,7 @@ def load_scenario(path: str | Path) -> Scenario:
     if unknown:
         raise r.fail(unknown[0], data[unknown[0]], "unknown key", f"allowed keys: {', '.join(sorted(_TOP_KEYS))}")
     obj, integ, diss, init, outs = (_table(r, data, t) for t in ("object", "integrator", "dissipation", "initial", "outputs"))
+    prescribed = _prescribed(r, _table(r, data, "prescribed")) if "prescribed" in data else None
     direct = [k for k in ("gauge_pressure_Pa", "youngs_modulus_Pa") if k in obj]
     if len(direct) == 1:
         raise r.fail(f"object.{direct[0]}", obj[direct[0]], "P_g and E are given together or not at all", "give both gauge_pressure_Pa and youngs_modulus_Pa, or neither (then they come from the session's estimate)")
@@ -206,35 +272,36 @@ def load_scenario(path: str | Path) -> Scenario:
     if dt > duration:
         raise r.fail("integrator.dt_s", dt, f"longer than integrator.duration_s = {duration}", "give dt_s ≤ duration_s")
     cor, damping, bracket = _dissipation(r, diss)
-    heights = init.get("drop_heights_m")
-    if not isinstance(heights, list) or not heights or not all(isinstance(h, (int, float)) and not isinstance(h, bool) for h in heights):
-        raise r.fail("initial.drop_heights_m", heights, "expected a non-empty list of heights in m", "write e.g. [0.5, 1.0]")
-    for h in heights:
-        if not (math.isfinite(h) and h >= 0.0):
-            raise r.fail("initial.drop_heights_m", heights, f"drop height {h} m is negative", "give the lowest point's height above the ground, ≥ 0 m")
+    if prescribed is not None and cor is not None:
+        raise r.fail("dissipation.cor", cor, "a held object is not calibrated on a free drop", "give dissipation.contact_damping_N_s_per_m instead")
+    velocity = r.vector(init, "velocity_m_per_s", "initial.", 3, [0.0, 0.0, 0.0])
+    if prescribed is not None and any(velocity):
+        raise r.fail("initial.velocity_m_per_s", list(velocity), "a held object starts at rest (its held vertices follow the schedule)", "write [0.0, 0.0, 0.0]")
     planes = data.get("planes", [])
     if not isinstance(planes, list) or not planes:
         raise r.fail("planes", planes, "no plane to collide with", "add a [[planes]] table (the ground)")
     return Scenario(
         source=path, name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         output_dir=path.parent / str(data.get("output_dir", "runs")), session=session,
+        mesh=_session_path(r, obj.get("mesh"), "object.mesh", "meshes/hammer-coarse.stl"),
         estimate=r.choice(obj, "estimate", "object.", ("closed-form", "fit", "bayes"), "fit"),
         gauge_pressure=r.number(obj, "gauge_pressure_Pa", "object.", positive=True) if direct else None,
         youngs_modulus=r.number(obj, "youngs_modulus_Pa", "object.", positive=True) if direct else None,
         gas=r.choice(obj, "gas", "object.", ("prescribed", "isothermal", "adiabatic"), "adiabatic"),
-        mesh_faces=int(r.number(obj, "mesh_faces", "object.", default=2000, positive=True)),
+        mesh_faces=int(r.number(obj, "mesh_faces", "object.", positive=True)) if "mesh_faces" in obj else None,
         mass=r.number(obj, "mass_kg", "object.", positive=True) if "mass_kg" in obj else None,
         wall_density=r.number(obj, "wall_density_kg_per_m3", "object.", positive=True) if "wall_density_kg_per_m3" in obj else None,
         radius=r.number(obj, "radius_m", "object.", positive=True) if "radius_m" in obj else None,
         thickness=r.number(obj, "thickness_m", "object.", positive=True) if "thickness_m" in obj else None,
         poisson_ratio=r.number(obj, "poisson_ratio", "object.", positive=True) if "poisson_ratio" in obj else None,
         scheme=r.choice(integ, "scheme", "integrator.", ("newmark", "backward-euler"), "newmark"), dt=dt, duration=duration,
+        step_tolerance=r.number(integ, "newton_step_tolerance_m", "integrator.", default=1e-10, positive=True),
         cor=cor, bracket=bracket, contact_damping=damping,
         calibration_height=r.number(diss, "calibration_height_m", "dissipation.", default=1.0, positive=True),
         rayleigh=(r.number(diss, "rayleigh_mass_per_s", "dissipation.", default=0.0, nonnegative=True),
                   r.number(diss, "rayleigh_stiffness_s", "dissipation.", default=0.0, nonnegative=True)),
-        planes=tuple(_plane(r, i, p) for i, p in enumerate(planes)), drop_heights=tuple(float(h) for h in heights),
-        centre=r.vector(init, "centre_m", "initial.", 2, [0.0, 0.0]), velocity=r.vector(init, "velocity_m_per_s", "initial.", 3, [0.0, 0.0, 0.0]),
+        planes=tuple(_plane(r, i, p) for i, p in enumerate(planes)), drop_heights=_drop_heights(r, init, prescribed is not None),
+        centre=r.vector(init, "centre_m", "initial.", 2, [0.0, 0.0]), velocity=velocity, prescribed=prescribed,
         figures=bool(outs.get("figures", True)), mesh_frames=r.choice(outs, "mesh_frames", "outputs.", ("ply", "glb"), "ply"),
         max_frames=int(r.number(outs, "max_frames", "outputs.", default=60, nonnegative=True)), preview_gif=bool(outs.get("preview_gif", True)),
     )  # fmt: skip
@@ -271,6 +338,7 @@ def estimated_parameters(session, method: str) -> tuple[float, float, dict]:
 def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -> ObjectModel:
     """The scenario's shell and parameters, from its session (or ``session_path``, which overrides it)."""
     from . import shell3d as s3
+    from .dynamics import remeshed
     from .session import load_session
 
     path = Path(session_path) if session_path is not None else scenario.session
@@ -293,8 +361,13 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     thickness = pick(scenario.thickness, "thickness", "thickness_m", "m")
     nu = pick(scenario.poisson_ratio, "poisson_ratio", "poisson_ratio", "-")
     radius = pick(scenario.radius, "radius", "radius_m", "m")
-    mesh_path = getattr(session, "mesh_path", None) if session is not None else None
-    shell = s3.load(mesh_path, thickness) if mesh_path else s3.ball(radius, thickness, n_triangles=scenario.mesh_faces)
+    mesh_path = scenario.mesh or (getattr(session, "mesh_path", None) if session is not None else None)
+    if mesh_path:
+        shell = s3.load(mesh_path, thickness)
+        if scenario.mesh_faces is not None and scenario.mesh_faces != shell.mesh.n_faces:
+            shell = remeshed(shell, scenario.mesh_faces)
+    else:
+        shell = s3.ball(radius, thickness, n_triangles=scenario.mesh_faces or 2000)
     mass = scenario.mass if scenario.mass is not None else (session.mass if session is not None else None)
     if mass is None and scenario.wall_density is None:
         where = f"the session {path} has no `mass`" if session is not None else "no session gives it"
@@ -334,7 +407,7 @@ def _simulate(scenario: Scenario, system, state, duration: float, progress: bool
     from . import dynamics as d
 
     try:
-        return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(),
+        return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
                           rayleigh=_rayleigh(scenario), progress=progress)  # fmt: skip
     except NoConvergenceError as err:
         raise NoConvergenceError(f"{scenario.source}: field 'integrator.dt_s' = {scenario.dt}: {err} Fix: reduce integrator.dt_s", err.history) from err
@@ -397,11 +470,72 @@ def _check_time_step(scenario: Scenario, system) -> None:
         )
 
 
+def held_vertices(scenario: Scenario, system) -> np.ndarray:
+    """Indices of the vertices ``[prescribed]`` holds: its list, or those within ``within_m`` [m] of the lowest point along gravity."""
+    spec = scenario.prescribed
+    x = np.asarray(system.inflated).reshape(-1, 3)
+    if spec.select == "lowest":
+        down = np.asarray(system.gravity) / np.linalg.norm(np.asarray(system.gravity))
+        depth = x @ down
+        held = np.flatnonzero(depth >= depth.max() - spec.within)
+        if held.size < 3:
+            raise InvalidInputError(
+                f"{scenario.source}: field 'prescribed.within_m' = {spec.within}: selects {held.size} vertex(es) of the "
+                f"{len(x)}-vertex mesh; fewer than 3 leave the body free to pivot about them. Fix: raise prescribed.within_m"
+            )
+        return held
+    held = np.asarray(spec.select, dtype=int)
+    if held.max() >= len(x):
+        raise InvalidInputError(
+            f"{scenario.source}: field 'prescribed.select' = {list(spec.select)}: vertex {int(held.max())} is not in the "
+            f"{len(x)}-vertex mesh. Fix: give indices below {len(x)}, or select = \"lowest\""
+        )
+    return held
+
+
+def hold(scenario: Scenario, system):
+    """``system`` with its ``[prescribed]`` vertices turned on the schedule (angles in rad), from the inflated shape."""
+    spec, held = scenario.prescribed, held_vertices(scenario, system)
+    return system.with_prescribed(held, spec.axis_point, spec.axis_direction, spec.times, np.radians(spec.angles))
+
+
+def _swing(scenario: Scenario, system, out: Path, progress: bool) -> dict:
+    """Run a held object once from its posed start into ``out``/swing; what the run shows."""
+    from . import dynamics as d
+
+    trajectory = _simulate(scenario, system, d.initial_state(system, system.posed(0.0)), scenario.duration, progress)
+    run_dir = out / "swing"
+    d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
+                    figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
+    positions, times = trajectory["position_m"], trajectory["time_s"]
+    held = np.asarray(system.prescribed_vertices)
+    rigid = np.stack([np.asarray(system.posed(t)) for t in times])
+    schedule = np.stack([np.asarray(system.prescribed_positions(t)) for t in times])
+    deviation = np.linalg.norm((positions - rigid).reshape(len(times), -1, 3), axis=2).max(axis=1)
+    force = np.linalg.norm(trajectory["contact_force_N"], axis=2)
+    return {
+        "directory": str(run_dir), "held_vertices": held.tolist(),
+        "held_error_m": float(np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))),
+        "max_deviation_from_rigid_m": float(deviation.max()), "time_of_max_deviation_s": float(times[np.argmax(deviation)]),
+        "peak_gas_pressure_Pa": float(np.max(trajectory["gas_pressure_Pa"])), "time_of_peak_pressure_s": float(times[np.argmax(trajectory["gas_pressure_Pa"])]),
+        "planes": {name: {"min_gap_m": float(np.min(trajectory["min_gap_m"][:, i])), "peak_force_N": float(np.max(force[:, i])),
+                          "first_contact_s": _first_contact(trajectory, i)} for i, name in enumerate(trajectory.plane_names)},
+        "impacts": [m.to_dict() for m in d.measured_cor(trajectory)],
+    }  # fmt: skip
+
+
+def _first_contact(trajectory, plane: int) -> float | None:
+    """Time [s] at which a contact point first comes within the plane's contact distance (None if never)."""
+    near = np.flatnonzero(trajectory["min_gap_m"][:, plane] < trajectory.contact_distances_m[plane])
+    return float(trajectory["time_s"][near[0]]) if near.size else None
+
+
 def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, session: str | Path | None = None, progress: bool = True) -> dict:
     """Run every drop of ``scenario`` into ``out_dir`` (default: its output_dir/name); the summary it writes.
 
     Writes ``scenario.json`` (parameters, calibration, every run's impacts) and per drop height a
-    directory ``h<H>m/`` with ``results.json``, figures, mesh frames and ``preview.gif``.
+    directory ``h<H>m/`` with ``results.json``, figures, mesh frames and ``preview.gif``; a held
+    object (``[prescribed]``) runs once into ``swing/``.
     """
     from . import dynamics as d
 
@@ -409,6 +543,8 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     out.mkdir(parents=True, exist_ok=True)
     obj = resolve_object(scenario, session)
     system = build_system(scenario, obj)
+    if scenario.prescribed is not None:
+        system = hold(scenario, system)
     _check_time_step(scenario, system)
     calibration = None
     damping = scenario.contact_damping or 0.0
@@ -424,6 +560,8 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
         d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
                         figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
         runs.append({"drop_height_m": h, "directory": str(run_dir), "impacts": [m.to_dict() for m in d.measured_cor(trajectory)]})
+    if scenario.prescribed is not None:
+        runs.append(_swing(scenario, system, out, progress))
     summary = {
         "scenario": str(scenario.source), "name": scenario.name, "object": obj.source,
         "parameters": {"gauge_pressure_Pa": obj.gauge_pressure, "youngs_modulus_Pa": obj.young_modulus, "poisson_ratio": obj.poisson_ratio,

@@ -23,6 +23,6 @@ from ._potential import IncrementalPotential, incremental_potential
 from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness
 from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
 from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation
-from ._shell import ShellDynamicSystem, shell_system
+from ._shell import ShellDynamicSystem, remeshed, shell_system
 from ._sparse import SparseNewton
 from ._systems import PointMassOnGround, SpringBalloon, icosphere

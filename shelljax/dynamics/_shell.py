@@ -9,6 +9,10 @@ are the dynamics core's planes, with every vertex a contact point.
 ``shell_system`` builds one from a :class:`shelljax.shell3d.Shell`: the rest shape comes from the
 engine's rest-shape solve, so the inflated shell ``inflated`` is in equilibrium at t = 0.
 
+Prescribed motion: ``prescribed_vertices`` (static indices) follow ``prescribed``, a
+:class:`PrescribedRotation` of their positions (e.g. a hand holding the hammer's handle and
+swinging it); the integrator eliminates their degrees of freedom. ``with_prescribed`` sets both.
+
 Contact damping is mesh independent: it is one dashpot c [N·s/m] on the centre of mass's velocity
 along each plane's normal, the paper's 1-DOF dashpot, (c / 2Δt) W ((x_com − x_comⁿ)·n)², weighted
 by W = min(1, Σⱼ wⱼ Aⱼ / Ā) from the vertices' lagged law weights wⱼ, rest areas Aⱼ and mean area
@@ -17,6 +21,8 @@ themselves would do nothing: held by the barrier, they hardly move along the nor
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import equinox as eqx
 import jax
@@ -31,6 +37,7 @@ from ..shell3d import (
     ModelConfig,
     Shell,
     ShellGeometry,
+    ShellMesh,
     ShellModel,
     ShellParams,
     elastic_energy,
@@ -40,7 +47,7 @@ from ..shell3d import (
     hessian_values,
 )
 from ._contact import Plane, check_positive
-from ._system import AbstractDynamicSystem, gravity_vector
+from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
 
 #: Host sparsity patterns of the shells' Hessians, by ``ShellDynamicSystem.pattern_key``.
 PATTERNS: dict[int, object] = {}
@@ -52,7 +59,8 @@ class ShellDynamicSystem(AbstractDynamicSystem):
     ``params``: the engine's :class:`ShellParams` (E [Pa], ν, h [m], P_g [Pa], the sealed gas's
     reference volume [m³]); ``geometry``: rest data; ``config``: the engine's static setup (gas
     model, γ); ``node_masses`` (V,) [kg]; ``faces`` (F, 3); ``inflated`` (3V,) [m]: the pressurized
-    equilibrium at rest; ``maps``, ``nnz``, ``pattern_key``: the sparse Hessian's pattern.
+    equilibrium at rest; ``maps``, ``nnz``, ``pattern_key``: the sparse Hessian's pattern;
+    ``prescribed_vertices`` (static indices) and ``prescribed``: held vertices and their motion.
     """
 
     params: ShellParams
@@ -66,6 +74,8 @@ class ShellDynamicSystem(AbstractDynamicSystem):
     maps: tuple
     nnz: int = eqx.field(static=True)
     pattern_key: int = eqx.field(static=True)
+    prescribed_vertices: tuple[int, ...] = eqx.field(static=True, default=())
+    prescribed: PrescribedRotation | None = None
 
     def lumped_mass(self):
         return jnp.repeat(self.node_masses, 3)
@@ -99,6 +109,43 @@ class ShellDynamicSystem(AbstractDynamicSystem):
 
     def surface_faces(self):
         return np.asarray(self.faces)
+
+    def prescribed_dofs(self):
+        return tuple(3 * i + k for i in self.prescribed_vertices for k in range(3))
+
+    def prescribed_positions(self, t):
+        if self.prescribed is None:
+            return jnp.zeros((0,))
+        return self.prescribed.positions(t).reshape(-1)
+
+    def with_prescribed(self, vertices, axis_point, axis_direction, times, angles, reference=None) -> "ShellDynamicSystem":
+        """The same system with ``vertices`` (indices) held and turned rigidly about the axis through
+        ``axis_point`` (3,) [m] along ``axis_direction`` (3,) by ``angles`` (K,) [rad] at ``times``
+        (K,) [s] (:class:`PrescribedRotation`), from their positions in ``reference`` (3V,) [m]
+        (default: ``inflated``). The held vertices' start must be the schedule's position at t = 0:
+        use :meth:`posed` for the whole body's start.
+        """
+        idx = np.asarray(vertices, dtype=int).reshape(-1)
+        n = self.node_masses.shape[0]
+        if idx.size == 0 or idx.min() < 0 or idx.max() >= n or np.unique(idx).size != idx.size:
+            raise InvalidInputError(f"prescribed vertices must be distinct indices in [0, {n}); got {idx.size} of them. Select at least one vertex of the mesh.")
+        t, a = np.asarray(times, dtype=float).reshape(-1), np.asarray(angles, dtype=float).reshape(-1)
+        if t.size < 2 or t.size != a.size or np.any(np.diff(t) <= 0.0):
+            raise InvalidInputError(f"the rotation schedule needs ≥ 2 strictly increasing times [s] and as many angles [rad]; got {t.size} times and {a.size} angles.")
+        direction = np.asarray(axis_direction, dtype=float)
+        if direction.shape != (3,) or not np.linalg.norm(direction) > 0.0:
+            raise InvalidInputError(f"axis_direction must be a nonzero 3-vector; got {direction.tolist()}.")
+        x = np.asarray(self.inflated if reference is None else reference, dtype=float).reshape(-1, 3)
+        rotation = PrescribedRotation(x[idx], np.asarray(axis_point, dtype=float), direction, t, a)
+        return dataclasses.replace(self, prescribed_vertices=tuple(int(i) for i in idx), prescribed=rotation)
+
+    def posed(self, t: float = 0.0, reference=None) -> Float[Array, " n"]:
+        """Every vertex of ``reference`` (default ``inflated``) [m] turned rigidly as the held ones are at time t [s]."""
+        x = jnp.asarray(self.inflated if reference is None else reference).reshape(-1, 3)
+        if self.prescribed is None:
+            return x.reshape(-1)
+        whole = eqx.tree_at(lambda r: r.rest_positions, self.prescribed, x)
+        return whole.positions(jnp.asarray(t)).reshape(-1)
 
     def hessian_parts(self, x: Float[Array, " n"]):
         """The internal energy's Hessian at x [m]: CSR values [N/m] on the pattern (faces and the
@@ -150,11 +197,15 @@ def shell_system(
     """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with E [Pa],
     ν [-], gauge pressure P_g [Pa], ``gas`` ("prescribed", "isothermal", "adiabatic"), the mass
     from ``mass`` [kg] (spread by rest area) or ``wall_density`` [kg/m³] × h × area, ``planes``
-    and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium.
+    and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium, in the
+    mesh's frame (its lowest vertex where the mesh has it).
     """
     sim = Indentation(shell, young_modulus, poisson_ratio, gauge_pressure, gas="prescribed", ground=False)
-    rest = np.asarray(sim.rest)
-    inflated = np.asarray(sim.q_reference[:-3])
+    # The engine poses the mesh on its ground; its bottom vertex stays where it put it: move back to the mesh's frame.
+    bottom = int(np.argmin(shell.mesh.vertices[:, 2]))
+    shift = shell.mesh.vertices[bottom] - np.asarray(sim.q_reference[3 * bottom : 3 * bottom + 3])
+    rest = np.asarray(sim.rest) + shift
+    inflated = (np.asarray(sim.q_reference[:-3]).reshape(-1, 3) + shift).reshape(-1)
     n = shell.mesh.n_vertices
     config = ModelConfig(n, gas=gas, heat_capacity_ratio=heat_capacity_ratio)
     fixed = np.zeros(3 * n + 3, dtype=bool)
@@ -171,3 +222,32 @@ def shell_system(
         faces=jnp.asarray(shell.mesh.faces), inflated=jnp.asarray(inflated), planes=tuple(planes),
         gravity=gravity_vector(gravity), maps=model.pattern.maps, nnz=model.pattern.nnz, pattern_key=key,
     )  # fmt: skip
+
+
+def remeshed(shell: Shell, n_faces: int) -> Shell:
+    """``shell`` with its edges split until it has about ``n_faces`` triangles (within 10 %), its
+    thickness [m] kept: long, thin triangles (a capsule's sides) become rows of short ones that
+    can bend. Only refines (manifold3d's ``refine_to_length``): the vertices stay on the mesh's
+    surface and no triangle gets a smaller angle. Coarsening by edge collapse folded faces onto
+    their neighbours, which the rest-shape solve cannot start from; give a coarser mesh instead.
+    """
+    import manifold3d
+
+    mesh = shell.mesh
+    if n_faces < mesh.n_faces:
+        raise InvalidInputError(
+            f"mesh_faces = {n_faces}: the mesh {mesh.name} has {mesh.n_faces} faces and can only be refined; "
+            f"give mesh_faces ≥ {mesh.n_faces}, or a coarser mesh (e.g. object.mesh = \"bundled:meshes/hammer-coarse.stl\")."
+        )
+    solid = manifold3d.Manifold(manifold3d.Mesh(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32)))
+    low, high = 1e-6 * float(np.ptp(mesh.vertices, axis=0).max()), float(np.ptp(mesh.vertices, axis=0).max())
+    for _ in range(40):  # bisection on the edge length [m]: the face count falls as it grows
+        length = float(np.sqrt(low * high))
+        fine = solid.refine_to_length(length)
+        if abs(fine.num_tri() - n_faces) < 0.1 * n_faces or high / low < 1.001:
+            break
+        low, high = (length, high) if fine.num_tri() > n_faces else (low, length)
+    out = fine.to_mesh()
+    vertices = np.asarray(out.vert_properties[:, :3], dtype=float)
+    return Shell(mesh=ShellMesh.from_arrays(vertices, np.asarray(out.tri_verts, dtype=int), name=f"{mesh.name} refined to {fine.num_tri()} faces"),
+                 thickness=shell.thickness)  # fmt: skip
