@@ -422,6 +422,10 @@ def initial_state(scenario: Scenario, system, height: float):
     return d.drop_state(system, x.reshape(-1), height, velocity=list(scenario.velocity))
 
 
+#: Calibration drops run this many textbook contact times π√(m / 2πR P_g) (twice that if the shell has not left).
+CALIBRATION_WINDOW = 3.0
+
+
 def calibration_cor(scenario: Scenario, system, damping: float, *, progress: bool = False) -> float:
     """Height COR [-] of a ground drop from ``calibration_height`` with contact damping c [N·s/m].
 
@@ -440,10 +444,15 @@ def calibration_cor(scenario: Scenario, system, damping: float, *, progress: boo
     state = d.drop_state(one, x, gap0, velocity=list(-speed * np.asarray(ground.normal)))
     mass = float(np.sum(np.asarray(one.node_masses)))
     radius = (3.0 * float(one.volume(one.inflated)) / (4.0 * math.pi)) ** (1.0 / 3.0)
-    window = 1.5 * d.pressurized_ball_contact_time(mass, radius, float(one.params.gauge_pressure)) + 4.0 * scenario.dt
-    impacts = d.measured_cor(_simulate(scenario, one, state, window, progress))
-    if not impacts:
-        raise NoConvergenceError(f"{scenario.source}: the calibration drop did not leave the plane within {window:.3g} s; the contact lasts longer than the textbook estimate.")
+    textbook = d.pressurized_ball_contact_time(mass, radius, float(one.params.gauge_pressure))
+    # The shell's contact outlasts the textbook spring's (docs/dynamics.md): widen the window once before giving up.
+    for window in (CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt, 2.0 * CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt):
+        impacts = d.measured_cor(_simulate(scenario, one, state, window, progress))
+        if impacts:
+            break
+    else:
+        raise NoConvergenceError(f"{scenario.source}: the calibration drop did not leave the plane within {window:.3g} s "
+                                 f"({2 * CALIBRATION_WINDOW:g} textbook contact times); check the planes, P_g and the mass.")
     first = impacts[0]
     return math.sqrt(max(first.bounce_height_m, 0.0) / (first.speed_in_m_per_s**2 / (2.0 * g)))
 
