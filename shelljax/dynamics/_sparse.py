@@ -158,9 +158,16 @@ class SparseNewton(AbstractMinimiser):
     max_halvings: int = eqx.field(static=True, default=40)
 
     def linear_solve(self, potential, y, rhs):
-        return self._solve(potential, y, rhs, False)
+        return self._solve(potential, y, rhs, False, self._rayleigh_values(potential))
 
-    def _solve(self, potential, y, rhs, shift: bool):
+    @staticmethod
+    def _rayleigh_values(potential):
+        """CSR values [N/m] of Rayleigh β's β K(xₙ)/Δt (None without Rayleigh): fixed over a step."""
+        if potential.rayleigh is None:
+            return None
+        return potential.rayleigh.stiffness_coefficient / potential.dt * potential.system.hessian_parts(potential.x_prev)[0]
+
+    def _solve(self, potential, y, rhs, shift: bool, rayleigh_values):
         system = potential.system
         if not isinstance(system, ShellDynamicSystem):
             raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
@@ -169,7 +176,7 @@ class SparseNewton(AbstractMinimiser):
         diag = potential.inertia_weight
         if potential.rayleigh is not None:
             diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
-            data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
+            data = data + rayleigh_values
         blocks = potential.point_hessian_blocks(x)
         share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
         columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
@@ -178,11 +185,13 @@ class SparseNewton(AbstractMinimiser):
         solve = functools.partial(_host_solve, system.pattern_key, shift)
         return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
 
-    def _direction(self, potential, y, g):
-        p = self._solve(potential, y, -g, True)
+    def _direction(self, potential, y, g, rayleigh_values):
+        p = self._solve(potential, y, -g, True, rayleigh_values)
         # Only a failed shift gives NaN: fall back to descent scaled by the inertia.
         ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
         return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
 
     def minimise(self, potential, y0):
-        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g))
+        # K(xₙ) of Rayleigh β is the same in every iteration of the step: assembled once, before the loop.
+        rayleigh_values = self._rayleigh_values(potential)
+        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g, rayleigh_values))
