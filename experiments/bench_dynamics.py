@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import time
 from pathlib import Path
 
@@ -140,7 +142,9 @@ def main() -> None:
     print(table(rows))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"machine": "see docs/dynamics.md, Benchmark", "runs": rows}, indent=1) + "\n")
+        machine = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average": os.getloadavg(),
+                   "date": time.strftime("%Y-%m-%d", time.gmtime())}  # fmt: skip
+        args.json.write_text(json.dumps(machine | {"runs": rows}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
