@@ -1,19 +1,32 @@
-"""Benchmark of the 3D shell in motion: a ball of N faces dropped onto the ground, Newmark at Δt.
+"""Benchmark of the 3D shell in motion: a ball of N faces dropped onto the ground, steps of Δt.
 
-The issue's case is 1 s of a 5k-face ball at Δt = 1 ms (``--faces 5000 --duration 1.0``); the
-defaults run a shorter piece of it and report the time per step, split into compilation (the
-first chunk) and the steps after it.
+The Pezzi ball (R = 0.13 m, h = 0.9 mm, 1300 Pa, 0.8 kg; by default isothermal gas and backward
+Euler, as the configs) starts ``--height`` above a barrier ground, so that it touches down within
+the measured steps. Per mesh it reports the
+setup (rest-shape solve, pattern), the compilation (first chunk less its steps), the seconds per
+step (median over the timed chunks), Newton's iterations per step, where a step's time goes
+(isolated, jitted pieces at a contact state times their count per step: Hessian assembly, host
+factorisation and solves, gradients and energies; "other" is the rest of the measured step) and
+the time that 1 s of motion would take. The issue's case is 1 s of a 5k-face ball at 1 ms
+(``--faces 5000 --chunk 100 --chunks 10``: 1.1 s of motion, the first 0.1 s compiling).
 
-    python3 experiments/bench_dynamics.py [--faces 2000] [--dt 1e-3] [--steps 40]
+    python3 experiments/bench_dynamics.py [--faces 2000 5000] [--dt 1e-3] [--chunk 25] [--chunks 4]
+        [--json docs/bench/dynamics-cpu-2core.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import time
+from pathlib import Path
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 import shelljax.shell3d as s3
 from shelljax import dynamics as d
@@ -21,31 +34,117 @@ from shelljax import dynamics as d
 jax.config.update("jax_enable_x64", True)
 
 
+def _median_time(fn, *args, repeats: int = 7) -> float:
+    """Median wall time [s] of ``fn(*args)`` (results blocked on), after one warm-up call."""
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def _system(faces: int, gas: str):
+    shell = s3.ball(0.13, 0.9e-3, n_triangles=faces)
+    ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(1e-3, 1e3), name="ground")
+    return shell, d.shell_system(shell, 2.34e6, 0.4, 1300.0, gas=gas, mass=0.8, planes=[ground])
+
+
+def breakdown(system, state, dt: float, integrator) -> dict:
+    """Isolated timings [s] of one step's pieces at ``state``: the Hessian's values (shell and point
+    blocks), one linear solve with it (values, host transfer, factorisation and solves), one
+    gradient and one energy of the step's incremental potential."""
+    potential = d.incremental_potential(system, integrator, state, jnp.asarray(dt))
+    y = potential.free(state.position)
+    rhs = -potential.gradient(y)
+
+    def matrix(p, y):
+        x = p.full(y)
+        return p.system.hessian_parts(x), p.point_hessian_blocks(x)
+
+    hessian = _median_time(eqx.filter_jit(matrix), potential, y)
+    solve = _median_time(eqx.filter_jit(lambda p, y, b: d.SparseNewton().linear_solve(p, y, b)), potential, y, rhs)
+    return {
+        "hessian_s": hessian,
+        "host_solve_s": max(solve - hessian, 0.0),
+        "gradient_s": _median_time(eqx.filter_jit(lambda p, y: p.gradient(y)), potential, y),
+        "energy_s": _median_time(eqx.filter_jit(lambda p, y: p.value(y)), potential, y),
+    }
+
+
+def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrator, gas: str) -> dict:
+    """Drop a ``faces``-face ball from ``height`` [m]: a compiling chunk, then ``chunks`` timed ones."""
+    rollout = eqx.filter_jit(d.rollout)
+    start = time.perf_counter()
+    shell, system = _system(faces, gas)
+    setup = time.perf_counter() - start
+    state = d.drop_state(system, system.inflated, height)
+    timings, iterations, gaps = [], [], []
+    for _ in range(chunks + 1):
+        start = time.perf_counter()
+        # A compiled roll-out, as simulate's chunks, returning the whole state to start the next one.
+        state, record = rollout(system, state, jnp.asarray(dt), chunk, integrator, d.SparseNewton())
+        jax.block_until_ready(state)
+        timings.append(time.perf_counter() - start)
+        if not np.all(np.asarray(record.converged)):
+            k = int(np.flatnonzero(~np.asarray(record.converged))[0])
+            raise RuntimeError(f"step {len(timings) * chunk - chunk + k + 1} did not converge ({faces} faces, {gas} gas)")
+        iterations.append(np.asarray(record.newton_iterations))
+        gaps.append(np.asarray(record.min_gap_m)[:, 0])
+    per_step = float(np.median(timings[1:])) / chunk
+    parts = breakdown(system, state, dt, integrator)
+    newton = float(np.mean(np.concatenate(iterations[1:])))
+    hessian = newton * parts["hessian_s"]
+    host = newton * parts["host_solve_s"]
+    # Each iteration: a gradient and at least one energy in the line search; one more of each to start.
+    energies = (newton + 1.0) * (parts["gradient_s"] + parts["energy_s"])
+    return {
+        "faces": int(shell.mesh.n_faces), "dofs": 3 * shell.mesh.n_vertices, "dt_s": dt,
+        "integrator": type(integrator).__name__, "gas": gas, "setup_s": setup,
+        "compile_s": timings[0] - per_step * chunk, "steps_per_chunk": chunk, "timed_chunks": chunks,
+        "seconds_per_step": per_step, "newton_iterations_per_step": newton,
+        "min_gap_m": float(np.min(np.concatenate(gaps))), "final_gap_m": float(gaps[-1][-1]),
+        "breakdown_s_per_step": {"hessian_assembly": hessian, "host_factorisation_solve": host,
+                                 "gradients_energies": energies, "other": per_step - hessian - host - energies},
+        "isolated_s": parts, "projected_1s_of_motion_s": per_step / dt,
+    }  # fmt: skip
+
+
+def table(rows: list[dict]) -> str:
+    """The results as a fixed-width text table."""
+    head = f"{'faces':>6} {'dofs':>6} {'setup s':>8} {'compile s':>9} {'ms/step':>8} {'Newton':>6} " \
+           f"{'Hess ms':>8} {'host ms':>8} {'grad ms':>8} {'other ms':>8} {'1 s [s]':>8}"  # fmt: skip
+    lines = [head]
+    for r in rows:
+        b = {k: 1e3 * v for k, v in r["breakdown_s_per_step"].items()}
+        lines.append(
+            f"{r['faces']:>6} {r['dofs']:>6} {r['setup_s']:>8.1f} {r['compile_s']:>9.1f} {1e3 * r['seconds_per_step']:>8.1f} "
+            f"{r['newton_iterations_per_step']:>6.2f} {b['hessian_assembly']:>8.1f} {b['host_factorisation_solve']:>8.1f} "
+            f"{b['gradients_energies']:>8.1f} {b['other']:>8.1f} {r['projected_1s_of_motion_s']:>8.1f}"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--faces", type=int, default=2000)
+    p.add_argument("--faces", type=int, nargs="+", default=[2000])
     p.add_argument("--dt", type=float, default=1e-3)
-    p.add_argument("--steps", type=int, default=40)
+    p.add_argument("--chunk", type=int, default=25, help="steps per compiled chunk")
+    p.add_argument("--chunks", type=int, default=4, help="timed chunks after the compiling one")
     p.add_argument("--height", type=float, default=0.005, help="drop height [m] (contact within the first steps)")
+    p.add_argument("--integrator", choices=["newmark", "backward-euler"], default="backward-euler")
+    p.add_argument("--gas", choices=["isothermal", "adiabatic", "prescribed"], default="isothermal")
+    p.add_argument("--json", type=Path, default=None, help="write the results here")
     args = p.parse_args()
-    start = time.perf_counter()
-    shell = s3.ball(0.13, 0.9e-3, n_triangles=args.faces)
-    ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(1e-3, 1e3), name="ground")
-    system = d.shell_system(shell, 2.34e6, 0.4, 1300.0, gas="adiabatic", mass=0.8, planes=[ground])
-    setup = time.perf_counter() - start
-    state = d.drop_state(system, system.inflated, args.height)
-    chunk = args.steps // 2
-    timings = []
-    for _ in range(2):
-        start = time.perf_counter()
-        traj = d.simulate(system, state, args.dt, chunk * args.dt, minimiser=d.SparseNewton(), chunk=chunk, progress=False)
-        timings.append(time.perf_counter() - start)
-        state = d.initial_state(system, traj["position_m"][-1], None)
-    out = {"faces": int(shell.mesh.n_faces), "dofs": 3 * shell.mesh.n_vertices, "dt_s": args.dt, "setup_s": setup,
-           "first_chunk_s (with compilation)": timings[0], "steps_per_chunk": chunk, "seconds_per_step": timings[1] / chunk,
-           "newton_iterations_mean": float(traj["newton_iterations"][1:].mean()),
-           "projected_1s_s": timings[1] / chunk / args.dt}  # fmt: skip
-    print(json.dumps(out, indent=1))
+    integrator = d.Newmark() if args.integrator == "newmark" else d.BackwardEuler()
+    rows = [run(f, args.dt, args.height, args.chunk, args.chunks, integrator, args.gas) for f in args.faces]
+    print(table(rows))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        machine = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average": os.getloadavg(),
+                   "date": time.strftime("%Y-%m-%d", time.gmtime())}  # fmt: skip
+        args.json.write_text(json.dumps(machine | {"runs": rows}, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -21,7 +21,9 @@ the implicit derivative's solve is never shifted.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import zlib
 
 import equinox as eqx
 import jax
@@ -45,27 +47,98 @@ def _woodbury(solver, columns, coeffs, rhs):
     return y - (z * coeffs[None, :]) @ np.linalg.solve(small, columns @ y)
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class _FreeAssembly:
+    """Where Newton's matrix on the free dofs takes its values from (host, built once per pattern
+    and free set): its CSR entry e is K's entry ``source[e]``, plus the point block entry
+    ``block_source[j]`` at ``block_target[j]``, plus the diagonal of free dof i at ``diagonal[i]``.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    source: np.ndarray
+    block_target: np.ndarray
+    block_source: np.ndarray
+    diagonal: np.ndarray
+    fixed_zero: np.ndarray  # entries in a row or column of a dof the pattern fixes
+    fixed_unit: np.ndarray  # and its diagonal
+
+    @staticmethod
+    def build(pattern, n: int, free: np.ndarray) -> "_FreeAssembly":
+        """From the shell's pattern (its first ``n`` dofs the vertices') and the free dof indices."""
+        positions = sp.csr_matrix((np.arange(1.0, pattern.nnz + 1.0), pattern.indices, pattern.indptr), shape=(pattern.n_dofs,) * 2)
+        sub = positions[:n, :n][free][:, free]
+        sub.sort_indices()
+        m = free.size
+        keys = np.repeat(np.arange(m), np.diff(sub.indptr)) * m + sub.indices
+
+        def find(rows, cols):  # CSR positions of (row, col) entries of the sub-matrix
+            at = np.searchsorted(keys, rows * m + cols)
+            if np.any(at >= keys.size) or np.any(keys[np.minimum(at, keys.size - 1)] != rows * m + cols):
+                raise InvalidInputError("the shell's sparsity pattern lacks a vertex's own 3×3 block.")
+            return at
+
+        source = sub.data.astype(np.int64) - 1
+        local = np.full(n, -1)
+        local[free] = np.arange(m)
+        v = n // 3
+        base = 3 * np.arange(v)[:, None, None]
+        row, col = np.broadcast_to(base + np.arange(3)[:, None], (v, 3, 3)), np.broadcast_to(base + np.arange(3), (v, 3, 3))
+        kept = (local[row] >= 0) & (local[col] >= 0)
+        return _FreeAssembly(
+            indptr=sub.indptr, indices=sub.indices, source=source,
+            block_target=find(local[row][kept], local[col][kept]), block_source=np.flatnonzero(kept.ravel()),
+            diagonal=find(np.arange(m), np.arange(m)),
+            fixed_zero=np.flatnonzero(np.isin(source, pattern.fixed_entries)),
+            fixed_unit=np.flatnonzero(np.isin(source, pattern.fixed_diagonal)),
+        )  # fmt: skip
+
+    def values(self, data, blocks, diag) -> np.ndarray:
+        """CSR values of K (its fixed dofs folded in) + blockdiag(blocks) + diag(diag) on the free dofs."""
+        out = data[self.source]
+        out[self.fixed_zero] = 0.0
+        out[self.fixed_unit] = 1.0
+        out[self.block_target] += blocks.reshape(-1)[self.block_source]  # the targets are distinct
+        out[self.diagonal] += diag
+        return out
+
+    def matrix(self, values) -> sp.csr_matrix:
+        m = self.indptr.size - 1
+        return sp.csr_matrix((values, self.indices, self.indptr), shape=(m, m))
+
+
+_ASSEMBLIES: dict = {}
+
+
+def _free_assembly(key: int, n: int, free: np.ndarray) -> _FreeAssembly:
+    """The cached :class:`_FreeAssembly` of pattern ``key`` and these free dofs."""
+    cache_key = (key, n, zlib.crc32(free.tobytes()))
+    if cache_key not in _ASSEMBLIES:
+        if len(_ASSEMBLIES) >= 8:
+            _ASSEMBLIES.pop(next(iter(_ASSEMBLIES)))
+        _ASSEMBLIES[cache_key] = _FreeAssembly.build(PATTERNS[key], n, free)
+    return _ASSEMBLIES[cache_key]
+
+
 def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
     """(K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; NaN if not
     positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
 
     With ``shift``, a matrix that is not positive definite is shifted by 1e-2, 1e-1, 1 times its
     mean diagonal until it is (Newton's step then is a descent direction)."""
-    pattern = PATTERNS[int(key)]
-    n = blocks.shape[0] * 3
-    k = pattern.matrix(np.asarray(data))[:n, :n]
-    v = blocks.shape[0]
-    block = sp.bsr_matrix((np.asarray(blocks), np.arange(v), np.arange(v + 1)), shape=(n, n)).tocsr()
-    a = (k + block + sp.diags(np.asarray(diag))).tocsr()
-    free = np.asarray(free)
-    a = a[free][:, free]
+    free = np.asarray(free, dtype=np.int64)
+    assembly = _free_assembly(int(key), blocks.shape[0] * 3, free)
+    values = assembly.values(np.asarray(data), np.asarray(blocks), np.asarray(diag)[free])
     c2 = float(c2)
     rank = (c2, np.asarray(u)[free]) if c2 != 0.0 else None
-    mean = float(np.mean(np.abs(a.diagonal())))
+    mean = float(np.mean(np.abs(values[assembly.diagonal])))
     for factor in (0.0, 1e-2, 1e-1, 1.0) if shift else (0.0,):
+        shifted = values
+        if factor:
+            shifted = values.copy()
+            shifted[assembly.diagonal] += factor * mean
         try:
-            shifted = a + factor * mean * sp.identity(a.shape[0], format="csr") if factor else a
-            solver = SparseSolver(shifted, rank, symmetric=True, definite=True)
+            solver = SparseSolver(assembly.matrix(shifted), rank, symmetric=True, definite=True)
         except NoConvergenceError:
             continue
         body = np.asarray(columns)[:, free]
@@ -85,9 +158,16 @@ class SparseNewton(AbstractMinimiser):
     max_halvings: int = eqx.field(static=True, default=40)
 
     def linear_solve(self, potential, y, rhs):
-        return self._solve(potential, y, rhs, False)
+        return self._solve(potential, y, rhs, False, self._rayleigh_values(potential))
 
-    def _solve(self, potential, y, rhs, shift: bool):
+    @staticmethod
+    def _rayleigh_values(potential):
+        """CSR values [N/m] of Rayleigh β's β K(xₙ)/Δt (None without Rayleigh): fixed over a step."""
+        if potential.rayleigh is None:
+            return None
+        return potential.rayleigh.stiffness_coefficient / potential.dt * potential.system.hessian_parts(potential.x_prev)[0]
+
+    def _solve(self, potential, y, rhs, shift: bool, rayleigh_values):
         system = potential.system
         if not isinstance(system, ShellDynamicSystem):
             raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
@@ -96,7 +176,7 @@ class SparseNewton(AbstractMinimiser):
         diag = potential.inertia_weight
         if potential.rayleigh is not None:
             diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
-            data = data + potential.rayleigh.stiffness_coefficient / potential.dt * system.hessian_parts(potential.x_prev)[0]
+            data = data + rayleigh_values
         blocks = potential.point_hessian_blocks(x)
         share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
         columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
@@ -105,11 +185,13 @@ class SparseNewton(AbstractMinimiser):
         solve = functools.partial(_host_solve, system.pattern_key, shift)
         return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
 
-    def _direction(self, potential, y, g):
-        p = self._solve(potential, y, -g, True)
+    def _direction(self, potential, y, g, rayleigh_values):
+        p = self._solve(potential, y, -g, True, rayleigh_values)
         # Only a failed shift gives NaN: fall back to descent scaled by the inertia.
         ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
         return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
 
     def minimise(self, potential, y0):
-        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g))
+        # K(xₙ) of Rayleigh β is the same in every iteration of the step: assembled once, before the loop.
+        rayleigh_values = self._rayleigh_values(potential)
+        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g, rayleigh_values))
