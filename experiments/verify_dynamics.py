@@ -214,7 +214,7 @@ def calibrations(args, system, integrator, dt, duration, bracket=(0.0, 10.0)):
 def part_cor(args, report):
     system = make_system(args)
     report["cor_calibration"] = [calibrations(args, system, d.BackwardEuler(), 1e-3, args.duration),
-                                 calibrations(args, system, d.Newmark(), 2.5e-4, args.duration, bracket=(0.0, 6.0))]  # fmt: skip
+                                 calibrations(args, system, d.Newmark(), 2.5e-4, args.duration, bracket=(0.0, 8.0))]  # fmt: skip
 
 
 def impact_extremes(traj, system, args, window):
