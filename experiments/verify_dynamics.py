@@ -15,7 +15,10 @@ For one ball (default: R = 5 cm, 200 faces, P_g = 5 kPa, E = 2 MPa, h = 0.5 mm, 
 
     python3 experiments/verify_dynamics.py [--parts cor,diameter,convergence] [--out docs/bench/verify-dynamics.json]
 
-Each part's results replace that part's key in the JSON file; the other keys are kept.
+    python3 experiments/verify_dynamics.py --parts diameter --diameter-faces 1000 --diameter-schemes backward_euler
+
+Each part's results replace that part's key in the JSON file; the other keys are kept (the diameter
+part's meshes accumulate).
 """
 
 from __future__ import annotations
@@ -235,13 +238,16 @@ def impact_extremes(traj, system, args, window):
 
 
 def part_diameter(args, report):
-    out = []
-    for faces, newmark_dt in ((args.faces, 2.5e-4), (args.fine_faces, 1.5e-4)):
+    out = {}
+    for faces in args.diameter_faces:
+        # Newmark's Δt resolves the membrane waves, whose period scales with the vertex spacing (~1 ms at 210 faces).
+        newmark_dt = math.floor(2.5e-4 * min(1.0, math.sqrt(200 / faces)) / 5e-5 + 1e-9) * 5e-5
         curve = quasi_static_curve(args, (0.5, 1.0, 2.0, 4.0, 7.0, 10.0, 14.0, 20.0, 27.0), faces=faces)
         system = make_system(args, faces=faces)
         entry = {"faces": int(system.surface_faces().shape[0]), "quasi_static": {"compression_m": curve[:, 0].tolist(), "force_N": curve[:, 1].tolist(),
                  "vertex_diameter_m": curve[:, 2].tolist(), "edge_diameter_m": curve[:, 3].tolist()}, "drops": []}  # fmt: skip
-        for scheme, integrator, dt in (("newmark", d.Newmark(), newmark_dt), ("backward_euler", d.BackwardEuler(), 2.5e-4)):
+        schemes = {"newmark": (d.Newmark(), newmark_dt), "backward_euler": (d.BackwardEuler(), 2.5e-4)}
+        for scheme, (integrator, dt) in ((k, schemes[k]) for k in args.diameter_schemes):
             for height in args.heights:
                 # The deepest point comes before half the contact time (≤ 25 ms here) plus the 2ĝ approach.
                 traj = run_drop(system, args, height, dt, 0.032, integrator)
@@ -258,7 +264,7 @@ def part_diameter(args, report):
                     row["qs_force_at_compression_N"] = float(np.interp(row["max_compression_m"], curve[:, 0], curve[:, 1]))
                 print(faces, json.dumps(row), flush=True)
                 entry["drops"].append(row)
-        out.append(entry)
+        out[str(entry["faces"])] = entry
     report["max_diameter"] = out
 
 
@@ -287,7 +293,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--parts", default="energy,model,adiabatic", help=f"comma-separated, of {', '.join(PARTS)}")
     p.add_argument("--faces", type=int, default=200)
-    p.add_argument("--fine-faces", type=int, default=500, help="the finer mesh of the diameter part")
+    p.add_argument("--diameter-faces", type=lambda s: [int(v) for v in s.split(",")], default=[200, 500], help="the diameter part's meshes")
+    p.add_argument("--diameter-schemes", type=lambda s: s.split(","), default=["newmark", "backward_euler"], help="the diameter part's schemes")
     p.add_argument("--mesh-faces", type=lambda s: [int(v) for v in s.split(",")], default=[200, 500, 1000], help="the convergence part's meshes")
     p.add_argument("--heights", type=lambda s: [float(v) for v in s.split(",")], default=[0.005, 0.01, 0.02, 0.05], help="drop heights [m]")
     p.add_argument("--damping", type=float, default=2.0, help="the convergence part's fixed c [N·s/m]")
@@ -315,7 +322,9 @@ def main() -> None:
     merged = json.loads(out.read_text()) if out.is_file() else {}
     merged.setdefault("ball", {}).update({k: v for k, v in vars(args).items() if k not in ("parts", "out")})
     seconds = {**merged.get("seconds", {}), **report.pop("seconds")}
-    merged.update(report, seconds=seconds, machine="shared 2-core x86-64 VM, heavy load (other jobs)")
+    for key, value in report.items():  # the diameter part's meshes accumulate
+        merged[key] = {**merged[key], **value} if isinstance(value, dict) and isinstance(merged.get(key), dict) else value
+    merged.update(seconds=seconds, machine="shared 2-core x86-64 VM, heavy load (other jobs)")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(merged, indent=1, default=str))
 
