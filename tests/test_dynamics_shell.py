@@ -230,3 +230,26 @@ def test_bad_configs_name_file_field_and_fix(tmp_path, change, field):
         run_scenario(scenario, tmp_path / "out", progress=False)
     message = str(err.value)
     assert str(config) in message and field in message and "Fix" in message
+
+
+def test_contact_damping_calibrates_to_0_75_and_rejects_a_cor_above_the_numerics_alone(system):
+    # The configs' scheme and step: backward Euler at 1 ms, whose own COR(c = 0) is ≈ 0.80 on this ball.
+    height, dt = 0.02, 1e-3
+
+    @functools.cache  # Brent's method asks for the bracket's ends again; the 0.9 check reuses them
+    def cor(c):
+        damped = system.with_planes([eqx.tree_at(lambda p: p.damping, system.planes[0], jnp.asarray(c))])
+        # 50 steps hold the 42 ms contact and its release; the apex is extrapolated ballistically.
+        traj = d.simulate(damped, _impact_state(damped, height), dt, 0.05, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(),
+                          progress=False, chunk=CHUNK)  # fmt: skip
+        first = d.measured_cor(traj)[0]
+        return math.sqrt(first.bounce_height_m / (first.speed_in_m_per_s**2 / (2 * G)))
+
+    cal = d.calibrate_contact_damping(cor, 0.75, (0.0, 2.0), rtol=1e-2)
+    # The issue's criterion: within 2 % of the target COR (Brent's c tolerance 0.02 N·s/m moves the COR by ~1e-3).
+    assert abs(cal.cor - 0.75) < 0.02 * 0.75
+    assert 0.0 < cal.damping < 2.0
+    # Numerical dissipation must not pass for physical damping: a target above COR(c = 0) is refused, naming the range.
+    assert 0.75 < cor(0.0) < 0.9
+    with pytest.raises(InvalidInputError, match="outside the reachable range"):
+        d.calibrate_contact_damping(cor, 0.9, (0.0, 2.0))
