@@ -403,12 +403,16 @@ def _rayleigh(scenario: Scenario):
     return d.Rayleigh(alpha, beta) if alpha or beta else None
 
 
+#: Steps per compiled chunk: one length for the calibration drops and the runs, so they share one program.
+SCENARIO_CHUNK = 25
+
+
 def _simulate(scenario: Scenario, system, state, duration: float, progress: bool):
     from . import dynamics as d
 
     try:
         return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
-                          rayleigh=_rayleigh(scenario), progress=progress)  # fmt: skip
+                          rayleigh=_rayleigh(scenario), chunk=SCENARIO_CHUNK, progress=progress)  # fmt: skip
     except NoConvergenceError as err:
         raise NoConvergenceError(f"{scenario.source}: field 'integrator.dt_s' = {scenario.dt}: {err} Fix: reduce integrator.dt_s", err.history) from err
 
@@ -422,7 +426,8 @@ def initial_state(scenario: Scenario, system, height: float):
     return d.drop_state(system, x.reshape(-1), height, velocity=list(scenario.velocity))
 
 
-#: Calibration drops run this many textbook contact times π√(m / 2πR P_g) (twice that if the shell has not left).
+#: Calibration drops run this many textbook contact times π√(m / 2πR P_g), twice that if the shell has
+#: not left the plane; a shell still on it then has COR 0 (an overdamped dashpot).
 CALIBRATION_WINDOW = 3.0
 
 
@@ -431,7 +436,8 @@ def calibration_cor(scenario: Scenario, system, damping: float, *, progress: boo
 
     The run starts just above the plane at the impact speed √(2 g (H − g₀)) (free flight is
     integrated exactly, so skipping it changes nothing) and ends once the shell has left the
-    plane; the COR is √(bounce / drop) with the drop height v_in² / 2g at contact onset.
+    plane; the COR is √(bounce / drop) with the drop height v_in² / 2g at contact onset, 0 if the
+    shell has not left the plane after ``2 CALIBRATION_WINDOW`` textbook contact times.
     """
     from . import dynamics as d
 
@@ -445,14 +451,13 @@ def calibration_cor(scenario: Scenario, system, damping: float, *, progress: boo
     mass = float(np.sum(np.asarray(one.node_masses)))
     radius = (3.0 * float(one.volume(one.inflated)) / (4.0 * math.pi)) ** (1.0 / 3.0)
     textbook = d.pressurized_ball_contact_time(mass, radius, float(one.params.gauge_pressure))
-    # The shell's contact outlasts the textbook spring's (docs/dynamics.md): widen the window once before giving up.
+    # The shell's contact outlasts the textbook spring's (docs/dynamics.md): widen the window once.
     for window in (CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt, 2.0 * CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt):
         impacts = d.measured_cor(_simulate(scenario, one, state, window, progress))
         if impacts:
             break
     else:
-        raise NoConvergenceError(f"{scenario.source}: the calibration drop did not leave the plane within {window:.3g} s "
-                                 f"({2 * CALIBRATION_WINDOW:g} textbook contact times); check the planes, P_g and the mass.")
+        return 0.0  # still on the plane: the dashpot is overdamped and nothing bounces
     first = impacts[0]
     return math.sqrt(max(first.bounce_height_m, 0.0) / (first.speed_in_m_per_s**2 / (2.0 * g)))
 
@@ -558,7 +563,7 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     calibration = None
     damping = scenario.contact_damping or 0.0
     if scenario.cor is not None:
-        cal = d.calibrate_contact_damping(lambda c: calibration_cor(scenario, system, c), scenario.cor, scenario.bracket, rtol=1e-3)
+        cal = d.calibrate_contact_damping(lambda c: calibration_cor(scenario, system, c), scenario.cor, scenario.bracket, rtol=1e-2)
         damping = cal.damping
         calibration = {"target_cor": scenario.cor, "damping_N_s_per_m": cal.damping, "cor": cal.cor, "evaluations": [list(e) for e in cal.evaluations]}
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])

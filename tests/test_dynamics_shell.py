@@ -207,6 +207,19 @@ def test_cli_simulate_tiny_config(tmp_path, capsys):
     assert "results:" in capsys.readouterr().out
 
 
+def test_scenario_calibrates_the_cor_even_past_critical_damping(tmp_path):
+    # The bracket's top, 60 N·s/m, is past critical damping 2√(2πR P_g m) = 25 N·s/m: the ball
+    # may not leave the ground there, which must read as COR ≈ 0, not fail the calibration.
+    config = tmp_path / "calibrated.toml"
+    config.write_text(TINY.replace("contact_damping_N_s_per_m = 1.0\n", "cor = 0.6\ncalibration_bracket_N_s_per_m = [0.0, 60.0]\ncalibration_height_m = 0.02\n"))
+    assert main(["simulate", str(config), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    calibration = json.loads((tmp_path / "out" / "scenario.json").read_text())["calibration"]
+    # The criterion: the calibrated drop's √(h/H) within 2 % of the target.
+    assert calibration["cor"] == pytest.approx(0.6, rel=0.02)
+    by_damping = dict(calibration["evaluations"])
+    assert by_damping[60.0] < 0.1 < 0.6 < by_damping[0.0]
+
+
 @pytest.mark.parametrize(
     "change, field",
     [
