@@ -66,27 +66,10 @@ def contact_diameter(x, ghat):
     return 2.0 * float(np.max(np.linalg.norm(touching[:, :2] - touching[:, :2].mean(axis=0), axis=1)))
 
 
-def mesh_edges(faces):
-    """The unique edges (E, 2) of triangles ``faces`` (F, 3)."""
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    return np.unique(e, axis=0)
-
-
 def edge_contact_diameter(x, edges, level):
-    """Sub-vertex contact diameter [m]: 2 × the mean distance, from their centroid, of the points where the faces cross height ``level`` [m].
-
-    The faces are flat, so a crossing interpolated linearly along an edge lies on the mesh surface:
-    the measure moves continuously as the patch grows instead of by a vertex spacing.
-    """
+    """Sub-vertex contact diameter [m] on the ground z = 0 (``shelljax.dynamics.contact_diameter``)."""
     nodes = np.asarray(x).reshape(-1, 3)
-    a, b = nodes[edges[:, 0]], nodes[edges[:, 1]]
-    cross = (a[:, 2] < level) != (b[:, 2] < level)
-    if np.count_nonzero(cross) < 3:
-        return 0.0
-    a, b = a[cross], b[cross]
-    s = (level - a[:, 2]) / (b[:, 2] - a[:, 2])
-    points = a[:, :2] + s[:, None] * (b[:, :2] - a[:, :2])
-    return 2.0 * float(np.mean(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+    return d.contact_diameter(nodes, edges, nodes[:, 2], np.array([0.0, 0.0, 1.0]), level)
 
 
 def touching_com_height(system, ghat):
@@ -126,7 +109,7 @@ def drop(system, args, dt, duration, integrator=None, damping=0.0, height=None):
                    cor=bounce_cor(impacts))
         k = int(np.argmax(traj["contact_force_N"][:, 0, 2]))
         out["diameter_at_peak_m"] = contact_diameter(traj["position_m"][k], args.ghat)
-        out["edge_diameter_at_peak_m"] = edge_contact_diameter(traj["position_m"][k], mesh_edges(np.asarray(system.surface_faces())), args.ghat)
+        out["edge_diameter_at_peak_m"] = edge_contact_diameter(traj["position_m"][k], d.mesh_edges(np.asarray(system.surface_faces())), args.ghat)
     return out
 
 
@@ -136,7 +119,7 @@ def quasi_static_curve(args, levels, faces=None):
     Compression is the centre of mass's descent below its height when the lowest vertex is ĝ above the ground.
     """
     base = make_system(args, faces=faces)
-    edges = mesh_edges(np.asarray(base.surface_faces()))
+    edges = d.mesh_edges(np.asarray(base.surface_faces()))
     z_touch = touching_com_height(base, args.ghat)
     rows = []
     for level in levels:
@@ -228,7 +211,7 @@ def impact_extremes(traj, system, args, window):
     smooth = np.convolve(force, np.ones(n) / n, mode="same")
     z = traj["com_position_m"][:, 2]
     deepest = int(np.argmin(z)) + 1
-    edges = mesh_edges(np.asarray(system.surface_faces()))
+    edges = d.mesh_edges(np.asarray(system.surface_faces()))
     diam = [edge_contact_diameter(x, edges, args.ghat) for x in traj["position_m"][:deepest]]
     vert = [contact_diameter(x, args.ghat) for x in traj["position_m"][:deepest]]
     e = traj["total_energy_J"][:deepest]

@@ -105,7 +105,8 @@ def _cmd_simulate(args) -> int:
                   f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm, peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa")  # fmt: skip
         for m in run["impacts"]:
             print(f"  {label}: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
-                  f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm")  # fmt: skip
+                  f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm, "
+                  f"contact diameter {1e3 * m['max_contact_diameter_m']:.1f} mm")  # fmt: skip
         print(f"  results: {run['directory']}/results.json")
     return 0
 

@@ -214,3 +214,24 @@ def test_coulomb_friction_decelerates_a_sliding_mass_at_mu_g():
     # Newmark's a₀ holds the conservative forces only (friction needs a lagged previous state).
     assert trajectory["com_velocity_m_per_s"][-1, 0] == pytest.approx(1.0 - mu * g * (0.1 - 0.5e-4), rel=1e-9)
     np.testing.assert_allclose(trajectory["contact_force_N"][:, 0, 0][1:], -mu * MASS * g, rtol=1e-6)
+
+
+@pytest.mark.parametrize("depth", [0.005, 0.01, 0.02])
+def test_contact_diameter_of_a_sphere_cut_by_a_plane(depth):
+    # A sphere of radius R cut at height h above its bottom meets the plane in a circle of radius
+    # r = √(2Rh − h²). The icosphere's flat faces sit inside the sphere by at most the sag ℓ²/8R of
+    # its longest edge ℓ, and a surface moved in by s moves the cut circle by s R / r: the bound.
+    radius = 0.05
+    nodes, faces = d.icosphere(radius, subdivisions=4)
+    edges = d.mesh_edges(faces)
+    normal = np.array([0.0, 0.0, 1.0])
+    gaps = nodes[:, 2] + radius
+    diameter = d.contact_diameter(nodes, edges, gaps, normal, depth)
+    circle = math.sqrt(2.0 * radius * depth - depth**2)
+    sag = np.max(np.linalg.norm(nodes[edges[:, 0]] - nodes[edges[:, 1]], axis=1)) ** 2 / (8.0 * radius)
+    assert 0.0 < 2.0 * circle - diameter <= 2.0 * sag * radius / circle
+    # Tilted plane: the same patch seen along another normal.
+    rotation = np.linalg.qr(np.array([[1.0, 0.3, 0.2], [0.1, 1.0, 0.4], [0.3, 0.2, 1.0]]))[0]
+    tilted = d.contact_diameter(nodes @ rotation.T, edges, gaps, rotation @ normal, depth)
+    assert tilted == pytest.approx(diameter, rel=1e-12)
+    assert d.contact_diameter(nodes, edges, gaps + 1.0, normal, depth) == 0.0

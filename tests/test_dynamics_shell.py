@@ -68,6 +68,9 @@ def test_bounce_conserves_energy_without_damping(system):
     # The criterion: ≤ 1 % of the impact energy m g H over a bounce (Newmark, no damping).
     assert drift < 0.01, drift
     assert impact.speed_out_m_per_s / impact.speed_in_m_per_s > 0.9
+    # A sphere flattened by its compression δ would touch over 2√(2Rδ); the pressurized wall curves
+    # away around its patch instead, so its patch is smaller, never zero on a landing.
+    assert 0.0 < impact.max_contact_diameter_m < 2.0 * math.sqrt(2.0 * RADIUS * impact.max_compression_m)
 
 
 def test_contact_damping_calibrates_the_cor(system):

@@ -15,7 +15,7 @@ from ._contact import (
     TabulatedCompressionCurve,
     ground,
 )
-from ._cor import Calibration, Impact, calibrate_contact_damping, measured_cor
+from ._cor import Calibration, Impact, calibrate_contact_damping, contact_diameter, measured_cor, mesh_edges
 from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
 from ._minimise import AbstractMinimiser, DenseNewton, MinimiserResult, solve_step
 from ._output import write_results
