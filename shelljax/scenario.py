@@ -563,7 +563,13 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     calibration = None
     damping = scenario.contact_damping or 0.0
     if scenario.cor is not None:
-        cal = d.calibrate_contact_damping(lambda c: calibration_cor(scenario, system, c), scenario.cor, scenario.bracket, rtol=1e-2)
+        def cor(c):
+            value = calibration_cor(scenario, system, c, progress=progress)
+            if progress:
+                print(f"  calibration: contact damping c = {c:.4g} N·s/m → COR {value:.4f} (target {scenario.cor})", flush=True)
+            return value
+
+        cal = d.calibrate_contact_damping(cor, scenario.cor, scenario.bracket, rtol=1e-2)
         damping = cal.damping
         calibration = {"target_cor": scenario.cor, "damping_N_s_per_m": cal.damping, "cor": cal.cor, "evaluations": [list(e) for e in cal.evaluations]}
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])
