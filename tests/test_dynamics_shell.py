@@ -106,7 +106,7 @@ def test_sealed_gas_energy_is_accurate_near_its_reference_volume(gas, exponent):
 
 
 def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_times_the_isothermal(shell, system):
-    # 12.5 ms at 0.25 ms: contact onset (step 6, where Newton used to stall) and 3 mm of compression.
+    # 12.5 ms at 0.25 ms: contact onset (step 6, where gas-energy round-off can stall Newton) and 3 mm of compression.
     adiabatic = d.shell_system(shell, E, NU, P_G, gas="adiabatic", mass=MASS, planes=system.planes)
     traj = d.simulate(adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, CHUNK * 2.5e-4, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
     # Quadratic Newton: the stall against round-off in Φ_inc ran into max_steps = 50.
