@@ -176,7 +176,7 @@ def bounce_cor(impacts):
 def calibrations(args, system, integrator, dt, duration, bracket=(0.0, 10.0)):
     """COR(c = 0) and the calibration to each target at one (scheme, Δt): c [N·s/m], COR, relative error, runs; or the error raised."""
 
-    @functools.cache  # Brent's method asks for the bracket's ends again
+    @functools.cache  # every target of this (scheme, Δt) reuses the runs already made
     def cor(c):
         traj = run_drop(system, args, args.height, dt, duration, integrator, c)
         if isinstance(traj, str):
