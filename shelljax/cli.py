@@ -114,7 +114,8 @@ def _cmd_simulate(args) -> int:
 def _cmd_replica(args) -> int:
     from .replica import export_replica
 
-    written = export_replica(args.session, args.out, method=args.method, gas=args.gas, cor=args.cor, mesh_faces=args.mesh_faces)
+    written = export_replica(args.session, args.out, method=args.method, gas=args.gas, cor=args.cor, mesh_faces=args.mesh_faces,
+                             wrinkle_law=args.wrinkle_law)  # fmt: skip
     print(f"written: {', '.join(str(p) for p in written)}")
     return 0
 
@@ -192,6 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic")
     rep.add_argument("--cor", type=float, default=None, help="measured coefficient of restitution [-], if known")
     rep.add_argument("--mesh-faces", type=int, default=2000, help="triangles of a sphere replica (sessions without a mesh)")
+    rep.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
+                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling, as configs/paper.toml) or the engine's (mechanics)")
     rep.set_defaults(func=_cmd_replica)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")

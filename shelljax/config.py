@@ -22,7 +22,7 @@ GAS_MODELS = ("prescribed", "isothermal")
 WRINKLE_LAWS = ("mechanics", "scaling")  # as shelljax.estimate._forward (kept JAX-free here)
 NUISANCE = ("depth_offset", "force_gain")
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
-_ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
+ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
                    "bayes_walkers", "bayes_max_steps", "bayes_surrogate"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
@@ -117,7 +117,7 @@ def load_config(path: str | Path) -> ExperimentConfig:
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(path, "seed", f"{seed!r} is not a non-negative integer", "write seed = 0")
-    estimators = _estimator_settings(path, _table(path, data, "estimators", _ESTIMATOR_KEYS))
+    estimators = estimator_settings(path, _table(path, data, "estimators", ESTIMATOR_KEYS))
     calibration = _calibration_settings(path, _table(path, data, "calibration", _CALIBRATION_KEYS))
     sessions_table = _table(path, data, "sessions", _SESSION_KEYS)
     if "paths" not in sessions_table:
@@ -145,8 +145,8 @@ def _read_toml(path: Path) -> dict:
         raise InvalidInputError(f"{path}: not valid TOML ({err}). Fix: correct the syntax") from None
 
 
-def _estimator_settings(path: Path, estimators: dict) -> dict:
-    """The ExperimentConfig fields of the [estimators] table, checked."""
+def estimator_settings(path: Path, estimators: dict, *, gas: str = "prescribed") -> dict:
+    """The ExperimentConfig fields of the [estimators] table, checked (``gas``: its default)."""
     methods = estimators.get("methods", ["closed-form"])
     if not isinstance(methods, list) or not methods:
         raise _fail(path, "estimators.methods", f"expected a non-empty list, got {methods!r}", 'write methods = ["closed-form"]')
@@ -161,7 +161,7 @@ def _estimator_settings(path: Path, estimators: dict) -> dict:
         raise _fail(path, "estimators.through_origin", f"{through_origin!r} is not true/false", "write true or false")
     choices = {}
     for key, default, allowed, what in (("forward_model", "axisym", FORWARD_MODELS, "model"),
-                                        ("gas", "prescribed", GAS_MODELS, "gas model"),
+                                        ("gas", gas, GAS_MODELS, "gas model"),
                                         ("wrinkle_law", "mechanics", WRINKLE_LAWS, "wrinkle law")):  # fmt: skip
         choices[key] = estimators.get(key, default)
         if choices[key] not in allowed:
@@ -181,6 +181,17 @@ def _estimator_settings(path: Path, estimators: dict) -> dict:
         raise _fail(path, "estimators.bayes_surrogate", f"{surrogate!r} is not true/false", "write true or false")
     return dict(methods=tuple(methods), bootstrap_samples=boot, through_origin=through_origin, **choices,
                 nuisance=tuple(nuisance), bayes_surrogate=surrogate, **counts)  # fmt: skip
+
+
+_OPTION_NAMES = {"bayes_walkers": "walkers", "bayes_max_steps": "max_steps", "bayes_surrogate": "surrogate"}
+
+
+def estimator_option_fields(settings) -> dict:
+    """``shelljax.estimate.EstimatorOptions`` keyword arguments, all but ``k_s`` and ``seed``, from
+    [estimators] settings: the dict of :func:`estimator_settings` or an ExperimentConfig."""
+    get = settings.get if isinstance(settings, dict) else lambda key: getattr(settings, key)
+    keys = ("through_origin", "bootstrap_samples", "forward_model", "gas", "wrinkle_law", "nuisance", *_OPTION_NAMES)
+    return {_OPTION_NAMES.get(key, key): get(key) for key in keys}
 
 
 def _calibration_settings(path: Path, calibration: dict) -> dict:

@@ -45,9 +45,12 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
 
 
 def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str = "fit", gas: str = "adiabatic",
-                   cor: float | None = None, mesh_faces: int = 2000) -> list[Path]:  # fmt: skip
+                   cor: float | None = None, mesh_faces: int = 2000, wrinkle_law: str = "scaling") -> list[Path]:  # fmt: skip
     """The replica of a session: P_g and E ± std from its ``method`` estimate, ν, h ± std, mass and
-    the mesh (the session's, or a sphere of its radius with ``mesh_faces`` triangles)."""
+    the mesh (the session's, or a sphere of its radius with ``mesh_faces`` triangles).
+
+    fit and bayes read the session through the axisym engine with ``wrinkle_law``, and with a sealed
+    isothermal gas unless the replica's ``gas`` is "prescribed" (a poke is slow: no heat is kept in)."""
     from . import shell3d as s3
     from .scenario import estimated_parameters
     from .session import load_session
@@ -57,7 +60,8 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
         raise InvalidInputError(f"{session.source}: field 'mass' is missing. Fix: add `mass = <kg>` to the session")
     if cor is not None and not 0.0 < cor <= 1.0:
         raise InvalidInputError(f"--cor {cor}: a COR is in (0, 1]. Fix: measure it as √(bounce height / drop height)")
-    p_g, e, stats = estimated_parameters(session, method)
+    estimator_gas = "prescribed" if gas == "prescribed" else "isothermal"
+    p_g, e, stats = estimated_parameters(session, method, {"gas": estimator_gas, "wrinkle_law": wrinkle_law})
     mesh_path = getattr(session, "mesh_path", None)
     shell = s3.load(mesh_path, session.thickness) if mesh_path else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
     quantities = {
@@ -65,7 +69,7 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
         "poisson_ratio": (session.poisson_ratio, None), "thickness_m": (session.thickness, session.thickness_std),
         "mass_kg": (session.mass, None), "cor": (cor, None),
     }  # fmt: skip
-    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method})
+    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method, "estimator_gas": estimator_gas, "wrinkle_law": wrinkle_law})
 
 
 def load_replica(directory: str | Path, *, planes=(), gravity=None):

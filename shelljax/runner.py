@@ -19,7 +19,7 @@ from . import __version__
 from ._compile_log import compile_log
 from ._errors import ShelljaxError
 from ._memory_mappings import release_compiled_programs_if_crowded
-from .config import ExperimentConfig, load_config
+from .config import ExperimentConfig, estimator_option_fields, load_config
 from .estimate import (
     ConvergenceWarning,
     Estimate,
@@ -74,12 +74,7 @@ def _block(result) -> dict:
 
 
 def _estimator_options(config: ExperimentConfig, k_s: Estimate) -> EstimatorOptions:
-    return EstimatorOptions(
-        k_s=k_s, through_origin=config.through_origin, bootstrap_samples=config.bootstrap_samples,
-        seed=config.seed, forward_model=config.forward_model, gas=config.gas, wrinkle_law=config.wrinkle_law,
-        nuisance=config.nuisance, walkers=config.bayes_walkers, max_steps=config.bayes_max_steps,
-        surrogate=config.bayes_surrogate,
-    )  # fmt: skip
+    return EstimatorOptions(k_s=k_s, seed=config.seed, **estimator_option_fields(config))
 
 
 def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_dir: Path, figures: bool):

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InvalidInputError, NoConvergenceError
-from .config import bundled_data_dir
+from .config import ESTIMATOR_KEYS, bundled_data_dir, estimator_option_fields, estimator_settings
 
 _TABLES = {
     "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
@@ -31,6 +31,7 @@ _TABLES = {
     "initial": {"drop_heights_m", "centre_m", "velocity_m_per_s"},
     "outputs": {"figures", "mesh_frames", "max_frames", "preview_gif"},
     "prescribed": {"select", "within_m", "axis_point_m", "axis_direction", "times_s", "angles_deg"},
+    "estimators": ESTIMATOR_KEYS - {"methods"},  # object.estimate names the method
 }  # fmt: skip
 _PLANE_KEYS = {"name", "point_m", "normal", "contact", "activation_distance_m", "barrier_stiffness_J_per_m2", "friction", "slip_tolerance_m"}
 _TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes"}
@@ -74,6 +75,7 @@ class Scenario:
     session: Path | None
     mesh: Path | None
     estimate: str
+    estimator_options: dict  # EstimatorOptions keyword arguments, from [estimators]
     gauge_pressure: float | None
     youngs_modulus: float | None
     gas: str
@@ -267,6 +269,9 @@ def load_scenario(path: str | Path) -> Scenario:
     session = _session_path(r, obj.get("session"))
     if session is None and not direct:
         raise InvalidInputError(f"{path}: field 'object.session' is missing and P_g, E are not given. Fix: name a session, or give object.gauge_pressure_Pa and object.youngs_modulus_Pa")
+    gas = r.choice(obj, "gas", "object.", ("prescribed", "isothermal", "adiabatic"), "adiabatic")
+    # a poke is slow, so a sealed object's gas is isothermal while it is estimated, whatever its law in the impact
+    estimators = estimator_settings(path, _table(r, data, "estimators"), gas="prescribed" if gas == "prescribed" else "isothermal")
     dt = r.number(integ, "dt_s", "integrator.", positive=True, fix="give the time step in s, e.g. 1e-3")
     duration = r.number(integ, "duration_s", "integrator.", positive=True, fix="give the duration in s, e.g. 1.0")
     if dt > duration:
@@ -284,10 +289,10 @@ def load_scenario(path: str | Path) -> Scenario:
         source=path, name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         output_dir=path.parent / str(data.get("output_dir", "runs")), session=session,
         mesh=_session_path(r, obj.get("mesh"), "object.mesh", "meshes/hammer-coarse.stl"),
-        estimate=r.choice(obj, "estimate", "object.", ("closed-form", "fit", "bayes"), "fit"),
+        estimate=r.choice(obj, "estimate", "object.", ("closed-form", "fit", "bayes"), "fit"), estimator_options=estimator_option_fields(estimators),
         gauge_pressure=r.number(obj, "gauge_pressure_Pa", "object.", positive=True) if direct else None,
         youngs_modulus=r.number(obj, "youngs_modulus_Pa", "object.", positive=True) if direct else None,
-        gas=r.choice(obj, "gas", "object.", ("prescribed", "isothermal", "adiabatic"), "adiabatic"),
+        gas=gas,
         mesh_faces=int(r.number(obj, "mesh_faces", "object.", positive=True)) if "mesh_faces" in obj else None,
         mass=r.number(obj, "mass_kg", "object.", positive=True) if "mass_kg" in obj else None,
         wall_density=r.number(obj, "wall_density_kg_per_m3", "object.", positive=True) if "wall_density_kg_per_m3" in obj else None,
@@ -320,11 +325,12 @@ class ObjectModel:
     source: dict
 
 
-def estimated_parameters(session, method: str) -> tuple[float, float, dict]:
-    """(P_g [Pa], E [Pa], their values and standard deviations) from the session's ``method`` estimate."""
-    from .estimate import run_estimator
+def estimated_parameters(session, method: str, options: dict) -> tuple[float, float, dict]:
+    """(P_g [Pa], E [Pa], their values and standard deviations) from the session's ``method`` estimate
+    with ``options`` (EstimatorOptions keyword arguments)."""
+    from .estimate import EstimatorOptions, run_estimator
 
-    result = run_estimator(method, session, progress=False)
+    result = run_estimator(method, session, EstimatorOptions(**options), progress=False)
     missing = [k for k in ("gauge_pressure", "young_modulus") if k not in result.estimates]
     if missing:
         raise InvalidInputError(
@@ -350,8 +356,9 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     elif session is None:
         raise InvalidInputError(f"{scenario.source}: no session to estimate P_g and E from. Fix: set object.session or pass --session")
     else:
-        p_g, e, source["estimate"] = estimated_parameters(session, scenario.estimate)
+        p_g, e, source["estimate"] = estimated_parameters(session, scenario.estimate, scenario.estimator_options)
         source["parameters"] = f"estimator '{scenario.estimate}' of {path}"
+        source["estimator_options"] = {k: list(v) if isinstance(v, tuple) else v for k, v in scenario.estimator_options.items()}
     def pick(given, field, name, unit):
         value = given if given is not None else (getattr(session, field) if session is not None else None)
         if value is None:

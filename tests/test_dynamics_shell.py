@@ -20,6 +20,7 @@ import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax import dynamics as d
 from shelljax.cli import main
+from shelljax.config import bundled_data_dir
 from shelljax.physics import ATMOSPHERIC_PRESSURE, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
 from shelljax.scenario import load_scenario
@@ -213,6 +214,8 @@ def test_scenario_calibrates_the_cor_even_past_critical_damping(tmp_path):
         (("youngs_modulus_Pa = 2e6\n", ""), "object.gauge_pressure_Pa"),
         (("scheme = \"backward-euler\"", "scheme = \"leapfrog\""), "integrator.scheme"),
         (("[dissipation]\n", "[dissipation]\ncor = 1.5\n"), "dissipation.cor"),
+        (("[integrator]\n", "[estimators]\nwrinkle_law = \"guess\"\n[integrator]\n"), "estimators.wrinkle_law"),
+        (("[integrator]\n", "[estimators]\nmethods = [\"fit\"]\n[integrator]\n"), "estimators.methods"),
     ],
 )
 def test_bad_configs_name_file_field_and_fix(tmp_path, change, field):
@@ -227,6 +230,25 @@ def test_bad_configs_name_file_field_and_fix(tmp_path, change, field):
         run_scenario(scenario, tmp_path / "out", progress=False)
     message = str(err.value)
     assert str(config) in message and field in message and "Fix" in message
+
+
+def test_scenario_estimates_the_object_with_its_estimators_table(tmp_path):
+    from shelljax.estimate import EstimatorOptions, run_estimator
+    from shelljax.scenario import resolve_object
+    from shelljax.session import load_session
+
+    session_path = bundled_data_dir() / "sessions" / "pezzi.toml"
+    config = tmp_path / "estimated.toml"
+    given = "gauge_pressure_Pa = 5000.0\nyoungs_modulus_Pa = 2e6\nradius_m = 0.05\n"
+    config.write_text(TINY.replace(given, f'session = "{session_path}"\nestimate = "fit"\n').replace("[integrator]\n", '[estimators]\nforward_model = "scaling"\n[integrator]\n'))
+    scenario = load_scenario(config)
+    # A sealed object is estimated with a sealed (isothermal) gas unless [estimators] says otherwise.
+    assert scenario.estimator_options["gas"] == "isothermal"
+    obj = resolve_object(scenario)
+    expected = run_estimator("fit", load_session(session_path), EstimatorOptions(forward_model="scaling", gas="isothermal"))
+    assert obj.gauge_pressure == expected.estimates["gauge_pressure"].value
+    assert obj.young_modulus == expected.estimates["young_modulus"].value
+    assert obj.source["estimator_options"]["forward_model"] == "scaling"
 
 
 def test_contact_damping_calibrates_to_0_75_and_rejects_a_cor_above_the_numerics_alone(system):
