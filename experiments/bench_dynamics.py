@@ -52,9 +52,11 @@ def _system(faces: int, gas: str):
 
 
 def breakdown(system, state, dt: float, integrator) -> dict:
-    """Isolated timings [s] of one step's pieces at ``state``: the Hessian's values (shell and point
-    blocks), one linear solve with it (values, host transfer, factorisation and solves), one
+    """Isolated timings [s] of one step's pieces at ``state``: Newton's matrix (shell Hessian and
+    point blocks), its host factorisation with a solve, a solve with a kept factorisation, and one
     gradient and one energy of the step's incremental potential."""
+    from shelljax.dynamics._sparse import _FACTORS
+
     potential = d.incremental_potential(system, integrator, state, jnp.asarray(dt))
     y = potential.free(state.position)
     rhs = -potential.gradient(y)
@@ -63,47 +65,58 @@ def breakdown(system, state, dt: float, integrator) -> dict:
         x = p.full(y)
         return p.system.hessian_parts(x), p.point_hessian_blocks(x)
 
+    def fresh_solve(p, y, b):
+        _FACTORS.clear()
+        return solve(p, y, b)
+
+    solve = eqx.filter_jit(lambda p, y, b: d.SparseNewton().linear_solve(p, y, b))
     hessian = _median_time(eqx.filter_jit(matrix), potential, y)
-    solve = _median_time(eqx.filter_jit(lambda p, y, b: d.SparseNewton().linear_solve(p, y, b)), potential, y, rhs)
     return {
         "hessian_s": hessian,
-        "host_solve_s": max(solve - hessian, 0.0),
+        "host_factorisation_s": max(_median_time(fresh_solve, potential, y, rhs) - hessian, 0.0),
+        "host_kept_solve_s": max(_median_time(solve, potential, y, rhs) - hessian, 0.0),
         "gradient_s": _median_time(eqx.filter_jit(lambda p, y: p.gradient(y)), potential, y),
         "energy_s": _median_time(eqx.filter_jit(lambda p, y: p.value(y)), potential, y),
     }
 
 
-def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrator, gas: str) -> dict:
-    """Drop a ``faces``-face ball from ``height`` [m]: a compiling chunk, then ``chunks`` timed ones."""
+def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrator, gas: str, reuse: bool) -> dict:
+    """Drop a ``faces``-face ball from ``height`` [m]: a compiling chunk, then ``chunks`` timed ones;
+    ``reuse``: keep Newton's matrix while it contracts (``SparseNewton(reuse_matrix=...)``)."""
     rollout = eqx.filter_jit(d.rollout)
     start = time.perf_counter()
     shell, system = _system(faces, gas)
     setup = time.perf_counter() - start
     state = d.drop_state(system, system.inflated, height)
-    timings, iterations, gaps = [], [], []
+    timings, iterations, matrices, gaps = [], [], [], []
     for _ in range(chunks + 1):
         start = time.perf_counter()
         # A compiled roll-out, as simulate's chunks, returning the whole state to start the next one.
-        state, record = rollout(system, state, jnp.asarray(dt), chunk, integrator, d.SparseNewton())
+        state, record = rollout(system, state, jnp.asarray(dt), chunk, integrator, d.SparseNewton(reuse_matrix=reuse))
         jax.block_until_ready(state)
         timings.append(time.perf_counter() - start)
         if not np.all(np.asarray(record.converged)):
             k = int(np.flatnonzero(~np.asarray(record.converged))[0])
             raise RuntimeError(f"step {len(timings) * chunk - chunk + k + 1} did not converge ({faces} faces, {gas} gas)")
         iterations.append(np.asarray(record.newton_iterations))
+        matrices.append(np.asarray(record.newton_matrices))
         gaps.append(np.asarray(record.min_gap_m)[:, 0])
     per_step = float(np.median(timings[1:])) / chunk
     parts = breakdown(system, state, dt, integrator)
     newton = float(np.mean(np.concatenate(iterations[1:])))
-    hessian = newton * parts["hessian_s"]
-    host = newton * parts["host_solve_s"]
+    fresh = float(np.mean(np.concatenate(matrices[1:])))
+    touching = np.concatenate(gaps[1:]) < 1e-3
+    hessian = fresh * parts["hessian_s"]
+    host = fresh * parts["host_factorisation_s"] + (newton - fresh) * parts["host_kept_solve_s"]
     # Each iteration: a gradient and at least one energy in the line search; one more of each to start.
     energies = (newton + 1.0) * (parts["gradient_s"] + parts["energy_s"])
     return {
         "faces": int(shell.mesh.n_faces), "dofs": 3 * shell.mesh.n_vertices, "dt_s": dt,
-        "integrator": type(integrator).__name__, "gas": gas, "setup_s": setup,
+        "integrator": type(integrator).__name__, "gas": gas, "reuse_matrix": reuse, "setup_s": setup,
         "compile_s": timings[0] - per_step * chunk, "steps_per_chunk": chunk, "timed_chunks": chunks,
-        "seconds_per_step": per_step, "newton_iterations_per_step": newton,
+        "seconds_per_step": per_step, "chunk_seconds": timings[1:], "newton_iterations_per_step": newton,
+        "newton_matrices_per_step": fresh, "steps_in_contact": int(np.sum(touching)),
+        "newton_matrices_per_step_in_contact": float(np.mean(np.concatenate(matrices[1:])[touching])) if touching.any() else None,
         "min_gap_m": float(np.min(np.concatenate(gaps))), "final_gap_m": float(gaps[-1][-1]),
         "breakdown_s_per_step": {"hessian_assembly": hessian, "host_factorisation_solve": host,
                                  "gradients_energies": energies, "other": per_step - hessian - host - energies},
@@ -113,14 +126,14 @@ def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrato
 
 def table(rows: list[dict]) -> str:
     """The results as a fixed-width text table."""
-    head = f"{'faces':>6} {'dofs':>6} {'setup s':>8} {'compile s':>9} {'ms/step':>8} {'Newton':>6} " \
+    head = f"{'faces':>6} {'reuse':>5} {'setup s':>8} {'compile s':>9} {'ms/step':>8} {'Newton':>6} {'matrix':>6} " \
            f"{'Hess ms':>8} {'host ms':>8} {'grad ms':>8} {'other ms':>8} {'1 s [s]':>8}"  # fmt: skip
     lines = [head]
     for r in rows:
         b = {k: 1e3 * v for k, v in r["breakdown_s_per_step"].items()}
         lines.append(
-            f"{r['faces']:>6} {r['dofs']:>6} {r['setup_s']:>8.1f} {r['compile_s']:>9.1f} {1e3 * r['seconds_per_step']:>8.1f} "
-            f"{r['newton_iterations_per_step']:>6.2f} {b['hessian_assembly']:>8.1f} {b['host_factorisation_solve']:>8.1f} "
+            f"{r['faces']:>6} {str(r['reuse_matrix']):>5} {r['setup_s']:>8.1f} {r['compile_s']:>9.1f} {1e3 * r['seconds_per_step']:>8.1f} "
+            f"{r['newton_iterations_per_step']:>6.2f} {r['newton_matrices_per_step']:>6.2f} {b['hessian_assembly']:>8.1f} {b['host_factorisation_solve']:>8.1f} "
             f"{b['gradients_energies']:>8.1f} {b['other']:>8.1f} {r['projected_1s_of_motion_s']:>8.1f}"
         )
     return "\n".join(lines)
@@ -135,10 +148,13 @@ def main() -> None:
     p.add_argument("--height", type=float, default=0.005, help="drop height [m] (contact within the first steps)")
     p.add_argument("--integrator", choices=["newmark", "backward-euler"], default="backward-euler")
     p.add_argument("--gas", choices=["isothermal", "adiabatic", "prescribed"], default="isothermal")
+    p.add_argument("--reuse", choices=["kept", "fresh", "both"], default="both",
+                   help="Newton's matrix: kept while it contracts (simplified Newton, the default), fresh every iteration, or both")
     p.add_argument("--json", type=Path, default=None, help="write the results here")
     args = p.parse_args()
     integrator = d.Newmark() if args.integrator == "newmark" else d.BackwardEuler()
-    rows = [run(f, args.dt, args.height, args.chunk, args.chunks, integrator, args.gas) for f in args.faces]
+    reuses = {"kept": [True], "fresh": [False], "both": [True, False]}[args.reuse]
+    rows = [run(f, args.dt, args.height, args.chunk, args.chunks, integrator, args.gas, r) for f in args.faces for r in reuses]
     print(table(rows))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

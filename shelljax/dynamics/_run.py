@@ -41,6 +41,7 @@ class StepRecord(eqx.Module):
     converged: Bool[Array, ""]
     feasible_start: Bool[Array, ""]
     newton_iterations: Int[Array, ""]
+    newton_matrices: Int[Array, ""]  # Newton matrices assembled and factorised in the step
     residual_history_N: Float[Array, " K"]
 
 
@@ -91,14 +92,15 @@ def observe(
     gaps = [jnp.min(p.gap(points)) for p in system.planes]
     pressure, volume = system.gas_state(x)
     if result is None:
-        converged, iterations, history = jnp.asarray(True), jnp.asarray(0), jnp.full((max_steps,), jnp.nan)
+        converged, iterations, history, matrices = jnp.asarray(True), jnp.asarray(0), jnp.full((max_steps,), jnp.nan), jnp.asarray(0)
     else:
-        converged, iterations, history = result.converged, result.iterations, result.history
+        converged, iterations, history, matrices = result.converged, result.iterations, result.history, result.assemblies
     return StepRecord(
         time_s=t, com_position_m=com, com_velocity_m_per_s=com_velocity, contact_force_N=forces,
         min_gap_m=jnp.stack(gaps) if gaps else jnp.zeros((0,)), gas_pressure_Pa=jnp.asarray(pressure, dtype=float),
         gas_volume_m3=jnp.asarray(volume, dtype=float), energy_J=energies, position_m=x,
-        converged=converged, feasible_start=jnp.asarray(feasible_start), newton_iterations=iterations, residual_history_N=history,
+        converged=converged, feasible_start=jnp.asarray(feasible_start), newton_iterations=iterations, newton_matrices=matrices,
+        residual_history_N=history,
     )  # fmt: skip
 
 
@@ -118,15 +120,24 @@ def step(
     rayleigh: Rayleigh | None = None,
 ) -> tuple[DynamicState, StepRecord]:
     """One implicit step of Δt [s]: the new state and its record (check ``record.converged``)."""
+    new_state, record, _ = _step_kept(system, state, dt, integrator, minimiser, rayleigh, None)
+    return new_state, record
+
+
+def _step_kept(system, state, dt, integrator, minimiser, rayleigh, memory):
+    """:func:`step` with the minimiser's ``memory`` from the previous step: (state, record, memory)."""
     potential = incremental_potential(system, integrator, state, dt, rayleigh)
+    # Newton starts where the step would end if the acceleration stayed aₙ (exact in free flight), else at
+    # x̂; either may cross a barrier, and the previous positions (with the new prescribed ones) are a safe start.
+    extrapolated = potential.free(potential.x_hat + integrator.inertia_factor() * potential.dt**2 * state.acceleration)
     predicted = potential.free(potential.x_hat)
-    # The prediction x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start.
     start = jnp.where(potential.is_feasible(predicted), predicted, potential.free(state.position))
+    start = jnp.where(potential.is_feasible(extrapolated), extrapolated, start)
     feasible = potential.is_feasible(start)
-    result = solve_step(potential, minimiser, jax.lax.stop_gradient(start))
+    result = solve_step(potential, minimiser, jax.lax.stop_gradient(start), memory)
     x_new = potential.full(result.y)
     new_state = integrator.advance(state, x_new, potential.dt)
-    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible)
+    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible), result.memory
 
 
 def rollout(
@@ -138,12 +149,19 @@ def rollout(
     minimiser: AbstractMinimiser = DenseNewton(),
     rayleigh: Rayleigh | None = None,
 ) -> tuple[DynamicState, StepRecord]:
-    """``n_steps`` steps of Δt [s] in a scan: the final state and the stacked records (pure, differentiable)."""
+    """``n_steps`` steps of Δt [s] in a scan: the final state and the stacked records (pure,
+    differentiable). What the minimiser keeps between steps (a kept Newton matrix) is carried
+    along."""
+    potential = incremental_potential(system, integrator, state, dt, rayleigh)
+    memory = jax.lax.stop_gradient(minimiser.initial_memory(potential, potential.free(state.position)))
 
-    def body(s, _):
-        return step(system, s, dt, integrator, minimiser, rayleigh)
+    def body(carry, _):
+        s, kept = carry
+        s, record, kept = _step_kept(system, s, dt, integrator, minimiser, rayleigh, kept)
+        return (s, jax.lax.stop_gradient(kept)), record
 
-    return jax.lax.scan(body, state, None, length=n_steps)
+    (state, _), records = jax.lax.scan(body, (state, memory), None, length=n_steps)
+    return state, records
 
 
 @eqx.filter_jit

@@ -33,18 +33,22 @@ import scipy.sparse as sp
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..shell3d import SparseSolver
-from ._minimise import AbstractMinimiser, newton_loop
+from ._minimise import AbstractMinimiser, KeptMatrix, newton_loop, simplified_newton_loop
 from ._shell import PATTERNS, ShellDynamicSystem
 
 
-def _woodbury(solver, columns, coeffs, rhs):
-    """(A + U D Uᵀ)⁻¹ rhs from a solver of A: y − Z D (I + Uᵀ Z D)⁻¹ Uᵀ y, Z = A⁻¹U (U: the columns)."""
-    y = solver.apply_inverse(rhs)
+def _woodbury(solver, columns, coeffs):
+    """rhs ↦ (A + U D Uᵀ)⁻¹ rhs from a solver of A: y − Z D (I + Uᵀ Z D)⁻¹ Uᵀ y, Z = A⁻¹U (U: the columns)."""
     if not np.any(coeffs):
-        return y
-    z = solver.apply_inverse(columns.T)
-    small = np.eye(len(coeffs)) + (columns @ z) * coeffs[None, :]
-    return y - (z * coeffs[None, :]) @ np.linalg.solve(small, columns @ y)
+        return solver.apply_inverse
+    z = solver.apply_inverse(columns.T) * coeffs[None, :]
+    small = np.eye(len(coeffs)) + columns @ z
+
+    def apply(rhs):
+        y = solver.apply_inverse(rhs)
+        return y - z @ np.linalg.solve(small, columns @ y)
+
+    return apply
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -120,18 +124,28 @@ def _free_assembly(key: int, n: int, free: np.ndarray) -> _FreeAssembly:
     return _ASSEMBLIES[cache_key]
 
 
-def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
-    """(K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; NaN if not
+#: The last factorised matrices, by content: a kept Newton matrix (``simplified_newton_loop``) is
+#: factorised once however many steps it serves.
+_FACTORS: dict = {}
+
+
+def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
+    """rhs ↦ (K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; None if not
     positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
 
     With ``shift``, a matrix that is not positive definite is shifted by 1e-2, 1e-1, 1 times its
     mean diagonal until it is (Newton's step then is a descent direction)."""
+    arrays = [np.asarray(a, dtype=np.float64) for a in (data, blocks, diag, c2, u, coeffs, columns)]
     free = np.asarray(free, dtype=np.int64)
+    fingerprint = (int(key), bool(shift), free.size, hash(b"".join(a.tobytes() for a in arrays) + free.tobytes()))
+    if fingerprint in _FACTORS:
+        return _FACTORS[fingerprint]
+    data, blocks, diag, c2, u, coeffs, columns = arrays
     assembly = _free_assembly(int(key), blocks.shape[0] * 3, free)
-    values = assembly.values(np.asarray(data), np.asarray(blocks), np.asarray(diag)[free])
-    c2 = float(c2)
-    rank = (c2, np.asarray(u)[free]) if c2 != 0.0 else None
+    values = assembly.values(data, blocks, diag[free])
+    rank = (float(c2), u[free]) if float(c2) != 0.0 else None
     mean = float(np.mean(np.abs(values[assembly.diagonal])))
+    apply = None
     for factor in (0.0, 1e-2, 1e-1, 1.0) if shift else (0.0,):
         shifted = values
         if factor:
@@ -141,9 +155,20 @@ def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rh
             solver = SparseSolver(assembly.matrix(shifted), rank, symmetric=True, definite=True)
         except NoConvergenceError:
             continue
-        body = np.asarray(columns)[:, free]
-        return np.asarray(_woodbury(solver, body, np.asarray(coeffs, dtype=np.float64), np.asarray(rhs)), dtype=np.float64)
-    return np.full(rhs.shape, np.nan)
+        apply = _woodbury(solver, columns[:, free], coeffs)
+        break
+    if len(_FACTORS) >= 4:
+        _FACTORS.pop(next(iter(_FACTORS)))
+    _FACTORS[fingerprint] = apply
+    return apply
+
+
+def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
+    """The solve of :func:`_factorised` applied to ``rhs`` (NaN where the matrix is not positive definite)."""
+    apply = _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free)
+    if apply is None:
+        return np.full(rhs.shape, np.nan)
+    return np.asarray(apply(np.asarray(rhs)), dtype=np.float64)
 
 
 class SparseNewton(AbstractMinimiser):
@@ -151,14 +176,18 @@ class SparseNewton(AbstractMinimiser):
 
     Converged when the Newton step's largest component is below ``step_tolerance`` [m];
     ``max_steps`` bounds the iterations and ``max_halvings`` the feasibility-keeping line search.
+    With ``reuse_matrix`` (default) it is the simplified Newton of :func:`simplified_newton_loop`:
+    Newton's matrix and its factorisation are kept across iterations and steps while its steps
+    contract; otherwise the matrix is assembled and factorised at every iteration.
     """
 
     step_tolerance: float = eqx.field(static=True, default=1e-10)
     max_steps: int = eqx.field(static=True, default=50)
     max_halvings: int = eqx.field(static=True, default=40)
+    reuse_matrix: bool = eqx.field(static=True, default=True)
 
     def linear_solve(self, potential, y, rhs):
-        return self._solve(potential, y, rhs, False, self._rayleigh_values(potential))
+        return self._apply(potential, self._matrix(potential, y, self._rayleigh_values(potential)), rhs, False)
 
     @staticmethod
     def _rayleigh_values(potential):
@@ -167,7 +196,8 @@ class SparseNewton(AbstractMinimiser):
             return None
         return potential.rayleigh.stiffness_coefficient / potential.dt * potential.system.hessian_parts(potential.x_prev)[0]
 
-    def _solve(self, potential, y, rhs, shift: bool, rayleigh_values):
+    def _matrix(self, potential, y, rayleigh_values):
+        """Newton's matrix at y [m] as the host solve's inputs (data, blocks, diag, c2, u, columns, coeffs)."""
         system = potential.system
         if not isinstance(system, ShellDynamicSystem):
             raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
@@ -181,17 +211,34 @@ class SparseNewton(AbstractMinimiser):
         share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
         columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
         coeffs = jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt if system.planes else jnp.zeros((0,))
+        return data, blocks, diag, c2, u, columns, coeffs
+
+    def _apply(self, potential, matrix, rhs, shift: bool):
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
-        solve = functools.partial(_host_solve, system.pattern_key, shift)
+        solve = functools.partial(_host_solve, potential.system.pattern_key, shift)
+        data, blocks, diag, c2, u, columns, coeffs = matrix
         return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
 
-    def _direction(self, potential, y, g, rayleigh_values):
-        p = self._solve(potential, y, -g, True, rayleigh_values)
+    def _direction(self, potential, matrix, g):
+        p = self._apply(potential, matrix, -g, True)
         # Only a failed shift gives NaN: fall back to descent scaled by the inertia.
         ok = jnp.all(jnp.isfinite(p)) & (g @ p < 0.0)
         return jnp.where(ok, p, -g / jnp.max(potential.inertia_weight))
 
-    def minimise(self, potential, y0):
+    def initial_memory(self, potential, y0):
+        if not self.reuse_matrix:
+            return None
+        shapes = jax.eval_shape(lambda y: self._matrix(potential, y, self._rayleigh_values(potential)), y0)
+        return KeptMatrix(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes), jnp.asarray(True))
+
+    def minimise(self, potential, y0, memory=None):
         # K(xₙ) of Rayleigh β is the same in every iteration of the step: assembled once, before the loop.
         rayleigh_values = self._rayleigh_values(potential)
-        return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, y, g, rayleigh_values))
+
+        def assemble(y):
+            return self._matrix(potential, y, rayleigh_values)
+
+        if not self.reuse_matrix:
+            return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, assemble(y), g))
+        memory = self.initial_memory(potential, y0) if memory is None else memory
+        return simplified_newton_loop(self, potential, y0, assemble, lambda values, g: self._direction(potential, values, g), memory)
