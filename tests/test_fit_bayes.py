@@ -93,6 +93,25 @@ def test_posterior_resumes_from_hdf5(tmp_path):
     np.testing.assert_array_equal(second.chain[:300], first.chain)
 
 
+def test_chain_file_is_the_chain_in_emcees_layout(tmp_path):
+    import emcee
+
+    fit = fit_session(synthetic(depth_noise=1e-3, seed=6), MODEL)
+    path = tmp_path / "chain.h5"
+    options = dict(n_walkers=16, max_steps=620, check_every=310, seed=3, progress=False)  # 620: not a multiple of the 250-step block
+    with pytest.warns(ConvergenceWarning):
+        in_memory = sample_posterior(fit, **options)
+    with pytest.warns(ConvergenceWarning):
+        on_file = sample_posterior(fit, backend_path=path, **options)
+    np.testing.assert_array_equal(on_file.chain, in_memory.chain)
+    # emcee's own reader sees every step, the acceptance counts and the sampler's last random state.
+    stored = emcee.backends.HDFBackend(str(path), name="shelljax-" + fit.source.stem, read_only=True)
+    assert stored.iteration == 620
+    np.testing.assert_array_equal(stored.get_chain(), in_memory.chain)
+    assert np.mean(stored.accepted) / 620 == pytest.approx(in_memory.acceptance_fraction, rel=1e-12)
+    assert stored.random_state is not None
+
+
 class _FailsAbovePressure(ScalingLawModel):
     limit: float = 1400.0
 

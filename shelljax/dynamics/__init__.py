@@ -17,7 +17,7 @@ from ._contact import (
 )
 from ._cor import Calibration, Impact, calibrate_contact_damping, contact_diameter, measured_cor, mesh_edges
 from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
-from ._minimise import AbstractMinimiser, DenseNewton, MinimiserResult, solve_step
+from ._minimise import AbstractMinimiser, DenseNewton, KeptMatrix, MinimiserResult, simplified_newton_loop, solve_step
 from ._output import write_results
 from ._potential import IncrementalPotential, incremental_potential
 from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness

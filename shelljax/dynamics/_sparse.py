@@ -1,7 +1,7 @@
 """``SparseNewton``: the step minimiser of the 3D shell, on the engine's sparse factorisation.
 
-Newton's loop is the dense minimiser's (traceable: it runs inside ``jit`` and ``lax.scan``); only
-the linear solve differs. The Hessian of the incremental potential is assembled without ever
+Newton's loop is the simplified one of ``_minimise`` (traceable: it runs inside ``jit`` and
+``lax.scan``), or with ``reuse_matrix=False`` the dense minimiser's; only the linear solve differs. The Hessian of the incremental potential is assembled without ever
 being densified,
 
     ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks)
@@ -14,6 +14,8 @@ centre-of-mass dashpots' (Woodbury, one column per plane). The values are
 computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.SparseSolver`, its
 symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
 derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
+Newton's matrix is kept across iterations and steps while it contracts (``reuse_matrix``,
+:func:`simplified_newton_loop`); the host keeps recent factorisations by content.
 Newton's step shifts a Hessian that is not positive definite by a multiple of its mean diagonal;
 the implicit derivative's solve is never shifted.
 β's gas rank-one term at xₙ is left out of Newton's matrix (an approximation of its step only).

@@ -7,8 +7,8 @@ estimated and sampling stops once the chain is longer than ``autocorr_factor`` (
 changed by less than ``tau_tolerance`` (5 %) since the last check (emcee's documentation uses
 100 τ and 1 %; 50 τ already bounds the Monte-Carlo error of τ to ~10 %), and never before
 ``min_steps`` (1000): on shorter chains τ itself is underestimated. Otherwise a warning says the
-chain has not converged. Chains can live in an HDF5 file (emcee's HDFBackend) and a later call
-with the same file resumes them. Forward solves that fail map to log p = −∞ and are counted.
+chain has not converged. Chains can live in an HDF5 file (emcee's HDFBackend layout, written 250
+steps at a time) and a later call with the same file resumes them. Forward solves that fail map to log p = −∞ and are counted.
 
 The sampler starts from a least-squares fit (:class:`FitResult`): its inverse problem, and, with
 the surrogate, its optimum and Laplace covariance.
@@ -171,9 +171,64 @@ def _surrogate_around_fit(fit: FitResult, nodes, progress):
     return built, report
 
 
+class _BlockHDFBackend(emcee.backends.HDFBackend):
+    """emcee's HDF5 chain file, written a block of ``block`` steps at a time: emcee's backend opens
+    the file at every step, which costs more than the step itself. Whatever reads the file (τ
+    checks, the summary, a resumed run) writes the pending steps first. The posterior has no blobs."""
+
+    def __init__(self, *args, block: int = 250, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._block, self._pending, self._random_state = block, [], None
+
+    def save_step(self, state, accepted):
+        self._pending.append((np.array(state.coords), np.array(state.log_prob), np.asarray(accepted, dtype=float)))
+        self._random_state = state.random_state
+        if len(self._pending) >= self._block:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the pending steps, as emcee's ``save_step`` would one by one."""
+        if not self._pending:
+            return
+        pending, self._pending = self._pending, []
+        with self.open("a") as f:
+            group = f[self.name]
+            start = int(group.attrs["iteration"])
+            stop = start + len(pending)
+            group["chain"][start:stop] = np.stack([p[0] for p in pending])
+            group["log_prob"][start:stop] = np.stack([p[1] for p in pending])
+            group["accepted"][:] += np.sum([p[2] for p in pending], axis=0)
+            for i, value in enumerate(self._random_state):
+                group.attrs[f"random_state_{i}"] = value
+            group.attrs["iteration"] = stop
+
+    def grow(self, ngrow, blobs):
+        self.flush()
+        super().grow(ngrow, blobs)
+
+    def get_value(self, name, flat=False, thin=1, discard=0):
+        self.flush()
+        return super().get_value(name, flat=flat, thin=thin, discard=discard)
+
+    @property
+    def iteration(self):
+        self.flush()
+        return super().iteration
+
+    @property
+    def accepted(self):
+        self.flush()
+        return super().accepted
+
+    @property
+    def random_state(self):
+        self.flush()
+        return super().random_state
+
+
 def _open_backend(backend_path, source: Path, n_walkers: int, ndim: int):
-    """emcee's HDF5 backend at ``backend_path``, reset unless it holds a chain of this shape."""
-    backend = emcee.backends.HDFBackend(str(backend_path), name=f"shelljax-{source.stem}")
+    """emcee's HDF5 backend at ``backend_path`` (written in blocks), reset unless it holds a chain of this shape."""
+    backend = _BlockHDFBackend(str(backend_path), name=f"shelljax-{source.stem}")
     if Path(backend_path).is_file() and backend.initialized and backend.iteration > 0:
         if backend.shape != (n_walkers, ndim):
             raise InvalidInputError(
@@ -318,4 +373,6 @@ def sample_posterior(
     sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
     converged, done = _run_until_converged(sampler, initial, chain, source, progress)
+    if backend is not None:
+        backend.flush()
     return _summarise(sampler, problem, log_prob, converged, done, surrogate_info)
