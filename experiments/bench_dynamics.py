@@ -55,8 +55,6 @@ def breakdown(system, state, dt: float, integrator) -> dict:
     """Isolated timings [s] of one step's pieces at ``state``: Newton's matrix (shell Hessian and
     point blocks), its host factorisation with a solve, a solve with a kept factorisation, and one
     gradient and one energy of the step's incremental potential."""
-    from shelljax.dynamics._sparse import _FACTORS
-
     potential = d.incremental_potential(system, integrator, state, jnp.asarray(dt))
     y = potential.free(state.position)
     rhs = -potential.gradient(y)
@@ -66,7 +64,7 @@ def breakdown(system, state, dt: float, integrator) -> dict:
         return p.system.hessian_parts(x), p.point_hessian_blocks(x)
 
     def fresh_solve(p, y, b):
-        _FACTORS.clear()
+        d.forget_factorisations()
         return solve(p, y, b)
 
     solve = eqx.filter_jit(lambda p, y, b: d.SparseNewton().linear_solve(p, y, b))

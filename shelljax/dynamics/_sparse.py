@@ -131,6 +131,11 @@ def _free_assembly(key: int, n: int, free: np.ndarray) -> _FreeAssembly:
 _FACTORS: dict = {}
 
 
+def forget_factorisations() -> None:
+    """Drop the host's kept factorisations (the next solve factorises afresh; e.g. to time it)."""
+    _FACTORS.clear()
+
+
 def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
     """rhs ↦ (K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; None if not
     positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
