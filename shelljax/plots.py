@@ -136,8 +136,11 @@ def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tup
     fig.savefig(corner_path, dpi=90)
     plt.close(fig)
     fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.4 * len(names)), sharex=True, dpi=100)
+    # At most ~700 points a walker: the 700-pixel-wide axes show no more, and drawing them all is slow.
+    every = max(1, chain.shape[0] // 700)
+    steps = np.arange(0, chain.shape[0], every)
     for ax, i, name in zip(np.atleast_1d(axes), range(len(names)), names):
-        ax.plot(chain[:, :, i], color="k", alpha=0.15, lw=0.5)
+        ax.plot(steps, chain[::every, :, i], color="k", alpha=0.15, lw=0.5)
         ax.set_ylabel(scale[name][1].split(" ")[0] + " (u)", fontsize=7)
     np.atleast_1d(axes)[-1].set_xlabel("step")
     fig.suptitle(f"MCMC trace, {stem} (sampler coordinates: log-scaled)", fontsize=9)
