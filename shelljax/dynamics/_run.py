@@ -127,12 +127,14 @@ def step(
 def _step_kept(system, state, dt, integrator, minimiser, rayleigh, memory):
     """:func:`step` with the minimiser's ``memory`` from the previous step: (state, record, memory)."""
     potential = incremental_potential(system, integrator, state, dt, rayleigh)
-    # Newton starts where the step would end if the acceleration stayed aₙ (exact in free flight), else at
-    # x̂; either may cross a barrier, and the previous positions (with the new prescribed ones) are a safe start.
-    extrapolated = potential.free(potential.x_hat + integrator.inertia_factor() * potential.dt**2 * state.acceleration)
+    # x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start. Where
+    # the acceleration staying aₙ gives a lower Φ_inc, Newton starts there instead (exact in free flight;
+    # an initial state far from equilibrium can have an aₙ that throws the nodes metres away).
     predicted = potential.free(potential.x_hat)
     start = jnp.where(potential.is_feasible(predicted), predicted, potential.free(state.position))
-    start = jnp.where(potential.is_feasible(extrapolated), extrapolated, start)
+    extrapolated = potential.free(potential.x_hat + integrator.inertia_factor() * potential.dt**2 * state.acceleration)
+    better = potential.is_feasible(extrapolated) & (potential.value(extrapolated) < potential.value(start))
+    start = jnp.where(better, extrapolated, start)
     feasible = potential.is_feasible(start)
     result = solve_step(potential, minimiser, jax.lax.stop_gradient(start), memory)
     x_new = potential.full(result.y)

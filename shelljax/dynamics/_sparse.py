@@ -1,8 +1,8 @@
 """``SparseNewton``: the step minimiser of the 3D shell, on the engine's sparse factorisation.
 
 Newton's loop is the simplified one of ``_minimise`` (traceable: it runs inside ``jit`` and
-``lax.scan``), or with ``reuse_matrix=False`` the dense minimiser's; only the linear solve differs. The Hessian of the incremental potential is assembled without ever
-being densified,
+``lax.scan``), or with ``reuse_matrix=False`` the dense minimiser's; only the linear solve
+differs. The Hessian of the incremental potential is assembled without ever being densified,
 
     ∇²Φ_inc = diag(inertia_weight [+ α M/Δt]) + K_shell(x) [+ β K_shell(xₙ)/Δt] + blockdiag(point blocks)
               + c u uᵀ + Σ_planes (c_p Wⁿ_p / Δt) v_p v_pᵀ,
