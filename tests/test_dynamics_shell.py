@@ -147,7 +147,7 @@ def test_a_wild_acceleration_changes_newtons_start_not_the_step(system):
         new, record = d.step(system, start, 1e-2, d.BackwardEuler(), d.SparseNewton())
         assert bool(record.converged)
         ends.append(np.asarray(new.position))
-    # Both end within Newton's 1e-10 m step tolerance of the same minimiser.
+    # Both end within about Newton's 1e-10 m step tolerance of the same minimiser: 2e-10 apart at most, 1e-9 with margin.
     assert np.max(np.abs(ends[0] - ends[1])) < 1e-9
 
 
