@@ -262,9 +262,14 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     scale = np.abs(hessian).max()
     # Only the ground's zz entries change, by the closed-form amount; round-off of the largest entry.
     np.testing.assert_allclose(newton_matrix, expected, rtol=0, atol=1e-12 * scale)
-    assert np.sum(factor == floor) >= 2 and np.all(np.diag(newton_matrix - hessian) <= 0.0)  # softened, never stiffened
-    # At equilibrium (zero gradient) Newton's matrix is the Hessian, bit for bit.
-    np.testing.assert_array_equal(model.host_hessian(q, params, gradient=np.zeros_like(g))[0].toarray(), hessian)
+    # softened, never stiffened: no diagonal entry grows by more than the 2 ulp by which the two
+    # assemblies' rounding may differ
+    softening = np.diag(newton_matrix - hessian)
+    assert np.sum(factor == floor) >= 2 and np.all(softening <= 4 * np.finfo(float).eps * np.abs(np.diag(hessian)))
+    # At equilibrium (zero gradient) Newton's matrix is the Hessian, to the assembly's round-off:
+    # 4 ulp of each row's largest entry (two programs, each rounded as XLA fuses it).
+    at_equilibrium = model.host_hessian(q, params, gradient=np.zeros_like(g))[0].toarray()
+    assert np.all(np.abs(at_equilibrium - hessian) <= 4 * np.finfo(float).eps * np.abs(hessian).max(axis=1, keepdims=True))
     # CG's products (stored linearization, and jvp above the face threshold) apply the same matrix.
     v = rng.normal(size=q.size)
     for max_faces in (mesh.n_faces, mesh.n_faces - 1):

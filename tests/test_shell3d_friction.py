@@ -163,9 +163,11 @@ def test_zero_friction_reproduces_the_frictionless_solution(frictionless, poked)
     lagged = {"friction_anchor": state0.vertices + 1e-3, "friction_normal_force": np.zeros((1, len(state0.vertices)))}
     params = sim.params_at(q, **lagged)
     np.testing.assert_array_equal(sim.model.host_gradient(q, params), frictionless.model.host_gradient(q, params))
-    np.testing.assert_array_equal(
-        sim.model.host_hessian(q, params)[0].toarray(), frictionless.model.host_hessian(q, params)[0].toarray()
-    )
+    # the Hessians to the assembly's round-off, 4 ulp of each row's largest entry: how XLA fuses the
+    # two programs' sums decides their last bits
+    frictionless_hessian = frictionless.model.host_hessian(q, params)[0].toarray()
+    round_off = 4 * np.finfo(float).eps * np.abs(frictionless_hessian).max(axis=1, keepdims=True)
+    assert np.all(np.abs(sim.model.host_hessian(q, params)[0].toarray() - frictionless_hessian) <= round_off)
     res = sim.model.equilibrium(q, params, atol=sim.atol)
     assert res.iterations == 0
     np.testing.assert_array_equal(res.x, q)

@@ -8,7 +8,6 @@ quantities are reported with log-normal 95 % intervals, matching the log paramet
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from pathlib import Path
 
@@ -18,10 +17,11 @@ import numpy as np
 import optimistix as optx
 
 from .._errors import NoConvergenceError
+from .._programs import persistent_jit
 from ..session import Session
 from ._closed_form import estimate_session
 from ._forward import AbstractForwardModel
-from ._problem import ALL_NAMES, OFFSET_SCALE, InverseProblem, build_problem, padded_problem
+from ._problem import ALL_NAMES, OFFSET_SCALE, InverseProblem, PaddedProblem, build_problem, padded_problem
 from ._result import Estimate
 
 _METHOD = "fit: Levenberg-Marquardt through {model}, Laplace (Gauss-Newton) errors"
@@ -106,8 +106,7 @@ def _zero_tangent(x):
     return np.zeros(x.shape, jax.dtypes.float0)
 
 
-@functools.partial(jax.jit, static_argnames="max_steps")
-def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
+def _solve(problem: PaddedProblem, u0, rtol, atol, max_steps: int):
     # One compiled program; every forward-model call in it is another engine copy to compile, so
     # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
@@ -122,6 +121,12 @@ def _solve(problem: InverseProblem, u0, rtol, atol, max_steps: int):
                 residual=accepted.residual, jacobian=accepted.jac.as_matrix(), prediction=tuple(prediction))  # fmt: skip
 
 
+# XLA:CPU's legacy elemental emitters and LLVM at -O1 compile the fit in two thirds of the time,
+# and it runs as fast (docs/fit-and-bayes.md#compilation)
+_FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
+_solve_kept = persistent_jit(_solve, static_argnames=("max_steps",), cpu_compiler_options=_FIT_COMPILER_OPTIONS)
+
+
 def solve_least_squares(problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
                         optimality_tol: float = OPTIMALITY_TOL):
     """Levenberg–Marquardt on ``problem.residuals_and_prediction`` (whitened residuals, aux
@@ -131,7 +136,7 @@ def solve_least_squares(problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max
     converged; forward model finite; the χ² a Gauss–Newton step would still remove). Converged
     as :func:`fit_session` documents.
     """
-    out = _solve(problem, u0, rtol, atol, int(max_steps))
+    out = _solve_kept(problem, u0, rtol, atol, max_steps=int(max_steps))
     finite = bool(out["forward_ok"])
     jac = np.asarray(out["jacobian"])
     # optimistix also stops "successfully" after a step it rejected (e.g. the engine failed at the

@@ -1,0 +1,59 @@
+"""Export the default experiment's traced fit program into the package (``shelljax/data/programs/``).
+
+A fit's program is kept across processes by its key (package sources, jax and jaxlib versions, the
+arguments' structure; ``shelljax/_programs.py``). Shipping the one ``shelljax run
+configs/paper.toml`` uses lets a new user's first fit skip ~12 s of tracing: only XLA compiles.
+Any change to the package's sources changes the key, so run this after every such change
+(``tests/test_programs.py`` fails until you do)::
+
+    python experiments/ship_programs.py [--config configs/paper.toml]
+
+It fits every calibration and estimation session of the config (one program serves all of a
+structure), then replaces the shipped programs with the ones those fits exported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default=str(ROOT / "configs" / "paper.toml"))
+    args = parser.parse_args()
+    cache = Path(tempfile.mkdtemp(prefix="shelljax-ship-"))
+    os.environ["SHELLJAX_CACHE_DIR"] = str(cache)  # before shelljax sets JAX's cache directory
+    os.environ.pop("SHELLJAX_NO_COMPILATION_CACHE", None)
+
+    import shelljax
+    from shelljax.config import estimator_option_fields, load_config
+    from shelljax.estimate import EstimatorOptions, run_estimator
+    from shelljax.session import load_session
+
+    shipped = Path(shelljax.__file__).resolve().parent / "data" / "programs"
+    if shipped.parent.parent != ROOT / "shelljax":
+        raise SystemExit(f"shelljax is imported from {shipped.parent.parent}, not this checkout: pip install -e {ROOT}")
+    config = load_config(args.config)
+    options = EstimatorOptions(**estimator_option_fields(config))
+    try:
+        for path in (*config.calibration_sessions, *config.sessions):
+            run_estimator("fit", load_session(path), options)
+            print(f"fitted {path.name}", flush=True)
+        exported = sorted((cache / "programs").glob("*.jaxexport"))
+        shutil.rmtree(shipped, ignore_errors=True)
+        shipped.mkdir(parents=True)
+        for path in exported:
+            shutil.copyfile(path, shipped / path.name)
+            print(f"shipped {path.name} ({path.stat().st_size / 1e3:.0f} kB)")
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
