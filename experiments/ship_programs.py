@@ -2,7 +2,7 @@
 
 A fit's program is kept across processes by its key (package sources, jax and jaxlib versions, the
 arguments' structure; ``shelljax/_programs.py``). Shipping the one ``shelljax run
-configs/paper.toml`` uses lets a new user's first fit skip ~12 s of tracing: only XLA compiles.
+configs/paper.toml`` uses lets a new user's first fit skip its tracing: only XLA compiles.
 Any change to the package's sources changes the key, so run this after every such change
 (``tests/test_programs.py`` fails until you do)::
 

@@ -1,9 +1,9 @@
 """Traced programs kept across processes, as serialized StableHLO (``jax.export``).
 
 JAX's persistent compilation cache keeps what XLA compiled, but every new process still traces
-its programs again; the fit traces its Levenberg–Marquardt loop through the engine's equilibria
-for ~12 s. :func:`persistent_jit` keeps the traced and lowered program itself, keyed by everything
-that shapes it:
+its programs again, and tracing the fit (Levenberg–Marquardt through the engine's equilibria) is
+most of a warm fit's first call. :func:`persistent_jit` keeps the traced and lowered program
+itself, keyed by everything that shapes it:
 
 * the package's sources (a SHA-256 of every ``shelljax/**/*.py``): any code change is a new key,
   so a kept program never outlives the code that traced it;

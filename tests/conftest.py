@@ -10,9 +10,9 @@ import os
 # reused by shelljax outside the tests. An XLA_FLAGS that sets its own level overrides this.
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-# For the same reason XLA:CPU uses its legacy elemental emitters here (as shelljax's own fit
-# does): they compile the engines' programs in about two thirds of the time (docs/fit-and-bayes.md
-# #compilation) with the same arithmetic up to the rounding of fused expressions.
+# For the same reason XLA:CPU uses its legacy elemental emitters here, as shelljax's own fit does:
+# they compile the engines' programs faster (docs/fit-and-bayes.md#compilation), with the same
+# arithmetic up to the rounding of fused expressions.
 if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 

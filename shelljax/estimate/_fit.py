@@ -121,8 +121,8 @@ def _solve(problem: PaddedProblem, u0, rtol, atol, max_steps: int):
                 residual=accepted.residual, jacobian=accepted.jac.as_matrix(), prediction=tuple(prediction))  # fmt: skip
 
 
-# XLA:CPU's legacy elemental emitters and LLVM at -O1 compile the fit in two thirds of the time,
-# and it runs as fast (docs/fit-and-bayes.md#compilation)
+# a fit is compiled more often than it runs long: XLA:CPU's legacy elemental emitters and LLVM at
+# -O1 compile it faster, and it runs as fast (docs/fit-and-bayes.md#compilation)
 _FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 _solve_kept = persistent_jit(_solve, static_argnames=("max_steps",), cpu_compiler_options=_FIT_COMPILER_OPTIONS)
 
