@@ -143,4 +143,9 @@ def _load_or_export(fn: Callable, static_argnames: tuple[str, ...], key: str, ar
             plain = jax.jit(fn, static_argnames=static_argnames, compiler_options=options)
             return lambda *flat_leaves: plain(*jax.tree_util.tree_unflatten(treedef, flat_leaves), **static)
         _write(key, exported)
-    return jax.jit(exported.call, compiler_options=options)
+
+    @functools.wraps(fn)  # the compile log and JAX's own messages name the program after fn
+    def run(*flat_leaves):
+        return exported.call(*flat_leaves)
+
+    return jax.jit(run, compiler_options=options)
