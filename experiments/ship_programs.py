@@ -41,18 +41,29 @@ def main() -> None:
         raise SystemExit(f"shelljax is imported from {shipped.parent.parent}, not this checkout: pip install -e {ROOT}")
     config = load_config(args.config)
     options = EstimatorOptions(**estimator_option_fields(config))
+    # the shipped programs move aside while the fits run: a fit that finds its program there
+    # (sources unchanged) would export nothing
+    previous = Path(tempfile.mkdtemp(prefix="shelljax-shipped-"))
+    if shipped.is_dir():
+        shutil.copytree(shipped, previous, dirs_exist_ok=True)
+        shutil.rmtree(shipped)
+    shipped.mkdir(parents=True)
     try:
         for path in (*config.calibration_sessions, *config.sessions):
             run_estimator("fit", load_session(path), options)
             print(f"fitted {path.name}", flush=True)
         exported = sorted((cache / "programs").glob("*.jaxexport"))
-        shutil.rmtree(shipped, ignore_errors=True)
-        shipped.mkdir(parents=True)
+        if not exported:
+            raise SystemExit(f"the fits of {args.config} exported no program; the shipped ones are left as they were")
         for path in exported:
             shutil.copyfile(path, shipped / path.name)
             print(f"shipped {path.name} ({path.stat().st_size / 1e3:.0f} kB)")
+    except BaseException:
+        shutil.copytree(previous, shipped, dirs_exist_ok=True)
+        raise
     finally:
         shutil.rmtree(cache, ignore_errors=True)
+        shutil.rmtree(previous, ignore_errors=True)
 
 
 if __name__ == "__main__":

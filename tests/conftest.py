@@ -25,6 +25,26 @@ jax.config.update("jax_numpy_dtype_promotion", "strict")
 import shelljax  # noqa: E402,F401  (x64 for every test, whatever it imports first)
 
 
+# Test files that run the same compiled programs go to one xdist worker, in file order, so that
+# the later ones find those programs in the persistent caches instead of compiling them again at
+# the same time on the other worker: the sim_to_real notebook's diagnosis is test_diagnose's joint
+# fit (4 sessions), and test_fit_axisym and test_runner_cli both fit with the main job's program.
+SHARED_PROGRAMS = {"test_notebooks.py": "test_diagnose.py", "test_runner_cli.py": "test_fit_axisym.py"}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedProgramsTogether(LoadFileScheduling):
+        def _split_scope(self, nodeid):
+            path = super()._split_scope(nodeid)
+            name = path.rpartition("/")[2]
+            return path.removesuffix(name) + SHARED_PROGRAMS[name] if name in SHARED_PROGRAMS else path
+
+    return SharedProgramsTogether(config, log)
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     """Drop JAX's compiled programs after each test file.
