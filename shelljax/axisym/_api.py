@@ -86,6 +86,9 @@ def _walk_coordinates(params: Float[Array, "b 4"]) -> Float[Array, "b 4"]:
 @functools.partial(jax.jit, static_argnums=(0, 3))
 def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
     b = params.shape[0]
+    if b == 1:  # one curve: its Newton loops need no batching, which costs tracing and compiling
+        one = _one(setup, params[0], forces, jax.tree_util.tree_map(lambda v: v[0], physics))[0]
+        return jax.tree_util.tree_map(lambda v: v[None], one)
     if chunk <= 0 or b <= chunk:
         return jax.vmap(lambda th, ph: _one(setup, th, forces, ph))(params, physics)[0]
     # `chunk` lanes, vmapped, each walking its own stretch of the batch's Hilbert ordering, one
