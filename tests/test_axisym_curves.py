@@ -40,6 +40,16 @@ def test_batch_elements_are_independent(batch_result):
     np.testing.assert_allclose(swapped.w0[::-1], res.w0, rtol=1e-8)
 
 
+def test_one_curve_unbatched_is_its_row_of_a_vmapped_batch(batch_result):
+    # a batch of one skips vmap: the same Newton iterations from the same start, so the same
+    # equilibrium up to round-off (1e-8, as for the swapped batch above)
+    params, res = batch_result
+    alone = indentation_curves(params[:1], FORCES, radius=RADIUS, **KW)
+    np.testing.assert_allclose(alone.w0, res.w0[:1], rtol=1e-8)
+    np.testing.assert_allclose(alone.wrinkle_count, res.wrinkle_count[:1], rtol=1e-8)
+    np.testing.assert_array_equal(alone.iterations, res.iterations[:1])
+
+
 def test_uneven_chunks_match_one_vmapped_batch(batch_result):
     """3 curves in 2 lanes (the second padded with a copy of the Hilbert walk's last curve)
     against the fixture's one vmap of the first two: the padding must neither leak into the
