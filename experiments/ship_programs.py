@@ -43,10 +43,9 @@ def main() -> None:
     options = EstimatorOptions(**estimator_option_fields(config))
     # the shipped programs move aside while the fits run: a fit that finds its program there
     # (sources unchanged) would export nothing
-    previous = Path(tempfile.mkdtemp(prefix="shelljax-shipped-"))
+    previous = Path(tempfile.mkdtemp(prefix="shelljax-shipped-")) / "programs"
     if shipped.is_dir():
-        shutil.copytree(shipped, previous, dirs_exist_ok=True)
-        shutil.rmtree(shipped)
+        shutil.move(shipped, previous)
     shipped.mkdir(parents=True)
     try:
         for path in (*config.calibration_sessions, *config.sessions):
@@ -59,12 +58,13 @@ def main() -> None:
             shutil.copyfile(path, shipped / path.name)
             print(f"shipped {path.name} ({path.stat().st_size / 1e3:.0f} kB)")
     except BaseException:
-        shutil.copytree(previous, shipped, dirs_exist_ok=True)
+        shutil.rmtree(shipped, ignore_errors=True)
+        if previous.is_dir():
+            shutil.move(previous, shipped)
         raise
     finally:
         shutil.rmtree(cache, ignore_errors=True)
-        shutil.rmtree(previous, ignore_errors=True)
-
+        shutil.rmtree(previous.parent, ignore_errors=True)
 
 if __name__ == "__main__":
     main()
