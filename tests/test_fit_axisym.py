@@ -29,16 +29,17 @@ def model():
     return AxisymForwardModel.for_forces(0.13, FORCES, **OPTIONS)
 
 
+@jax.jit  # one program for every model of this structure (its numbers are traced), not op by op
+def _depth(model, theta):
+    return model(theta[0], theta[1], theta[2], theta[3], FORCES[:7]).depth
+
+
 def test_depth_gradient_matches_central_differences(model):
     theta = jnp.asarray(TRUTH)
-
-    def depth(t):
-        return model(t[0], t[1], t[2], t[3], FORCES[:7]).depth
-
-    jac = jax.jacfwd(depth)(theta)
+    jac = jax.jit(jax.jacfwd(_depth, argnums=1))(model, theta)
     for k in range(4):
         step = 2.5e-5 * theta[k]
-        fd = (depth(theta.at[k].add(step)) - depth(theta.at[k].add(-step))) / (2 * step)
+        fd = (_depth(model, theta.at[k].add(step)) - _depth(model, theta.at[k].add(-step))) / (2 * step)
         # Newton converges to 1e-7 N (docs/axisym.md), so depths are exact to ~1e-12 m; the central
         # difference's O(step²) truncation error is largest for R at the wrinkled 17.5–20 N levels:
         # measured 2.5e-5 relative at 1e-4 steps, 1.6e-6 at 2.5e-5 (≤ 6e-8 for P_g, E, h): 1e-5 holds
@@ -50,9 +51,25 @@ def test_similarity_in_radius(model):
     # effect on the dimple depth at these forces is below 1 %.
     direct = AxisymForwardModel.for_forces(0.1352, FORCES, **OPTIONS)
     p, e, h, _ = TRUTH
-    scaled = model(p, e, h, 0.1352, FORCES[:7]).depth
-    reference = direct(p, e, h, 0.1352, FORCES[:7]).depth
+    scaled = _depth(model, jnp.asarray([p, e, h, 0.1352]))
+    reference = _depth(direct, jnp.asarray([p, e, h, 0.1352]))
     np.testing.assert_allclose(np.asarray(scaled), np.asarray(reference), rtol=1e-2)
+
+
+def test_both_gas_laws_run_one_program(model):
+    # the gas law is the traced exponent κ of the engine's polytropic gas: same pytree structure
+    # (static fields included), so the prescribed-pressure model runs the isothermal one's program
+    prescribed = AxisymForwardModel.for_forces(0.13, FORCES, **{**OPTIONS, "gas": "prescribed"})
+    assert jax.tree_util.tree_structure(prescribed) == jax.tree_util.tree_structure(model)
+    assert (prescribed.gas_exponent, model.gas_exponent) == (0.0, 1.0)
+    theta = jnp.asarray(TRUTH)
+    free = np.asarray(_depth(prescribed, theta))
+    # κ = 0 holds the pressure at P_g whatever volume the gas fills: the same Newton path, so the
+    # same depths to round-off (measured 1e-14)
+    np.testing.assert_allclose(_depth(dataclasses.replace(prescribed, gas_volume_ratio=3.0), theta), free, rtol=1e-12)
+    # κ = 1: squeezing the sealed gas raises its pressure and stiffens the ball (measured 6 % less
+    # depth at 5 N, 29 % at 20 N)
+    assert np.all(np.asarray(_depth(model, theta)) < 0.97 * free)
 
 
 def test_fit_recovers_parameters_of_its_own_model(model):

@@ -12,12 +12,13 @@ from .._parallel import cpu_workers, map_batch
 from ._api import CurveResult, indentation_curves, indentation_curves_raw
 from ._energy import Config, Params, enclosed_volume, hoop_tension, rest_nodes, total_energy
 from ._inflation import gent_sphere_pressure, inflation_stretch, neo_hookean_sphere_pressure
-from ._model import CurvePhysics, Setup, curve_single, inflate
+from ._model import GAS_EXPONENTS, CurvePhysics, Setup, curve_single, inflate
 from ._newton import SolverOptions, equilibrium
 from ._observables import compressive_annulus, observables, wrinkle_count, wrinkle_length
 from ._shallow import pinch_linear_stiffness, pinch_observables, pinch_setup, pinch_state
 
 __all__ = [
+    "GAS_EXPONENTS",
     "Config",
     "CurvePhysics",
     "CurveResult",

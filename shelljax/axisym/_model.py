@@ -129,6 +129,11 @@ class Setup(eqx.Module):
         return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
 
 
+# κ of each named gas law (p V^κ constant): gas = "polytropic" with this traced κ is that law, so one
+# compiled program serves them all
+GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": 1.4}
+
+
 class CurvePhysics(eqx.Module):
     """Per-curve physical effects, traced: one compiled program serves every value.
 

@@ -28,10 +28,11 @@ import numpy as np
 from scipy import stats
 
 from .._errors import InvalidInputError, NoConvergenceError
+from ..axisym import GAS_EXPONENTS
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
-from ._model import GAS_EXPONENTS, WRINKLE_LAWS, StudyArrays, physical, study_arrays
+from ._model import WRINKLE_LAWS, StudyArrays, physical, study_arrays
 from ._study import SHAPE_OBSERVABLES, Study, build_study
 
 WIN_SE = 2.0

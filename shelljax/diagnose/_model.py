@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
+from ..axisym import GAS_EXPONENTS, CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
 from ..estimate import FAILED_RESIDUAL, count_log_likelihood
 from ..paper import PAPER_INDENTER_RADIUS
 from ..physics import STANDARD_GRAVITY, scaling_wrinkle_count
@@ -51,7 +51,6 @@ R_REF = 0.2  # [m] the engine's radius; every object is reached by similarity
 N_GRID = 12  # forces per curve
 GRID_SPAN = (0.6, 1.3)  # the grid covers [0.6 F_min, 1.3 F_max]: room for gain and exponent
 N_ELEMENTS = 101  # meridian elements, as the fitted estimator's forward model
-GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": 1.4}
 WRINKLE_LAWS = ("scaling", "mechanics")
 _INDEX = {name: i for i, name in enumerate(GLOBAL_PARAMETERS)}
 

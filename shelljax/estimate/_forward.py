@@ -76,7 +76,9 @@ class AxisymForwardModel(AbstractForwardModel):
     the engine's mechanical count at the top force, where the protocol records it; with
     ``"scaling"``, Vella et al.'s n = 1.33 τ^½ at the fitted parameters. With a sealed gas it fills
     ``gas_volume_ratio`` [-] times the ball's 4/3 π R³; ``contact_stiffness`` k_c [N/m³] is the
-    contact penalty.
+    contact penalty. The engine's gas is the polytropic one, p V^κ constant, with a traced
+    ``gas_exponent`` κ [-] (0: the prescribed pressure, 1: the isothermal sealed gas), so both gas
+    laws run the same compiled program.
 
     Every number of a session is a traced field, so one compiled program serves every object:
     the engine (``setup``, static: mesh, gas law, solver) runs at ``ENGINE_RADIUS`` R₀ and reaches
@@ -96,6 +98,7 @@ class AxisymForwardModel(AbstractForwardModel):
     indenter_radius: float
     gas_volume_ratio: float
     contact_stiffness: float
+    gas_exponent: float
     n_grid: int = eqx.field(static=True)
     setup: object = eqx.field(static=True)
     wrinkle_law: str = eqx.field(static=True, default="mechanics")
@@ -106,17 +109,19 @@ class AxisymForwardModel(AbstractForwardModel):
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]; ``setup_kwargs``
         go to the engine's ``Setup`` (its finger, gas volume ratio and penalty become traced fields)."""
         from .._errors import InvalidInputError
-        from ..axisym import Setup
+        from ..axisym import GAS_EXPONENTS, Setup
 
         if wrinkle_law not in WRINKLE_LAWS:
             raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: use one of {', '.join(WRINKLE_LAWS)}")
         forces = jnp.asarray(forces)
         given = Setup(radius=float(radius), **setup_kwargs)  # checks every field
         engine = dataclasses.replace(given, radius=ENGINE_RADIUS, indenter_radius=ENGINE_RADIUS, gas_volume_ratio=1.0,
-                                     contact_stiffness=Setup().contact_stiffness)  # fmt: skip
+                                     contact_stiffness=Setup().contact_stiffness, gas="polytropic")  # fmt: skip
+        # a "polytropic" Setup carries no κ: the engine's default, CurvePhysics.defaults' isothermal κ = 1
+        gas_exponent = GAS_EXPONENTS["isothermal" if given.gas == "polytropic" else given.gas]
         return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()), poisson_ratio=poisson_ratio,
                    indenter_radius=given.indenter_radius, gas_volume_ratio=given.gas_volume_ratio,
-                   contact_stiffness=given.contact_stiffness, n_grid=n_grid, setup=engine,
+                   contact_stiffness=given.contact_stiffness, gas_exponent=gas_exponent, n_grid=n_grid, setup=engine,
                    wrinkle_law=wrinkle_law)  # fmt: skip
 
     def engine_frame(self, radius):
@@ -128,7 +133,7 @@ class AxisymForwardModel(AbstractForwardModel):
         default = CurvePhysics.defaults(self.setup)
         physics = CurvePhysics(indenter_radius=jnp.asarray(self.indenter_radius / measured, jnp.float64),
                                gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
-                               gas_exponent=default.gas_exponent, stiffening=default.stiffening,
+                               gas_exponent=jnp.asarray(self.gas_exponent, jnp.float64), stiffening=default.stiffening,
                                areal_weight=default.areal_weight, friction_coefficient=default.friction_coefficient,
                                contact_stiffness=jnp.asarray(self.contact_stiffness * measured, jnp.float64))  # fmt: skip
         return scale, physics
