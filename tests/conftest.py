@@ -16,6 +16,14 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
 if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 
+# And without the two passes that hoist loop-invariant code and constants out of while loops: the
+# engines' programs are Newton and line-search loops inside load-step scans, where those passes are
+# about a quarter of the compile time (docs/fit-and-bayes.md, *The suite*). The loops then redo that
+# work each iteration; results agree to round-off, with the same Newton iterations.
+if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                               + " --xla_disable_hlo_passes=while-loop-invariant-code-motion,while-loop-constant-sinking").strip()
+
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
@@ -28,8 +36,9 @@ import shelljax  # noqa: E402,F401  (x64 for every test, whatever it imports fir
 # Test files that run the same compiled programs go to one xdist worker, in file order, so that
 # the later ones find those programs in the persistent caches instead of compiling them again at
 # the same time on the other worker: the sim_to_real notebook's diagnosis is test_diagnose's joint
-# fit (4 sessions), and test_fit_axisym and test_runner_cli both fit with the main job's program.
-SHARED_PROGRAMS = {"test_notebooks.py": "test_diagnose.py", "test_runner_cli.py": "test_fit_axisym.py"}
+# fit (4 sessions), and test_fit_axisym, the estimators notebook and test_runner_cli all fit with
+# the main job's program.
+SHARED_PROGRAMS = {name: "test_diagnose.py" for name in ("test_fit_axisym.py", "test_notebooks.py", "test_runner_cli.py")}
 
 
 @pytest.hookimpl(optionalhook=True)

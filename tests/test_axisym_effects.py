@@ -385,7 +385,8 @@ def test_similar_balls_give_similar_curves(walked):
     reference = _physics([physics]).similar(1.0 / scale)
     rows = _rows()
     params = np.tile(PEZZI / np.array([1.0, 1.0, scale, 1.0]), (len(rows), 1))
-    padded = jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, (len(rows),)), reference)
+    # the (1,) rows broadcast, the scalar default μ kept: the walked fixture's compiled program
+    padded = jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, (len(rows),)) if np.ndim(v) else v, reference)
     small = _curves(SETUP, WALK_LANES, params, FORCES / scale**2, padded)
     assert bool(np.all(small.converged))
     np.testing.assert_allclose(at_radius.w0, scale * np.asarray(small.w0[0]), rtol=NEWTON_RTOL)

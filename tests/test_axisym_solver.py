@@ -190,7 +190,9 @@ def test_nearby_guesses_change_the_path_not_the_equilibrium():
     warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, forces, nearby_guesses=guesses))
     alone = cold(pezzi)
     neighbour = cold(pezzi * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
-    started_near = warm(pezzi, neighbour["state"][:, None])
+    missing = jnp.full_like(neighbour["state"], jnp.nan)
+    # two guesses in every call below (a NaN one never taken): one compiled program serves them all
+    started_near = warm(pezzi, jnp.stack([neighbour["state"], missing], axis=1))
     # Both satisfy max|∂E/∂y| ≤ 1e-7 N; with a dimple stiffness of ~250 N/m that pins w0 to
     # ≈ 4e-10 m of its 20–45 mm, ≈ 2e-8 relative: 1e-7 leaves room for the two Newton paths'
     # own rounding without letting any other equilibrium pass.
@@ -201,7 +203,7 @@ def test_nearby_guesses_change_the_path_not_the_equilibrium():
     at_rest = warm(pezzi, jnp.stack([neighbour["state"], alone["state"]], axis=1))
     assert np.all(np.asarray(at_rest["iterations"]) == 0)
     # ... and a missing one (NaN) is never taken: the usual path, step for step.
-    unknown = warm(pezzi, jnp.full_like(neighbour["state"][:, None], jnp.nan))
+    unknown = warm(pezzi, jnp.stack([missing, missing], axis=1))
     np.testing.assert_array_equal(np.asarray(unknown["iterations"]), np.asarray(alone["iterations"]))
     np.testing.assert_allclose(np.asarray(unknown["w0"]), np.asarray(alone["w0"]), rtol=1e-12)
 
