@@ -81,7 +81,7 @@ class AxisymForwardModel(AbstractForwardModel):
     laws run the same compiled program.
 
     Every number of a session is a traced field, so one compiled program serves every object:
-    the engine (``setup``, static: mesh, gas law, solver) runs at ``ENGINE_RADIUS`` R₀ and reaches
+    the engine (``setup``, static: mesh, solver) runs at ``ENGINE_RADIUS`` R₀ and reaches
     R by exact similarity. Scaling every length by s = R/R₀ at fixed E, P_g scales forces by s²
     and the penalty by 1/s, so w(F; h, a, k_c, R) = s·w(F/s²; h/s, a/s, k_c s, R₀) and
     n(F; h, a, k_c, R) = n(F/s²; h/s, a/s, k_c s, R₀). The finger and the penalty are those of the
@@ -107,7 +107,7 @@ class AxisymForwardModel(AbstractForwardModel):
     def for_forces(cls, radius: float, forces, *, poisson_ratio: float = DEFAULT_POISSON_RATIO, n_grid: int = 7,
                    wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]; ``setup_kwargs``
-        go to the engine's ``Setup`` (its finger, gas volume ratio and penalty become traced fields)."""
+        go to the engine's ``Setup`` (its finger, gas law, gas volume ratio and penalty become traced fields)."""
         from .._errors import InvalidInputError
         from ..axisym import GAS_EXPONENTS, Setup
 
