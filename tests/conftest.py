@@ -1,5 +1,13 @@
 import os
 
+
+def _default_xla_flag(flag: str) -> None:
+    """Append ``--name=value`` to XLA_FLAGS unless the environment already sets that name."""
+    name = flag.removeprefix("--").partition("=")[0]
+    if name not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+
+
 # The suite is mostly XLA compilation of programs it then runs briefly, and LLVM's optimization
 # passes are most of that. At optimization level 0 the whole suite ran in 11:31 instead of 17:19
 # from an empty compilation cache (2 workers, 2-core VM, 25 Nov, loaded host), and in 7:46
@@ -8,21 +16,17 @@ import os
 # with the same Newton iterations; a 3D indentation state to 4e-13 m), so the tests check the same
 # arithmetic. The flag is part of the persistent cache's key: programs compiled here are not
 # reused by shelljax outside the tests. An XLA_FLAGS that sets its own level overrides this.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
+_default_xla_flag("--xla_backend_optimization_level=0")
 # For the same reason XLA:CPU uses its legacy elemental emitters here, as shelljax's own fit does:
 # they compile the engines' programs faster (docs/fit-and-bayes.md#compilation), with the same
 # arithmetic up to the rounding of fused expressions.
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+_default_xla_flag("--xla_cpu_use_fusion_emitters=false")
 
 # And without the two passes that hoist loop-invariant code and constants out of while loops: the
 # engines' programs are Newton and line-search loops inside load-step scans, where those passes are
 # about a quarter of the compile time (docs/fit-and-bayes.md, *The suite*). The loops then redo that
 # work each iteration; results agree to round-off, with the same Newton iterations.
-if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                               + " --xla_disable_hlo_passes=while-loop-invariant-code-motion,while-loop-constant-sinking").strip()
+_default_xla_flag("--xla_disable_hlo_passes=while-loop-invariant-code-motion,while-loop-constant-sinking")
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
