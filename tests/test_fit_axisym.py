@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 
 import jax
@@ -29,14 +30,15 @@ def model():
     return AxisymForwardModel.for_forces(0.13, FORCES, **OPTIONS)
 
 
-@jax.jit  # one program for every model of this structure (its numbers are traced), not op by op
 def _depth(model, theta):
-    return model(theta[0], theta[1], theta[2], theta[3], FORCES[:7]).depth
+    """Depths [m] at FORCES, run as the fit's own checks run the engine (test_fit_recovers…): the
+    same compiled engine programs, plain and under ``jacfwd``, serve every test of this file."""
+    return model(theta[0], theta[1], theta[2], theta[3], FORCES).depth
 
 
 def test_depth_gradient_matches_central_differences(model):
     theta = jnp.asarray(TRUTH)
-    jac = jax.jit(jax.jacfwd(_depth, argnums=1))(model, theta)
+    jac = jax.jacfwd(functools.partial(_depth, model))(theta)
     for k in range(4):
         step = 2.5e-5 * theta[k]
         fd = (_depth(model, theta.at[k].add(step)) - _depth(model, theta.at[k].add(-step))) / (2 * step)

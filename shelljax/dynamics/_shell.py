@@ -23,6 +23,7 @@ themselves would do nothing: held by the barrier, they hardly move along the nor
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 
 import equinox as eqx
 import jax
@@ -51,6 +52,16 @@ from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
 
 #: Host sparsity patterns of the shells' Hessians, by ``ShellDynamicSystem.pattern_key``.
 PATTERNS: dict[int, object] = {}
+
+
+def _pattern_key(pattern) -> int:
+    """A key equal for equal patterns: systems on one mesh topology share the compiled step programs."""
+    digest = hashlib.sha256()
+    arrays = (pattern.indptr, pattern.indices, pattern.fixed_entries, pattern.fixed_diagonal, pattern.free,
+              *(np.asarray(part) for pair in pattern.maps for part in pair))  # fmt: skip
+    for array in arrays:
+        digest.update(f"{array.dtype}{array.shape}".encode() + np.ascontiguousarray(array).tobytes())
+    return int.from_bytes(digest.digest()[:8], "little")
 
 
 class ShellDynamicSystem(AbstractDynamicSystem):
@@ -214,8 +225,8 @@ def shell_system(
     params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness), float(gauge_pressure))
     if gas != "prescribed":
         params = params.replace(reference_volume=float(sim.reference_volume), atmospheric_pressure=ATMOSPHERIC_PRESSURE)
-    key = len(PATTERNS)
-    PATTERNS[key] = model.pattern
+    key = _pattern_key(model.pattern)
+    PATTERNS.setdefault(key, model.pattern)
     return ShellDynamicSystem(
         params=params, geometry=model.geometry, config=config,
         node_masses=jnp.asarray(_node_masses(model, mass, wall_density, shell.thickness)),
