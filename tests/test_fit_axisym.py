@@ -31,8 +31,8 @@ def model():
 
 
 def _depth(model, theta):
-    """Depths [m] at FORCES, run as the fit's own checks run the engine (test_fit_recovers…): the
-    same compiled engine programs, plain and under ``jacfwd``, serve every test of this file."""
+    """Depths [m] at FORCES through the engine call the fit's residuals make, so its compiled
+    programs, plain and under ``jacfwd``, serve every test of this file and the fit's checks."""
     return model(theta[0], theta[1], theta[2], theta[3], FORCES).depth
 
 
