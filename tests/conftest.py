@@ -9,13 +9,11 @@ def _default_xla_flag(flag: str) -> None:
 
 
 # The suite is mostly XLA compilation of programs it then runs briefly, and LLVM's optimization
-# passes are most of that. At optimization level 0 the whole suite ran in 11:31 instead of 17:19
-# from an empty compilation cache (2 workers, 2-core VM, 25 Nov, loaded host), and in 7:46
-# instead of 10:34 on a fresh, quiet one. Results agree with the
-# optimized build to round-off (checked 25 Nov: 8 axisymmetric curves' w0 to 1.6e-15 relative
-# with the same Newton iterations; a 3D indentation state to 4e-13 m), so the tests check the same
-# arithmetic. The flag is part of the persistent cache's key: programs compiled here are not
-# reused by shelljax outside the tests. An XLA_FLAGS that sets its own level overrides this.
+# passes are most of that: at optimization level 0 the suite compiles far faster, and its results
+# agree with the optimized build to round-off with the same Newton iterations, so the tests check
+# the same arithmetic (measurements: docs/fit-and-bayes.md, *The suite*). The flag is part of the
+# persistent cache's key: programs compiled here are not reused by shelljax outside the tests. An
+# XLA_FLAGS that sets its own level overrides this.
 _default_xla_flag("--xla_backend_optimization_level=0")
 # For the same reason XLA:CPU uses its legacy elemental emitters here, as shelljax's own fit does:
 # they compile the engines' programs faster (docs/fit-and-bayes.md#compilation), with the same

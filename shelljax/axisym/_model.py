@@ -20,6 +20,7 @@ from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
+from ..physics import AIR_HEAT_CAPACITY_RATIO
 from ._energy import (
     GAS_MODELS,
     WRINKLED_HOOP_CAPACITY,
@@ -131,7 +132,7 @@ class Setup(eqx.Module):
 
 # κ of each named gas law (p V^κ constant): gas = "polytropic" with this traced κ is that law, so one
 # compiled program serves them all
-GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": 1.4}
+GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": AIR_HEAT_CAPACITY_RATIO}
 
 
 class CurvePhysics(eqx.Module):
@@ -172,7 +173,7 @@ class CurvePhysics(eqx.Module):
             return jnp.full(shape, v, dtype=jnp.float64)
 
         return cls(indenter_radius=full(setup.indenter_radius), gas_volume_ratio=full(setup.gas_volume_ratio),
-                   gas_exponent=full(1.0), stiffening=full(0.0), areal_weight=full(0.0),
+                   gas_exponent=full(GAS_EXPONENTS["isothermal"]), stiffening=full(0.0), areal_weight=full(0.0),
                    friction_coefficient=full(0.0))  # fmt: skip
 
     def similar(self, scale) -> "CurvePhysics":
