@@ -73,9 +73,18 @@ def _dense(hess, mask):
     return dense
 
 
+PEZZI = np.array([1300.0, 2.34e6, 9e-4, 0.4])  # P_g [Pa], E [Pa], h [m], ν [-]
+FORCES = np.array([5.0, 10.0, 15.0])  # [N]
+
+
+def _cold_curve(setup):
+    """curve_single from its usual start, jitted anew (Newton constants are read at trace time)."""
+    return jax.jit(lambda theta: curve_single(setup, *theta, FORCES, return_states=True))
+
+
 @functools.lru_cache(maxsize=None)
 def _indented_states(setup):
-    return curve_single(setup, 1300.0, 2.34e6, 9e-4, 0.4, np.array([5.0, 10.0, 15.0]), return_states=True)["state"]
+    return _cold_curve(setup)(PEZZI)["state"]
 
 
 # Jitted: run op by op, the dense autodiff Hessian compiled ≈ 900 single-operation programs
@@ -90,7 +99,7 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     # A wrinkled, indented state (15 N, both contacts active, relaxed hoop stress in the dimple)
     # with a random perturbation, so that every term has a non-zero gradient and curvature.
     setup = Setup(radius=0.13, n_elements=21, gas=gas)
-    params = (1300.0, 2.34e6, 9e-4, 0.4)
+    params = tuple(PEZZI)
     states = _indented_states(setup)
     r0, y_inflated, _, _ = inflate(setup, *params)
     x_inflated, _ = split(y_inflated, len(setup.theta()))
@@ -162,7 +171,8 @@ def test_step_cap_limits_motion_relative_to_the_indenter():
 
 
 def _curve(setup):
-    return jax.jit(lambda: curve_single(setup, 1300.0, 2.34e6, 9e-4, 0.4, np.array([5.0, 10.0, 15.0])))()
+    # the same program as the cold curve below: compiled once, read back from the persistent cache
+    return _cold_curve(setup)(PEZZI)
 
 
 def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations(monkeypatch):
@@ -184,10 +194,9 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
 
 def test_nearby_guesses_change_the_path_not_the_equilibrium():
     setup = Setup(radius=0.13, n_elements=61)
-    forces = np.array([5.0, 10.0, 15.0])
-    pezzi = np.array([1300.0, 2.34e6, 9e-4, 0.4])
-    cold = jax.jit(lambda theta: curve_single(setup, *theta, forces, return_states=True))
-    warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, forces, nearby_guesses=guesses))
+    pezzi = PEZZI
+    cold = _cold_curve(setup)
+    warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, FORCES, nearby_guesses=guesses))
     alone = cold(pezzi)
     neighbour = cold(pezzi * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
     missing = jnp.full_like(neighbour["state"], jnp.nan)

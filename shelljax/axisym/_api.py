@@ -161,7 +161,9 @@ def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0,
         physics = CurvePhysics.defaults(setup, params.shape[0])
     physics = jax.tree_util.tree_map(lambda v: jnp.broadcast_to(jnp.asarray(v, jnp.float64), params.shape[:1]),
                                      physics)
-    return CurveResult(**_batched(setup, params, jnp.asarray(forces, jnp.float64), int(chunk), physics))
+    # a batch that fits in one chunk is solved unwalked: one program whatever the chunk it asked for
+    chunk = int(chunk) if params.shape[0] > int(chunk) > 0 else 0
+    return CurveResult(**_batched(setup, params, jnp.asarray(forces, jnp.float64), chunk, physics))
 
 
 def _check(params, forces, radius):

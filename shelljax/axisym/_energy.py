@@ -26,7 +26,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from .._errors import InvalidInputError
 from ..physics import (
@@ -103,7 +103,10 @@ class Params(eqx.Module):
     0: no gravity); ground friction (``ground_friction_energy``, with the ground only):
     friction_coefficient μ [-] (0: frictionless), friction_anchor r̂ (n,) [m] (lagged node radii,
     the slip origin), friction_normal_force λ̂ (n,) [N] (lagged ground contact force per node) and
-    friction_slip_tolerance ε [m] > 0 (slip below which a node sticks).
+    friction_slip_tolerance ε [m] > 0 (slip below which a node sticks); ``inflating``: the solve is
+    the inflation, in the indentation's configuration (one Newton program for both): the gas is held
+    at its gauge pressure, the wall is not relaxed, and z of the bottom pole and z_c are fixed
+    (``fixed_mask``); its parameters switch the contacts, load and weight off.
     """
 
     young_modulus: Float[Array, ""]
@@ -126,6 +129,7 @@ class Params(eqx.Module):
     friction_anchor: Float[Array, "n"] | float = 0.0
     friction_normal_force: Float[Array, "n"] | float = 0.0
     friction_slip_tolerance: Float[Array, ""] = 1e-6
+    inflating: Bool[Array, ""] | bool = False
 
 
 def rest_nodes(cfg: Config, rest_radius) -> Float[Array, "n 2"]:
@@ -206,8 +210,9 @@ def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float 
         # Only the indented (upper) half is relaxed: there the hoop compression is the
         # wrinkling of the paper; in the ground-contact disc relaxation lets the pole lift
         # into a micrometre blister that makes Newton cycle on the contact kink.
+        # The inflating wall is taut: it is never relaxed (the smooth maximum would move it).
         n_el = lam_t_sq.shape[-1]
-        upper = jnp.arange(n_el) >= n_el // 2
+        upper = (jnp.arange(n_el) >= n_el // 2) & ~jnp.asarray(p.inflating, bool)
         wrinkle_work = jnp.where(upper, hoop_resultant * (jnp.sqrt(relaxed) - jnp.abs(lam_t)), 0.0)
         # Relaxation removes the log barrier of det C against λ_θ → 0, so a Newton step could park
         # a node on the axis: restore a barrier far below any physical state.
@@ -298,9 +303,12 @@ def gas_energy(volume, cfg: Config, p: Params):
     # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
     gas_volume = gas_volume_ratio(cfg, p) * p.reference_volume
     if cfg.gas == "polytropic":
-        return polytropic_gas_energy(volume - p.reference_volume + gas_volume, gas_volume,
-                                     p.gauge_pressure, p.gas_exponent)
-    return isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
+        sealed = polytropic_gas_energy(volume - p.reference_volume + gas_volume, gas_volume,
+                                       p.gauge_pressure, p.gas_exponent)
+    else:
+        sealed = isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
+    # the gas is sealed once the ball is inflated at its gauge pressure
+    return jnp.where(p.inflating, prescribed_pressure_energy(volume, p.gauge_pressure), sealed)
 
 
 def gauge_pressure_at(volume, cfg: Config, p: Params):
@@ -408,6 +416,14 @@ def constrained_mask(cfg: Config) -> np.ndarray:
     if cfg.loading != "sphere":
         mask[-1] = True
     return mask
+
+
+def fixed_mask(cfg: Config, p: Params) -> Bool[Array, " ny"]:
+    """Fixed unknowns of a solve: ``constrained_mask`` and, while ``p.inflating``, z of the bottom
+    pole (the vertical rigid mode nothing else removes) and z_c."""
+    inflation = np.zeros(2 * cfg.n_nodes + 1, bool)
+    inflation[1] = inflation[-1] = True
+    return jnp.asarray(constrained_mask(cfg)) | (jnp.asarray(p.inflating, bool) & jnp.asarray(inflation))
 
 
 def hoop_tension(x, x0, p: Params):

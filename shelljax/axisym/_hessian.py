@@ -30,8 +30,8 @@ from ._energy import (
     _ghosted,
     Config,
     Params,
-    constrained_mask,
     enclosed_volume,
+    fixed_mask,
     gas_energy,
     ground_friction_energy,
     ground_gaps,
@@ -391,9 +391,9 @@ def hessian_at(y, cfg: Config, p: Params) -> StructuredHessian:
     b0, b1, b2 = _fold_ghosts(hinge_d0, hinge_d1, _node_block(hinge, 0, 2))
     diag, upper = _blocks_from_bands(_matrix_sum(d0, b0), _matrix_sum(d1, b1), b2)
 
-    mask = constrained_mask(cfg)
-    free = jnp.asarray(~mask, dtype=y.dtype)
-    free_entry = [(~mask[i:-1:4]).astype(float) for i in range(4)]  # (m,) per dof of a block
+    mask = fixed_mask(cfg, p)
+    free = (~mask).astype(y.dtype)
+    free_entry = [(~mask[i:-1:4]).astype(y.dtype) for i in range(4)]  # (m,) per dof of a block
     diag = tuple(tuple(diag[i][j] * (free_entry[i] * free_entry[j]) + (1.0 - free_entry[i]) if i == j
                        else diag[i][j] * (free_entry[i] * free_entry[j]) for j in range(4)) for i in range(4))
     upper = tuple(tuple(upper[i][j] * (free_entry[i][:-1] * free_entry[j][1:]) for j in range(4))

@@ -201,22 +201,35 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
     """Inflated (pre-indentation) state of the discrete sphere.
 
     Returns (rest radius R0 [m], inflated unknowns y [m], residual [N], iterations). The bottom
-    pole height is pinned at −R (rigid mode); nothing touches the ball. Newton starts from the
+    pole height is pinned at −R (rigid mode); nothing touches the ball (the indenter's z_c is
+    parked 10 R above it). Solved by the indentation's Newton (``Params.inflating``). Newton starts from the
     lowest-energy of the continuous sphere's stretch and ``guesses`` (c, n_y) [m] (NaN: none).
     ``stiffening`` s [-]: Gent stiffening of the membrane (0: Neo-Hookean); the rest radius
     R0 = R/λ comes from the same law.
     """
-    lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale, stiffening=stiffening)
-    r0 = setup.radius / lam
-    cfg = Config(theta=setup.theta(), gas="prescribed", loading="none", ground=False,
-                 pin_bottom=True, relax=False)
     physics = eqx.tree_at(lambda c: c.stiffening, CurvePhysics.defaults(setup), jnp.asarray(stiffening, jnp.float64))
-    p = _params(young, thick, nu, r0, pressure, setup, bending_scale=bending_scale, physics=physics)
-    y0 = jnp.concatenate([lam * rest_nodes(cfg, r0).ravel(), jnp.zeros(1)])
+    r0, y0, p = _inflation(setup, pressure, young, thick, nu, bending_scale, physics)
     if guesses is not None:
         y0 = jnp.concatenate([y0[None], jax.lax.stop_gradient(guesses)])
-    y, res, it, _ = equilibrium(cfg, setup.options(), p, y0)
+    y, res, it, _ = equilibrium(_indentation_config(setup), setup.options(), p, y0)
     return r0, y, res, it
+
+
+def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics: CurvePhysics):
+    """(rest radius R0 [m], Newton's start [m], Params) of the inflation, solved in the
+    indentation's configuration (``Params.inflating``): the continuous sphere's stretch, the gas at
+    its gauge pressure, no contact stiffness, load, weight or friction, and the ground and the
+    indenter parked 10 R away."""
+    lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale, stiffening=physics.stiffening)
+    r0 = setup.radius / lam
+    far = 10.0 * setup.radius
+    # (the sealed gas's reference volume is not used while inflating; the ball's keeps it finite)
+    p = _params(young, thick, nu, r0, pressure, setup, ground_z=-far, bending_scale=bending_scale, physics=physics,
+                ref_volume=4.0 / 3.0 * jnp.pi * setup.radius**3)
+    p = eqx.tree_at(lambda c: (c.contact_stiffness, c.areal_weight, c.friction_coefficient, c.inflating), p,
+                    (jnp.zeros(()), jnp.zeros(()), jnp.zeros(()), jnp.asarray(True)))
+    y0 = jnp.concatenate([lam * rest_nodes(_indentation_config(setup), r0).ravel(), jnp.full(1, far)])
+    return r0, y0, p
 
 
 def _indentation_config(setup: Setup) -> Config:
@@ -342,42 +355,61 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
     physics = CurvePhysics.defaults(setup) if physics is None else physics
-    r0, y_inf, res_inf, _ = inflate(setup, pressure, young, thick, nu, bending_scale,
-                                    None if nearby_guesses is None else nearby_guesses[0],
-                                    stiffening=physics.stiffening)
     cfg = _indentation_config(setup)
-    x_inf, _ = split(y_inf, cfg.n_nodes)
-    zc_contact = x_inf[-1, 1] + physics.indenter_radius
-    base = _params(young, thick, nu, r0, pressure, setup, ref_volume=enclosed_volume(x_inf),
-                   ground_z=x_inf[0, 1], bending_scale=bending_scale, physics=physics)
+    r0, y_inflation, p_inflation = _inflation(setup, pressure, young, thick, nu, bending_scale, physics)
     schedule, first_load = _load_schedule(setup, forces)
     # the ground first carries the first force and the wall's weight
     load = first_load + physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
-    y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
     opts = setup.options()
 
+    def indentation(y_inf):
+        """(z_c at first contact [m], the indentation's Params, the first load step's carry) of the
+        inflated state y_inf [m]."""
+        x_inf, _ = split(y_inf, cfg.n_nodes)
+        zc_contact = x_inf[-1, 1] + physics.indenter_radius
+        base = _params(young, thick, nu, r0, pressure, setup, ref_volume=enclosed_volume(x_inf),
+                       ground_z=x_inf[0, 1], bending_scale=bending_scale, physics=physics)
+        y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
+        return zc_contact, base, _initial_carry(y_start, cfg, base, load)
+
+    # The inflation is the scan's first step, so that one Newton solve (one copy of the engine in
+    # the compiled program, and in its derivatives) serves it and every load step.
     def step(carry, level):
-        force, nearby = level
-        guess = _predicted_start(setup, cfg, base, carry, force)
-        p = _with_load(base, force, carry[-1])
+        y_inf, zc_contact, base, loading = carry
+        force, nearby, inflating = level
+        p = _where(inflating, p_inflation, _with_load(base, force, loading[-1]))
+        guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
         if nearby_guesses is not None:
             guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
         y, res, it, _ = equilibrium(cfg, opts, p, guess)
-        obs = observables(cfg, p, y, y_inf, zc_contact)
+        y_inf = jnp.where(inflating, y, y_inf)
+        inflated_zc, inflated_base, first = indentation(y_inf)
+        zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))
+        # (the inflation's row is dropped; observed with the indentation's parameters it stays finite)
+        obs = observables(cfg, _where(inflating, _with_load(base, force, first[-1]), p), y, y_inf, zc_contact)
         obs.update(residual=res, iterations=it)
         if return_states:
-            obs.update(state=y, friction_anchor=carry[-1][0], friction_normal_force=carry[-1][1])
-        return (y, carry[0], force, carry[2], _friction_lag(y, cfg, base)), obs
+            obs.update(state=y, friction_anchor=loading[-1][0], friction_normal_force=loading[-1][1])
+        loading = _where(inflating, first, (y, loading[0], force, loading[2], _friction_lag(y, cfg, base)))
+        return (y_inf, zc_contact, base, loading), obs
 
     n_ramp, m = len(setup.ramp), setup.substeps
     nearby = _nearby_per_step(nearby_guesses, schedule.shape[0], n_ramp, m)
-    _, obs = jax.lax.scan(step, _initial_carry(y_start, cfg, base, load), (schedule, nearby))
-    out = _levels(obs, n_ramp, m)
+    if nearby is not None:
+        nearby = jnp.concatenate([nearby_guesses[:1], nearby])
+    levels = (jnp.concatenate([jnp.zeros(1), schedule]), nearby, jnp.arange(1 + schedule.shape[0]) == 0)
+    _, obs = jax.lax.scan(step, (y_inflation, *indentation(y_inflation)), levels)
+    out = _levels(jax.tree_util.tree_map(lambda v: v[1:], obs), n_ramp, m)
     out["rest_radius"] = r0
-    out["inflation_residual"] = res_inf
+    out["inflation_residual"] = obs["residual"][0]
     if return_states:
-        out["state"] = jnp.concatenate([y_inf[None], out["state"]])
+        out["state"] = jnp.concatenate([obs["state"][:1], out["state"]])
     return out
+
+
+def _where(condition, on_true, on_false):
+    """``on_true`` where the traced bool ``condition`` holds, else ``on_false``, leaf by leaf."""
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(condition, a, b), on_true, on_false)
 
 
 __all__ = ["CurvePhysics", "Setup", "curve_single", "inflate"]

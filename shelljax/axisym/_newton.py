@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from ._energy import (
     Config,
     Params,
-    constrained_mask,
+    fixed_mask,
     gas_volume_ratio,
     ground_gaps,
     indenter_gaps,
@@ -53,13 +53,13 @@ class SolverOptions(eqx.Module):
     max_step: float = eqx.field(static=True, default=float("inf"), converter=float)
 
 
-def _free(cfg: Config, dtype):
-    return jnp.asarray(~constrained_mask(cfg), dtype=dtype)
+def _free(cfg: Config, p: Params, dtype):
+    return (~fixed_mask(cfg, p)).astype(dtype)
 
 
 def residual(y, cfg: Config, p: Params):
     """Out-of-balance force ∂E/∂y [N] on the free unknowns (zero on fixed ones)."""
-    return jax.grad(total_energy)(y, cfg, p) * _free(cfg, y.dtype)
+    return jax.grad(total_energy)(y, cfg, p) * _free(cfg, p, y.dtype)
 
 
 def _add_contact_springs(hess: StructuredHessian, ground, indenter, normal):
@@ -152,10 +152,12 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     a node farther away than ``max_step`` may move up to its gap: α |Δx_i − Δc| ≤
     max(max_step, gap_i). A node can pass through the sphere only by moving relative to it by
     more than its gap, so this keeps the indenter from tunnelling while letting the shell and the
-    indenter translate together. Without an indenter the cap is on every coordinate.
+    indenter translate together. Without an indenter (or while inflating) the cap is on every
+    coordinate.
     """
+    coordinate_cap = jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
     if cfg.loading != "sphere":
-        return jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
+        return coordinate_cap
     n = cfg.n_nodes
     x, zc = split(y, n)
     dx, dzc = split(d, n)
@@ -163,7 +165,7 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     # A traced indenter radius smaller than the static cap shrinks it (a small sphere is
     # tunnelled through by a shorter jump); a larger one keeps the static cap.
     allowed = jnp.maximum(jnp.minimum(max_step, p.indenter_radius), indenter_gaps(x, zc, p))
-    return jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300)))
+    return jnp.where(p.inflating, coordinate_cap, jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300))))
 
 
 def _jacobi_diagonal(hess: StructuredHessian):
@@ -204,8 +206,8 @@ def _gas_energy_scale(cfg: Config, p: Params):
     """Size [J] of a sealed gas's p_abs·V energy, whose round-off the line search must tolerate."""
     if cfg.gas not in ("isothermal", "polytropic"):
         return 0.0
-    return ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
-            * jnp.abs(gas_volume_ratio(cfg, p)))
+    scale = (ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * jnp.abs(gas_volume_ratio(cfg, p))
+    return jnp.where(p.inflating, 0.0, scale)  # an inflating ball's gas is held at its pressure
 
 
 def _lowest_energy_start(energy, y0):
@@ -217,7 +219,7 @@ def _lowest_energy_start(energy, y0):
 
 
 def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
-    free = _free(cfg, y0.dtype)
+    free = _free(cfg, p, y0.dtype)
     gas_scale = _gas_energy_scale(cfg, p)
     energy = lambda y: total_energy(y, cfg, p)  # noqa: E731
     energy_and_grad = jax.value_and_grad(energy)
@@ -291,7 +293,7 @@ def _equilibrium_jvp(cfg, opts, primals, tangents):
     dp, _ = tangents
     out = equilibrium(cfg, opts, p, y0)
     y = out[0]
-    free = _free(cfg, y.dtype)
+    free = _free(cfg, p, y.dtype)
     fixed = 1.0 - free
     _, dg = jax.jvp(lambda pp: residual(y, cfg, pp), (p,), (dp,))
     hess = hessian_at(y, cfg, p)
