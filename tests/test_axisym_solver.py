@@ -264,3 +264,26 @@ def test_tied_loop_carries_let_vmap_batch_a_loop_body_once():
     assert (untied, tied) == (2, 1)
     np.testing.assert_array_equal(out_tied[0], out_untied[0])
     np.testing.assert_array_equal(out_tied[1], [2, 6])
+
+
+def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem():
+    # A curve's first Newton solve is the inflation in the indentation's configuration, with
+    # Params.inflating switching the sealed gas, the relaxation, the contacts, the load and the
+    # weight off (one solver program for both). The state must be the equilibrium of the plain
+    # inflation problem: prescribed gauge pressure, nothing touching, unrelaxed wall, bottom pinned.
+    setup = Setup(radius=0.13, n_elements=21, gas="isothermal")
+    r0, y, res, _ = inflate(setup, *PEZZI)
+    # the same solve, jitted inside the curve and run op by op here: equal to round-off
+    np.testing.assert_allclose(np.asarray(_indented_states(setup)[0]), np.asarray(y), rtol=0, atol=1e-14)
+    assert float(res) <= setup.atol
+    plain = Config(theta=setup.theta(), gas="prescribed", loading="none", ground=False, pin_bottom=True, relax=False)
+    p = _params(*PEZZI[1:], r0, PEZZI[0], setup)
+    force = jax.jit(newton.residual, static_argnums=1)
+    # The plain problem's out-of-balance force at the state is the curve's own residual (2.7e-8 N
+    # measured, bit for bit: the switched-off terms add exact zeros) up to the round-off of forces
+    # of P_g × element area ≈ 30 N per node (1e-14 N), so 1e-6 relative.
+    assert float(jnp.max(jnp.abs(force(y, plain, p)))) == pytest.approx(float(res), rel=1e-6)
+    # not vacuous: the same state is far from the equilibrium of the sealed, indented problem
+    sealed = _params(*PEZZI[1:], r0, PEZZI[0], setup, ref_volume=0.9 * enclosed_volume(split(y, 21)[0]))
+    assert float(jnp.max(jnp.abs(force(y, Config(theta=setup.theta(), gas="isothermal", loading="none",
+                                                 pin_bottom=True), sealed)))) > 1.0
