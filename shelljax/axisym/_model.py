@@ -202,7 +202,7 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
 
     Returns (rest radius R0 [m], inflated unknowns y [m], residual [N], iterations). The bottom
     pole height is pinned at −R (rigid mode); nothing touches the ball (the indenter's z_c is
-    parked 10 R above it). Solved by the indentation's Newton (``Params.inflating``). Newton starts from the
+    parked 10 R above it). Solved by the indentation's Newton (``Params.inflating``), from the
     lowest-energy of the continuous sphere's stretch and ``guesses`` (c, n_y) [m] (NaN: none).
     ``stiffening`` s [-]: Gent stiffening of the membrane (0: Neo-Hookean); the rest radius
     R0 = R/λ comes from the same law.

@@ -165,7 +165,8 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     # A traced indenter radius smaller than the static cap shrinks it (a small sphere is
     # tunnelled through by a shorter jump); a larger one keeps the static cap.
     allowed = jnp.maximum(jnp.minimum(max_step, p.indenter_radius), indenter_gaps(x, zc, p))
-    return jnp.where(p.inflating, coordinate_cap, jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300))))
+    sphere_cap = jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300)))
+    return jnp.where(p.inflating, coordinate_cap, sphere_cap)
 
 
 def _jacobi_diagonal(hess: StructuredHessian):
@@ -206,7 +207,8 @@ def _gas_energy_scale(cfg: Config, p: Params):
     """Size [J] of a sealed gas's p_abs·V energy, whose round-off the line search must tolerate."""
     if cfg.gas not in ("isothermal", "polytropic"):
         return 0.0
-    scale = (ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * jnp.abs(gas_volume_ratio(cfg, p))
+    scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
+             * jnp.abs(gas_volume_ratio(cfg, p)))
     return jnp.where(p.inflating, 0.0, scale)  # an inflating ball's gas is held at its pressure
 
 
