@@ -194,14 +194,13 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
 
 def test_nearby_guesses_change_the_path_not_the_equilibrium():
     setup = Setup(radius=0.13, n_elements=61)
-    pezzi = PEZZI
     cold = _cold_curve(setup)
     warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, FORCES, nearby_guesses=guesses))
-    alone = cold(pezzi)
-    neighbour = cold(pezzi * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
+    alone = cold(PEZZI)
+    neighbour = cold(PEZZI * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
     missing = jnp.full_like(neighbour["state"], jnp.nan)
     # two guesses in every call below (a NaN one never taken): one compiled program serves them all
-    started_near = warm(pezzi, jnp.stack([neighbour["state"], missing], axis=1))
+    started_near = warm(PEZZI, jnp.stack([neighbour["state"], missing], axis=1))
     # Both satisfy max|∂E/∂y| ≤ 1e-7 N; with a dimple stiffness of ~250 N/m that pins w0 to
     # ≈ 4e-10 m of its 20–45 mm, ≈ 2e-8 relative: 1e-7 leaves room for the two Newton paths'
     # own rounding without letting any other equilibrium pass.
@@ -209,10 +208,10 @@ def test_nearby_guesses_change_the_path_not_the_equilibrium():
     # 5–7 Newton iterations a level from the previous level, 2 from the neighbour (measured)
     assert float(started_near["iterations"].sum()) <= 0.6 * float(alone["iterations"].sum())
     # The lowest-energy guess wins: the equilibrium itself needs no iteration ...
-    at_rest = warm(pezzi, jnp.stack([neighbour["state"], alone["state"]], axis=1))
+    at_rest = warm(PEZZI, jnp.stack([neighbour["state"], alone["state"]], axis=1))
     assert np.all(np.asarray(at_rest["iterations"]) == 0)
     # ... and a missing one (NaN) is never taken: the usual path, step for step.
-    unknown = warm(pezzi, jnp.stack([missing, missing], axis=1))
+    unknown = warm(PEZZI, jnp.stack([missing, missing], axis=1))
     np.testing.assert_array_equal(np.asarray(unknown["iterations"]), np.asarray(alone["iterations"]))
     np.testing.assert_allclose(np.asarray(unknown["w0"]), np.asarray(alone["w0"]), rtol=1e-12)
 
@@ -283,7 +282,8 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
     # measured, bit for bit: the switched-off terms add exact zeros) up to the round-off of forces
     # of P_g × element area ≈ 30 N per node (1e-14 N), so 1e-6 relative.
     assert float(jnp.max(jnp.abs(force(y, plain, p)))) == pytest.approx(float(res), rel=1e-6)
-    # not vacuous: the same state is far from the equilibrium of the sealed, indented problem
+    # not vacuous: with a sealed gas that is at P_g only at 90 % of this volume, the same state is
+    # far out of balance (285 N measured)
     sealed = _params(*PEZZI[1:], r0, PEZZI[0], setup, ref_volume=0.9 * enclosed_volume(split(y, 21)[0]))
     assert float(jnp.max(jnp.abs(force(y, Config(theta=setup.theta(), gas="isothermal", loading="none",
                                                  pin_bottom=True), sealed)))) > 1.0
