@@ -23,6 +23,8 @@ def _cmd_estimate(args) -> int:
     from .estimate import Estimate, EstimatorOptions, run_estimator
     from .session import load_session
 
+    if args.rig is not None:
+        return _estimate_with_rig(args)
     session = load_session(args.session)
     k_s = None
     if args.method == "closed-form" and args.k_s is not None:
@@ -30,22 +32,66 @@ def _cmd_estimate(args) -> int:
             raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
         k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
     options = EstimatorOptions(
-        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model, gas=args.gas,
-        wrinkle_law=args.wrinkle_law, nuisance=tuple(args.nuisance or ()), walkers=args.walkers,
+        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model, gas=args.gas or "prescribed",
+        wrinkle_law=args.wrinkle_law or "mechanics", nuisance=tuple(args.nuisance or ()), walkers=args.walkers,
         max_steps=args.max_steps, surrogate=not args.no_surrogate,
     )  # fmt: skip
     result = run_estimator(args.method, session, options, backend_path=args.chain)
     out = {"session": str(session.source), "object": session.object_name, "method": args.method, **result.to_dict()}
     if args.method != "closed-form":
         out["forward_model"] = args.model
-    if args.json:
+    _print_estimates(out, result.estimates, args.json)
+    return 0
+
+
+def _print_estimates(out: dict, estimates: dict, as_json: bool) -> None:
+    if as_json:
         json.dump(out, sys.stdout, indent=2)
         print()
-    else:
-        for name, est in result.estimates.items():
-            unit = "" if est.unit == "1" else f" {est.unit}"
-            print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
-                  f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip
+        return
+    for name, est in estimates.items():
+        unit = "" if est.unit == "1" else f" {est.unit}"
+        print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
+              f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip
+
+
+def _estimate_with_rig(args) -> int:
+    from .rig import estimate_with_rig, load_rig
+
+    if args.method == "closed-form" or args.model != "axisym" or args.nuisance:
+        raise ShelljaxError("--rig works with --method fit or bayes through the axisym model, without --nuisance "
+                            "(the rig holds the measuring chain). Fix: add --method fit")  # fmt: skip
+    rig = load_rig(args.rig)
+    result = estimate_with_rig(args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law,
+                               seed=args.seed)  # fmt: skip
+    out = {"session": result.sources[0], "method": args.method, "rig": str(args.rig), **result.to_dict()}
+    _print_estimates(out, result.estimates, args.json)
+    if not args.json:
+        for m in result.models:
+            share = f"{100 * m['weight']:.0f} %"
+            print(f"    rig model {'+'.join(m['terms']) or 'ideal':<40s} weight {share:>5s}  {m['status']}")
+        if result.not_identified:
+            print(f"    not identified by the calibration: {', '.join(result.not_identified)} "
+                  "(the intervals include their spread)")  # fmt: skip
+    return 0
+
+
+def _cmd_rig_calibrate(args) -> int:
+    from .rig import calibrate_rig, physical_parameter, write_rig
+
+    rig = calibrate_rig(args.sessions, gas=args.gas, wrinkle_law=args.wrinkle_law, terms=args.terms,
+                        progress=not args.quiet)  # fmt: skip
+    write_rig(rig, args.out)
+    print(f"rig: {len(rig.models)} model(s) the calibration cannot exclude (weights: pseudo-BMA+)")
+    for m in rig.models:
+        stds = [float(v) for v in (m.covariance.diagonal() ** 0.5)]
+        values = ", ".join(f"{n} = {v:.4g} ± {e:.2g}" for n, (v, e) in
+                           ((n, physical_parameter(n, float(u), s, rig.indenter_radius))
+                            for n, u, s in zip(m.parameters, m.mean, stds)))  # fmt: skip
+        print(f"  {'+'.join(m.terms) or 'ideal':<40s} weight {m.weight:5.2f}  Δelpd {m.delta:6.2f} ± {m.delta_se:4.2f}  {values}")
+    if rig.not_identified:
+        print(f"not identified: {', '.join(rig.not_identified)}")
+    print(f"written: {args.out}")
     return 0
 
 
@@ -53,8 +99,16 @@ def _cmd_diagnose(args) -> int:
     from .diagnose import diagnose
     from .report import jsonable, write_diagnosis
 
-    result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=args.gas,
-                      wrinkle_law=args.wrinkle_law, progress=not args.quiet and not args.json)  # fmt: skip
+    measurement, gas, wrinkle_law = None, args.gas, args.wrinkle_law
+    if args.rig is not None:
+        from .rig import check_compatible, load_rig, rig_measurement
+
+        rig = load_rig(args.rig)
+        check_compatible(rig, gas=gas, wrinkle_law=wrinkle_law, where="the diagnosis")
+        measurement, gas, wrinkle_law = rig_measurement(rig), rig.gas, rig.wrinkle_law
+    result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=gas,
+                      wrinkle_law=wrinkle_law or "scaling", progress=not args.quiet and not args.json,
+                      measurement=measurement)  # fmt: skip
     if args.out is not None:
         written = write_diagnosis(result, args.out)
         if not args.json:
@@ -85,6 +139,17 @@ def summary_text(report: dict) -> str:
         after = report["gap_after"]["by_observable"][name]
         lines.append(f"  {name:>18s}: rms {g['rms']:.3g} -> {after['rms']:.3g} {g['unit']} "
                      f"({g['rms_percent']:.3g} % -> {after['rms_percent']:.3g} % of the measured value)")  # fmt: skip
+    kept = report.get("not_excluded") or []
+    if len(kept) > 1:
+        lines.append(f"not excluded (within {report['decision']['win_nats']:g} nats / {report['decision']['win_se']:g} SE "
+                     f"of the best): {', '.join(k['effect'] for k in kept)}")  # fmt: skip
+        e = report["robust"]["young_modulus"]
+        lines.append(f"  E over them: {e['range95'][0]:.4g} … {e['range95'][1]:.4g} Pa (95 %), point values spread "
+                     f"{e['spread_percent']:.1f} %")  # fmt: skip
+        for s in report.get("separating", [])[:4]:
+            lines.append(f"  to separate {s['effect']}: {s['measurement']}")
+    if report.get("robust", {}).get("warning"):
+        lines.append(f"warning: {report['robust']['warning']}")
     misfit = report["where"]["misfit_groups"]
     lines.append("baseline misfit (p < {:g}): {}".format(report["where"]["misfit_threshold_p"], ", ".join(misfit) or "none"))
     return "\n".join(lines)
@@ -129,6 +194,45 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+def _register_diagnose(sub) -> None:
+    """``shelljax diagnose``."""
+    diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
+                          "which candidate effect explains it, how far the gap shrinks")
+    diag.add_argument("sessions", nargs="+", help="session TOML files of one object (e.g. at several pressures)")
+    diag.add_argument("--out", default=None, help="directory for diagnosis.json and diagnosis.png (created)")
+    diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
+    diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
+                      help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
+    diag.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
+                      help="gas law of the baseline (default: the baseline's)")
+    diag.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
+                      help="wrinkle count: n = 1.33 tau^1/2 (scaling, the default, as configs/paper.toml) or the engine's "
+                      "(mechanics)")
+    diag.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: its measuring chain is the "
+                      "baseline, and its gas and wrinkle law the model's")
+    diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
+                      help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
+    diag.add_argument("--quiet", action="store_true", help="no progress bar")
+    diag.set_defaults(func=_cmd_diagnose)
+
+
+def _register_rig(sub) -> None:
+    """``shelljax rig calibrate``."""
+    rig = sub.add_parser("rig", help="the measuring chain: calibrate it once where the pressure is known (docs/rig.md)")
+    rig_sub = rig.add_subparsers(dest="rig_command", required=True)
+    cal = rig_sub.add_parser("calibrate", help="fit and select the rig's terms on sessions with manometer readings")
+    cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects")
+    cal.add_argument("--out", required=True, help="rig TOML file to write")
+    cal.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="isothermal",
+                     help="gas law of the forward model (every estimate through the rig uses it)")
+    cal.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
+                     help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)")
+    cal.add_argument("--terms", nargs="+", default=None, metavar="TERM",
+                     help="candidate terms (default: all of shelljax.rig.RIG_TERMS)")
+    cal.add_argument("--quiet", action="store_true", help="no progress bar")
+    cal.set_defaults(func=_cmd_rig_calibrate)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``shelljax`` command."""
     parser = argparse.ArgumentParser(prog="shelljax", description=__doc__)
@@ -152,9 +256,13 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--seed", type=int, default=0)
     est.add_argument("--model", choices=["axisym", "scaling"], default="axisym",
                      help="forward model of fit/bayes (default: the axisymmetric shell engine)")
-    est.add_argument("--gas", choices=["prescribed", "isothermal"], default="prescribed", help="gas model of the axisym engine")
-    est.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="mechanics",
-                     help="wrinkle count of the axisym model: the engine's (mechanics) or n = 1.33 tau^1/2 (scaling)")
+    est.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
+                     help="gas model of the axisym engine (default: prescribed; with --rig, the rig's)")
+    est.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
+                     help="wrinkle count of the axisym model: the engine's (mechanics, the default) or n = 1.33 tau^1/2 "
+                     "(scaling); with --rig, the rig's")
+    est.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through the calibrated "
+                     "measuring chain (fit or bayes)")
     est.add_argument("--nuisance", nargs="*", choices=["depth_offset", "force_gain"], help="extra fitted parameters")
     est.add_argument("--walkers", type=int, default=32, help="bayes: emcee walkers")
     est.add_argument("--max-steps", type=int, default=20_000, help="bayes: most MCMC steps")
@@ -163,21 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
     est.set_defaults(func=_cmd_estimate)
 
-    diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
-                          "which candidate effect explains it, how far the gap shrinks")
-    diag.add_argument("sessions", nargs="+", help="session TOML files of one object (e.g. at several pressures)")
-    diag.add_argument("--out", default=None, help="directory for diagnosis.json and diagnosis.png (created)")
-    diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
-    diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
-                      help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
-    diag.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
-                      help="gas law of the baseline (default: the baseline's)")
-    diag.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
-                      help="wrinkle count: n = 1.33 tau^1/2 (scaling, as configs/paper.toml) or the engine's (mechanics)")
-    diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
-                      help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
-    diag.add_argument("--quiet", action="store_true", help="no progress bar")
-    diag.set_defaults(func=_cmd_diagnose)
+    _register_diagnose(sub)
 
     sim = sub.add_parser("simulate", help="run a dynamic scenario config (drop, bounce) into --out")
     sim.add_argument("config", help="scenario config TOML, e.g. configs/drop.toml")
@@ -196,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
                      help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling, as configs/paper.toml) or the engine's (mechanics)")
     rep.set_defaults(func=_cmd_replica)
+
+    _register_rig(sub)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")
     val.add_argument("sessions", nargs="+")

@@ -18,15 +18,16 @@ from .paper import PAPER_KS
 
 METHODS = ("closed-form", "fit", "bayes")
 FORWARD_MODELS = ("axisym", "scaling")
-GAS_MODELS = ("prescribed", "isothermal")
+GAS_MODELS = ("prescribed", "isothermal", "adiabatic")
 WRINKLE_LAWS = ("mechanics", "scaling")  # as shelljax.estimate._forward (kept JAX-free here)
 NUISANCE = ("depth_offset", "force_gain")
-_TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs"}
+_TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs", "rig"}
 ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
                    "bayes_walkers", "bayes_max_steps", "bayes_surrogate"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
 _OUTPUT_KEYS = {"figures"}
+_RIG_KEYS = {"path"}
 
 
 def bundled_data_dir() -> Path:
@@ -44,7 +45,8 @@ class ExperimentConfig:
     ``bayes``: ``forward_model`` ("axisym" or "scaling"), ``gas`` ("prescribed" or "isothermal"),
     ``wrinkle_law`` of the axisym model ("mechanics" or "scaling"),
     ``nuisance`` parameters, ``bayes_walkers``, ``bayes_max_steps`` and ``bayes_surrogate``
-    (sample the axisym engine through its checked Chebyshev surrogate; default true).
+    (sample the axisym engine through its checked Chebyshev surrogate; default true); ``rig``: a
+    rig file (``shelljax rig calibrate``) that fit and bayes estimate through, or None.
     """
 
     source: Path
@@ -67,6 +69,7 @@ class ExperimentConfig:
     bayes_walkers: int = 32
     bayes_max_steps: int = 20_000
     bayes_surrogate: bool = True
+    rig: Path | None = None
 
 
 def _fail(path: Path, field: str, problem: str, fix: str) -> InvalidInputError:
@@ -117,7 +120,11 @@ def load_config(path: str | Path) -> ExperimentConfig:
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(path, "seed", f"{seed!r} is not a non-negative integer", "write seed = 0")
-    estimators = estimator_settings(path, _table(path, data, "estimators", ESTIMATOR_KEYS))
+    estimators_table = _table(path, data, "estimators", ESTIMATOR_KEYS)
+    rig = _rig_settings(path, _table(path, data, "rig", _RIG_KEYS), estimators_table)
+    if rig is not None:
+        estimators_table = {**estimators_table, **rig[1]}
+    estimators = estimator_settings(path, estimators_table)
     calibration = _calibration_settings(path, _table(path, data, "calibration", _CALIBRATION_KEYS))
     sessions_table = _table(path, data, "sessions", _SESSION_KEYS)
     if "paths" not in sessions_table:
@@ -132,8 +139,33 @@ def load_config(path: str | Path) -> ExperimentConfig:
         raise _fail(path, "output_dir", f"{output_dir!r} is not a path", 'write output_dir = "runs"')
     return ExperimentConfig(
         source=path, name=name, description=str(data.get("description", "")), output_dir=Path(output_dir),
-        seed=seed, sessions=sessions, figures=figures, **estimators, **calibration,
+        seed=seed, sessions=sessions, figures=figures, **estimators, **calibration, rig=None if rig is None else rig[0],
     )  # fmt: skip
+
+
+def _rig_settings(path: Path, table: dict, estimators: dict) -> tuple[Path, dict] | None:
+    """(the rig file, its forward-model options) of a [rig] table, or None without one; the
+    [estimators] table may repeat the rig's gas and wrinkle law but not contradict them."""
+    if not table:
+        return None
+    if "path" not in table:
+        raise _fail(path, "rig.path", "missing", 'write path = "rig.toml" (a file from `shelljax rig calibrate`)')
+    (rig_path,) = resolve_paths(path, "rig.path", [table["path"]])[:1]
+    try:
+        forward = tomllib.loads(rig_path.read_text()).get("forward_model", {})
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise _fail(path, "rig.path", f"{rig_path} is not a readable rig file ({err})",
+                    "re-create it with `shelljax rig calibrate`") from None  # fmt: skip
+    options = {}
+    for key in ("gas", "wrinkle_law"):
+        made = forward.get(key)
+        if made is None:
+            raise _fail(path, "rig.path", f"{rig_path} names no forward_model.{key}", "re-create it with `shelljax rig calibrate`")
+        if key in estimators and estimators[key] != made:
+            raise _fail(path, f"estimators.{key}", f"{estimators[key]!r}, but the rig {rig_path} was calibrated with {made!r}",
+                        f"write {key} = {made!r}, or calibrate a rig with this {key}")  # fmt: skip
+        options[key] = made
+    return rig_path, options
 
 
 def _read_toml(path: Path) -> dict:

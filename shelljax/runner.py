@@ -113,20 +113,26 @@ def _stage(name: str, stages: list[dict], verbose: bool):
 
 
 def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                        stages: list[dict], verbose: bool):  # fmt: skip
+                        stages: list[dict], verbose: bool, rig=None):  # fmt: skip
     """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
     result or None). bayes starts from the fit when it converged; each method is a timed stage.
+    With a ``rig`` (``shelljax.rig``), both go through it.
 
     A failure is recorded in the block (``error``) and reported, not raised: one bad session must
     not lose the others' results.
     """
     methods = [m for m in ("fit", "bayes") if m in config.methods]
-    model = options_forward_model(session, options) if methods else None
+    model = options_forward_model(session, options) if methods and rig is None else None
     out, fit = {}, None
     for method in methods:
         try:
             with _stage(f"{session.source.name}: {method}", stages, verbose):
-                if method == "fit":
+                if rig is not None:
+                    from .rig import estimate_with_rig
+
+                    result = estimate_with_rig(session, rig, method=method, seed=config.seed)
+                    out[method] = (_block(result), result)
+                elif method == "fit":
                     fit = run_estimator("fit", session, options, model=model)
                     out[method] = (_block(fit), fit)
                 else:
@@ -166,7 +172,8 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
 
 
 def _estimate_session_entry(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                            used_in_calibration: bool, held_out: list, stages: list[dict], verbose: bool):  # fmt: skip
+                            used_in_calibration: bool, held_out: list, stages: list[dict], verbose: bool,
+                            rig=None):  # fmt: skip
     """Every configured estimator on one session: (results.json entry, summary-figure row)."""
     entry = {"object": session.object_name, "session": str(session.source),
              "used_in_calibration": used_in_calibration, "input_files": session.input_files,
@@ -180,12 +187,12 @@ def _estimate_session_entry(session: Session, config: ExperimentConfig, options:
         manometer = session.manometer_gauge_pressure
         if manometer is not None and not used_in_calibration:
             held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
-    for method, (block, result) in _simulation_methods(session, config, options, run_dir, stages, verbose).items():
+    for method, (block, result) in _simulation_methods(session, config, options, run_dir, stages, verbose, rig).items():
         entry["estimates"][method] = block
         if result is not None:
             row["estimates"][method] = _plotted(result.estimates)
             entry["figures"] += block.pop("_figures", [])
-            if method == "fit":
+            if method == "fit" and rig is None:
                 model_curves[f"{method}: {config.forward_model} model"] = result.predicted_depth
     if session.manometer_gauge_pressure is not None:
         for method, estimates in row["estimates"].items():
@@ -222,17 +229,24 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
     calibration, k_s = _calibration(config, calibration_sessions)
     options = _estimator_options(config, k_s)
+    rig = None
+    if config.rig is not None:
+        from .rig import load_rig
+
+        rig = load_rig(config.rig)
 
     run_dir = _fresh_run_dir(config, None if output_dir is None else Path(output_dir))
     shutil.copy2(config.source, run_dir / "config.toml")
     results = _results_header(config, k_s)
+    if config.rig is not None:
+        results["rig"] = {"path": str(config.rig), "sha256": file_sha256(config.rig)}
     summary_rows: list[dict] = []
     held_out: list[tuple[str, float, float, float]] = []
     calibration_files = {str(s.source) for s in calibration_sessions}
     stages: list[dict] = []
     for session in tqdm(sessions, desc="estimating", disable=disable):
         entry, row = _estimate_session_entry(session, config, options, run_dir, str(session.source) in calibration_files,
-                                             held_out, stages, verbose=progress is not False)  # fmt: skip
+                                             held_out, stages, verbose=progress is not False, rig=rig)  # fmt: skip
         summary_rows.append(row)
         results["sessions"].append(entry)
         release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate

@@ -131,3 +131,23 @@ def test_cli_writes_the_diagnosis_and_refuses_bad_input(studies, tmp_path, capsy
     assert main(["diagnose", str(planted[0]), str(other[1]), "--out", str(tmp_path / "mixed")]) == 2
     assert "different objects" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists() and not (tmp_path / "mixed").exists()
+
+
+def test_what_the_study_cannot_exclude(studies):
+    _, found, _, clean = studies
+    # with the offset planted, the models that ignore it are excluded: the offset is in, the baseline out
+    kept = {k["effect"] for k in found.report["not_excluded"]}
+    assert "depth_offset" in kept and "baseline" not in kept
+    # the effect-free study cannot exclude the candidates that add nothing: the robust range spans
+    # every one's interval, and so contains the chosen model's
+    report = clean.report
+    kept = {k["effect"] for k in report["not_excluded"]}
+    assert "baseline" in kept and len(kept) >= 2
+    e = report["robust"]["young_modulus"]
+    assert e["range95"][0] <= e["chosen_ci95"][0] and e["range95"][1] >= e["chosen_ci95"][1]
+    assert e["unit"] == "Pa" and e["width_ratio"] >= 1.0
+    assert len(report["robust"]["gauge_pressure"]) == len(PRESSURES)
+    separating = {s["effect"]: s["measurement"] for s in report["separating"]}
+    assert set(separating) == kept - {"baseline"}
+    if "depth_offset" in separating:
+        assert "rigid-surface press" in separating["depth_offset"]

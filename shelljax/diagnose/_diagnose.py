@@ -32,7 +32,9 @@ from ..axisym import GAS_EXPONENTS
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
-from ._model import WRINKLE_LAWS, StudyArrays, physical, study_arrays
+from ._measurement import MeasurementPrior, measured_baseline, widened_grid
+from ._model import GRID_SPAN, WRINKLE_LAWS, StudyArrays, physical, study_arrays
+from ._robust import not_excluded, robust_range, separating
 from ._study import SHAPE_OBSERVABLES, Study, build_study
 
 WIN_SE = 2.0
@@ -220,6 +222,23 @@ def _checked_options(effects, baseline: str, gas: str | None, wrinkle_law: str) 
     return effects, gas
 
 
+def _fit_candidate_restarted(data: StudyArrays, wrinkle_law: str, u_start: np.ndarray, effect: str) -> CandidateFit:
+    """A candidate's fit from the baseline's optimum; where it stops short, again with its parameters
+    started one prior unit either side (an indenter or a gain far from nominal is a long way from 0)."""
+    fit = fit_candidate(data, wrinkle_law, u_start)
+    n_sessions = int(data.radius.shape[0])
+    for sign in (1.0, -1.0):
+        if fit.converged:
+            break
+        u = np.asarray(u_start, float).copy()
+        for name in EFFECTS[effect].parameters:
+            u[n_sessions + GLOBAL_PARAMETERS.index(name)] = sign
+        retry = fit_candidate(data, wrinkle_law, u)
+        if retry.converged or retry.chi2 < fit.chi2:
+            fit = retry
+    return fit
+
+
 def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessions, report_progress):
     """Fit the baseline, then every candidate from the baseline's optimum: (fits, scores) by name."""
     fits, scores = {}, {}
@@ -231,7 +250,7 @@ def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessio
     fits["baseline"], scores["baseline"] = fit, loo_score(fit)
     for effect in effects:
         report_progress(effect)
-        fit = fit_candidate(candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u)
+        fit = _fit_candidate_restarted(candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u, effect)
         fits[effect] = fit
         if fit.converged:
             scores[effect] = loo_score(fit)
@@ -305,13 +324,16 @@ def diagnose(
     gas: str | None = None,
     wrinkle_law: str = "scaling",
     progress: Callable[[str], None] | bool = True,
+    measurement: MeasurementPrior | None = None,
 ) -> Diagnosis:
     """Diagnose the sim-to-real gap of the sessions of one object (see the module docstring).
 
     ``effects``: candidate names (default: every one in :data:`EFFECTS`); ``baseline``:
     "estimator" (the fitted estimator's sealed isothermal gas) or "paper" (the paper's prescribed
     pressure); ``gas`` overrides the baseline's gas law ("prescribed", "isothermal", "adiabatic");
-    ``wrinkle_law``: "scaling" (n = 1.33 τ^½) or "mechanics" (the engine's count).
+    ``wrinkle_law``: "scaling" (n = 1.33 τ^½) or "mechanics" (the engine's count);
+    ``measurement``: a calibrated measuring chain as the new baseline (``shelljax.rig``), whose
+    parameters every model fits under its calibrated prior, with its reference force and noise model.
 
     Raises:
         InvalidInputError: sessions of several objects, an unknown effect, baseline, gas or
@@ -321,10 +343,14 @@ def diagnose(
     """
     effects, gas = _checked_options(effects, baseline, gas, wrinkle_law)
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
-    study = build_study(sessions)
-    base = study_arrays(study, gas=gas)
+    study = build_study(sessions, None if measurement is None else measurement.noise)
+    base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
+    if measurement is not None:
+        base = widened_grid(measured_baseline(base, measurement), study.force, GRID_SPAN)
     baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
         ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+    if measurement is not None:
+        baseline_free += tuple(p for p in measurement.parameters if p not in baseline_free)
     report_progress = _progress_reporter(progress, 1 + len(effects))
     fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
     ranking, chosen = _ranking(fits, scores, effects)
@@ -336,6 +362,9 @@ def diagnose(
     misfit_p = float(stats.chi2.sf(np.sum(points_after["whitened"] ** 2), points_after["whitened"].size))
     verdict = "unexplained" if misfit_p < MISFIT_P else ("none" if chosen == "baseline" else chosen)
     before_est, after_est = _session_estimates(fits["baseline"]), _session_estimates(fits[chosen])
+    kept = not_excluded(ranking, scores, WIN_NATS, WIN_SE)
+    robust = robust_range(kept, {name: _session_estimates(fits[name]) for name in {k["effect"] for k in kept} | {chosen}},
+                          chosen)
     report = {
         "verdict": verdict,
         "ranking": ranking,
@@ -344,11 +373,15 @@ def diagnose(
         "shrink": gap_before["rms_standardized"] / gap_after["rms_standardized"],
         "where": _where(study, points_before),
         "where_after": _where(study, points_after) if chosen != "baseline" else None,
+        "not_excluded": kept,
+        "robust": robust,
+        "separating": separating(kept, chosen, robust),
         "winner": _winner_record(chosen, fits, before_est, after_est),
         "misfit_p_value": misfit_p,
         "decision": {"win_se": WIN_SE, "win_nats": WIN_NATS, "misfit_p": MISFIT_P,
                      "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum"},  # fmt: skip
-        "baseline": _baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
+        "baseline": {**_baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
+                     "measurement": None if measurement is None else measurement.name},
         "sessions": _sessions_record(study),
     }
     return Diagnosis(report=report, study=study, fits=fits, scores=scores, points_before=points_before,

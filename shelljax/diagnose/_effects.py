@@ -11,10 +11,11 @@ per-session gauge pressures:
 | thickness | h_cal · e^u | m | free if the calliper has a std | normal(0, σ_h/h), or (0, 0.5) under ``wall_thickness`` |
 | radius | R_meas · e^u | m | free if R has a std | normal(0, σ_R/R) |
 | finger_compliance | 0.1 mm/N · u | m/N | 0 | normal(0, 10) |
+| pad_exponent | 1 + 0.1 u | - | 1 (a linear pad) | normal(0, 4) |
 | depth_offset | 1 mm · u | m | 0 | normal(0, 10) |
 | force_gain | e^u | - | 1 | normal(0, 0.3) |
 | force_exponent | 1 + 0.1 u | - | 1 | normal(0, 3) |
-| indenter_radius | a₀ · e^u | m | a₀ (8 mm) | normal(0, 1) |
+| indenter_radius | a₀ (f + (1 − f) e^u), f = 1/2 | m | a₀ (8 mm) | normal(0, 1) |
 | gas_exponent | κ₀ + 0.5 u | - | κ₀ (1 isothermal, 0 prescribed, 1.4 adiabatic) | normal(0, 2) |
 | stiffening | 10 u | - | 0 (Neo-Hookean) | normal(0, 3) |
 | body_mass | m_ref · e^u | kg | no gravity | normal(0, 0.1) with the session's mass, else (0, 1.5) |
@@ -34,20 +35,26 @@ from .._errors import InvalidInputError
 
 GLOBAL_PARAMETERS = (
     "young_modulus", "thickness", "radius", "finger_compliance", "depth_offset", "force_gain",
-    "force_exponent", "indenter_radius", "gas_exponent", "stiffening", "body_mass", "friction_coefficient",
+    "force_exponent", "indenter_radius", "gas_exponent", "stiffening", "body_mass", "friction_coefficient", "pad_exponent",
 )  # fmt: skip
 UNITS = {
     "gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
     "finger_compliance": "m/N", "depth_offset": "m", "force_gain": "1", "force_exponent": "1",
     "indenter_radius": "m", "gas_exponent": "1", "stiffening": "1", "body_mass": "kg", "friction_coefficient": "1",
+    "pad_exponent": "1",
 }  # fmt: skip
 LOG_PARAMETERS = frozenset({"gauge_pressure", "young_modulus", "thickness", "radius", "force_gain",
                             "indenter_radius", "body_mass", "friction_coefficient"})  # fmt: skip
+# the finger never shrinks below half its nominal radius: a fingertip is no needle, and a contact
+# patch smaller than the engine's elements makes the depth a kinked function of the radius, on
+# which Levenberg–Marquardt stalls (docs/rig.md)
+MIN_INDENTER_FRACTION = 0.5
 # (scale of u, prior std of u) of the effect parameters that are linear in u
 LINEAR_SCALE = {"finger_compliance": 1e-4, "depth_offset": 1e-3, "force_exponent": 0.1, "gas_exponent": 0.5,
-                "stiffening": 10.0}  # fmt: skip
+                "stiffening": 10.0, "pad_exponent": 0.1}  # fmt: skip
 PRIOR_STD = {"finger_compliance": 10.0, "depth_offset": 10.0, "force_gain": 0.3, "force_exponent": 3.0,
-             "indenter_radius": 1.0, "gas_exponent": 2.0, "stiffening": 3.0, "friction_coefficient": 1.5}  # fmt: skip
+             "indenter_radius": 1.0, "gas_exponent": 2.0, "stiffening": 3.0, "friction_coefficient": 1.5,
+             "pad_exponent": 4.0}  # fmt: skip
 FRICTION_REFERENCE = 0.5  # [-] μ at u = 0: rubber on a table
 FREE_THICKNESS_STD = 0.5  # [-] prior std of log h under ``wall_thickness``: h within ×/÷ 2.7 at 2σ
 WEIGHED_MASS_STD = 0.1  # [-] prior std of log m when the session states the mass
@@ -73,7 +80,7 @@ class Effect:
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("finger_compliance", "measurement", ("finger_compliance",),
            "the finger pad compresses by c·F, and the depth read from the finger includes it: "
-           "depth = w0 + c F [c in m/N]"),
+           "depth = w0 + c F [c in m/N] (a linear pad; a rig may give it a power law, shelljax.rig)"),
     Effect("depth_offset", "measurement", ("depth_offset",),
            "a zero-point error of the depth reading, the same for every sample: depth = w0 + δ [m]"),
     Effect("force_sensor_gain", "measurement", ("force_gain",),

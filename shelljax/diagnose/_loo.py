@@ -27,9 +27,10 @@ from ..estimate import solve_least_squares
 from ._model import JointProblem, StudyArrays
 
 FIT_TOLERANCE = 1e-6  # [-] LM's rtol and atol on u: far below any parameter's statistical error
-# [χ²] an optimum's remaining Gauss–Newton decrease: 0.05 χ² is 0.025 nats of log-likelihood, far
-# below the 4-nat decision margin, and above the engine's round-off floor on joint studies
-OPTIMALITY_TOLERANCE = 0.05
+# [χ²] an optimum's remaining Gauss–Newton decrease: 0.5 χ² is 0.25 nats of log-likelihood, 16 times
+# below the 4-nat decision margin, and above the engine's floor on joint studies: its depth is kinked
+# in the finger's radius where the contact patch is about an element wide
+OPTIMALITY_TOLERANCE = 0.5
 RESTARTS = 2
 
 

@@ -14,8 +14,10 @@ program serves the baseline, every candidate and every object:
 
 Measurement model of a depth sample recorded at force F [N]: the true force is
 F_t = g F_ref (F / F_ref)^p (``force_sensor_gain`` g, ``force_sensor_nonlinearity`` p; F_ref the
-study's mid force), and the depth read is w0(F_t) + δ + c F_t (``depth_offset`` δ,
-``finger_compliance`` c). Wrinkle counts are the paper's n = 1.33 τ^½ ("scaling") or the
+study's mid force), and the depth read is w0(F_t) + δ + c F_ref (F_t / F_ref)^q (``depth_offset``
+δ, ``finger_compliance`` c, a pad compressing c F_t when linear, q = 1, the default; a rig model
+(``shelljax.rig``) may free q). A rig's calibrated parameters enter as a correlated normal prior:
+``rig_whitening`` L and ``rig_mean`` μ add the residuals L (u − μ). Wrinkle counts are the paper's n = 1.33 τ^½ ("scaling") or the
 engine's count at the top force ("mechanics"); shape observables come from the engine's state.
 """
 
@@ -40,6 +42,7 @@ from ._effects import (
     LINEAR_SCALE,
     LOG_PARAMETERS,
     MANOMETER_STD,
+    MIN_INDENTER_FRACTION,
     PRIOR_STD,
     UNWEIGHED_MASS,
     UNWEIGHED_MASS_STD,
@@ -61,7 +64,9 @@ class StudyArrays(eqx.Module):
     ``prior_mean``/``prior_std`` of u (std = inf: flat), ``free`` mask, ``u_base`` (the value of
     every fixed entry), references for u = 0: ``start_pressure`` [Pa], ``start_modulus`` [Pa],
     ``thickness`` [m], ``radius`` [m] per session, ``mass_ref`` [kg], ``indenter_radius`` [m],
-    ``gas_exponent`` κ₀ [-]; ``force_ref`` [N]; ``grid`` [N] in the reference frame.
+    ``gas_exponent`` κ₀ [-]; ``force_ref`` [N]; ``grid`` [N] in the reference frame;
+    ``rig_whitening`` (u, u) and ``rig_mean`` (u,): a correlated prior L (u − μ) on the entries of a
+    calibrated rig (zeros: none).
     """
 
     depth_session: Int[Array, " n"]
@@ -94,11 +99,18 @@ class StudyArrays(eqx.Module):
     prior_std: Float[Array, " u"]
     free: Bool[Array, " u"]
     u_base: Float[Array, " u"]
+    rig_whitening: Float[Array, "u u"]
+    rig_mean: Float[Array, " u"]
     n_units: int = eqx.field(static=True)
 
 
-def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = PAPER_INDENTER_RADIUS) -> StudyArrays:
-    """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only)."""
+def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = PAPER_INDENTER_RADIUS,
+                 force_ref: float | None = None) -> StudyArrays:
+    """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only).
+
+    ``force_ref`` [N]: the force about which the sensor's and the pad's power laws are written
+    (None: the study's mid force; a rig carries its own to every later study).
+    """
     s = study.n_sessions
     n_u = s + len(GLOBAL_PARAMETERS)
     mean, std = np.zeros(n_u), np.full(n_u, np.inf)
@@ -121,6 +133,7 @@ def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: floa
     lo = GRID_SPAN[0] * float(np.min(study.force)) / float(np.max(scale)) ** 2
     hi = GRID_SPAN[1] * float(np.max(study.force)) / float(np.min(scale)) ** 2
     levels = np.unique(study.level)
+    force_ref = math.sqrt(levels[0] * levels[-1]) if force_ref is None else float(force_ref)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
     i = lambda v: jnp.asarray(v, jnp.int32)  # noqa: E731
     return StudyArrays(
@@ -133,9 +146,9 @@ def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: floa
         thickness=f(study.thickness), poisson_ratio=f(study.poisson_ratio),
         mass_ref=f(study.mass if study.mass is not None else UNWEIGHED_MASS), indenter_radius=f(indenter_radius),
         gas_exponent=f(GAS_EXPONENTS[gas]), gas_volume_ratio=f(study.gas_volume_ratio),
-        force_ref=f(math.sqrt(levels[0] * levels[-1])), grid=f(np.linspace(lo, hi, N_GRID)),
+        force_ref=f(force_ref), grid=f(np.linspace(lo, hi, N_GRID)),
         prior_mean=f(mean), prior_std=f(std), free=jnp.asarray(np.arange(n_u) < s), u_base=f(np.zeros(n_u)),
-        n_units=study.n_units,
+        rig_whitening=f(np.zeros((n_u, n_u))), rig_mean=f(np.zeros(n_u)), n_units=study.n_units,
     )  # fmt: skip
 
 
@@ -154,7 +167,10 @@ def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array,
         else:
             out[name] = LINEAR_SCALE[name] * get[name]
     out["radius"] = data.radius * out["radius"]  # per session
+    out["indenter_radius"] = data.indenter_radius * (MIN_INDENTER_FRACTION + (1 - MIN_INDENTER_FRACTION) * jnp.exp(
+        get["indenter_radius"]))  # fmt: skip
     out["force_exponent"] = 1.0 + out["force_exponent"]
+    out["pad_exponent"] = 1.0 + out["pad_exponent"]
     out["gas_exponent"] = data.gas_exponent + out["gas_exponent"]
     # self-weight and ground friction are on only when their parameter is free
     for name in ("body_mass", "friction_coefficient"):
@@ -165,6 +181,11 @@ def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array,
 def true_force(recorded, phys, data: StudyArrays):
     """F_t [N] from a recorded force [N]: gain and power-law response about F_ref."""
     return phys["force_gain"] * data.force_ref * (recorded / data.force_ref) ** phys["force_exponent"]
+
+
+def pad_compression(force, phys, data: StudyArrays):
+    """The finger pad's compression [m] under the true force [N]: c F_ref (F / F_ref)^q."""
+    return phys["finger_compliance"] * data.force_ref * (force / data.force_ref) ** phys["pad_exponent"]
 
 
 def engine_inputs(phys, data: StudyArrays):
@@ -208,7 +229,7 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
     f_true = true_force(data.force, phys, data)
     f_ref = f_true / scale[data.depth_session] ** 2
     w0 = scale[data.depth_session] * _at(curves.w0, data.depth_session, f_ref, data.grid)
-    depth = w0 + phys["depth_offset"] + phys["finger_compliance"] * f_true
+    depth = w0 + phys["depth_offset"] + pad_compression(f_true, phys, data)
     wrinkled = _at(curves.min_hoop_tension, data.depth_session, f_ref, data.grid) < 0.0
     top = jax.ops.segment_max(f_ref, data.depth_session, num_segments=scale.shape[0])
     if wrinkle_law == "scaling":
@@ -230,9 +251,11 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
 
 
 def prior_residuals(u, data: StudyArrays):
-    """(u − μ)/σ of every free entry with a proper prior, 0 elsewhere."""
+    """(u − μ)/σ of every free entry with a proper prior, 0 elsewhere; then the rig's L (u − μ_rig)."""
     finite = jnp.isfinite(data.prior_std) & data.free
-    return jnp.where(finite, (u - data.prior_mean) / jnp.where(finite, data.prior_std, 1.0), 0.0)
+    independent = jnp.where(finite, (u - data.prior_mean) / jnp.where(finite, data.prior_std, 1.0), 0.0)
+    rig = data.rig_whitening @ (jnp.where(data.free, u, data.u_base) - data.rig_mean)
+    return jnp.concatenate([independent, rig])
 
 
 def data_residuals(pred, data: StudyArrays):

@@ -31,7 +31,7 @@ KS_SCANS = {
     "finger_compliance": np.linspace(0.0, 20.0, 6),  # 0 … 2 mm/N
     "force_sensor_gain": np.linspace(-0.8, 0.8, 9),  # g = e^u
     "force_sensor_nonlinearity": np.linspace(-4.0, 4.0, 9),  # p = 1 + 0.1 u
-    "indenter_size": np.linspace(-1.0, 2.0, 7),  # a = 8 mm e^u
+    "indenter_size": np.linspace(-1.0, 2.0, 7),  # a = 8 mm (1/2 + e^u / 2): 5.5-33.6 mm
     "gas": np.linspace(-2.0, 0.8, 8),  # κ = 1 + 0.5 u: 0 (prescribed) … 1.4 (adiabatic)
     "material_stiffening": np.linspace(0.0, 4.0, 5),  # s = 10 u
     "wall_thickness": np.linspace(-1.0, 1.0, 9),  # h = h_cal e^u

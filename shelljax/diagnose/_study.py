@@ -212,11 +212,13 @@ def _shape_points(sessions, unit_of):
     return si.astype(int), unit.astype(int), kind.astype(int), force, value, std
 
 
-def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None) -> Study:
+def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None, *,
+                min_trials: int = MIN_TRIALS) -> Study:
     """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`).
 
     ``noise`` = (τ_t [m], (a [m²], b [-])) fixes the depth noise model instead of estimating it
-    from the replicates (e.g. a study's noise reused for a subset of its trials).
+    from the replicates (e.g. a study's noise reused for a subset of its trials, or a rig's);
+    ``min_trials``: fewest trials accepted (ranking needs trials to leave out; an estimate does not).
     """
     sessions = tuple(sessions)
     if not sessions:
@@ -228,10 +230,10 @@ def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, fl
             unit_of[(si, t)] = len(units)
             units.append((si, t))
     n_depth = sum(s.depth.size for s in sessions)
-    if len(units) < MIN_TRIALS or n_depth < MIN_DEPTHS:
+    if len(units) < min_trials or n_depth < MIN_DEPTHS:
         raise InvalidInputError(
             f"the study is too small to rank candidate effects: {len(units)} trials with {n_depth} depth samples "
-            f"in {len(sessions)} session(s) (need at least {MIN_TRIALS} trials and {MIN_DEPTHS} samples: "
+            f"in {len(sessions)} session(s) (need at least {min_trials} trials and {MIN_DEPTHS} samples: "
             "leave-one-trial-out needs trials to leave out). Fix: add sessions or trials"
         )
     # one protocol for the study: force levels are clustered over all sessions together

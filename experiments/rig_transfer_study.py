@@ -1,0 +1,318 @@
+"""Rig transfer study: calibrate a rig once on one object with a manometer, measure others without.
+
+Each rig has 0–3 imperfections of its measuring chain, drawn from families **wider than the rig
+model's** (shelljax.rig fits linear, Hertzian or power-law pads and power-law sensors; here pads
+also saturate exponentially and sensors also bend quadratically):
+
+| family | drawn | truth |
+|---|---|---|
+| pad | linear, Hertzian or saturating | compression 2–5 mm at 20 N: c F, c' F^(2/3), or d (1 − e^(−F/F₀)) with F₀ 5–12 N |
+| finger | a wider finger | radius 10–25 mm (the estimators assume 8 mm) |
+| sensor | gain, power law, or quadratic | F_t = g F (g 0.8–1.25), F_ref (F/F_ref)^p (p 0.8–1.2), or F (1 + β (F/F_ref − 1)) (β ±0.1–0.2) |
+| depth | zero error | δ ±1–3 mm |
+
+Per rig: a calibration object (R 0.12–0.2 m) at 4 pressures with manometer readings (1 % noise),
+and ``--objects`` test objects of other R (0.08–0.30 m, log-uniform), h (0.6–2 mm) and E (1–5 MPa,
+log-uniform) at 2 pressures each, without manometer. The paper's protocol (5–20 N in 2.5 N steps,
+3 trials, one wrinkle count a trial) with the bundled sessions' noise (as
+``experiments/blind_gap_study.py``). "Reality" is a finer engine than the estimators': the
+axisymmetric engine at 201 meridian elements from its own reference radius (0.15 m), sealed
+isothermal gas. The estimators see only the session files.
+
+Methods, on every test session:
+* ``fit``: the fitted estimator without a rig (sealed isothermal gas, n = 1.33 τ^½);
+* ``fit+rig`` and ``bayes+rig``: the same forward model through the rig calibrated on the
+  calibration object (``shelljax.rig``);
+* ``closed-form k_s``: the paper's closed form with k_s calibrated on the calibration object.
+
+Run:  python experiments/rig_transfer_study.py --rigs 12 --out docs/bench/rig-transfer-study.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
+from shelljax.physics import scaling_wrinkle_count
+
+FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
+N_TRIALS = 3
+REALITY_RADIUS = 0.15  # [m]
+REALITY_ELEMENTS = 201
+POISSON = DEFAULT_POISSON_RATIO
+F_REF = math.sqrt(FORCE_LEVELS[0] * FORCE_LEVELS[-1])  # [N]
+FAMILIES = ("pad", "finger", "sensor", "depth")
+METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s")
+CALIBRATION_WEIGHTS = "fit+rig, calibration weights"  # the same fits, mixed by the rig's weights alone
+
+
+def draw_rig(rng, n_imperfections: int) -> dict:
+    """The true measuring chain: a dict of the imperfections present (family → kind and values)."""
+    rig = {}
+    for family in rng.choice(FAMILIES, size=n_imperfections, replace=False):
+        if family == "pad":
+            kind = str(rng.choice(["linear", "hertz", "saturating"]))
+            at_20 = rng.uniform(2e-3, 5e-3)  # [m] compression at 20 N
+            rig["pad"] = {"kind": kind, "compression_at_20N": at_20, "f0": rng.uniform(5.0, 12.0)}
+        elif family == "finger":
+            rig["finger"] = {"radius": rng.uniform(10e-3, 25e-3)}
+        elif family == "sensor":
+            kind = str(rng.choice(["gain", "power", "quadratic"]))
+            rig["sensor"] = {"kind": kind, "gain": rng.uniform(0.8, 1.25), "exponent": rng.uniform(0.8, 1.2),
+                             "beta": rng.choice([-1, 1]) * rng.uniform(0.1, 0.2)}  # fmt: skip
+        else:
+            rig["depth"] = {"offset": rng.choice([-1, 1]) * rng.uniform(1e-3, 3e-3)}
+    return rig
+
+
+def true_force(rig, recorded):
+    s = rig.get("sensor")
+    if s is None:
+        return recorded
+    if s["kind"] == "gain":
+        return s["gain"] * recorded
+    if s["kind"] == "power":
+        return F_REF * (recorded / F_REF) ** s["exponent"]
+    return recorded * (1 + s["beta"] * (recorded / F_REF - 1))
+
+
+def pad_compression(rig, force):
+    p = rig.get("pad")
+    if p is None:
+        return np.zeros_like(force)
+    if p["kind"] == "linear":
+        return p["compression_at_20N"] * force / 20.0
+    if p["kind"] == "hertz":
+        return p["compression_at_20N"] * (force / 20.0) ** (2.0 / 3.0)
+    return p["compression_at_20N"] * (1 - np.exp(-force / p["f0"])) / (1 - math.exp(-20.0 / p["f0"]))
+
+
+def draw_object(rng, radius_range, log_radius=False):
+    lo, hi = radius_range
+    radius = math.exp(rng.uniform(math.log(lo), math.log(hi))) if log_radius else rng.uniform(lo, hi)
+    thickness = rng.uniform(0.6e-3, 2.0e-3)
+    young = math.exp(rng.uniform(math.log(1.0e6), math.log(5.0e6)))
+    low = max(700.0, 16.0 / radius**2)
+    return dict(radius=radius, thickness=thickness, young_modulus=young, low_pressure=low * rng.uniform(1.0, 1.3))
+
+
+def reality_w0(obj, rig, pressure, forces):
+    """Noise-free w0 [m] of reality at increasing true forces [N]."""
+    from shelljax.axisym import CurvePhysics, indentation_curves
+
+    scale = obj["radius"] / REALITY_RADIUS
+    radius = rig.get("finger", {}).get("radius", PAPER_INDENTER_RADIUS)
+    physics = CurvePhysics(indenter_radius=np.array([radius / scale]), gas_volume_ratio=np.ones(1),
+                           gas_exponent=np.ones(1), stiffening=np.zeros(1), areal_weight=np.zeros(1),
+                           friction_coefficient=np.zeros(1))  # fmt: skip
+    params = np.array([[pressure, obj["young_modulus"], obj["thickness"] / scale, POISSON]])
+    curve = indentation_curves(params, np.asarray(forces) / scale**2, radius=REALITY_RADIUS, n_elements=REALITY_ELEMENTS,
+                               gas="polytropic", physics=physics, workers=1)  # fmt: skip
+    return scale * np.asarray(curve.w0[0])
+
+
+def write_object(rng, obj, rig, pressures, directory: Path, name: str, manometer: bool):
+    from shelljax.session import write_session
+
+    paths = []
+    for k, pressure in enumerate(pressures):
+        trial, force, depth, counts = [], [], [], []
+        for t in range(1, N_TRIALS + 1):
+            recorded = np.round(FORCE_LEVELS + rng.normal(0.0, 0.05, FORCE_LEVELS.size), 2)
+            true = true_force(rig, recorded)
+            order = np.argsort(true)
+            w0 = np.empty_like(true)
+            w0[order] = reality_w0(obj, rig, pressure, true[order])
+            offset = rig.get("depth", {}).get("offset", 0.0)
+            measured = (w0 + pad_compression(rig, true) + offset) * (1 + rng.normal(0.0, 0.02, true.size)) \
+                + rng.normal(0.0, 0.5e-3)
+            trial += [t] * recorded.size
+            force += recorded.tolist()
+            depth += (np.round(measured * 2e3) / 2e3).tolist()
+            mean = scaling_wrinkle_count(pressure, obj["radius"], obj["young_modulus"], obj["thickness"], POISSON)
+            counts.append(int(round(float(mean) + rng.normal(0.0, 0.5))))
+        path = directory / f"{name}_{k}.toml"
+        write_session(path, object_name=name, radius=obj["radius"], radius_std=0.02 * obj["radius"],
+                      thickness=obj["thickness"], thickness_std=0.05 * obj["thickness"], trial=trial, force=force,
+                      depth=depth, wrinkle_counts=counts, poisson_ratio=POISSON,
+                      manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))) if manometer else None)  # fmt: skip
+        paths.append(path)
+    return paths
+
+
+def make_rig_world(rng, n_imperfections: int, n_objects: int, directory: Path):
+    """Write one rig's calibration and test sessions; return (rig truth, calibration paths, tests)."""
+    from shelljax import NoConvergenceError
+
+    rig = draw_rig(rng, n_imperfections)
+    for _ in range(5):
+        try:
+            obj = draw_object(rng, (0.12, 0.2))
+            pressures = obj["low_pressure"] * np.array([1.0, 1.3, 1.65, 2.0])
+            calibration = write_object(rng, obj, rig, pressures, directory, "calibration", manometer=True)
+            break
+        except NoConvergenceError:
+            continue
+    tests = []
+    while len(tests) < n_objects:
+        obj = draw_object(rng, (0.08, 0.30), log_radius=True)
+        pressures = obj["low_pressure"] * np.array([1.0, rng.uniform(1.4, 2.0)])
+        try:
+            paths = write_object(rng, obj, rig, pressures, directory, f"object{len(tests)}", manometer=False)
+        except NoConvergenceError:
+            continue
+        tests.append(dict(paths=paths, object=obj, pressures=pressures.tolist()))
+    return rig, calibration, {"radius": obj["radius"]}, tests
+
+
+def _errors(estimates, truth_p, truth_e):
+    """Relative errors [%] and 95 % coverage of P_g and E, from (value, (low, high)) by name."""
+    row = {}
+    for key, name, truth in (("p", "gauge_pressure", truth_p), ("e", "young_modulus", truth_e)):
+        if estimates.get(name) is not None:
+            value, (lo, hi) = estimates[name]
+            row.update({f"{key}_error": 100 * (value / truth - 1), f"{key}_covered": bool(lo <= truth <= hi)})
+    return row
+
+
+def _calibration_weighted(result):
+    """The rig fit's per-model estimates mixed by the rig's weights alone (no update by the session)."""
+    from shelljax.rig import normal_mixture
+
+    ok = [m for m in result.models if m["status"] == "ok"]
+    out = {}
+    for name in ("gauge_pressure", "young_modulus"):
+        center, lo, hi, _ = normal_mixture([math.log(m["estimates"][name]["value"]) for m in ok],
+                                           [m["estimates"][name]["relative_std"] for m in ok], [m["weight"] for m in ok])
+        out[name] = (math.exp(center), (math.exp(lo), math.exp(hi)))
+    return out
+
+
+def evaluate_session(path, truth_p, truth_e, rig_model, k_s, methods):
+    """Every method's errors on one test session (a failure is recorded, not raised)."""
+    from shelljax import ShelljaxError
+    from shelljax.estimate import EstimatorOptions, estimate_session, run_estimator
+    from shelljax.rig import estimate_with_rig
+    from shelljax.session import load_session
+
+    session = load_session(path)
+    out = {}
+    for method in methods:
+        start = time.perf_counter()
+        try:
+            if method == "fit":
+                est = run_estimator("fit", session, EstimatorOptions(gas="isothermal", wrinkle_law="scaling")).estimates
+            elif method == "closed-form k_s":
+                est = estimate_session(session, k_s=k_s, bootstrap_samples=0).estimates
+            else:
+                result = estimate_with_rig(session, rig_model, method=method.split("+")[0])
+                est = result.estimates
+                if method == "fit+rig":
+                    out[CALIBRATION_WEIGHTS] = {**_errors(_calibration_weighted(result), truth_p, truth_e), "seconds": 0.0}
+            pairs = {k: (v.value, v.ci95) for k, v in est.items() if k in ("gauge_pressure", "young_modulus")}
+            out[method] = {**_errors(pairs, truth_p, truth_e), "seconds": time.perf_counter() - start}
+        except ShelljaxError as err:
+            out[method] = {"failed": str(err)[:300]}
+    return out
+
+
+def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int):
+    from shelljax.estimate import calibrate_ks
+    from shelljax.rig import calibrate_rig
+    from shelljax.session import load_session
+
+    with tempfile.TemporaryDirectory() as tmp:
+        truth, calibration, _, tests = make_rig_world(rng, n_imperfections, n_objects, Path(tmp))
+        start = time.perf_counter()
+        rig = calibrate_rig(calibration, progress=False)
+        seconds = time.perf_counter() - start
+        k_s = calibrate_ks([load_session(p) for p in calibration]).k_s
+        rows = []
+        for test in tests:
+            for k, (path, pressure) in enumerate(zip(test["paths"], test["pressures"])):
+                use = [m for m in methods if m != "bayes+rig" or k % bayes_every == 0]
+                row = evaluate_session(path, pressure, test["object"]["young_modulus"], rig, k_s, use)
+                rows.append(dict(radius=test["object"]["radius"], pressure=pressure,
+                                 young_modulus=test["object"]["young_modulus"], results=row))  # fmt: skip
+    return dict(rig=index, truth=truth, families=sorted(truth), calibration_seconds=seconds,
+                selected=[dict(terms=list(m.terms), weight=m.weight) for m in rig.models],
+                not_identified=list(rig.not_identified), sessions=rows)  # fmt: skip
+
+
+def summarize(rigs, methods):
+    def stats(rows):
+        out = {}
+        for m in [*methods, CALIBRATION_WEIGHTS]:
+            ok = [r["results"][m] for r in rows if m in r["results"] and "failed" not in r["results"][m]]
+            failed = sum(1 for r in rows if m in r["results"] and "failed" in r["results"][m])
+            if not ok:
+                continue
+            entry = dict(n=len(ok), failed=failed, median_abs_p_error=float(np.median([abs(o["p_error"]) for o in ok])),
+                         p_coverage=float(np.mean([o["p_covered"] for o in ok])))  # fmt: skip
+            with_e = [o for o in ok if "e_error" in o]
+            if with_e:
+                entry.update(median_abs_e_error=float(np.median([abs(o["e_error"]) for o in with_e])),
+                             e_coverage=float(np.mean([o["e_covered"] for o in with_e])))  # fmt: skip
+            entry["median_seconds"] = float(np.median([o["seconds"] for o in ok]))
+            out[m] = entry
+        return out
+
+    rows = [r for rig in rigs for r in rig["sessions"]]
+    summary = {"rigs": len(rigs), "test_sessions": len(rows), "all": stats(rows),
+               "clean": stats([r for rig in rigs if not rig["families"] for r in rig["sessions"]])}  # fmt: skip
+    for family in FAMILIES:
+        summary[f"with_{family}"] = stats([r for rig in rigs if family in rig["families"] for r in rig["sessions"]])
+    summary["median_calibration_seconds"] = float(np.median([r["calibration_seconds"] for r in rigs]))
+    return summary
+
+
+def table(summary, methods) -> str:
+    lines = [f"{summary['rigs']} rigs, {summary['test_sessions']} test sessions; median calibration "
+             f"{summary['median_calibration_seconds']:.0f} s",
+             f"{'group':>14s} {'method':>29s} {'n':>4s} {'|P_g err| med':>13s} {'P cov95':>8s} {'|E err| med':>12s} "
+             f"{'E cov95':>8s}"]  # fmt: skip
+    for group in ("all", "clean") + tuple(f"with_{f}" for f in FAMILIES):
+        for m, s in summary.get(group, {}).items():
+            lines.append(f"{group:>14s} {m:>29s} {s['n']:4d} {s['median_abs_p_error']:12.1f}% {100 * s['p_coverage']:7.0f}% "
+                         f"{s.get('median_abs_e_error', float('nan')):11.1f}% {100 * s.get('e_coverage', float('nan')):7.0f}%")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rigs", type=int, default=12)
+    parser.add_argument("--objects", type=int, default=4, help="test objects per rig (2 pressures each)")
+    parser.add_argument("--seed", type=int, default=46)
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--bayes-every", type=int, default=2, help="bayes+rig on every n-th session of an object")
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json"))
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    rng = np.random.default_rng(args.seed)
+    # imperfections per rig: 0, 1, 2, 3 in turn (every fourth rig is clean)
+    counts = [i % 4 for i in range(args.rigs)]
+    rigs = []
+    out = Path(args.out)
+    for i, n in enumerate(counts):
+        start = time.perf_counter()
+        rigs.append(run_rig(i, rng, n, args.objects, args.methods, args.bayes_every))
+        print(f"[{i + 1}/{len(counts)}] rig {rigs[-1]['truth']} -> {[m['terms'] for m in rigs[-1]['selected'][:3]]} "
+              f"({time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
+        summary = summarize(rigs, args.methods)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"summary": summary, "rigs": rigs}, indent=1, default=float))
+    print(table(summarize(rigs, args.methods), args.methods))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,80 @@
+"""What a study cannot exclude: the candidates the best one does not beat, the range of P_g and E
+over them, and which extra measurement would tell them apart.
+
+A candidate is excluded when the best model beats it by the decision margin (Δ elpd ≥ 4 nats and
+≥ 2 SE, as a winner must beat the baseline). Over the rest (``not_excluded``), ``robust`` spans
+every one's 95 % interval of P_g (per session) and E; a verdict — `none` included — is only as sure
+as that range. ``separating`` names, for each candidate not excluded besides the chosen model, the
+measurement that would tell it from the chosen one, and the factor by which E's 95 % interval
+would shrink once it did (from the robust range to the chosen model's own interval).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# the measurement that separates a candidate from the rest, by the observable it moves most
+SEPARATING_MEASUREMENT = {
+    "baseline": "none needed beyond the other candidates' measurements",
+    "finger_compliance": "a rigid-surface press (the pad's compression alone)",
+    "depth_offset": "a rigid-surface press (the depth gauge's zero)",
+    "force_sensor_gain": "a second pressure with a manometer, or the sensor checked against weights",
+    "force_sensor_nonlinearity": "the sensor checked against weights across 5-20 N",
+    "indenter_size": "a second finger size (or a rigid sphere of known radius)",
+    "gas": "shape observables (H, D_u, D_l, d at 10 and 20 N)",
+    "material_stiffening": "deeper indentation (forces above 20 N)",
+    "wall_thickness": "a calliper reading of h on a squeezed fold",
+    "self_weight": "the object's mass",
+    "ground_friction": "shape observables (the contact diameter D_l)",
+}
+SPREAD_WARNING = 1.5  # the robust E range this many times the chosen model's interval deserves a warning
+
+
+def not_excluded(ranking: list[dict], scores: dict, win_nats: float, win_se: float) -> list[dict]:
+    """Every converged model the best one does not beat by the margin: {effect, delta_to_best, se}."""
+    ok = [e for e in ranking if e["status"] == "ok"]
+    best = scores[ok[0]["effect"]].elpd
+    out = []
+    for entry in ok:
+        diff = best - scores[entry["effect"]].elpd
+        delta, se = float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
+        if not (delta >= win_nats and delta >= win_se * se):
+            out.append({"effect": entry["effect"], "delta_to_best": -delta, "delta_to_best_se": se, "unit": "nats"})
+    return out
+
+
+def robust_range(kept: list[dict], estimates: dict, chosen: str) -> dict:
+    """Range of P_g [Pa] (per session) and E [Pa] over the kept models' 95 % intervals, with the spread of
+    their point values [%] and the chosen model's own interval for comparison."""
+    names = [k["effect"] for k in kept]
+
+    def span(get):
+        values = [get(estimates[n]) for n in names]
+        lo, hi = min(v["ci95"][0] for v in values), max(v["ci95"][1] for v in values)
+        points = [v["value"] for v in values]
+        own = get(estimates[chosen])
+        return {"range95": [lo, hi], "values": dict(zip(names, points)),
+                "spread_percent": 100.0 * (max(points) / min(points) - 1.0), "chosen_ci95": own["ci95"], "unit": "Pa"}
+
+    n_sessions = len(estimates[chosen]["gauge_pressure"])
+    out = {"gauge_pressure": [span(lambda e, i=i: e["gauge_pressure"][i]) for i in range(n_sessions)],
+           "young_modulus": span(lambda e: e["young_modulus"])}
+    e = out["young_modulus"]
+    width = math.log(e["range95"][1] / e["range95"][0])
+    own = math.log(e["chosen_ci95"][1] / e["chosen_ci95"][0])
+    out["young_modulus"]["width_ratio"] = width / own if own > 0 else math.inf
+    out["warning"] = (f"E is not pinned down by this study: over the {len(names)} models it cannot exclude, E's 95 % range "
+                      f"is {e['range95'][0]:.4g}-{e['range95'][1]:.4g} Pa ({width / own:.1f}x the chosen model's "
+                      f"interval; point values spread {e['spread_percent']:.0f} %)"
+                      if width > SPREAD_WARNING * own else None)  # fmt: skip
+    return out
+
+
+def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
+    """For each kept model besides the chosen: the measurement that separates it, and the factor E's
+    95 % interval would shrink by once the study could exclude every model but the chosen one."""
+    ratio = robust["young_modulus"]["width_ratio"]
+    return [{"effect": k["effect"], "measurement": SEPARATING_MEASUREMENT.get(k["effect"], "a measurement it moves"),
+             "young_modulus_interval_shrink": ratio} for k in kept if k["effect"] != chosen]  # fmt: skip

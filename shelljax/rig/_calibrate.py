@@ -1,0 +1,346 @@
+"""Rig calibration: the measuring chain learned once from sessions whose gauge pressure is known.
+
+Every calibration session has a manometer reading. Sessions are grouped by object; each object is
+one joint problem of the diagnosis (``shelljax.diagnose``: E, h and R per object, P_g per session
+with the manometer as its prior) and the rig's parameters are shared by all of them.
+
+**Term selection, out of sample.** Forward selection from the ideal rig: at each step every term of
+a family not yet in the model is added in turn and refitted; the best one is kept when it beats
+the current model by the diagnosis's margin (Δ elpd ≥ 4 nats and ≥ 2 SE, leave-one-trial-out).
+Real rigs have two or three imperfections, so several terms can be switched on.
+
+**What the data cannot exclude.** Every fitted model that the best one does not beat by that margin
+stays in the rig, weighted by pseudo-BMA+ (Yao et al. 2018: Bayesian-bootstrap Akaike weights of
+the leave-one-trial-out densities). Stacking was not chosen: it gives zero weight to a model whose
+predictions the others already make on the calibration object, yet such a model can transfer
+differently to another object, and its spread is what the intervals must include.
+
+**Several objects.** Objects share only the rig, so the rig's Laplace posterior is the product of
+each object's Gaussian marginal of the rig entries, with the weakly informative prior they all
+carry counted once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from .. import __version__
+from .._errors import InvalidInputError, NoConvergenceError
+from ..diagnose import GLOBAL_PARAMETERS, build_study, fit_candidate, loo_score, study_arrays
+from ..axisym import GAS_EXPONENTS
+from ..diagnose._diagnose import WIN_NATS, WIN_SE
+from ..diagnose._effects import PRIOR_STD
+from ..diagnose._measurement import widened_grid, with_measurement
+from ..diagnose._model import WRINKLE_LAWS, physical
+from ..paper import PAPER_INDENTER_RADIUS
+from ..session import Session, file_sha256, load_session
+from ._terms import FAMILIES, RIG_TERMS, check_terms, fixed_values, freed_parameters
+
+CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
+BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
+MIN_WEIGHT = 1e-3  # a model below this weight is dropped from the rig (its weight goes to the others)
+IDENTIFIED = 0.9  # a term is identified when the models holding it weigh ≥ 0.9, or ≤ 0.1
+
+
+@dataclasses.dataclass(frozen=True)
+class RigModel:
+    """One model of the measuring chain: its ``terms``, the diagnosis ``parameters`` it fits with their
+    ``mean`` and ``covariance`` in the diagnosis's scaled coordinates (u), the scaled values it
+    ``fixes``, its leave-one-trial-out ``elpd`` [nats] with ``elpd_se``, its difference to the best
+    model ``delta`` ± ``delta_se`` [nats], and its ``weight`` in the rig [-]."""
+
+    terms: tuple[str, ...]
+    parameters: tuple[str, ...]
+    mean: np.ndarray
+    covariance: np.ndarray
+    fixes: dict[str, float]
+    elpd: float
+    elpd_se: float
+    delta: float
+    delta_se: float
+    weight: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Rig:
+    """A calibrated rig (docs/rig.md): the ``models`` the data cannot exclude (weights sum to 1),
+    the ``excluded`` ones (terms, Δ elpd, SE), the ``inclusion`` probability of every term and the
+    terms ``not_identified``; the forward-model options it was made with (``gas``,
+    ``wrinkle_law``), the reference force ``force_ref`` [N] of the power laws, the nominal finger
+    radius ``indenter_radius`` [m], the depth ``noise`` model (τ_t [m], (a [m²], b [-])), the
+    ``calibration`` sessions (path, sha256, object, manometer [Pa]), the calibration objects'
+    ``objects`` estimates, and the shelljax ``version`` that made it."""
+
+    models: tuple[RigModel, ...]
+    excluded: tuple[dict, ...]
+    inclusion: dict[str, float]
+    not_identified: tuple[str, ...]
+    gas: str
+    wrinkle_law: str
+    force_ref: float
+    indenter_radius: float
+    noise: tuple[float, tuple[float, float]]
+    calibration: tuple[dict, ...]
+    objects: tuple[dict, ...]
+    version: str = __version__
+
+
+@dataclasses.dataclass(frozen=True)
+class _Fitted:
+    terms: tuple[str, ...]
+    fits: list
+    elpd: np.ndarray  # per trial, every object's trials in turn
+
+    @property
+    def total(self) -> float:
+        return float(np.sum(self.elpd))
+
+
+def _check_sessions(sessions: Sequence[Session]) -> None:
+    missing = [s for s in sessions if s.manometer_gauge_pressure is None]
+    if missing:
+        raise InvalidInputError(
+            f"{missing[0].source}: field 'manometer_gauge_pressure': missing; a rig is calibrated where the gauge "
+            "pressure is known. Fix: add the manometer reading, or leave this session out of `rig calibrate`")
+    names = [s.object_name for s in sessions]
+    for s in sessions:
+        if s.wrinkle_counts is None:
+            raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; the calibration needs the "
+                                    "wrinkle counts to separate E from the rig. Fix: add one count per trial")  # fmt: skip
+    if len(sessions) < 2 and len(set(names)) == 1:
+        raise InvalidInputError(f"{sessions[0].source}: one session cannot separate a rig from the object. "
+                                "Fix: calibrate on an object measured at two or more pressures (four are better)")  # fmt: skip
+
+
+def pooled_noise(studies) -> tuple[float, tuple[float, float]]:
+    """(τ_t [m], (a [m²], b [-])) of several studies, weighted by their trials."""
+    weights = np.array([s.n_units for s in studies], float)
+    tau = math.sqrt(float(np.average([s.trial_offset_std**2 for s in studies], weights=weights)))
+    a = float(np.average([s.depth_noise[0] for s in studies], weights=weights))
+    b = float(np.average([s.depth_noise[1] for s in studies], weights=weights))
+    return tau, (a, b)
+
+
+def baseline_free(study) -> tuple[str, ...]:
+    """The object's own unknowns besides P_g: E, and h and R where they carry a std."""
+    return ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
+        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+
+
+def model_data(base, study, terms, *, rig_prior=None):
+    """``base`` arrays with the free mask and fixed values of a rig model with ``terms``;
+    ``rig_prior`` = (parameters, mean u, covariance) puts the rig's correlated prior on them."""
+    return with_measurement(base, free=baseline_free(study) + freed_parameters(terms), fixes=fixed_values(terms),
+                            prior=rig_prior)
+
+
+def fit_model(base, study, terms, wrinkle_law: str, u_start: np.ndarray, *, rig_prior=None):
+    """Fit one object's study under a rig model; a fit that stops short is retried once from the
+    ideal rig (LM can stall where the engine's round-off meets a trust region that has shrunk)."""
+    data = model_data(base, study, terms, rig_prior=rig_prior)
+    fit = fit_candidate(data, wrinkle_law, u_start)
+    if not fit.converged:
+        retry = fit_candidate(data, wrinkle_law, np.asarray(data.u_base) * 0.0)
+        if retry.converged or retry.chi2 < fit.chi2:
+            fit = retry
+    return fit
+
+
+def _fit_everywhere(objects, terms, wrinkle_law, starts) -> _Fitted | None:
+    fits = []
+    for (base, study), start in zip(objects, starts):
+        fit = fit_model(base, study, terms, wrinkle_law, start)
+        if not fit.converged:
+            return None
+        fits.append(fit)
+    return _Fitted(terms, fits, np.concatenate([loo_score(f).elpd for f in fits]))
+
+
+def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
+    diff = better - worse
+    delta, se = float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
+    return delta >= WIN_NATS and delta >= WIN_SE * se, delta, se
+
+
+def _search(objects, terms, wrinkle_law, report) -> tuple[dict, tuple[str, ...]]:
+    """Forward selection: (every fitted model by its terms, the selected terms)."""
+    report("ideal rig")
+    start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects])
+    if start is None:
+        raise NoConvergenceError("the calibration fit with an ideal rig did not converge. Fix: check the sessions "
+                                 "with `shelljax validate` and `shelljax diagnose`")  # fmt: skip
+    fitted, current = {(): start}, ()
+    while True:
+        used = {RIG_TERMS[t].family for t in current}
+        trials = [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]
+        best = None
+        for candidate in trials:
+            report("+".join(candidate))
+            parent = fitted[current]
+            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in parent.fits])
+            if result is None:
+                continue
+            fitted[candidate] = result
+            if best is None or result.total > best.total:
+                best = result
+        if best is None or not _beats(best.elpd, fitted[current].elpd)[0]:
+            return fitted, current
+        current = best.terms
+
+
+def pseudo_bma_plus(elpd: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0) -> np.ndarray:
+    """Pseudo-BMA+ weights [-] of models from their pointwise elpd (models, units) (Yao et al. 2018)."""
+    rng = np.random.default_rng(seed)
+    n = elpd.shape[1]
+    alpha = rng.dirichlet(np.ones(n), size=draws)  # (draws, units)
+    z = n * alpha @ elpd.T  # (draws, models)
+    z -= z.max(axis=1, keepdims=True)
+    w = np.exp(z)
+    return (w / w.sum(axis=1, keepdims=True)).mean(axis=0)
+
+
+def _rig_posterior(result: _Fitted, objects) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """(parameters, mean u, covariance) of the rig entries: the product of every object's marginal."""
+    names = freed_parameters(result.terms)
+    if not names:
+        return names, np.zeros(0), np.zeros((0, 0))
+    prior_precision = np.diag([1.0 / PRIOR_STD[p] ** 2 for p in names])
+    precision, shift = -(len(result.fits) - 1) * prior_precision, np.zeros(len(names))
+    for fit, (_, study) in zip(result.fits, objects):
+        free = np.flatnonzero(np.asarray(fit.data.free))
+        index = [int(np.flatnonzero(free == study.n_sessions + GLOBAL_PARAMETERS.index(p))[0]) for p in names]
+        cov = fit.covariance[np.ix_(index, index)]
+        mean = fit.u[[study.n_sessions + GLOBAL_PARAMETERS.index(p) for p in names]]
+        info = np.linalg.inv(cov)
+        precision, shift = precision + info, shift + info @ mean
+    covariance = np.linalg.inv(precision)
+    return names, covariance @ shift, 0.5 * (covariance + covariance.T)
+
+
+def _object_summary(fit, study) -> dict:
+    phys = {k: np.asarray(v) for k, v in physical(jnp.asarray(fit.u), fit.data).items()}
+    free = np.flatnonzero(np.asarray(fit.data.free))
+    index = int(np.flatnonzero(free == study.n_sessions + GLOBAL_PARAMETERS.index("young_modulus"))[0])
+    rel = math.sqrt(fit.covariance[index, index])
+    return {"object": study.sessions[0].object_name, "radius": {"value": float(np.mean(phys["radius"])), "unit": "m"},
+            "young_modulus": {"value": float(phys["young_modulus"]), "relative_std": rel, "unit": "Pa"},
+            "thickness": {"value": float(phys["thickness"]), "unit": "m"}}  # fmt: skip
+
+
+def _objects(sessions, gas, force_ref):
+    by_object: dict[str, list[Session]] = {}
+    for s in sessions:
+        by_object.setdefault(s.object_name, []).append(s)
+    studies = [build_study(group, min_trials=2) for group in by_object.values()]
+    noise = pooled_noise(studies)
+    studies = [build_study(group, noise, min_trials=2) for group in by_object.values()]
+    forces = np.concatenate([s.force for s in sessions])
+    objects = []
+    for study in studies:
+        base = study_arrays(study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref)
+        objects.append((widened_grid(base, forces, CALIBRATION_GRID_SPAN), study))
+    return objects, noise
+
+
+def calibrate_rig(
+    sessions: Sequence[Session | str | Path],
+    *,
+    gas: str = "isothermal",
+    wrinkle_law: str = "scaling",
+    terms: Sequence[str] | None = None,
+    progress: Callable[[str], None] | bool = True,
+) -> Rig:
+    """Calibrate a rig on ``sessions`` with manometer readings, of one or more objects (module docstring).
+
+    ``gas`` and ``wrinkle_law``: the forward model's options, carried by the rig to every later
+    estimate; ``terms``: the candidate terms (default: every one in :data:`RIG_TERMS`).
+
+    Raises:
+        InvalidInputError: a session without a manometer reading or wrinkle counts, too few
+            sessions, an unknown term, gas or wrinkle law.
+        NoConvergenceError: the fit with an ideal rig failed.
+    """
+    terms = tuple(RIG_TERMS) if terms is None else check_terms_list(terms)
+    if gas not in GAS_EXPONENTS:
+        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
+    if wrinkle_law not in WRINKLE_LAWS:
+        raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
+    sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
+    if not sessions:
+        raise InvalidInputError("no calibration sessions given. Fix: pass session TOML files with manometer readings")
+    _check_sessions(sessions)
+    levels = np.concatenate([s.force for s in sessions])
+    force_ref = math.sqrt(float(np.min(levels)) * float(np.max(levels)))
+    objects, noise = _objects(sessions, gas, force_ref)
+    report = _reporter(progress)
+    fitted, chosen = _search(objects, terms, wrinkle_law, report)
+    report(None)
+    return _assemble(fitted, chosen, objects, sessions, noise, gas, wrinkle_law, force_ref)
+
+
+def check_terms_list(terms) -> tuple[str, ...]:
+    """Candidate terms: known names, each once (several of one family may be candidates)."""
+    terms = tuple(terms)
+    for t in terms:
+        check_terms((t,))
+    if len(set(terms)) != len(terms):
+        raise InvalidInputError(f"terms {list(terms)} name one term twice. Fix: list each once")
+    return terms
+
+
+def _assemble(fitted, chosen, objects, sessions, noise, gas, wrinkle_law, force_ref) -> Rig:
+    best = max(fitted.values(), key=lambda r: r.total)
+    kept, excluded = [], []
+    for result in fitted.values():
+        beaten, delta, se = _beats(best.elpd, result.elpd) if result is not best else (False, 0.0, 0.0)
+        (excluded if beaten else kept).append((result, -delta, se))
+    weights = pseudo_bma_plus(np.stack([r.elpd for r, _, _ in kept]))
+    keep = weights >= MIN_WEIGHT
+    excluded += [k for k, w in zip(kept, keep) if not w]
+    kept, weights = [k for k, w in zip(kept, keep) if w], weights[keep] / weights[keep].sum()
+    models = []
+    for (result, delta, se), weight in sorted(zip(kept, weights), key=lambda kw: -kw[1]):
+        names, mean, cov = _rig_posterior(result, objects)
+        n = result.elpd.size
+        models.append(RigModel(terms=result.terms, parameters=names, mean=mean, covariance=cov,
+                               fixes=fixed_values(result.terms), elpd=result.total,
+                               elpd_se=float(math.sqrt(n * np.var(result.elpd))), delta=delta, delta_se=se,
+                               weight=float(weight)))  # fmt: skip
+    inclusion = {t: float(sum(m.weight for m in models if t in m.terms)) for t in RIG_TERMS}
+    not_identified = tuple(t for t, p in inclusion.items() if 1 - IDENTIFIED < p < IDENTIFIED)
+    calibration = tuple({"path": str(s.source), "sha256": file_sha256(Path(s.source)), "object": s.object_name,
+                         "manometer_gauge_pressure": float(s.manometer_gauge_pressure)} for s in sessions)  # fmt: skip
+    objects_summary = tuple(_object_summary(f, study) for f, (_, study) in zip(fitted[models[0].terms].fits, objects))
+    return Rig(models=tuple(models), excluded=tuple({"terms": list(r.terms), "delta": d, "delta_se": se}
+                                                    for r, d, se in excluded),
+               inclusion=inclusion, not_identified=not_identified, gas=gas, wrinkle_law=wrinkle_law,
+               force_ref=force_ref, indenter_radius=PAPER_INDENTER_RADIUS, noise=noise, calibration=calibration,
+               objects=objects_summary)  # fmt: skip
+
+
+def _reporter(progress):
+    if callable(progress):
+        return progress
+    if not progress:
+        return lambda stage: None
+    from tqdm.auto import tqdm
+
+    bar = tqdm(desc="rig calibrate", unit="model")
+
+    def update(stage):
+        if stage is None:
+            bar.close()
+            return
+        bar.update(1)
+        bar.set_postfix_str(stage)
+
+    return update
+
+
+__all__ = ["FAMILIES", "Rig", "RigModel", "calibrate_rig", "pseudo_bma_plus"]

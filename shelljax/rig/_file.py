@@ -1,0 +1,203 @@
+"""The rig file: a calibrated rig as readable TOML (docs/rig.md), and its checked reader.
+
+Each model lists its terms, its weight, its evidence (elpd, Δ elpd ± SE against the best model) and
+each parameter's value ± std in physical units, and — for the estimates — its mean and covariance
+in the diagnosis's scaled coordinates, which are what an estimate reads back.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from .._errors import InvalidInputError
+from ..diagnose._effects import MIN_INDENTER_FRACTION, UNITS
+from ._calibrate import Rig, RigModel
+from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
+
+FORMAT = 1
+_HEADER = ("# shelljax rig: the measuring chain (finger pad, finger radius, force sensor, depth gauge), calibrated\n"
+           "# on sessions with manometer readings. Written by `shelljax rig calibrate`; see docs/rig.md.\n")  # fmt: skip
+_SCALE = {"finger_compliance": 1e-4, "depth_offset": 1e-3, "force_exponent": 0.1, "pad_exponent": 0.1}
+
+
+def physical_parameter(name: str, u: float, std: float, indenter_radius: float) -> tuple[float, float]:
+    """(value, std) in SI of a rig parameter at scaled ``u`` ± ``std`` (the diagnosis's coordinates)."""
+    if name == "indenter_radius":
+        floor = MIN_INDENTER_FRACTION * indenter_radius
+        return floor + (indenter_radius - floor) * math.exp(u), (indenter_radius - floor) * math.exp(u) * std
+    if name == "force_gain":
+        return math.exp(u), math.exp(u) * std
+    offset = 1.0 if name in ("force_exponent", "pad_exponent") else 0.0
+    return offset + _SCALE[name] * u, _SCALE[name] * std
+
+
+def _model_table(model: RigModel, rig: Rig) -> dict:
+    stds = np.sqrt(np.diag(model.covariance)) if model.parameters else np.zeros(0)
+    parameters = {}
+    for name, u, std in zip(model.parameters, model.mean, stds):
+        value, err = physical_parameter(name, float(u), float(std), rig.indenter_radius)
+        parameters[name] = {"value": value, "std": err, "unit": UNITS[name]}
+    for name, u in model.fixes.items():
+        parameters[name] = {"value": physical_parameter(name, u, 0.0, rig.indenter_radius)[0], "std": 0.0,
+                            "unit": UNITS[name], "fixed": True}  # fmt: skip
+    return {
+        "terms": list(model.terms), "weight": model.weight,
+        "evidence": {"elpd": model.elpd, "elpd_se": model.elpd_se, "delta_elpd": model.delta,
+                     "delta_se": model.delta_se, "unit": "nats"},
+        "parameters": parameters,
+        "scaled": {"names": list(model.parameters), "mean": [float(v) for v in model.mean],
+                   "covariance": [[float(v) for v in row] for row in model.covariance]},
+    }  # fmt: skip
+
+
+def rig_document(rig: Rig) -> dict:
+    """The rig as the TOML document's dict."""
+    return {
+        "format": FORMAT, "shelljax_version": rig.version,
+        "forward_model": {"engine": "axisym", "gas": rig.gas, "wrinkle_law": rig.wrinkle_law},
+        "reference": {"force_ref": rig.force_ref, "force_ref_unit": "N", "indenter_radius": rig.indenter_radius,
+                      "indenter_radius_unit": "m"},
+        "noise": {"trial_offset_std": rig.noise[0], "trial_offset_std_unit": "m", "depth_scatter_a": rig.noise[1][0],
+                  "depth_scatter_a_unit": "m^2", "depth_scatter_b": rig.noise[1][1], "depth_scatter_b_unit": "1"},
+        "selection": {"weights": "pseudo-BMA+", "inclusion": dict(rig.inclusion), "not_identified": list(rig.not_identified),
+                      "excluded": [{"terms": e["terms"], "delta_elpd": e["delta"], "delta_se": e["delta_se"]}
+                                   for e in rig.excluded]},
+        "calibration": [dict(c) for c in rig.calibration],
+        "objects": [dict(o) for o in rig.objects],
+        "model": [_model_table(m, rig) for m in rig.models],
+    }  # fmt: skip
+
+
+def write_rig(rig: Rig, path: str | Path) -> Path:
+    """Write ``rig`` to ``path`` atomically (a file that is read back and checked first)."""
+    path = Path(path)
+    text = _HEADER + tomli_w.dumps(rig_document(rig))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        load_rig(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+class _Checker:
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, field: str, problem: str, fix: str) -> InvalidInputError:
+        return InvalidInputError(f"{self.path}: field '{field}': {problem}. Fix: {fix}")
+
+    def get(self, table: dict, key: str, kind, field: str):
+        if key not in table:
+            raise self.fail(field, "missing", "re-create the file with `shelljax rig calibrate`")
+        value = table[key]
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, kind) or (kind is float and not math.isfinite(value)):
+            raise self.fail(field, f"{value!r} is not a {'finite number' if kind is float else kind.__name__}",
+                            "re-create the file with `shelljax rig calibrate`")  # fmt: skip
+        return value
+
+
+def _read_model(check: _Checker, table: dict, i: int) -> RigModel:
+    where = f"model[{i}]"
+    terms = check_terms(check.get(table, "terms", list, f"{where}.terms"), where=f"{check.path}: field '{where}.terms'")
+    scaled = check.get(table, "scaled", dict, f"{where}.scaled")
+    names = tuple(check.get(scaled, "names", list, f"{where}.scaled.names"))
+    if names != freed_parameters(terms):
+        raise check.fail(f"{where}.scaled.names", f"{list(names)} are not the parameters of terms {list(terms)} "
+                         f"({list(freed_parameters(terms))})", "re-create the file with `shelljax rig calibrate`")  # fmt: skip
+    mean = np.asarray(check.get(scaled, "mean", list, f"{where}.scaled.mean"), float)
+    cov = np.asarray(check.get(scaled, "covariance", list, f"{where}.scaled.covariance"), float).reshape(-1)
+    if mean.shape != (len(names),) or cov.size != len(names) ** 2 or not np.all(np.isfinite(cov)) \
+            or not np.all(np.isfinite(mean)):
+        raise check.fail(f"{where}.scaled", f"mean {mean.tolist()} / covariance of {cov.size} entries do not fit "
+                         f"{len(names)} parameters", "re-create the file with `shelljax rig calibrate`")  # fmt: skip
+    cov = cov.reshape(len(names), len(names))
+    if names and (not np.allclose(cov, cov.T, rtol=1e-8, atol=0) or np.min(np.linalg.eigvalsh(cov)) <= 0):
+        raise check.fail(f"{where}.scaled.covariance", "not symmetric positive definite",
+                         "re-create the file with `shelljax rig calibrate`")  # fmt: skip
+    weight = check.get(table, "weight", float, f"{where}.weight")
+    if not 0 < weight <= 1:
+        raise check.fail(f"{where}.weight", f"{weight!r} is not in (0, 1]", "re-create the file with `shelljax rig calibrate`")
+    ev = check.get(table, "evidence", dict, f"{where}.evidence")
+    num = lambda k: check.get(ev, k, float, f"{where}.evidence.{k}")  # noqa: E731
+    return RigModel(terms=terms, parameters=names, mean=mean, covariance=cov, fixes=fixed_values(terms),
+                    elpd=num("elpd"), elpd_se=num("elpd_se"), delta=num("delta_elpd"), delta_se=num("delta_se"),
+                    weight=weight)  # fmt: skip
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read and check a rig file written by :func:`write_rig`.
+
+    Raises:
+        InvalidInputError: an unreadable file, another format or shelljax version, or any field
+            that is missing or makes no sense (the message names the field and the fix).
+    """
+    from .. import __version__
+
+    path = Path(path)
+    check = _Checker(path)
+    if not path.is_file():
+        raise InvalidInputError(f"{path}: no such rig file. Fix: make one with `shelljax rig calibrate SESSIONS... --out {path}`")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise InvalidInputError(f"{path}: not a readable TOML file ({err}). Fix: re-create it with `shelljax rig calibrate`") from err
+    fmt = data.get("format")
+    if fmt != FORMAT:
+        raise check.fail("format", f"{fmt!r} is not this shelljax's rig format {FORMAT}", "re-calibrate the rig with this version")
+    version = check.get(data, "shelljax_version", str, "shelljax_version")
+    if version.split(".")[:2] != __version__.split(".")[:2]:
+        raise check.fail("shelljax_version", f"made by shelljax {version}, incompatible with {__version__} (the models may differ)",
+                         "re-calibrate the rig with this version")  # fmt: skip
+    fm = check.get(data, "forward_model", dict, "forward_model")
+    ref = check.get(data, "reference", dict, "reference")
+    noise = check.get(data, "noise", dict, "noise")
+    force_ref = check.get(ref, "force_ref", float, "reference.force_ref")
+    radius = check.get(ref, "indenter_radius", float, "reference.indenter_radius")
+    tau = check.get(noise, "trial_offset_std", float, "noise.trial_offset_std")
+    a = check.get(noise, "depth_scatter_a", float, "noise.depth_scatter_a")
+    b = check.get(noise, "depth_scatter_b", float, "noise.depth_scatter_b")
+    for field, value in (("reference.force_ref", force_ref), ("reference.indenter_radius", radius)):
+        if value <= 0:
+            raise check.fail(field, f"{value!r} is not positive", "re-create the file with `shelljax rig calibrate`")
+    for field, value in (("noise.trial_offset_std", tau), ("noise.depth_scatter_a", a), ("noise.depth_scatter_b", b)):
+        if value < 0:
+            raise check.fail(field, f"{value!r} is negative", "re-create the file with `shelljax rig calibrate`")
+    if a + b <= 0:
+        raise check.fail("noise.depth_scatter_a", "the depth scatter is zero", "re-create the file with `shelljax rig calibrate`")
+    tables = check.get(data, "model", list, "model")
+    if not tables:
+        raise check.fail("model", "no model", "re-create the file with `shelljax rig calibrate`")
+    models = tuple(_read_model(check, t, i) for i, t in enumerate(tables))
+    total = sum(m.weight for m in models)
+    if abs(total - 1.0) > 1e-6:
+        raise check.fail("model.weight", f"the weights add up to {total:.6g}, not 1", "re-create the file with `shelljax rig calibrate`")
+    selection = data.get("selection", {})
+    from ..axisym import GAS_EXPONENTS
+    from ..diagnose._model import WRINKLE_LAWS
+
+    gas = check.get(fm, "gas", str, "forward_model.gas")
+    law = check.get(fm, "wrinkle_law", str, "forward_model.wrinkle_law")
+    if gas not in GAS_EXPONENTS or law not in WRINKLE_LAWS:
+        raise check.fail("forward_model", f"gas {gas!r} / wrinkle_law {law!r} unknown",
+                         f"use a gas of {', '.join(GAS_EXPONENTS)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}")  # fmt: skip
+    return Rig(models=models, excluded=tuple({"terms": e.get("terms"), "delta": e.get("delta_elpd"), "delta_se": e.get("delta_se")}
+                                             for e in selection.get("excluded", [])),
+               inclusion={t: float(selection.get("inclusion", {}).get(t, 0.0)) for t in RIG_TERMS},
+               not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
+               force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
+               calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version)  # fmt: skip

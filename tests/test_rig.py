@@ -1,0 +1,181 @@
+"""The rig: calibrated once where the pressure is known, carried to a held-out session.
+
+The bundled Pezzi sessions are virtual (the engine at 201 elements, an ideal measuring chain,
+shelljax/data/README.md); a linear finger pad of known compliance is planted in their depths. The
+calibration must switch the pad on, recover its compliance, and the held-out session's P_g through
+the rig must be right where the fit without the rig is not. The file format, its checks, the weights,
+PSIS and the command line are tested on their own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from shelljax import InvalidInputError
+from shelljax.cli import main
+from shelljax.config import bundled_data_dir, load_config
+from shelljax.rig import (
+    calibrate_rig,
+    estimate_with_rig,
+    load_rig,
+    physical_parameter,
+    psis,
+    pseudo_bma_plus,
+    write_rig,
+)
+from shelljax.session import load_session, write_session
+
+PAD = 0.3e-3  # [m/N] planted pad compliance: 6 mm at 20 N, about a fifth of the Pezzi ball's depths
+TERMS = ("pad_linear", "depth_offset", "sensor_gain")  # candidates: enough to choose among, few to fit
+SESSIONS = bundled_data_dir() / "sessions"
+
+
+def _padded(path):
+    session = load_session(path)
+    return dataclasses.replace(session, depth=session.depth + PAD * session.force)
+
+
+def _write_padded(path, directory):
+    s = _padded(path)
+    out = directory / path.name
+    write_session(out, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
+                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
+                  wrinkle_counts=s.wrinkle_counts, manometer_gauge_pressure=s.manometer_gauge_pressure,
+                  poisson_ratio=s.poisson_ratio)  # fmt: skip
+    return out
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("rig")
+    paths = [_write_padded(SESSIONS / f"calib_pezzi_{p:04d}Pa.toml", directory) for p in (900, 1200, 1500, 1650)]
+    rig = calibrate_rig(paths, terms=TERMS, progress=False)
+    return rig, write_rig(rig, directory / "rig.toml"), directory
+
+
+def test_calibration_switches_the_pad_on_and_recovers_its_compliance(calibrated):
+    rig, _, _ = calibrated
+    assert rig.inclusion["pad_linear"] > 0.9, rig.models
+    best = rig.models[0]
+    assert "pad_linear" in best.terms
+    i = best.parameters.index("finger_compliance")
+    value, std = physical_parameter("finger_compliance", best.mean[i], math.sqrt(best.covariance[i, i]), rig.indenter_radius)
+    # within 3 std (a Laplace interval of 4 sessions' worth of data), and never off by 30 %
+    assert abs(value - PAD) < 3 * std and abs(value / PAD - 1) < 0.3, (value, std)
+    assert abs(sum(m.weight for m in rig.models) - 1) < 1e-9
+    assert all(m.delta <= 0 for m in rig.models)
+
+
+def test_held_out_pressure_through_the_rig_is_right_and_the_fit_without_it_is_not(calibrated):
+    from shelljax.estimate import EstimatorOptions, run_estimator
+
+    rig, path, directory = calibrated
+    held_out = _write_padded(SESSIONS / "heldout_pezzi_1100Pa.toml", directory)
+    truth = 1100.0  # [Pa] the virtual session's gauge pressure
+    through = estimate_with_rig(held_out, load_rig(path)).estimates["gauge_pressure"]
+    plain = run_estimator("fit", load_session(held_out), EstimatorOptions(gas="isothermal", wrinkle_law="scaling"))
+    plain = plain.estimates["gauge_pressure"]
+    assert through.ci95[0] <= truth <= through.ci95[1], through
+    # the pad makes every depth deeper: without the rig the ball reads softer, P_g low
+    assert abs(through.value / truth - 1) < 0.04
+    assert abs(plain.value / truth - 1) > 2 * abs(through.value / truth - 1), (plain.value, through.value)
+
+
+def test_rig_file_round_trip_keeps_every_model(calibrated):
+    rig, path, _ = calibrated
+    again = load_rig(path)
+    assert [m.terms for m in again.models] == [m.terms for m in rig.models]
+    for a, b in zip(again.models, rig.models):
+        np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12)
+        np.testing.assert_allclose(a.covariance, b.covariance, rtol=1e-12)
+        assert a.weight == pytest.approx(b.weight, rel=1e-12)
+    assert again.noise[0] == pytest.approx(rig.noise[0]) and again.noise[1] == pytest.approx(rig.noise[1])
+    assert len(again.calibration) == 4 and all(len(c["sha256"]) == 64 for c in again.calibration)
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda t: t.replace("format = 1", "format = 7"), "format"),
+    (lambda t: t.replace('shelljax_version = "0.1.0"', 'shelljax_version = "9.0.0"'), "shelljax_version"),
+    (lambda t: t.replace("weight = ", "weight = -", 1), "weight"),
+    (lambda t: t.replace('gas = "isothermal"', 'gas = "helium"'), "forward_model"),
+    (lambda t: t.replace('terms = [\n    "pad_linear"', 'terms = [\n    "pad_tofu"', 1), "terms"),
+    (lambda t: t.replace("force_ref = ", "force_ref = -", 1), "reference.force_ref"),
+])  # fmt: skip
+def test_a_rig_file_edited_into_nonsense_is_refused_naming_the_field(calibrated, tmp_path, edit, field):
+    _, path, _ = calibrated
+    text = path.read_text()
+    edited = edit(text)
+    assert edited != text, "the edit must change the file"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edited)
+    with pytest.raises(InvalidInputError, match=field.split(".")[0]):
+        load_rig(bad)
+
+
+def test_a_rig_of_other_forward_model_options_is_refused(calibrated):
+    _, path, _ = calibrated
+    held_out = SESSIONS / "heldout_pezzi_1100Pa.toml"
+    with pytest.raises(InvalidInputError, match="calibrated with gas = 'isothermal'"):
+        estimate_with_rig(held_out, load_rig(path), gas="prescribed")
+    with pytest.raises(InvalidInputError, match="wrinkle_law"):
+        estimate_with_rig(held_out, load_rig(path), wrinkle_law="mechanics")
+
+
+def test_calibration_sessions_without_a_manometer_are_refused():
+    with pytest.raises(InvalidInputError, match="manometer_gauge_pressure.*missing"):
+        calibrate_rig([SESSIONS / "calib_pezzi_0900Pa.toml", SESSIONS / "pezzi.toml"], progress=False)
+    with pytest.raises(InvalidInputError, match="unknown rig term"):
+        calibrate_rig([SESSIONS / "calib_pezzi_0900Pa.toml"], terms=("pad_tofu",), progress=False)
+
+
+def test_pseudo_bma_plus_weights():
+    rng = np.random.default_rng(0)
+    same = rng.normal(size=20)
+    np.testing.assert_allclose(pseudo_bma_plus(np.stack([same, same])), [0.5, 0.5], atol=1e-12)
+    # a model better by 1 nat in each of 20 units takes (nearly) all the weight
+    w = pseudo_bma_plus(np.stack([same + 1.0, same]))
+    assert w[0] > 0.99 and w.sum() == pytest.approx(1.0)
+
+
+def test_psis_recovers_a_known_posterior_mean():
+    # target N(1, 0.5²) sampled from a proposal t₅(0, 1): the weighted mean is the target's
+    from scipy import stats
+
+    rng = np.random.default_rng(1)
+    x = stats.t(df=5).rvs(size=4000, random_state=rng)
+    log_w = stats.norm(1.0, 0.5).logpdf(x) - stats.t(df=5).logpdf(x)
+    w, k_hat = psis(log_w)
+    assert k_hat < 0.7
+    assert np.sum(w * x) == pytest.approx(1.0, abs=0.03)  # a few Monte Carlo standard errors (≈ 0.01)
+
+
+def test_cli_rig_calibrate_and_estimate(calibrated, tmp_path, capsys):
+    rig, path, directory = calibrated
+    held_out = _write_padded(SESSIONS / "heldout_pezzi_1450Pa.toml", directory)
+    assert main(["estimate", str(held_out), "--method", "fit", "--rig", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    p = out["estimates"]["gauge_pressure"]
+    assert p["unit"] == "Pa" and p["ci95"][0] <= 1450.0 <= p["ci95"][1]
+    assert sum(m["weight"] for m in out["rig_models"]) == pytest.approx(1.0)
+    assert main(["estimate", str(held_out), "--method", "fit", "--rig", str(path), "--gas", "prescribed"]) == 2
+    assert "calibrated with gas" in capsys.readouterr().err
+    assert main(["estimate", str(held_out), "--rig", str(path)]) == 2  # closed form has no rig
+    assert "--method fit" in capsys.readouterr().err
+
+
+def test_config_rig_table_names_the_rig_and_refuses_contradictions(calibrated, tmp_path):
+    _, path, _ = calibrated
+    config = tmp_path / "exp.toml"
+    config.write_text(f'[estimators]\nmethods = ["fit"]\n[rig]\npath = "{path}"\n[sessions]\n'
+                      'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
+    loaded = load_config(config)
+    assert loaded.rig == path and loaded.gas == "isothermal" and loaded.wrinkle_law == "scaling"
+    config.write_text(f'[estimators]\nmethods = ["fit"]\ngas = "prescribed"\n[rig]\npath = "{path}"\n[sessions]\n'
+                      'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
+    with pytest.raises(InvalidInputError, match="estimators.gas"):
+        load_config(config)
