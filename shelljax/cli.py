@@ -180,7 +180,7 @@ def _cmd_replica(args) -> int:
     from .replica import export_replica
 
     written = export_replica(args.session, args.out, method=args.method, gas=args.gas, cor=args.cor, mesh_faces=args.mesh_faces,
-                             wrinkle_law=args.wrinkle_law)  # fmt: skip
+                             wrinkle_law=args.wrinkle_law, rig=args.rig)  # fmt: skip
     print(f"written: {', '.join(str(p) for p in written)}")
     return 0
 
@@ -287,8 +287,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic")
     rep.add_argument("--cor", type=float, default=None, help="measured coefficient of restitution [-], if known")
     rep.add_argument("--mesh-faces", type=int, default=2000, help="triangles of a sphere replica (sessions without a mesh)")
-    rep.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
-                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling, as configs/paper.toml) or the engine's (mechanics)")
+    rep.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
+                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling, the default, as configs/paper.toml) or the "
+                     "engine's (mechanics)")
+    rep.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through it (fit, bayes)")
     rep.set_defaults(func=_cmd_replica)
 
     _register_rig(sub)

@@ -121,7 +121,7 @@ def load_config(path: str | Path) -> ExperimentConfig:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(path, "seed", f"{seed!r} is not a non-negative integer", "write seed = 0")
     estimators_table = _table(path, data, "estimators", ESTIMATOR_KEYS)
-    rig = _rig_settings(path, _table(path, data, "rig", _RIG_KEYS), estimators_table)
+    rig = rig_settings(path, _table(path, data, "rig", _RIG_KEYS), estimators_table)
     if rig is not None:
         estimators_table = {**estimators_table, **rig[1]}
     estimators = estimator_settings(path, estimators_table)
@@ -143,9 +143,10 @@ def load_config(path: str | Path) -> ExperimentConfig:
     )  # fmt: skip
 
 
-def _rig_settings(path: Path, table: dict, estimators: dict) -> tuple[Path, dict] | None:
-    """(the rig file, its forward-model options) of a [rig] table, or None without one; the
-    [estimators] table may repeat the rig's gas and wrinkle law but not contradict them."""
+def rig_settings(path: Path, table: dict, estimators: dict) -> tuple[Path, dict] | None:
+    """(the rig file, its forward-model options) of a [rig] table (experiment and scenario configs),
+    or None without one; the [estimators] table may repeat the rig's gas and wrinkle law but not
+    contradict them."""
     if not table:
         return None
     if "path" not in table:

@@ -45,14 +45,16 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
 
 
 def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str = "fit", gas: str = "adiabatic",
-                   cor: float | None = None, mesh_faces: int = 2000, wrinkle_law: str = "scaling") -> list[Path]:  # fmt: skip
+                   cor: float | None = None, mesh_faces: int = 2000, wrinkle_law: str | None = None,
+                   rig: str | Path | None = None) -> list[Path]:  # fmt: skip
     """The replica of a session: P_g and E ± std from its ``method`` estimate, ν, h ± std, mass and
     the mesh (the session's, or a sphere of its radius with ``mesh_faces`` triangles).
 
-    fit and bayes read the session through the axisym engine with ``wrinkle_law``, and with a sealed
-    isothermal gas unless the replica's ``gas`` is "prescribed" (a poke is slow: no heat is kept in)."""
+    fit and bayes read the session through the axisym engine with ``wrinkle_law`` (default
+    "scaling"), and with a sealed isothermal gas unless the replica's ``gas`` is "prescribed" (a poke
+    is slow: no heat is kept in); with a ``rig`` file, through that rig and its forward model."""
     from . import shell3d as s3
-    from .scenario import estimated_parameters
+    from .object_estimate import estimated_parameters
     from .session import load_session
 
     session = load_session(session_path)
@@ -61,7 +63,12 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
     if cor is not None and not 0.0 < cor <= 1.0:
         raise InvalidInputError(f"--cor {cor}: a COR is in (0, 1]. Fix: measure it as √(bounce height / drop height)")
     estimator_gas = "prescribed" if gas == "prescribed" else "isothermal"
-    p_g, e, stats = estimated_parameters(session, method, {"gas": estimator_gas, "wrinkle_law": wrinkle_law})
+    if rig is not None:
+        from .rig import load_rig
+
+        estimator_gas, wrinkle_law = load_rig(rig).gas, wrinkle_law or load_rig(rig).wrinkle_law
+    wrinkle_law = wrinkle_law or "scaling"
+    p_g, e, stats = estimated_parameters(session, method, {"gas": estimator_gas, "wrinkle_law": wrinkle_law}, rig)
     mesh_path = getattr(session, "mesh_path", None)
     shell = s3.load(mesh_path, session.thickness) if mesh_path else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
     quantities = {
@@ -69,7 +76,8 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
         "poisson_ratio": (session.poisson_ratio, None), "thickness_m": (session.thickness, session.thickness_std),
         "mass_kg": (session.mass, None), "cor": (cor, None),
     }  # fmt: skip
-    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method, "estimator_gas": estimator_gas, "wrinkle_law": wrinkle_law})
+    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method, "estimator_gas": estimator_gas, "wrinkle_law": wrinkle_law,
+                                                             "rig": None if rig is None else str(rig)})
 
 
 def load_replica(directory: str | Path, *, planes=(), gravity=None):

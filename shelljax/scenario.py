@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InvalidInputError, NoConvergenceError
-from .config import ESTIMATOR_KEYS, bundled_data_dir, estimator_option_fields, estimator_settings
+from .config import ESTIMATOR_KEYS, bundled_data_dir, estimator_option_fields, estimator_settings, rig_settings
+from .object_estimate import estimated_parameters
 
 _TABLES = {
     "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
@@ -32,6 +33,7 @@ _TABLES = {
     "outputs": {"figures", "mesh_frames", "max_frames", "preview_gif"},
     "prescribed": {"select", "within_m", "axis_point_m", "axis_direction", "times_s", "angles_deg"},
     "estimators": ESTIMATOR_KEYS - {"methods"},  # object.estimate names the method
+    "rig": {"path"},
 }  # fmt: skip
 _PLANE_KEYS = {"name", "point_m", "normal", "contact", "activation_distance_m", "barrier_stiffness_J_per_m2", "friction", "slip_tolerance_m"}
 _TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes"}
@@ -103,6 +105,7 @@ class Scenario:
     max_frames: int
     preview_gif: bool
     prescribed: PrescribedSpec | None = None
+    rig: Path | None = None  # fit and bayes estimate through this rig (shelljax.rig)
 
 
 class _Reader:
@@ -271,7 +274,10 @@ def load_scenario(path: str | Path) -> Scenario:
         raise InvalidInputError(f"{path}: field 'object.session' is missing and P_g, E are not given. Fix: name a session, or give object.gauge_pressure_Pa and object.youngs_modulus_Pa")
     gas = r.choice(obj, "gas", "object.", ("prescribed", "isothermal", "adiabatic"), "adiabatic")
     # a poke is slow, so a sealed object's gas is isothermal while it is estimated, whatever its law in the impact
-    estimators = estimator_settings(path, _table(r, data, "estimators"), gas="prescribed" if gas == "prescribed" else "isothermal")
+    estimators_table = _table(r, data, "estimators")
+    rig = rig_settings(path, _table(r, data, "rig"), estimators_table)
+    estimators = estimator_settings(path, {**estimators_table, **(rig[1] if rig else {})},
+                                    gas="prescribed" if gas == "prescribed" else "isothermal")  # fmt: skip
     dt = r.number(integ, "dt_s", "integrator.", positive=True, fix="give the time step in s, e.g. 1e-3")
     duration = r.number(integ, "duration_s", "integrator.", positive=True, fix="give the duration in s, e.g. 1.0")
     if dt > duration:
@@ -306,7 +312,7 @@ def load_scenario(path: str | Path) -> Scenario:
         rayleigh=(r.number(diss, "rayleigh_mass_per_s", "dissipation.", default=0.0, nonnegative=True),
                   r.number(diss, "rayleigh_stiffness_s", "dissipation.", default=0.0, nonnegative=True)),
         planes=tuple(_plane(r, i, p) for i, p in enumerate(planes)), drop_heights=_drop_heights(r, init, prescribed is not None),
-        centre=r.vector(init, "centre_m", "initial.", 2, [0.0, 0.0]), velocity=velocity, prescribed=prescribed,
+        centre=r.vector(init, "centre_m", "initial.", 2, [0.0, 0.0]), velocity=velocity, prescribed=prescribed, rig=rig[0] if rig else None,
         figures=bool(outs.get("figures", True)), mesh_frames=r.choice(outs, "mesh_frames", "outputs.", ("ply", "glb"), "ply"),
         max_frames=int(r.number(outs, "max_frames", "outputs.", default=60, nonnegative=True)), preview_gif=bool(outs.get("preview_gif", True)),
     )  # fmt: skip
@@ -325,22 +331,6 @@ class ObjectModel:
     source: dict
 
 
-def estimated_parameters(session, method: str, options: dict) -> tuple[float, float, dict]:
-    """(P_g [Pa], E [Pa], their values and standard deviations) from the session's ``method`` estimate
-    with ``options`` (EstimatorOptions keyword arguments)."""
-    from .estimate import EstimatorOptions, run_estimator
-
-    result = run_estimator(method, session, EstimatorOptions(**options), progress=False)
-    missing = [k for k in ("gauge_pressure", "young_modulus") if k not in result.estimates]
-    if missing:
-        raise InvalidInputError(
-            f"{session.source}: the '{method}' estimator gives no {', '.join(missing)}. Fix: use object.estimate = \"fit\" or give "
-            "object.gauge_pressure_Pa and object.youngs_modulus_Pa"
-        )
-    p, e = result.estimates["gauge_pressure"], result.estimates["young_modulus"]
-    return p.value, e.value, {"gauge_pressure_Pa": {"value": p.value, "std": p.std}, "youngs_modulus_Pa": {"value": e.value, "std": e.std}}
-
-
 def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -> ObjectModel:
     """The scenario's shell and parameters, from its session (or ``session_path``, which overrides it)."""
     from . import shell3d as s3
@@ -356,7 +346,7 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     elif session is None:
         raise InvalidInputError(f"{scenario.source}: no session to estimate P_g and E from. Fix: set object.session or pass --session")
     else:
-        p_g, e, source["estimate"] = estimated_parameters(session, scenario.estimate, scenario.estimator_options)
+        p_g, e, source["estimate"] = estimated_parameters(session, scenario.estimate, scenario.estimator_options, scenario.rig)
         source["parameters"] = f"estimator '{scenario.estimate}' of {path}"
         source["estimator_options"] = {k: list(v) if isinstance(v, tuple) else v for k, v in scenario.estimator_options.items()}
     def pick(given, field, name, unit):

@@ -23,7 +23,7 @@ LAYERS = {  # rank: a module may import ranks ≤ its own
     "physics": 1, "session": 1, "geometry": 1, "sensing": 1,
     "axisym": 2, "shell3d": 2, "_parallel": 2, "_hilbert": 2, "_memory_mappings": 2, "_compile_log": 2,
     "estimate": 3, "diagnose": 3, "rig": 3, "virtual": 3, "dynamics": 3, "_programs": 3,
-    "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4, "scenario": 4, "replica": 4,
+    "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4, "scenario": 4, "replica": 4, "object_estimate": 4,
 }  # fmt: skip
 DATA_LAYER = ("session", "geometry", "sensing")
 MAX_FILE_LINES = 600

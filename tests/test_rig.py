@@ -179,3 +179,28 @@ def test_config_rig_table_names_the_rig_and_refuses_contradictions(calibrated, t
                       'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
     with pytest.raises(InvalidInputError, match="estimators.gas"):
         load_config(config)
+
+
+def test_replica_and_scenario_take_the_rig(calibrated, tmp_path):
+    from shelljax.replica import export_replica
+    from shelljax.scenario import load_scenario
+
+    _, path, directory = calibrated
+    s = _padded(SESSIONS / "heldout_pezzi_1100Pa.toml")
+    session = tmp_path / "ball.toml"
+    write_session(session, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
+                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
+                  wrinkle_counts=s.wrinkle_counts, mass=0.4)  # fmt: skip
+    export_replica(session, tmp_path / "replica", rig=path, mesh_faces=200)
+    replica = json.loads((tmp_path / "replica" / "replica.json").read_text())
+    direct = estimate_with_rig(session, load_rig(path)).estimates["gauge_pressure"].value
+    assert replica["gauge_pressure_Pa"]["value"] == pytest.approx(direct, rel=1e-9)
+    assert replica["source"]["rig"] == str(path)
+    drop = (bundled_data_dir().parents[1] / "configs" / "drop.toml").read_text()
+    config = tmp_path / "drop.toml"
+    config.write_text(drop.replace("[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'))
+    assert load_scenario(config).rig == path
+    config.write_text(drop.replace('wrinkle_law = "scaling"', 'wrinkle_law = "mechanics"')
+                      .replace("[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'))  # fmt: skip
+    with pytest.raises(InvalidInputError, match="estimators.wrinkle_law"):
+        load_scenario(config)

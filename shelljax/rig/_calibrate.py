@@ -4,13 +4,16 @@ Every calibration session has a manometer reading. Sessions are grouped by objec
 one joint problem of the diagnosis (``shelljax.diagnose``: E, h and R per object, P_g per session
 with the manometer as its prior) and the rig's parameters are shared by all of them.
 
-**Term selection, out of sample.** Forward selection from the ideal rig: at each step every term of
-a family not yet in the model is added in turn and refitted; the best one is kept when it beats
-the current model by the diagnosis's margin (Δ elpd ≥ 4 nats and ≥ 2 SE, leave-one-trial-out).
-Real rigs have two or three imperfections, so several terms can be switched on.
+**Term selection, out of sample.** A forward search from the ideal rig: at each step every term of a
+family not yet in the model is added in turn and refitted, and the best child (by leave-one-trial-out
+elpd) is expanded next, for as long as it predicts better than its parent. Real rigs have two or
+three imperfections, so several terms can be on at once, and a pair is reached where neither term
+alone wins by the margin.
 
-**What the data cannot exclude.** Every fitted model that the best one does not beat by that margin
-stays in the rig, weighted by pseudo-BMA+ (Yao et al. 2018: Bayesian-bootstrap Akaike weights of
+**What the data cannot exclude.** Every fitted model that the best one does not beat by the
+diagnosis's margin (Δ elpd ≥ 4 nats and ≥ 2 SE) stays in the rig — less those a simpler model
+nested in them predicts better (Occam's window, Madigan & Raftery 1994: a term that does not help
+out of sample adds nothing but its noise) — weighted by pseudo-BMA+ (Yao et al. 2018: Bayesian-bootstrap Akaike weights of
 the leave-one-trial-out densities). Stacking was not chosen: it gives zero weight to a model whose
 predictions the others already make on the calibration object, yet such a model can transfer
 differently to another object, and its spread is what the intervals must include.
@@ -168,8 +171,12 @@ def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
     return delta >= WIN_NATS and delta >= WIN_SE * se, delta, se
 
 
-def _search(objects, terms, wrinkle_law, report) -> tuple[dict, tuple[str, ...]]:
-    """Forward selection: (every fitted model by its terms, the selected terms)."""
+def _search(objects, terms, wrinkle_law, report) -> dict:
+    """Forward search: every fitted model by its terms.
+
+    From the ideal rig, every term of a family not yet in the current model is added in turn; the
+    best child becomes the current model for as long as it predicts better than its parent (so a
+    pair of terms is reached where neither alone wins by the margin)."""
     report("ideal rig")
     start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects])
     if start is None:
@@ -178,19 +185,17 @@ def _search(objects, terms, wrinkle_law, report) -> tuple[dict, tuple[str, ...]]
     fitted, current = {(): start}, ()
     while True:
         used = {RIG_TERMS[t].family for t in current}
-        trials = [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]
         best = None
-        for candidate in trials:
+        for candidate in [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]:
             report("+".join(candidate))
-            parent = fitted[current]
-            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in parent.fits])
+            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in fitted[current].fits])
             if result is None:
                 continue
             fitted[candidate] = result
             if best is None or result.total > best.total:
                 best = result
-        if best is None or not _beats(best.elpd, fitted[current].elpd)[0]:
-            return fitted, current
+        if best is None or best.total <= fitted[current].total:
+            return fitted
         current = best.terms
 
 
@@ -279,9 +284,9 @@ def calibrate_rig(
     force_ref = math.sqrt(float(np.min(levels)) * float(np.max(levels)))
     objects, noise = _objects(sessions, gas, force_ref)
     report = _reporter(progress)
-    fitted, chosen = _search(objects, terms, wrinkle_law, report)
+    fitted = _search(objects, terms, wrinkle_law, report)
     report(None)
-    return _assemble(fitted, chosen, objects, sessions, noise, gas, wrinkle_law, force_ref)
+    return _assemble(fitted, objects, sessions, noise, gas, wrinkle_law, force_ref)
 
 
 def check_terms_list(terms) -> tuple[str, ...]:
@@ -294,12 +299,21 @@ def check_terms_list(terms) -> tuple[str, ...]:
     return terms
 
 
-def _assemble(fitted, chosen, objects, sessions, noise, gas, wrinkle_law, force_ref) -> Rig:
+def _nests(terms, simpler) -> bool:
+    """Whether the model of ``terms`` contains the model of ``simpler`` (a power-law pad contains the
+    linear and the Hertzian ones)."""
+    covered = set(terms) | ({"pad_linear", "pad_hertz"} if "pad_power" in terms else set())
+    return set(simpler) < covered and set(simpler) != set(terms)
+
+
+def _assemble(fitted, objects, sessions, noise, gas, wrinkle_law, force_ref) -> Rig:
     best = max(fitted.values(), key=lambda r: r.total)
     kept, excluded = [], []
     for result in fitted.values():
         beaten, delta, se = _beats(best.elpd, result.elpd) if result is not best else (False, 0.0, 0.0)
-        (excluded if beaten else kept).append((result, -delta, se))
+        nested_better = any(other.total > result.total and _nests(result.terms, other.terms)
+                            for other in fitted.values() if other is not result)  # fmt: skip
+        (excluded if beaten or nested_better else kept).append((result, -delta, se))
     weights = pseudo_bma_plus(np.stack([r.elpd for r, _, _ in kept]))
     keep = weights >= MIN_WEIGHT
     excluded += [k for k, w in zip(kept, keep) if not w]
