@@ -103,7 +103,7 @@ def test_rig_file_round_trip_keeps_every_model(calibrated):
     (lambda t: t.replace('shelljax_version = "0.1.0"', 'shelljax_version = "9.0.0"'), "shelljax_version"),
     (lambda t: t.replace("weight = ", "weight = -", 1), "weight"),
     (lambda t: t.replace('gas = "isothermal"', 'gas = "helium"'), "forward_model"),
-    (lambda t: t.replace('terms = [\n    "pad_linear"', 'terms = [\n    "pad_tofu"', 1), "terms"),
+    (lambda t: t.replace('[[model]]\nterms = [\n    "pad_linear"', '[[model]]\nterms = [\n    "pad_tofu"', 1), "terms"),
     (lambda t: t.replace("force_ref = ", "force_ref = -", 1), "reference.force_ref"),
 ])  # fmt: skip
 def test_a_rig_file_edited_into_nonsense_is_refused_naming_the_field(calibrated, tmp_path, edit, field):

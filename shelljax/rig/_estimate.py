@@ -33,6 +33,7 @@ from scipy import optimize, stats
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, MeasurementPrior, build_study, study_arrays
+from ..diagnose._effects import LINEAR_SCALE
 from ..diagnose._loo import laplace_interval
 from ..diagnose._model import engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
 from ..estimate import Estimate
@@ -97,7 +98,8 @@ def _true_forces(rig: Rig, force: np.ndarray) -> np.ndarray:
     for m in rig.models:
         for k in (-3.0, 0.0, 3.0):
             u = dict(zip(m.parameters, m.mean + k * np.sqrt(np.diag(m.covariance)) if m.parameters else []))
-            gain, exponent = math.exp(u.get("force_gain", 0.0)), 1.0 + 0.1 * u.get("force_exponent", 0.0)
+            gain = math.exp(u.get("force_gain", 0.0))
+            exponent = 1.0 + LINEAR_SCALE["force_exponent"] * u.get("force_exponent", 0.0)
             out.append(gain * rig.force_ref * (force / rig.force_ref) ** exponent)
     return np.concatenate(out)
 

@@ -17,14 +17,13 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
-from ..diagnose._effects import MIN_INDENTER_FRACTION, UNITS
+from ..diagnose._effects import LINEAR_SCALE, MIN_INDENTER_FRACTION, UNITS
 from ._calibrate import Rig, RigModel
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 FORMAT = 1
 _HEADER = ("# shelljax rig: the measuring chain (finger pad, finger radius, force sensor, depth gauge), calibrated\n"
            "# on sessions with manometer readings. Written by `shelljax rig calibrate`; see docs/rig.md.\n")  # fmt: skip
-_SCALE = {"finger_compliance": 1e-4, "depth_offset": 1e-3, "force_exponent": 0.1, "pad_exponent": 0.1}
 
 
 def physical_parameter(name: str, u: float, std: float, indenter_radius: float) -> tuple[float, float]:
@@ -34,8 +33,8 @@ def physical_parameter(name: str, u: float, std: float, indenter_radius: float) 
         return floor + (indenter_radius - floor) * math.exp(u), (indenter_radius - floor) * math.exp(u) * std
     if name == "force_gain":
         return math.exp(u), math.exp(u) * std
-    offset = 1.0 if name in ("force_exponent", "pad_exponent") else 0.0
-    return offset + _SCALE[name] * u, _SCALE[name] * std
+    offset = 1.0 if name in ("force_exponent", "pad_exponent") else 0.0  # exponents are 1 + scale · u
+    return offset + LINEAR_SCALE[name] * u, LINEAR_SCALE[name] * std
 
 
 def _model_table(model: RigModel, rig: Rig) -> dict:

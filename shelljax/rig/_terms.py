@@ -26,9 +26,9 @@ import dataclasses
 
 from .._errors import InvalidInputError
 from ..diagnose import GLOBAL_PARAMETERS
+from ..diagnose._effects import LINEAR_SCALE
 
 HERTZ_EXPONENT = 2.0 / 3.0  # [-] a Hertzian contact's compression grows as F^(2/3)
-_PAD_EXPONENT_SCALE = 0.1  # q = 1 + 0.1 u (shelljax.diagnose's scaled coordinate)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,7 +46,7 @@ class RigTerm:
 
 RIG_TERMS: dict[str, RigTerm] = {t.name: t for t in (
     RigTerm("pad_linear", "pad", ("finger_compliance",), (), "the finger pad compresses by c F: depth = w0 + c F"),
-    RigTerm("pad_hertz", "pad", ("finger_compliance",), (("pad_exponent", (HERTZ_EXPONENT - 1.0) / _PAD_EXPONENT_SCALE),),
+    RigTerm("pad_hertz", "pad", ("finger_compliance",), (("pad_exponent", (HERTZ_EXPONENT - 1.0) / LINEAR_SCALE["pad_exponent"]),),
             "a Hertzian finger pad: depth = w0 + c F_ref (F/F_ref)^(2/3)"),
     RigTerm("pad_power", "pad", ("finger_compliance", "pad_exponent"), (),
             "a finger pad with a power-law response: depth = w0 + c F_ref (F/F_ref)^q"),
