@@ -78,8 +78,12 @@ def _estimate_with_rig(args) -> int:
 
 def _cmd_rig_calibrate(args) -> int:
     from .rig import calibrate_rig, physical_parameter, write_rig
+    from .session import session_kind
 
-    rig = calibrate_rig(args.sessions, gas=args.gas, wrinkle_law=args.wrinkle_law, terms=args.terms,
+    kinds = [session_kind(path) for path in args.sessions]
+    presses = [p for p, kind in zip(args.sessions, kinds) if kind == "rigid_press"]
+    sessions = [p for p, kind in zip(args.sessions, kinds) if kind != "rigid_press"]
+    rig = calibrate_rig(sessions, gas=args.gas, wrinkle_law=args.wrinkle_law, terms=args.terms, presses=presses,
                         progress=not args.quiet)  # fmt: skip
     write_rig(rig, args.out)
     print(f"rig: {len(rig.models)} model(s) the calibration cannot exclude (weights: pseudo-BMA+)")
@@ -186,9 +190,13 @@ def _cmd_replica(args) -> int:
 
 
 def _cmd_validate(args) -> int:
-    from .session import load_session
+    from .session import load_rigid_press, load_session, session_kind
 
     for path in args.sessions:
+        if session_kind(path) == "rigid_press":
+            p = load_rigid_press(path)
+            print(f"ok: {path}: rigid-surface press on {p.object_name}, {p.force.size} samples in {p.trial_ids.size} trials")
+            continue
         s = load_session(path)
         print(f"ok: {path}: {s.object_name}, {s.force.size} samples in {s.trial_ids.size} trials, R = {s.radius:.4g} m")
     return 0
@@ -221,7 +229,8 @@ def _register_rig(sub) -> None:
     rig = sub.add_parser("rig", help="the measuring chain: calibrate it once where the pressure is known (docs/rig.md)")
     rig_sub = rig.add_subparsers(dest="rig_command", required=True)
     cal = rig_sub.add_parser("calibrate", help="fit and select the rig's terms on sessions with manometer readings")
-    cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects")
+    cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects, "
+                     "and optionally rigid-surface press sessions (kind = \"rigid_press\", docs/session-format.md)")
     cal.add_argument("--out", required=True, help="rig TOML file to write")
     cal.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="isothermal",
                      help="gas law of the forward model (every estimate through the rig uses it)")

@@ -204,3 +204,58 @@ def test_replica_and_scenario_take_the_rig(calibrated, tmp_path):
                       .replace("[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'))  # fmt: skip
     with pytest.raises(InvalidInputError, match="estimators.wrinkle_law"):
         load_scenario(config)
+
+
+def _press(directory, rng, compliance=PAD, offset=0.0):
+    from shelljax.session import write_rigid_press
+
+    trial = np.repeat([1, 2, 3], 7)
+    force = np.tile(np.arange(5.0, 20.1, 2.5), 3) + rng.normal(0, 0.05, 21)
+    depth = compliance * force + offset + np.repeat(rng.normal(0, 0.1e-3, 3), 7) + rng.normal(0, 0.05e-3, 21)
+    return write_rigid_press(directory / "press.toml", object_name="table", trial=trial, force=np.round(force, 2),
+                             depth=depth)  # fmt: skip
+
+
+def test_a_press_alone_measures_the_pad_and_the_depth_zero(tmp_path):
+    from shelljax.rig._press import fit_press, press_data
+
+    press = _press(tmp_path, np.random.default_rng(5), offset=1e-3)
+    data = press_data([press])
+    fit = fit_press(data, ("pad_linear", "depth_offset"), 10.0)
+    c, delta = (physical_parameter(n, u, math.sqrt(fit.covariance[i, i]), 0.008)
+                for i, (n, u) in enumerate(zip(fit.parameters, fit.mean)))  # fmt: skip
+    # within 3 std of the planted values (a linear least-squares problem: the Laplace std is exact)
+    assert abs(c[0] - PAD) < 3 * c[1] and abs(delta[0] - 1e-3) < 3 * delta[1]
+    # a press with a pad is badly predicted by a rig without one: its trials lose density
+    assert fit.elpd.sum() > fit_press(data, (), 10.0).elpd.sum() + 20
+
+
+def test_calibration_with_a_press_pins_the_pad_down(calibrated, tmp_path):
+    rig, _, directory = calibrated
+    press = _press(tmp_path, np.random.default_rng(6))
+    calibration = sorted(directory.glob("calib_pezzi_*.toml"))
+    with_press = calibrate_rig(calibration, terms=("pad_linear",), presses=[press.source], progress=False)
+    without = next(m for m in rig.models if m.terms == ("pad_linear",))
+    pressed = next(m for m in with_press.models if m.terms == ("pad_linear",))
+    # the press's 21 samples at 0.1 mm measure c far better than four balls whose E absorbs part of it
+    assert math.sqrt(pressed.covariance[0, 0]) < 0.5 * math.sqrt(without.covariance[0, 0])
+    value = physical_parameter("finger_compliance", pressed.mean[0], 0.0, 0.008)[0]
+    assert abs(value / PAD - 1) < 0.1
+    assert any(c.get("kind") == "rigid_press" for c in with_press.calibration)
+
+
+def test_cli_rig_calibrate_writes_the_rig_or_nothing(calibrated, tmp_path, capsys):
+    _, _, directory = calibrated
+    press = _press(tmp_path, np.random.default_rng(7))
+    calibration = [str(p) for p in sorted(directory.glob("calib_pezzi_*.toml"))]
+    out = tmp_path / "rig.toml"
+    assert main(["rig", "calibrate", *calibration, str(press.source), "--terms", "pad_linear", "--out", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert "pad_linear" in printed and f"written: {out}" in printed
+    assert load_rig(out).models[0].terms == ("pad_linear",)
+    assert main(["validate", str(press.source)]) == 0
+    assert "rigid-surface press" in capsys.readouterr().out
+    refused = tmp_path / "refused.toml"
+    assert main(["rig", "calibrate", calibration[0], str(SESSIONS / "pezzi.toml"), "--out", str(refused), "--quiet"]) == 2
+    assert "manometer_gauge_pressure" in capsys.readouterr().err and not refused.exists()

@@ -125,30 +125,34 @@ def unit_log_jacobian(data: StudyArrays) -> np.ndarray:
     return _row_layout(data)[2]
 
 
+def held_out_units(jac: np.ndarray, resid: np.ndarray, units: np.ndarray, n_units: int):
+    """For each unit i of the whitened least-squares problem (rows ``units == i``; the rows past
+    ``units`` are priors, never left out): (i, its rows, the optimum's move Δ_i, H₋ᵢ⁻¹, the held-out
+    whitened residual, and the log-density [-] of its whitened data without the whitening's Jacobian)."""
+    hessian, gradient = jac.T @ jac, jac.T @ resid
+    for i in range(n_units):
+        rows = np.flatnonzero(units == i)
+        j_i, r_i = jac[rows], resid[rows]
+        h_inv = np.linalg.pinv(hessian - j_i.T @ j_i)
+        delta = -h_inv @ (gradient - j_i.T @ r_i)
+        chol = np.linalg.cholesky(np.eye(rows.size) + j_i @ h_inv @ j_i.T)
+        white = np.linalg.solve(chol, r_i + j_i @ delta)
+        yield i, rows, delta, h_inv, white, -0.5 * white @ white - np.sum(np.log(np.diag(chol)))
+
+
 def loo_score(fit: CandidateFit) -> LooScore:
     """Leave-one-trial-out score of ``fit``, exact for the model linearised at the optimum."""
     data = fit.data
     units, raw, log_jac = _row_layout(data)
     n_data = units.size
     jac, resid = fit.jacobian, fit.residual
-    hessian = jac.T @ jac
-    gradient = jac.T @ resid
     raw_jac = raw @ jac[:n_data]
     raw_resid = raw @ resid[:n_data]  # predicted − observed
     raw_var = np.sum(raw**2, axis=1)  # noise variance of each row (marginal)
     elpd = np.zeros(data.n_units)
     out_resid, out_std, out_white = (np.zeros(n_data) for _ in range(3))
-    for i in range(data.n_units):
-        rows = np.flatnonzero(units == i)
-        j_i, r_i = jac[rows], resid[rows]
-        h_minus = hessian - j_i.T @ j_i
-        h_inv = np.linalg.pinv(h_minus)
-        delta = -h_inv @ (gradient - j_i.T @ r_i)
-        e_i = r_i + j_i @ delta
-        cov = np.eye(rows.size) + j_i @ h_inv @ j_i.T
-        chol = np.linalg.cholesky(cov)
-        white = np.linalg.solve(chol, e_i)
-        elpd[i] = -0.5 * white @ white - np.sum(np.log(np.diag(chol))) + log_jac[i]
+    for i, rows, delta, h_inv, white, log_density in held_out_units(jac, resid, units, data.n_units):
+        elpd[i] = log_density + log_jac[i]
         out_white[rows] = -white
         g = raw_jac[rows]
         out_resid[rows] = -(raw_resid[rows] + g @ delta)

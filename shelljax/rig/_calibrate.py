@@ -42,7 +42,8 @@ from ..diagnose._effects import PRIOR_STD
 from ..diagnose._measurement import widened_grid, with_measurement
 from ..diagnose._model import WRINKLE_LAWS, physical
 from ..paper import PAPER_INDENTER_RADIUS
-from ..session import Session, file_sha256, load_session
+from ..session import RigidPress, Session, file_sha256, load_rigid_press, load_session
+from ._press import PressFit, fit_press, press_data
 from ._terms import FAMILIES, RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
@@ -98,7 +99,8 @@ class Rig:
 class _Fitted:
     terms: tuple[str, ...]
     fits: list
-    elpd: np.ndarray  # per trial, every object's trials in turn
+    press: PressFit | None
+    elpd: np.ndarray  # per trial: every object's trials in turn, then the presses'
 
     @property
     def total(self) -> float:
@@ -155,14 +157,16 @@ def fit_model(base, study, terms, wrinkle_law: str, u_start: np.ndarray, *, rig_
     return fit
 
 
-def _fit_everywhere(objects, terms, wrinkle_law, starts) -> _Fitted | None:
+def _fit_everywhere(objects, terms, wrinkle_law, starts, presses) -> _Fitted | None:
     fits = []
     for (base, study), start in zip(objects, starts):
         fit = fit_model(base, study, terms, wrinkle_law, start)
         if not fit.converged:
             return None
         fits.append(fit)
-    return _Fitted(terms, fits, np.concatenate([loo_score(f).elpd for f in fits]))
+    press = None if presses is None else fit_press(presses, terms, float(objects[0][0].force_ref))
+    elpd = [loo_score(f).elpd for f in fits] + ([press.elpd] if press is not None else [])
+    return _Fitted(terms, fits, press, np.concatenate(elpd))
 
 
 def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
@@ -171,14 +175,14 @@ def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
     return delta >= WIN_NATS and delta >= WIN_SE * se, delta, se
 
 
-def _search(objects, terms, wrinkle_law, report) -> dict:
+def _search(objects, terms, wrinkle_law, report, presses) -> dict:
     """Forward search: every fitted model by its terms.
 
     From the ideal rig, every term of a family not yet in the current model is added in turn; the
     best child becomes the current model for as long as it predicts better than its parent (so a
     pair of terms is reached where neither alone wins by the margin)."""
     report("ideal rig")
-    start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects])
+    start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects], presses)
     if start is None:
         raise NoConvergenceError("the calibration fit with an ideal rig did not converge. Fix: check the sessions "
                                  "with `shelljax validate` and `shelljax diagnose`")  # fmt: skip
@@ -188,7 +192,7 @@ def _search(objects, terms, wrinkle_law, report) -> dict:
         best = None
         for candidate in [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]:
             report("+".join(candidate))
-            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in fitted[current].fits])
+            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in fitted[current].fits], presses)
             if result is None:
                 continue
             fitted[candidate] = result
@@ -211,19 +215,28 @@ def pseudo_bma_plus(elpd: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 
 
 
 def _rig_posterior(result: _Fitted, objects) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """(parameters, mean u, covariance) of the rig entries: the product of every object's marginal."""
+    """(parameters, mean u, covariance) of the rig entries: the product of every object's marginal
+    and the presses' posterior, each of which holds the weak prior once."""
     names = freed_parameters(result.terms)
     if not names:
         return names, np.zeros(0), np.zeros((0, 0))
-    prior_precision = np.diag([1.0 / PRIOR_STD[p] ** 2 for p in names])
-    precision, shift = -(len(result.fits) - 1) * prior_precision, np.zeros(len(names))
+    factors = []
     for fit, (_, study) in zip(result.fits, objects):
         free = np.flatnonzero(np.asarray(fit.data.free))
         index = [int(np.flatnonzero(free == study.n_sessions + GLOBAL_PARAMETERS.index(p))[0]) for p in names]
-        cov = fit.covariance[np.ix_(index, index)]
-        mean = fit.u[[study.n_sessions + GLOBAL_PARAMETERS.index(p) for p in names]]
+        factors.append((names, fit.u[[study.n_sessions + GLOBAL_PARAMETERS.index(p) for p in names]],
+                        fit.covariance[np.ix_(index, index)]))  # fmt: skip
+    if result.press is not None and result.press.parameters:
+        factors.append((result.press.parameters, result.press.mean, result.press.covariance))
+    precision, shift = np.zeros((len(names), len(names))), np.zeros(len(names))
+    counts = np.zeros(len(names))
+    for factor_names, mean, cov in factors:
+        index = [names.index(p) for p in factor_names]
         info = np.linalg.inv(cov)
-        precision, shift = precision + info, shift + info @ mean
+        precision[np.ix_(index, index)] += info
+        shift[index] += info @ mean
+        counts[index] += 1
+    precision -= np.diag((counts - 1) / np.array([PRIOR_STD[p] ** 2 for p in names]))
     covariance = np.linalg.inv(precision)
     return names, covariance @ shift, 0.5 * (covariance + covariance.T)
 
@@ -259,12 +272,15 @@ def calibrate_rig(
     gas: str = "isothermal",
     wrinkle_law: str = "scaling",
     terms: Sequence[str] | None = None,
+    presses: Sequence = (),
     progress: Callable[[str], None] | bool = True,
 ) -> Rig:
     """Calibrate a rig on ``sessions`` with manometer readings, of one or more objects (module docstring).
 
     ``gas`` and ``wrinkle_law``: the forward model's options, carried by the rig to every later
-    estimate; ``terms``: the candidate terms (default: every one in :data:`RIG_TERMS`).
+    estimate; ``terms``: the candidate terms (default: every one in :data:`RIG_TERMS`);
+    ``presses``: rigid-surface press sessions (``shelljax.session.RigidPress`` or their files), which
+    measure the pad, the depth zero and the sensor without an object (``_press``).
 
     Raises:
         InvalidInputError: a session without a manometer reading or wrinkle counts, too few
@@ -284,9 +300,10 @@ def calibrate_rig(
     force_ref = math.sqrt(float(np.min(levels)) * float(np.max(levels)))
     objects, noise = _objects(sessions, gas, force_ref)
     report = _reporter(progress)
-    fitted = _search(objects, terms, wrinkle_law, report)
+    presses = [p if isinstance(p, RigidPress) else load_rigid_press(p) for p in presses]
+    fitted = _search(objects, terms, wrinkle_law, report, press_data(presses) if presses else None)
     report(None)
-    return _assemble(fitted, objects, sessions, noise, gas, wrinkle_law, force_ref)
+    return _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref)
 
 
 def check_terms_list(terms) -> tuple[str, ...]:
@@ -306,7 +323,7 @@ def _nests(terms, simpler) -> bool:
     return set(simpler) < covered and set(simpler) != set(terms)
 
 
-def _assemble(fitted, objects, sessions, noise, gas, wrinkle_law, force_ref) -> Rig:
+def _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref) -> Rig:
     best = max(fitted.values(), key=lambda r: r.total)
     kept, excluded = [], []
     for result in fitted.values():
@@ -330,6 +347,8 @@ def _assemble(fitted, objects, sessions, noise, gas, wrinkle_law, force_ref) -> 
     not_identified = tuple(t for t, p in inclusion.items() if 1 - IDENTIFIED < p < IDENTIFIED)
     calibration = tuple({"path": str(s.source), "sha256": file_sha256(Path(s.source)), "object": s.object_name,
                          "manometer_gauge_pressure": float(s.manometer_gauge_pressure)} for s in sessions)  # fmt: skip
+    calibration += tuple({"path": str(p.source), "sha256": p.sha256, "object": p.object_name, "kind": "rigid_press"}
+                         for p in presses)  # fmt: skip
     objects_summary = tuple(_object_summary(f, study) for f, (_, study) in zip(fitted[models[0].terms].fits, objects))
     return Rig(models=tuple(models), excluded=tuple({"terms": list(r.terms), "delta": d, "delta_se": se}
                                                     for r, d, se in excluded),

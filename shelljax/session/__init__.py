@@ -1,7 +1,8 @@
-"""Measurement sessions: the TOML/CSV format, its validation, and the Session record (SI units)."""
+"""Measurement sessions: the TOML/CSV format, its validation, and the Session and RigidPress records (SI units)."""
 
 from ._bundled import bundled_sessions
 from ._load import SCHEMA_VERSION, file_sha256, load_session
-from ._schema import SHAPE_OBSERVABLES, Session
+from ._press import load_rigid_press, session_kind
+from ._schema import SHAPE_OBSERVABLES, RigidPress, Session
 from ._units import FORCE_UNITS, LENGTH_UNITS, MASS_UNITS, PRESSURE_UNITS
-from ._write import write_session
+from ._write import write_rigid_press, write_session

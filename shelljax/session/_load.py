@@ -23,7 +23,7 @@ from ._units import QUANTITY_UNITS
 SCHEMA_VERSION = 1
 
 _TOP_KEYS = {
-    "schema_version", "object", "notes", "poisson_ratio", "mass", "mass_unit",
+    "schema_version", "kind", "object", "notes", "poisson_ratio", "mass", "mass_unit",
     "manometer_gauge_pressure", "pressure_unit", "geometry", "wall", "indentation", "wrinkles", "shape",
 }  # fmt: skip
 _GEOMETRY_KEYS = {"radius", "radius_std", "mesh", "poke_point", "fit_radius", "length_unit"}
@@ -36,6 +36,8 @@ _SHAPE_COLUMNS = ("trial", "force", *SHAPE_OBSERVABLES)
 # Nothing in the rig is this large: a larger shape length is millimetres read as metres.
 _SHAPE_MAX_LENGTH = 50.0  # [m]
 MIN_FORCE_LEVELS = 3
+# The `kind` key: absent means an indentation session, the only kind before presses existed.
+SESSION_KINDS = ("indentation", "rigid_press")
 
 
 def file_sha256(path: Path) -> str:
@@ -106,7 +108,8 @@ class _Reader:
         return np.asarray(values, dtype=np.float64)
 
 
-def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str) -> None:
+def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str, *, positive: bool = True) -> None:
+    """Every value finite and, with ``positive``, above zero (a magnitude); the first offender named."""
     bad_finite = np.flatnonzero(~np.isfinite(values))
     if bad_finite.size:
         i = bad_finite[0]
@@ -114,7 +117,7 @@ def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str) 
             f"{field}[{i}]", f"{where}value {float(values[i])!r} is not finite",
             "re-measure or delete that sample (the whole row, in every column)",
         )  # fmt: skip
-    bad_sign = np.flatnonzero(values <= 0)
+    bad_sign = np.flatnonzero(values <= 0) if positive else np.empty(0, dtype=np.int64)
     if bad_sign.size:
         i = bad_sign[0]
         raise reader.fail(
@@ -169,7 +172,7 @@ def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.nd
 def _trial_ids(reader: _Reader, field: str, trial: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(trial)) or np.any(trial != np.round(trial)):
         i = int(np.flatnonzero(~np.isfinite(trial) | (trial != np.round(trial)))[0])
-        raise reader.fail(f"{field}[{i}]", f"trial id {trial[i]!r} is not an integer", "number trials 1, 2, 3, ...")
+        raise reader.fail(f"{field}[{i}]", f"trial id {float(trial[i])!r} is not an integer", "number trials 1, 2, 3, ...")
     return trial.astype(np.int64)
 
 
@@ -183,6 +186,12 @@ def load_session(path: str | Path) -> Session:
     path = Path(path)
     reader = _Reader(path)
     data = _read_toml(path)
+    if _read_kind(reader, data) == "rigid_press":
+        raise reader.fail(
+            "kind", '"rigid_press": a rigid-surface press (the finger pressed on a rigid table), not an '
+            "indentation session of an object; it serves `shelljax rig calibrate`",
+            "pass it to `shelljax rig calibrate`, or load it with shelljax.session.load_rigid_press",
+        )  # fmt: skip
     input_files = {str(path): file_sha256(path)}
     reader.no_unknown_keys(data, _TOP_KEYS)
     header = _read_header(reader, data)
@@ -202,6 +211,17 @@ def load_session(path: str | Path) -> Session:
         trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
         shape_trial=shape_trial, shape_force=shape_force, shape=shape, input_files=input_files,
     )  # fmt: skip
+
+
+def _read_kind(reader: _Reader, data: dict) -> str:
+    """The parsed file's ``kind`` (one of ``SESSION_KINDS``; absent: ``"indentation"``)."""
+    kind = data.get("kind", "indentation")
+    if kind not in SESSION_KINDS:
+        raise reader.fail(
+            "kind", f"unknown session kind {kind!r}",
+            f"write one of {', '.join(repr(k) for k in SESSION_KINDS)} (absent means 'indentation')",
+        )  # fmt: skip
+    return kind
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -317,17 +337,26 @@ def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
     return trial, force, depth, ""
 
 
-def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: dict):
-    """(trial ids, forces [N], depths [m], the depth unit [m]) from [indentation], checked against R [m]."""
+def _read_indentation_samples(reader: _Reader, data: dict, input_files: dict, *, positive_depth: bool = True):
+    """(trial ids, forces [N], depths [m], the depth unit [m], where) from [indentation], in SI.
+
+    Every value is finite and every force positive; depths must be positive only with
+    ``positive_depth`` (a rigid press reads the pad's compression plus the gauge's zero error,
+    which may be zero or negative). ``where`` names the CSV for the callers' own messages.
+    """
     indentation = reader.table(data, "indentation", _INDENTATION_KEYS, required=True)
     force_scale = reader.unit(indentation, "force_unit", "force", "N", "indentation.")
     depth_scale = reader.unit(indentation, "depth_unit", "length", "m", "indentation.")
     trial, force, depth, where = _indentation_arrays(reader, indentation, input_files)
     _check_samples(reader, "indentation.force", force, where)
-    _check_samples(reader, "indentation.depth", depth, where)
+    _check_samples(reader, "indentation.depth", depth, where, positive=positive_depth)
     trial = _trial_ids(reader, "indentation.trial", trial)
-    force = force * force_scale
-    depth = depth * depth_scale
+    return trial, force * force_scale, depth * depth_scale, depth_scale, where
+
+
+def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: dict):
+    """(trial ids, forces [N], depths [m], the depth unit [m]) from [indentation], checked against R [m]."""
+    trial, force, depth, depth_scale, _ = _read_indentation_samples(reader, data, input_files)
     if np.unique(force).size < MIN_FORCE_LEVELS:
         raise reader.fail(
             "indentation.force", f"only {np.unique(force).size} distinct force level(s) {np.unique(force).tolist()} N",

@@ -1,4 +1,4 @@
-"""The measurement session: what one indentation experiment on one object recorded (SI units)."""
+"""The measurement sessions (SI units): an indentation experiment on one object, and a rigid-surface press."""
 
 from __future__ import annotations
 
@@ -80,3 +80,37 @@ class Session:
     def force_levels(self) -> np.ndarray:
         """Distinct force levels [N], ascending."""
         return np.unique(self.force)
+
+
+@dataclasses.dataclass(frozen=True)
+class RigidPress:
+    """A rigid-surface press: the instrumented finger pressed on a rigid table, every quantity in SI.
+
+    With no object in the way, the recorded depth is the finger pad's own compression plus the
+    depth gauge's zero error, so it may be zero or slightly negative; it measures the rig (pad
+    compliance, force sensor response) for ``shelljax rig calibrate``.
+
+    Attributes:
+        source: the press TOML file.
+        object_name: what was pressed (e.g. "table").
+        notes: free text.
+        trial: trial id of each sample (int; one trial = one sweep of force levels).
+        force: force F read by the sensor at each sample [N] (positive).
+        depth: recorded depth of each sample [m]: the pad's compression plus the gauge's zero
+            error (finite, any sign).
+        sha256: hex sha256 of the TOML file's bytes (a trials CSV is not included).
+    """
+
+    source: Path
+    object_name: str
+    notes: str
+    trial: np.ndarray
+    force: np.ndarray
+    depth: np.ndarray
+    sha256: str
+
+    @property
+    def trial_ids(self) -> np.ndarray:
+        """Distinct trial ids in order of first appearance."""
+        _, first = np.unique(self.trial, return_index=True)
+        return self.trial[np.sort(first)]

@@ -1,7 +1,8 @@
 """Writing session files (format: docs/session-format.md) from SI values, for scripts.
 
-The writer checks what it writes with :func:`load_session` before anything reaches the target
-path, so a script cannot leave behind a session that the reader would reject.
+Each writer checks what it writes with its reader (:func:`load_session`, :func:`load_rigid_press`)
+before anything reaches the target path, so a script cannot leave behind a file that the reader
+would reject.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -17,16 +19,17 @@ import tomli_w
 from .._errors import InvalidInputError
 from ..paper import DEFAULT_POISSON_RATIO
 from ._load import SCHEMA_VERSION, load_session
-from ._schema import SHAPE_OBSERVABLES, Session
+from ._press import load_rigid_press
+from ._schema import SHAPE_OBSERVABLES, RigidPress, Session
 
-_HEADER = "# Written by shelljax.session.write_session; format: docs/session-format.md; SI units.\n"
+_HEADER = "# Written by shelljax.session.{writer}; format: docs/session-format.md; SI units.\n"
 
 
-def _vector(argument: str, values) -> np.ndarray:
+def _vector(argument: str, values, writer: str = "write_session") -> np.ndarray:
     array = np.asarray(values, dtype=np.float64)
     if array.ndim != 1 or array.size == 0:
         raise InvalidInputError(
-            f"write_session: argument '{argument}' must be a non-empty 1-D array, got shape "
+            f"{writer}: argument '{argument}' must be a non-empty 1-D array, got shape "
             f"{array.shape}. Fix: pass one value per sample"
         )  # fmt: skip
     return array
@@ -127,9 +130,46 @@ def write_session(
         csv_name = f"{path.stem}_shape.csv"
         doc["shape"] = {"length_unit": "m", "force_unit": "N", "shape_csv": csv_name}
         files[csv_name] = _shape_csv(shape)
-    files[path.name] = _HEADER + tomli_w.dumps(doc)
-    _write_if_valid(path, files)
+    files[path.name] = _HEADER.format(writer="write_session") + tomli_w.dumps(doc)
+    _write_if_valid(path, files, load_session)
     return load_session(path)
+
+
+def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth, notes: str = "") -> RigidPress:
+    """Write a rigid-surface press TOML (``kind = "rigid_press"``); return it as loaded.
+
+    Every value is in SI units and is written in SI units (inline arrays, ``force_unit = "N"``,
+    ``depth_unit = "m"``).
+
+    Args:
+        path: the press TOML to write (``.toml``); its directory is created if missing.
+        object_name: what the finger was pressed on (e.g. "table").
+        trial: trial id of each sample, shape (n,).
+        force: force F read by the sensor at each sample [N] (positive), shape (n,).
+        depth: recorded depth of each sample [m]: the finger pad's compression plus the depth
+            gauge's zero error (may be zero or negative), shape (n,).
+        notes: free text.
+
+    Returns:
+        The written press, as :func:`load_rigid_press` reads it back.
+
+    Raises:
+        InvalidInputError: when an argument is malformed, or the press would not load (the
+            message is the reader's, naming the target file and field); nothing is written then.
+    """
+    path = Path(path)
+    writer = "write_rigid_press"
+    if path.suffix != ".toml":
+        raise InvalidInputError(f"{writer}: path {path} does not end in .toml. Fix: name the press file NAME.toml")
+    doc: dict = {"schema_version": SCHEMA_VERSION, "kind": "rigid_press", "object": object_name}
+    if notes:
+        doc["notes"] = notes
+    doc["indentation"] = {
+        "force_unit": "N", "depth_unit": "m", "trial": _ids(_vector("trial", trial, writer)),
+        "force": _vector("force", force, writer).tolist(), "depth": _vector("depth", depth, writer).tolist(),
+    }  # fmt: skip
+    _write_if_valid(path, {path.name: _HEADER.format(writer=writer) + tomli_w.dumps(doc)}, load_rigid_press)
+    return load_rigid_press(path)
 
 
 def _session_document(*, object_name, radius, radius_std, thickness, thickness_std, trial, force, depth,
@@ -154,8 +194,8 @@ def _session_document(*, object_name, radius, radius_std, thickness, thickness_s
     return doc
 
 
-def _write_if_valid(path: Path, files: dict[str, str]) -> None:
-    """Write ``files`` (name → text) beside ``path`` only if the session ``path`` then loads."""
+def _write_if_valid(path: Path, files: dict[str, str], load: Callable[[Path], object]) -> None:
+    """Write ``files`` (name → text) beside ``path`` only if ``load`` then reads ``path`` without error."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # Written and read back in a scratch folder beside the target, so that a rejected session
     # never replaces a good one and the final moves stay on one file system.
@@ -163,7 +203,7 @@ def _write_if_valid(path: Path, files: dict[str, str]) -> None:
         for name, text in files.items():
             (Path(scratch) / name).write_text(text)
         try:
-            load_session(Path(scratch) / path.name)
+            load(Path(scratch) / path.name)
         except InvalidInputError as err:
             raise InvalidInputError(str(err).replace(scratch, str(path.parent))) from None
         for name in files:  # the TOML last: it never names a CSV that is not there yet
