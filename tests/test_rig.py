@@ -259,3 +259,21 @@ def test_cli_rig_calibrate_writes_the_rig_or_nothing(calibrated, tmp_path, capsy
     refused = tmp_path / "refused.toml"
     assert main(["rig", "calibrate", calibration[0], str(SESSIONS / "pezzi.toml"), "--out", str(refused), "--quiet"]) == 2
     assert "manometer_gauge_pressure" in capsys.readouterr().err and not refused.exists()
+
+
+def test_mixed_rigs_are_refused_in_a_calibration_and_in_an_estimate(calibrated, tmp_path):
+    rig, _, _ = calibrated
+    paths = []
+    for k, p in enumerate((900, 1200)):
+        s = load_session(SESSIONS / f"calib_pezzi_{p:04d}Pa.toml")
+        paths.append(tmp_path / f"s{k}.toml")
+        write_session(paths[-1], object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
+                      thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
+                      wrinkle_counts=s.wrinkle_counts, manometer_gauge_pressure=s.manometer_gauge_pressure,
+                      rig_name=("alice-index", "bob-thumb")[k])  # fmt: skip
+    with pytest.raises(InvalidInputError, match="different rigs.*alice-index.*bob-thumb"):
+        calibrate_rig(paths, progress=False)
+    named = write_rig(dataclasses.replace(rig, name="alice-index"), tmp_path / "alice.toml")
+    assert load_rig(named).name == "alice-index"
+    with pytest.raises(InvalidInputError, match="field 'rig'.*bob-thumb"):
+        estimate_with_rig(paths[1], load_rig(named))

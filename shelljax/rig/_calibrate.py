@@ -79,7 +79,8 @@ class Rig:
     ``wrinkle_law``), the reference force ``force_ref`` [N] of the power laws, the nominal finger
     radius ``indenter_radius`` [m], the depth ``noise`` model (τ_t [m], (a [m²], b [-])), the
     ``calibration`` sessions (path, sha256, object, manometer [Pa]), the calibration objects'
-    ``objects`` estimates, and the shelljax ``version`` that made it."""
+    ``objects`` estimates, the shelljax ``version`` that made it, and the ``name`` of the measuring
+    chain the calibration files give (``rig`` in a session), or None."""
 
     models: tuple[RigModel, ...]
     excluded: tuple[dict, ...]
@@ -93,6 +94,7 @@ class Rig:
     calibration: tuple[dict, ...]
     objects: tuple[dict, ...]
     version: str = __version__
+    name: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,6 +107,19 @@ class _Fitted:
     @property
     def total(self) -> float:
         return float(np.sum(self.elpd))
+
+
+def _rig_name(sessions, presses) -> str | None:
+    """The one measuring chain the calibration files name (None: none named); several are refused."""
+    named = {}
+    for item in (*sessions, *presses):
+        if item.rig_name is not None:
+            named.setdefault(item.rig_name, str(item.source))
+    if len(named) > 1:
+        listing = "; ".join(f"{source}: rig = {name!r}" for name, source in named.items())
+        raise InvalidInputError(f"the calibration files were recorded with different rigs ({listing}). Fix: calibrate "
+                                "each measuring chain on its own sessions (`shelljax rig calibrate` once per rig)")  # fmt: skip
+    return next(iter(named), None)
 
 
 def _check_sessions(sessions: Sequence[Session]) -> None:
@@ -301,9 +316,10 @@ def calibrate_rig(
     objects, noise = _objects(sessions, gas, force_ref)
     report = _reporter(progress)
     presses = [p if isinstance(p, RigidPress) else load_rigid_press(p) for p in presses]
+    name = _rig_name(sessions, presses)
     fitted = _search(objects, terms, wrinkle_law, report, press_data(presses) if presses else None)
     report(None)
-    return _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref)
+    return dataclasses.replace(_assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref), name=name)
 
 
 def check_terms_list(terms) -> tuple[str, ...]:

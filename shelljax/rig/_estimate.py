@@ -109,6 +109,9 @@ def _prepare(sessions, rig: Rig):
     if not sessions:
         raise InvalidInputError("no session given. Fix: pass the session TOML file(s) of one object")
     for s in sessions:
+        if rig.name is not None and s.rig_name is not None and s.rig_name != rig.name:
+            raise InvalidInputError(f"{s.source}: field 'rig': recorded with rig {s.rig_name!r}, but the rig file is of "
+                                    f"{rig.name!r}. Fix: estimate through the rig file calibrated for {s.rig_name!r}")  # fmt: skip
         if s.wrinkle_counts is None:
             raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; E needs the wrinkle counts. "
                                     "Fix: add one count per trial")  # fmt: skip

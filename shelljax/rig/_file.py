@@ -59,7 +59,7 @@ def _model_table(model: RigModel, rig: Rig) -> dict:
 def rig_document(rig: Rig) -> dict:
     """The rig as the TOML document's dict."""
     return {
-        "format": FORMAT, "shelljax_version": rig.version,
+        "format": FORMAT, "shelljax_version": rig.version, **({"name": rig.name} if rig.name else {}),
         "forward_model": {"engine": "axisym", "gas": rig.gas, "wrinkle_law": rig.wrinkle_law},
         "reference": {"force_ref": rig.force_ref, "force_ref_unit": "N", "indenter_radius": rig.indenter_radius,
                       "indenter_radius_unit": "m"},
@@ -199,4 +199,12 @@ def load_rig(path: str | Path) -> Rig:
                inclusion={t: float(selection.get("inclusion", {}).get(t, 0.0)) for t in RIG_TERMS},
                not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
                force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
-               calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version)  # fmt: skip
+               calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version,
+               name=_name(check, data))  # fmt: skip
+
+
+def _name(check: _Checker, data: dict) -> str | None:
+    name = data.get("name")
+    if name is not None and (not isinstance(name, str) or not name.strip()):
+        raise check.fail("name", f"{name!r} is not a rig's name", 'write name = "alice-index-film3", or delete the line')
+    return name

@@ -15,7 +15,7 @@ import numpy as np
 from ._load import _TOP_KEYS, _read_header, _read_indentation_samples, _read_kind, _read_toml, _Reader, file_sha256
 from ._schema import RigidPress
 
-_PRESS_TOP_KEYS = {"schema_version", "kind", "object", "notes", "indentation"}
+_PRESS_TOP_KEYS = {"schema_version", "kind", "object", "notes", "rig", "indentation"}
 # A finger pad is millimetres thick and a gauge's zero error smaller still: a larger depth is
 # millimetres (or micrometres) written in a larger unit.
 _PRESS_MAX_DEPTH = 0.02  # [m]
@@ -61,7 +61,7 @@ def load_rigid_press(path: str | Path) -> RigidPress:
         )  # fmt: skip
     return RigidPress(
         source=path, object_name=header["object_name"], notes=header["notes"], trial=trial, force=force,
-        depth=depth, sha256=file_sha256(path),
+        depth=depth, sha256=file_sha256(path), rig_name=header["rig_name"],
     )  # fmt: skip
 
 

@@ -43,6 +43,8 @@ class Session:
             sunken_depth d, each an array [m] with one value per shape point, NaN where it was
             not measured at that point; None without a [shape] table.
         input_files: sha256 of every file the session was read from, by path.
+        rig_name: the name of the measuring chain (person, finger, sensor) it was recorded with,
+            or None; a rig calibration refuses sessions of several.
     """
 
     source: Path
@@ -69,6 +71,7 @@ class Session:
     shape: dict[str, np.ndarray] | None = None
     notes: str = ""
     input_files: dict[str, str] = dataclasses.field(default_factory=dict)
+    rig_name: str | None = None
 
     @property
     def trial_ids(self) -> np.ndarray:
@@ -99,6 +102,7 @@ class RigidPress:
         depth: recorded depth of each sample [m]: the pad's compression plus the gauge's zero
             error (finite, any sign).
         sha256: hex sha256 of the TOML file's bytes (a trials CSV is not included).
+        rig_name: the name of the measuring chain pressed, or None.
     """
 
     source: Path
@@ -108,6 +112,7 @@ class RigidPress:
     force: np.ndarray
     depth: np.ndarray
     sha256: str
+    rig_name: str | None = None
 
     @property
     def trial_ids(self) -> np.ndarray:

@@ -87,6 +87,7 @@ def write_session(
     poisson_ratio: float = DEFAULT_POISSON_RATIO,
     notes: str = "",
     shape: dict | None = None,
+    rig_name: str | None = None,
 ) -> Session:
     """Write a session TOML (and, with ``shape``, a shape CSV beside it); return it as loaded.
 
@@ -109,6 +110,7 @@ def write_session(
         notes: free text.
         shape: the measured deformed shape: ``"trial"`` and ``"force"`` [N], shape (m,), and any
             of ``SHAPE_OBSERVABLES`` [m], shape (m,), NaN where not measured; None to omit.
+        rig_name: the name of the measuring chain it was recorded with (``rig``); None to omit.
 
     Returns:
         The written session, as :func:`load_session` reads it back.
@@ -124,6 +126,7 @@ def write_session(
         object_name=object_name, radius=radius, radius_std=radius_std, thickness=thickness,
         thickness_std=thickness_std, trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts,
         manometer_gauge_pressure=manometer_gauge_pressure, mass=mass, poisson_ratio=poisson_ratio, notes=notes,
+        rig_name=rig_name,
     )  # fmt: skip
     files: dict[str, str] = {}
     if shape is not None:
@@ -135,7 +138,8 @@ def write_session(
     return load_session(path)
 
 
-def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth, notes: str = "") -> RigidPress:
+def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth, notes: str = "",
+                      rig_name: str | None = None) -> RigidPress:
     """Write a rigid-surface press TOML (``kind = "rigid_press"``); return it as loaded.
 
     Every value is in SI units and is written in SI units (inline arrays, ``force_unit = "N"``,
@@ -149,6 +153,7 @@ def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth
         depth: recorded depth of each sample [m]: the finger pad's compression plus the depth
             gauge's zero error (may be zero or negative), shape (n,).
         notes: free text.
+        rig_name: the name of the measuring chain pressed (``rig``), or None.
 
     Returns:
         The written press, as :func:`load_rigid_press` reads it back.
@@ -164,6 +169,8 @@ def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth
     doc: dict = {"schema_version": SCHEMA_VERSION, "kind": "rigid_press", "object": object_name}
     if notes:
         doc["notes"] = notes
+    if rig_name:
+        doc["rig"] = rig_name
     doc["indentation"] = {
         "force_unit": "N", "depth_unit": "m", "trial": _ids(_vector("trial", trial, writer)),
         "force": _vector("force", force, writer).tolist(), "depth": _vector("depth", depth, writer).tolist(),
@@ -173,11 +180,13 @@ def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth
 
 
 def _session_document(*, object_name, radius, radius_std, thickness, thickness_std, trial, force, depth,
-                      wrinkle_counts, manometer_gauge_pressure, mass, poisson_ratio, notes) -> dict:  # fmt: skip
+                      wrinkle_counts, manometer_gauge_pressure, mass, poisson_ratio, notes, rig_name) -> dict:  # fmt: skip
     """The session TOML's tables, every value in SI units (see :func:`write_session`)."""
     doc: dict = {"schema_version": SCHEMA_VERSION, "object": object_name}
     if notes:
         doc["notes"] = notes
+    if rig_name:
+        doc["rig"] = rig_name
     doc["poisson_ratio"] = float(poisson_ratio)
     if mass is not None:
         doc["mass"] = float(mass)
