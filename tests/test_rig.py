@@ -277,3 +277,17 @@ def test_mixed_rigs_are_refused_in_a_calibration_and_in_an_estimate(calibrated, 
     assert load_rig(named).name == "alice-index"
     with pytest.raises(InvalidInputError, match="field 'rig'.*bob-thumb"):
         estimate_with_rig(paths[1], load_rig(named))
+
+
+def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrated, tmp_path):
+    from shelljax.rig._estimate import RigEstimate
+
+    rig, _, _ = calibrated
+    held_out = SESSIONS / "heldout_pezzi_1100Pa.toml"
+    unsure = dataclasses.replace(rig, not_identified=("pad_linear", "sensor_gain"))
+    result = estimate_with_rig(held_out, unsure)
+    assert isinstance(result, RigEstimate)
+    rows = {s["term"]: s for s in result.to_dict()["separating"]}
+    assert "rigid-surface press" in rows["pad_linear"]["measurement"] and "weights" in rows["sensor_gain"]["measurement"]
+    # one model: the mixture is that model, and settling the terms would change nothing
+    assert rows["pad_linear"]["young_modulus_interval_shrink"] == pytest.approx(1.0, rel=1e-3)

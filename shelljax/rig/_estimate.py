@@ -49,6 +49,16 @@ PARETO_K_LIMIT = 0.7  # PSIS k̂ above which importance weights are unreliable
 Z95 = 1.959963984540054
 
 
+# the measurement that settles a term the calibration could not
+SEPARATING_MEASUREMENT = {
+    "pad_linear": "a rigid-surface press (the pad alone)", "pad_hertz": "a rigid-surface press (the pad alone)",
+    "pad_power": "a rigid-surface press (the pad alone)", "depth_offset": "a rigid-surface press (the depth gauge's zero)",
+    "finger_radius": "a second finger size, or a sphere of known radius",
+    "sensor_gain": "the force sensor checked against weights (shelljax sensor-calibrate)",
+    "sensor_power": "the force sensor checked against weights across 5-20 N (shelljax sensor-calibrate)",
+}  # fmt: skip
+
+
 class RigWarning(UserWarning):
     """A rig model could not be used for an estimate (its fit failed, or PSIS k̂ is high)."""
 
@@ -67,10 +77,22 @@ class RigEstimate:
     rig: Rig
     sources: tuple[str, ...]
 
+    def separating(self) -> list[dict]:
+        """For each term not identified: the measurement that would settle it, and the factor by
+        which E's 95 % interval would shrink were the weightiest model the only one left."""
+        own = next((m for m in self.models if m["status"] == "ok"), None)
+        e = self.estimates["young_modulus"]
+        shrink = None
+        if own is not None:
+            width = math.log(e.ci95[1] / e.ci95[0])
+            shrink = width / (2 * Z95 * own["estimates"]["young_modulus"]["relative_std"])
+        return [{"term": t, "measurement": SEPARATING_MEASUREMENT[t], "young_modulus_interval_shrink": shrink}
+                for t in self.not_identified]  # fmt: skip
+
     def to_dict(self) -> dict:
         """JSON-ready: estimates by name, each rig model's share, and the rig's provenance."""
         return {"estimates": {k: v.to_dict() for k, v in self.estimates.items()}, "rig_models": list(self.models),
-                "not_identified": list(self.not_identified),
+                "not_identified": list(self.not_identified), "separating": self.separating(),
                 "rig": {"gas": self.rig.gas, "wrinkle_law": self.rig.wrinkle_law, "version": self.rig.version,
                         "calibration": [c["sha256"] for c in self.rig.calibration]}}  # fmt: skip
 
