@@ -225,7 +225,7 @@ def evaluate_session(path, truth_p, truth_e, rig_model, k_s, methods):
     return out
 
 
-def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int):
+def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int, manometer_std: float):
     from shelljax.estimate import calibrate_ks
     from shelljax.rig import calibrate_rig
     from shelljax.session import load_session
@@ -233,7 +233,7 @@ def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int):
     with tempfile.TemporaryDirectory() as tmp:
         truth, calibration, _, tests = make_rig_world(rng, n_imperfections, n_objects, Path(tmp))
         start = time.perf_counter()
-        rig = calibrate_rig(calibration, progress=False)
+        rig = calibrate_rig(calibration, manometer_std=manometer_std, progress=False)
         seconds = time.perf_counter() - start
         k_s = calibrate_ks([load_session(p) for p in calibration]).k_s
         rows = []
@@ -294,6 +294,8 @@ def main():
     parser.add_argument("--seed", type=int, default=46)
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--bayes-every", type=int, default=2, help="bayes+rig on every n-th session of an object")
+    parser.add_argument("--manometer-std", type=float, default=0.01,
+                        help="the calibration's manometer accuracy, as the generator's noise (1 %%)")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json"))
     args = parser.parse_args()
     warnings.simplefilter("ignore")
@@ -304,7 +306,7 @@ def main():
     out = Path(args.out)
     for i, n in enumerate(counts):
         start = time.perf_counter()
-        rigs.append(run_rig(i, rng, n, args.objects, args.methods, args.bayes_every))
+        rigs.append(run_rig(i, rng, n, args.objects, args.methods, args.bayes_every, args.manometer_std))
         print(f"[{i + 1}/{len(counts)}] rig {rigs[-1]['truth']} -> {[m['terms'] for m in rigs[-1]['selected'][:3]]} "
               f"({time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
         summary = summarize(rigs, args.methods)

@@ -89,7 +89,7 @@ def _cmd_rig_calibrate(args) -> int:
     presses = [p for p, kind in zip(args.sessions, kinds) if kind == "rigid_press"]
     sessions = [p for p, kind in zip(args.sessions, kinds) if kind != "rigid_press"]
     rig = calibrate_rig(sessions, gas=args.gas, wrinkle_law=args.wrinkle_law, terms=args.terms, presses=presses,
-                        progress=not args.quiet)  # fmt: skip
+                        manometer_std=args.manometer_std, progress=not args.quiet)  # fmt: skip
     write_rig(rig, args.out)
     print(f"rig: {len(rig.models)} model(s) the calibration cannot exclude (weights: pseudo-BMA+)")
     for m in rig.models:
@@ -243,6 +243,8 @@ def _register_rig(sub) -> None:
                      help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)")
     cal.add_argument("--terms", nargs="+", default=None, metavar="TERM",
                      help="candidate terms (default: all of shelljax.rig.RIG_TERMS)")
+    cal.add_argument("--manometer-std", type=float, default=0.02,
+                     help="the manometer readings' relative standard deviation (default 0.02: 2 %%)")
     cal.add_argument("--quiet", action="store_true", help="no progress bar")
     cal.set_defaults(func=_cmd_rig_calibrate)
 

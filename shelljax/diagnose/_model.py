@@ -105,17 +105,18 @@ class StudyArrays(eqx.Module):
 
 
 def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = PAPER_INDENTER_RADIUS,
-                 force_ref: float | None = None) -> StudyArrays:
+                 force_ref: float | None = None, manometer_std: float = MANOMETER_STD) -> StudyArrays:
     """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only).
 
     ``force_ref`` [N]: the force about which the sensor's and the pad's power laws are written
-    (None: the study's mid force; a rig carries its own to every later study).
+    (None: the study's mid force; a rig carries its own to every later study); ``manometer_std``
+    [-]: the manometer readings' relative standard deviation.
     """
     s = study.n_sessions
     n_u = s + len(GLOBAL_PARAMETERS)
     mean, std = np.zeros(n_u), np.full(n_u, np.inf)
     manometer = np.isfinite(study.manometer)
-    std[:s] = np.where(manometer, MANOMETER_STD, np.inf)
+    std[:s] = np.where(manometer, manometer_std, np.inf)
     g = {name: s + i for i, name in enumerate(GLOBAL_PARAMETERS)}
     std[g["thickness"]] = study.thickness_std / study.thickness if study.thickness_std > 0 else FREE_THICKNESS_STD
     std[g["radius"]] = study.radius_std / float(np.mean(study.radius)) if study.radius_std > 0 else np.inf

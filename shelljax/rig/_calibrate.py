@@ -38,7 +38,7 @@ from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, build_study, fit_candidate, loo_score, study_arrays
 from ..axisym import GAS_EXPONENTS
 from ..diagnose._diagnose import WIN_NATS, WIN_SE
-from ..diagnose._effects import PRIOR_STD
+from ..diagnose._effects import MANOMETER_STD, PRIOR_STD
 from ..diagnose._measurement import widened_grid, with_measurement
 from ..diagnose._model import WRINKLE_LAWS, physical
 from ..paper import PAPER_INDENTER_RADIUS
@@ -80,7 +80,8 @@ class Rig:
     radius ``indenter_radius`` [m], the depth ``noise`` model (τ_t [m], (a [m²], b [-])), the
     ``calibration`` sessions (path, sha256, object, manometer [Pa]), the calibration objects'
     ``objects`` estimates, the shelljax ``version`` that made it, and the ``name`` of the measuring
-    chain the calibration files give (``rig`` in a session), or None."""
+    chain the calibration files give (``rig`` in a session), or None, and the ``manometer_std`` [-]
+    the calibration assumed."""
 
     models: tuple[RigModel, ...]
     excluded: tuple[dict, ...]
@@ -95,6 +96,7 @@ class Rig:
     objects: tuple[dict, ...]
     version: str = __version__
     name: str | None = None
+    manometer_std: float = MANOMETER_STD
 
 
 @dataclasses.dataclass(frozen=True)
@@ -266,7 +268,7 @@ def _object_summary(fit, study) -> dict:
             "thickness": {"value": float(phys["thickness"]), "unit": "m"}}  # fmt: skip
 
 
-def _objects(sessions, gas, force_ref):
+def _objects(sessions, gas, force_ref, manometer_std):
     by_object: dict[str, list[Session]] = {}
     for s in sessions:
         by_object.setdefault(s.object_name, []).append(s)
@@ -276,7 +278,8 @@ def _objects(sessions, gas, force_ref):
     forces = np.concatenate([s.force for s in sessions])
     objects = []
     for study in studies:
-        base = study_arrays(study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref)
+        base = study_arrays(study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref,
+                            manometer_std=manometer_std)
         objects.append((widened_grid(base, forces, CALIBRATION_GRID_SPAN), study))
     return objects, noise
 
@@ -288,6 +291,7 @@ def calibrate_rig(
     wrinkle_law: str = "scaling",
     terms: Sequence[str] | None = None,
     presses: Sequence = (),
+    manometer_std: float = MANOMETER_STD,
     progress: Callable[[str], None] | bool = True,
 ) -> Rig:
     """Calibrate a rig on ``sessions`` with manometer readings, of one or more objects (module docstring).
@@ -295,7 +299,8 @@ def calibrate_rig(
     ``gas`` and ``wrinkle_law``: the forward model's options, carried by the rig to every later
     estimate; ``terms``: the candidate terms (default: every one in :data:`RIG_TERMS`);
     ``presses``: rigid-surface press sessions (``shelljax.session.RigidPress`` or their files), which
-    measure the pad, the depth zero and the sensor without an object (``_press``).
+    measure the pad, the depth zero and the sensor without an object (``_press``); ``manometer_std``
+    [-]: the manometer readings' relative standard deviation (its accuracy class).
 
     Raises:
         InvalidInputError: a session without a manometer reading or wrinkle counts, too few
@@ -307,19 +312,23 @@ def calibrate_rig(
         raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
     if wrinkle_law not in WRINKLE_LAWS:
         raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
+    if not 0 < manometer_std < 0.5:
+        raise InvalidInputError(f"manometer_std {manometer_std!r} is not a relative std in (0, 0.5). Fix: give the "
+                                "manometer's accuracy as a fraction, e.g. 0.01 for 1 %")  # fmt: skip
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
     if not sessions:
         raise InvalidInputError("no calibration sessions given. Fix: pass session TOML files with manometer readings")
     _check_sessions(sessions)
     levels = np.concatenate([s.force for s in sessions])
     force_ref = math.sqrt(float(np.min(levels)) * float(np.max(levels)))
-    objects, noise = _objects(sessions, gas, force_ref)
+    objects, noise = _objects(sessions, gas, force_ref, manometer_std)
     report = _reporter(progress)
     presses = [p if isinstance(p, RigidPress) else load_rigid_press(p) for p in presses]
     name = _rig_name(sessions, presses)
     fitted = _search(objects, terms, wrinkle_law, report, press_data(presses) if presses else None)
     report(None)
-    return dataclasses.replace(_assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref), name=name)
+    rig = _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref)
+    return dataclasses.replace(rig, name=name, manometer_std=manometer_std)
 
 
 def check_terms_list(terms) -> tuple[str, ...]:

@@ -60,6 +60,7 @@ def rig_document(rig: Rig) -> dict:
     """The rig as the TOML document's dict."""
     return {
         "format": FORMAT, "shelljax_version": rig.version, **({"name": rig.name} if rig.name else {}),
+        "manometer_std": rig.manometer_std,
         "forward_model": {"engine": "axisym", "gas": rig.gas, "wrinkle_law": rig.wrinkle_law},
         "reference": {"force_ref": rig.force_ref, "force_ref_unit": "N", "indenter_radius": rig.indenter_radius,
                       "indenter_radius_unit": "m"},
@@ -200,7 +201,7 @@ def load_rig(path: str | Path) -> Rig:
                not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
                force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
                calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version,
-               name=_name(check, data))  # fmt: skip
+               name=_name(check, data), manometer_std=check.get(data, "manometer_std", float, "manometer_std"))  # fmt: skip
 
 
 def _name(check: _Checker, data: dict) -> str | None:
