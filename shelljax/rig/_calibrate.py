@@ -44,7 +44,7 @@ from ..diagnose._model import WRINKLE_LAWS, physical
 from ..paper import PAPER_INDENTER_RADIUS
 from ..session import RigidPress, Session, file_sha256, load_rigid_press, load_session
 from ._press import PressFit, fit_press, press_data
-from ._terms import FAMILIES, RIG_TERMS, check_terms, fixed_values, freed_parameters
+from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
 BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
@@ -400,5 +400,3 @@ def _reporter(progress):
 
     return update
 
-
-__all__ = ["FAMILIES", "Rig", "RigModel", "calibrate_rig", "pseudo_bma_plus"]

@@ -180,9 +180,10 @@ def _weighted_quantile(values, weights, q):
     return float(np.interp(q * cum[-1], cum, values[order]))
 
 
-def _estimate_from_log(name, center, lo, hi, log_std, method, note="") -> Estimate:
+def _estimate_from_log(center, lo, hi, log_std, method) -> Estimate:
+    """A pressure or modulus [Pa] from its log-space median, 95 % bounds and std."""
     value = math.exp(center)
-    return Estimate(value, value * log_std, (math.exp(lo), math.exp(hi)), "Pa", method, note)
+    return Estimate(value, value * log_std, (math.exp(lo), math.exp(hi)), "Pa", method)
 
 
 def estimate_with_rig(
@@ -258,7 +259,7 @@ def estimate_with_rig(
             center, lo, hi = (_weighted_quantile(values, w, q) for q in (0.5, 0.025, 0.975))
             mean = float(np.sum(w * values) / np.sum(w))
             log_std = math.sqrt(float(np.sum(w * (values - mean) ** 2) / np.sum(w)))
-        estimates[name] = _estimate_from_log(name, center, lo, hi, log_std, label)
+        estimates[name] = _estimate_from_log(center, lo, hi, log_std, label)
     return RigEstimate(estimates=estimates, models=tuple(per_model), not_identified=rig.not_identified, method=method,
                        rig=rig, sources=tuple(str(s.source) for s in sessions))  # fmt: skip
 
