@@ -237,8 +237,9 @@ def _register_rig(sub) -> None:
     cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects, "
                      "and optionally rigid-surface press sessions (kind = \"rigid_press\", docs/session-format.md)")
     cal.add_argument("--out", required=True, help="rig TOML file to write")
-    cal.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="isothermal",
-                     help="gas law of the forward model (every estimate through the rig uses it)")
+    cal.add_argument("--gas", choices=["prescribed", "isothermal"], default="isothermal",
+                     help="gas law of the forward model (every estimate through the rig uses it; a poke is slow, so a "
+                     "sealed object's gas is isothermal)")
     cal.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
                      help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)")
     cal.add_argument("--terms", nargs="+", default=None, metavar="TERM",
@@ -272,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--seed", type=int, default=0)
     est.add_argument("--model", choices=["axisym", "scaling"], default="axisym",
                      help="forward model of fit/bayes (default: the axisymmetric shell engine)")
-    est.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
+    est.add_argument("--gas", choices=["prescribed", "isothermal"], default=None,
                      help="gas model of the axisym engine (default: prescribed; with --rig, the rig's)")
     est.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
                      help="wrinkle count of the axisym model: the engine's (mechanics, the default) or n = 1.33 tau^1/2 "

@@ -18,7 +18,7 @@ from .paper import PAPER_KS
 
 METHODS = ("closed-form", "fit", "bayes")
 FORWARD_MODELS = ("axisym", "scaling")
-GAS_MODELS = ("prescribed", "isothermal", "adiabatic")
+GAS_MODELS = ("prescribed", "isothermal")
 WRINKLE_LAWS = ("mechanics", "scaling")  # as shelljax.estimate._forward (kept JAX-free here)
 NUISANCE = ("depth_offset", "force_gain")
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs", "rig"}

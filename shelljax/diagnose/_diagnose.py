@@ -32,8 +32,8 @@ from ..axisym import GAS_EXPONENTS
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
-from ._measurement import MeasurementPrior, measured_baseline, widened_grid
-from ._model import GRID_SPAN, WRINKLE_LAWS, StudyArrays, physical, study_arrays
+from ._measurement import MeasurementPrior, measured_baseline
+from ._model import WRINKLE_LAWS, StudyArrays, physical, study_arrays
 from ._robust import not_excluded, robust_range, separating
 from ._study import SHAPE_OBSERVABLES, Study, build_study
 
@@ -345,8 +345,7 @@ def diagnose(
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
     study = build_study(sessions, None if measurement is None else measurement.noise)
     base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
-    if measurement is not None:
-        base = widened_grid(measured_baseline(base, measurement), study.force, GRID_SPAN)
+    base = measured_baseline(base, measurement)
     baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
         ("radius",) if study.radius_std > 0 else ())  # fmt: skip
     if measurement is not None:

@@ -36,7 +36,6 @@ import numpy as np
 from .. import __version__
 from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, build_study, fit_candidate, loo_score, study_arrays
-from ..axisym import GAS_EXPONENTS
 from ..diagnose._diagnose import WIN_NATS, WIN_SE
 from ..diagnose._effects import MANOMETER_STD, PRIOR_STD
 from ..diagnose._measurement import widened_grid, with_measurement
@@ -46,6 +45,7 @@ from ..session import RigidPress, Session, file_sha256, load_rigid_press, load_s
 from ._press import PressFit, fit_press, press_data
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
+ESTIMATOR_GASES = ("prescribed", "isothermal")  # the estimators' gas laws (the fitted estimator's)
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
 BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
 MIN_WEIGHT = 1e-3  # a model below this weight is dropped from the rig (its weight goes to the others)
@@ -308,8 +308,9 @@ def calibrate_rig(
         NoConvergenceError: the fit with an ideal rig failed.
     """
     terms = tuple(RIG_TERMS) if terms is None else check_terms_list(terms)
-    if gas not in GAS_EXPONENTS:
-        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
+    if gas not in ESTIMATOR_GASES:
+        raise InvalidInputError(f"unknown gas {gas!r} for an estimate. Fix: choose from {', '.join(ESTIMATOR_GASES)} "
+                                "(a poke is slow: a sealed object's gas stays isothermal)")  # fmt: skip
     if wrinkle_law not in WRINKLE_LAWS:
         raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
     if not 0 < manometer_std < 0.5:

@@ -18,7 +18,7 @@ import tomli_w
 
 from .._errors import InvalidInputError
 from ..diagnose._effects import LINEAR_SCALE, MIN_INDENTER_FRACTION, UNITS
-from ._calibrate import Rig, RigModel
+from ._calibrate import ESTIMATOR_GASES, Rig, RigModel
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 FORMAT = 1
@@ -187,14 +187,13 @@ def load_rig(path: str | Path) -> Rig:
     if abs(total - 1.0) > 1e-6:
         raise check.fail("model.weight", f"the weights add up to {total:.6g}, not 1", "re-create the file with `shelljax rig calibrate`")
     selection = data.get("selection", {})
-    from ..axisym import GAS_EXPONENTS
     from ..diagnose._model import WRINKLE_LAWS
 
     gas = check.get(fm, "gas", str, "forward_model.gas")
     law = check.get(fm, "wrinkle_law", str, "forward_model.wrinkle_law")
-    if gas not in GAS_EXPONENTS or law not in WRINKLE_LAWS:
+    if gas not in ESTIMATOR_GASES or law not in WRINKLE_LAWS:
         raise check.fail("forward_model", f"gas {gas!r} / wrinkle_law {law!r} unknown",
-                         f"use a gas of {', '.join(GAS_EXPONENTS)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}")  # fmt: skip
+                         f"use a gas of {', '.join(ESTIMATOR_GASES)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}")  # fmt: skip
     return Rig(models=models, excluded=tuple({"terms": e.get("terms"), "delta": e.get("delta_elpd"), "delta_se": e.get("delta_se")}
                                              for e in selection.get("excluded", [])),
                inclusion={t: float(selection.get("inclusion", {}).get(t, 0.0)) for t in RIG_TERMS},
