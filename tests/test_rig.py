@@ -291,3 +291,18 @@ def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrate
     assert "rigid-surface press" in rows["pad_linear"]["measurement"] and "weights" in rows["sensor_gain"]["measurement"]
     # one model: the mixture is that model, and settling the terms would change nothing
     assert rows["pad_linear"]["young_modulus_interval_shrink"] == pytest.approx(1.0, rel=1e-3)
+
+
+def test_diagnose_with_the_rig_as_baseline(calibrated, tmp_path, capsys):
+    _, path, directory = calibrated
+    calibration = [str(p) for p in sorted(directory.glob("calib_pezzi_*.toml"))]
+    assert main(["diagnose", *calibration, "--rig", str(path), "--effects", "finger_compliance", "depth_offset",
+                 "--json", "--quiet"]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    # the rig's pad is the baseline: its own candidate is left out, and the rest find nothing more
+    assert report["baseline"]["measurement"] == "pad_linear"
+    assert report["baseline"]["effects_in_measurement"] == ["finger_compliance"]
+    assert {e["effect"] for e in report["ranking"]} == {"baseline", "depth_offset"} and report["verdict"] == "none"
+    assert {"not_excluded", "robust", "separating"} <= set(report)
+    assert main(["diagnose", *calibration, "--rig", str(path), "--wrinkle-law", "mechanics"]) == 2
+    assert "wrinkle_law" in capsys.readouterr().err

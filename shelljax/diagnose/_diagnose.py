@@ -348,8 +348,12 @@ def diagnose(
     base = measured_baseline(base, measurement)
     baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
         ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+    in_baseline = ()
     if measurement is not None:
         baseline_free += tuple(p for p in measurement.parameters if p not in baseline_free)
+        # a candidate whose parameters the calibrated chain already fits would be the baseline again
+        in_baseline = tuple(e for e in effects if set(EFFECTS[e].parameters) <= set(measurement.parameters))
+        effects = tuple(e for e in effects if e not in in_baseline)
     report_progress = _progress_reporter(progress, 1 + len(effects))
     fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
     ranking, chosen = _ranking(fits, scores, effects)
@@ -380,7 +384,8 @@ def diagnose(
         "decision": {"win_se": WIN_SE, "win_nats": WIN_NATS, "misfit_p": MISFIT_P,
                      "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum"},  # fmt: skip
         "baseline": {**_baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
-                     "measurement": None if measurement is None else measurement.name},
+                     "measurement": None if measurement is None else measurement.name,
+                     "effects_in_measurement": list(in_baseline)},
         "sessions": _sessions_record(study),
     }
     return Diagnosis(report=report, study=study, fits=fits, scores=scores, points_before=points_before,
