@@ -1,5 +1,5 @@
-"""Command line: ``shelljax run``, ``estimate``, ``diagnose``, ``simulate``, ``replica``, ``validate``, and the sensor commands ``acquire``,
-``sensor-calibrate``, ``sensor-emulator`` (see docs/sensing.md)."""
+"""Command line: shelljax run, estimate, diagnose, simulate, replica, rig, validate, and the sensor commands acquire,
+sensor-calibrate, sensor-emulator (docs/sensing.md); the same text is the --help description."""
 
 from __future__ import annotations
 
@@ -252,7 +252,10 @@ def _register_rig(sub) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``shelljax`` command."""
-    parser = argparse.ArgumentParser(prog="shelljax", description=__doc__)
+    from . import __version__
+
+    parser = argparse.ArgumentParser(prog="shelljax", description=__doc__.partition(";")[0] + ".")
+    parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run an experiment config into a fresh run directory")

@@ -551,12 +551,12 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     from . import dynamics as d
 
     out = Path(out_dir) if out_dir is not None else scenario.output_dir / scenario.name
-    out.mkdir(parents=True, exist_ok=True)
     obj = resolve_object(scenario, session)
     system = build_system(scenario, obj)
     if scenario.prescribed is not None:
         system = hold(scenario, system)
     _check_time_step(scenario, system)
+    out.mkdir(parents=True, exist_ok=True)  # only once the config is accepted: a refused one leaves nothing
     calibration = None
     damping = scenario.contact_damping or 0.0
     if scenario.cor is not None:

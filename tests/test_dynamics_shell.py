@@ -268,6 +268,7 @@ def test_bad_configs_name_file_field_and_fix(tmp_path, change, field):
         run_scenario(scenario, tmp_path / "out", progress=False)
     message = str(err.value)
     assert str(config) in message and field in message and "Fix" in message
+    assert not (tmp_path / "out").exists()  # a refused config leaves no output directory behind
 
 
 def test_scenario_estimates_the_object_with_its_estimators_table(tmp_path):

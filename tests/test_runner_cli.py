@@ -206,3 +206,15 @@ def test_config_carries_the_forward_model_options(tmp_path):
     path.write_text('[estimators]\nmethods = ["fit"]\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')
     defaults = load_config(path)
     assert (defaults.gas, defaults.wrinkle_law, defaults.bayes_surrogate) == ("prescribed", "mechanics", True)
+
+
+def test_version_and_plain_text_help(capsys):
+    import shelljax
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0 and capsys.readouterr().out.strip() == f"shelljax {shelljax.__version__}"
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    assert "``" not in text and "rig" in text and "estimate" in text
