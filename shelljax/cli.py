@@ -13,7 +13,8 @@ from ._errors import ShelljaxError
 def _cmd_run(args) -> int:
     from .runner import run_experiment, summary_table
 
-    run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False)
+    run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False,
+                             verbose=args.verbose)  # fmt: skip
     print(summary_table(json.loads((run_dir / "results.json").read_text())))
     print(f"results: {run_dir / 'results.json'}")
     return 0
@@ -262,6 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("config", help="experiment config TOML, e.g. configs/paper.toml")
     run.add_argument("--out", default=None, help="parent directory of the run directory (default: the config's output_dir)")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
+    run.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it")
     run.set_defaults(func=_cmd_run)
 
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")

@@ -217,11 +217,13 @@ def _calibration_record(calibration) -> dict:
     }  # fmt: skip
 
 
-def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = None, progress: bool | None = None) -> Path:
+def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = None, progress: bool | None = None,
+                   verbose: bool = False) -> Path:  # fmt: skip
     """Run the experiment config at ``config_path``; return the run directory.
 
     Every session is loaded and validated before anything is written, so a bad input fails the run
-    without leaving a half-written directory. ``progress``: None shows a bar on a terminal only.
+    without leaving a half-written directory. ``progress``: None shows a bar on a terminal only;
+    ``verbose``: print each stage's wall time and what JAX compiled in it (results.json has it always).
     """
     config = load_config(config_path)
     disable = None if progress is None else not progress
@@ -246,7 +248,7 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     stages: list[dict] = []
     for session in tqdm(sessions, desc="estimating", disable=disable):
         entry, row = _estimate_session_entry(session, config, options, run_dir, str(session.source) in calibration_files,
-                                             held_out, stages, verbose=progress is not False, rig=rig)  # fmt: skip
+                                             held_out, stages, verbose=verbose, rig=rig)  # fmt: skip
         summary_rows.append(row)
         results["sessions"].append(entry)
         release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate

@@ -218,3 +218,12 @@ def test_version_and_plain_text_help(capsys):
         main(["--help"])
     text = capsys.readouterr().out
     assert "``" not in text and "rig" in text and "estimate" in text
+
+
+def test_the_main_job_prints_compile_logs_only_when_asked(tmp_path, capsys):
+    config = paper_variant(tmp_path, ["fit"], ["bundled:sessions/heldout_pezzi_1100Pa.toml"])
+    assert main(["run", str(config), "--out", str(tmp_path / "quiet"), "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "programs compiled" not in captured.out + captured.err and "P_g fit" in captured.out
+    assert main(["run", str(config), "--out", str(tmp_path / "verbose"), "--quiet", "--verbose"]) == 0
+    assert "heldout_pezzi_1100Pa.toml: fit:" in capsys.readouterr().err
