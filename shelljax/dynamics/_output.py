@@ -71,7 +71,9 @@ def _plots(trajectory: Trajectory, figures: Path) -> list[Path]:
     for kind in ("kinetic", "elastic", "gas", "gravity", "contact", "total"):
         e = trajectory[f"{kind}_energy_J"]
         ax.plot(t, e - (e[0] if kind in ("gas", "gravity", "total") else 0.0), label=kind)
-    ax.set(xlabel="time [s]", ylabel="energy [J] (gas, gravity, total: change from t = 0)", title="energies")
+    # the note on which curves are changes goes in the title: a long y-label is taller than the axes and clips
+    ax.set(xlabel="time [s]", ylabel="energy [J]")
+    ax.set_title("energies (gas, gravity, total: change from t = 0)", fontsize=10)
     ax.legend(fontsize=8)
     written.append(figures / "energies.png")
     fig.tight_layout(), fig.savefig(written[-1], dpi=120), plt.close(fig)
