@@ -101,6 +101,8 @@ def _cmd_rig_calibrate(args) -> int:
         print(f"  {'+'.join(m.terms) or 'ideal':<40s} weight {m.weight:5.2f}  Δelpd {m.delta:6.2f} ± {m.delta_se:4.2f}  {values}")
     if rig.not_identified:
         print(f"not identified: {', '.join(rig.not_identified)}")
+    for f in rig.failed:
+        print(f"  {'+'.join(f['terms'])}: FAILED, left out ({f['message']})")
     print(f"written: {args.out}")
     return 0
 

@@ -306,3 +306,22 @@ def test_diagnose_with_the_rig_as_baseline(calibrated, tmp_path, capsys):
     assert {"not_excluded", "robust", "separating"} <= set(report)
     assert main(["diagnose", *calibration, "--rig", str(path), "--wrinkle-law", "mechanics"]) == 2
     assert "wrinkle_law" in capsys.readouterr().err
+
+
+def test_a_model_whose_fit_fails_is_reported_not_dropped(calibrated, tmp_path, monkeypatch):
+    import shelljax.rig._calibrate as calibrate
+
+    _, _, directory = calibrated
+    real = calibrate.fit_model
+
+    def failing_gain(base, study, terms, *args, **kwargs):
+        fit = real(base, study, terms, *args, **kwargs)
+        return dataclasses.replace(fit, converged=False, message="forced") if "sensor_gain" in terms else fit
+
+    monkeypatch.setattr(calibrate, "fit_model", failing_gain)
+    rig = calibrate_rig(sorted(directory.glob("calib_pezzi_*.toml")), terms=("pad_linear", "sensor_gain"), progress=False)
+    # the gain alone, then the pad with the gain: each reported with its reason
+    assert [f["terms"] for f in rig.failed] == [["sensor_gain"], ["pad_linear", "sensor_gain"]]
+    assert all("forced" in f["message"] for f in rig.failed)
+    assert all("sensor_gain" not in m.terms for m in rig.models)
+    assert load_rig(write_rig(rig, tmp_path / "rig.toml")).failed == rig.failed

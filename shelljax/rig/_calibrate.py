@@ -80,8 +80,8 @@ class Rig:
     radius ``indenter_radius`` [m], the depth ``noise`` model (τ_t [m], (a [m²], b [-])), the
     ``calibration`` sessions (path, sha256, object, manometer [Pa]), the calibration objects'
     ``objects`` estimates, the shelljax ``version`` that made it, and the ``name`` of the measuring
-    chain the calibration files give (``rig`` in a session), or None, and the ``manometer_std`` [-]
-    the calibration assumed."""
+    chain the calibration files give (``rig`` in a session), or None, the ``manometer_std`` [-]
+    the calibration assumed, and the models whose fit ``failed`` (terms, why), never dropped silently."""
 
     models: tuple[RigModel, ...]
     excluded: tuple[dict, ...]
@@ -97,6 +97,7 @@ class Rig:
     version: str = __version__
     name: str | None = None
     manometer_std: float = MANOMETER_STD
+    failed: tuple[dict, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,12 +131,11 @@ def _check_sessions(sessions: Sequence[Session]) -> None:
         raise InvalidInputError(
             f"{missing[0].source}: field 'manometer_gauge_pressure': missing; a rig is calibrated where the gauge "
             "pressure is known. Fix: add the manometer reading, or leave this session out of `rig calibrate`")
-    names = [s.object_name for s in sessions]
     for s in sessions:
         if s.wrinkle_counts is None:
             raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; the calibration needs the "
                                     "wrinkle counts to separate E from the rig. Fix: add one count per trial")  # fmt: skip
-    if len(sessions) < 2 and len(set(names)) == 1:
+    if len(sessions) < 2:
         raise InvalidInputError(f"{sessions[0].source}: one session cannot separate a rig from the object. "
                                 "Fix: calibrate on an object measured at two or more pressures (four are better)")  # fmt: skip
 
@@ -168,18 +168,19 @@ def fit_model(base, study, terms, wrinkle_law: str, u_start: np.ndarray, *, rig_
     data = model_data(base, study, terms, rig_prior=rig_prior)
     fit = fit_candidate(data, wrinkle_law, u_start)
     if not fit.converged:
-        retry = fit_candidate(data, wrinkle_law, np.asarray(data.u_base) * 0.0)
+        retry = fit_candidate(data, wrinkle_law, np.zeros(data.u_base.shape[0]))
         if retry.converged or retry.chi2 < fit.chi2:
             fit = retry
     return fit
 
 
-def _fit_everywhere(objects, terms, wrinkle_law, starts, presses) -> _Fitted | None:
+def _fit_everywhere(objects, terms, wrinkle_law, starts, presses) -> _Fitted | str:
+    """The model with ``terms`` fitted on every object and press, or why a fit failed."""
     fits = []
     for (base, study), start in zip(objects, starts):
         fit = fit_model(base, study, terms, wrinkle_law, start)
         if not fit.converged:
-            return None
+            return f"{study.sessions[0].object_name}: {fit.message}"
         fits.append(fit)
     press = None if presses is None else fit_press(presses, terms, float(objects[0][0].force_ref))
     elpd = [loo_score(f).elpd for f in fits] + ([press.elpd] if press is not None else [])
@@ -192,31 +193,32 @@ def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
     return delta >= WIN_NATS and delta >= WIN_SE * se, delta, se
 
 
-def _search(objects, terms, wrinkle_law, report, presses) -> dict:
-    """Forward search: every fitted model by its terms.
+def _search(objects, terms, wrinkle_law, report, presses) -> tuple[dict, list[dict]]:
+    """Forward search: (every fitted model by its terms, the models whose fit failed and why).
 
     From the ideal rig, every term of a family not yet in the current model is added in turn; the
     best child becomes the current model for as long as it predicts better than its parent (so a
     pair of terms is reached where neither alone wins by the margin)."""
     report("ideal rig")
     start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects], presses)
-    if start is None:
-        raise NoConvergenceError("the calibration fit with an ideal rig did not converge. Fix: check the sessions "
-                                 "with `shelljax validate` and `shelljax diagnose`")  # fmt: skip
-    fitted, current = {(): start}, ()
+    if isinstance(start, str):
+        raise NoConvergenceError(f"the calibration fit with an ideal rig did not converge ({start}). Fix: check the "
+                                 "sessions with `shelljax validate` and `shelljax diagnose`")  # fmt: skip
+    fitted, failed, current = {(): start}, [], ()
     while True:
         used = {RIG_TERMS[t].family for t in current}
         best = None
         for candidate in [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]:
             report("+".join(candidate))
             result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in fitted[current].fits], presses)
-            if result is None:
+            if isinstance(result, str):
+                failed.append({"terms": list(candidate), "message": result})
                 continue
             fitted[candidate] = result
             if best is None or result.total > best.total:
                 best = result
         if best is None or best.total <= fitted[current].total:
-            return fitted
+            return fitted, failed
         current = best.terms
 
 
@@ -326,10 +328,10 @@ def calibrate_rig(
     report = _reporter(progress)
     presses = [p if isinstance(p, RigidPress) else load_rigid_press(p) for p in presses]
     name = _rig_name(sessions, presses)
-    fitted = _search(objects, terms, wrinkle_law, report, press_data(presses) if presses else None)
+    fitted, failed = _search(objects, terms, wrinkle_law, report, press_data(presses) if presses else None)
     report(None)
     rig = _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref)
-    return dataclasses.replace(rig, name=name, manometer_std=manometer_std)
+    return dataclasses.replace(rig, name=name, manometer_std=manometer_std, failed=tuple(failed))
 
 
 def check_terms_list(terms) -> tuple[str, ...]:

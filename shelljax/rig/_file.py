@@ -68,7 +68,8 @@ def rig_document(rig: Rig) -> dict:
                   "depth_scatter_a_unit": "m^2", "depth_scatter_b": rig.noise[1][1], "depth_scatter_b_unit": "1"},
         "selection": {"weights": "pseudo-BMA+", "inclusion": dict(rig.inclusion), "not_identified": list(rig.not_identified),
                       "excluded": [{"terms": e["terms"], "delta_elpd": e["delta"], "delta_se": e["delta_se"]}
-                                   for e in rig.excluded]},
+                                   for e in rig.excluded],
+                      "failed": [dict(f) for f in rig.failed]},
         "calibration": [dict(c) for c in rig.calibration],
         "objects": [dict(o) for o in rig.objects],
         "model": [_model_table(m, rig) for m in rig.models],
@@ -200,7 +201,8 @@ def load_rig(path: str | Path) -> Rig:
                not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
                force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
                calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version,
-               name=_name(check, data), manometer_std=check.get(data, "manometer_std", float, "manometer_std"))  # fmt: skip
+               name=_name(check, data), manometer_std=check.get(data, "manometer_std", float, "manometer_std"),
+               failed=tuple(selection.get("failed", [])))  # fmt: skip
 
 
 def _name(check: _Checker, data: dict) -> str | None:
