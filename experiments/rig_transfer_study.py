@@ -51,7 +51,7 @@ REALITY_ELEMENTS = 201
 POISSON = DEFAULT_POISSON_RATIO
 F_REF = math.sqrt(FORCE_LEVELS[0] * FORCE_LEVELS[-1])  # [N]
 FAMILIES = ("pad", "finger", "sensor", "depth")
-METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s")
+METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s", "fit+rig, object")
 CALIBRATION_WEIGHTS = "fit+rig, calibration weights"  # the same fits, mixed by the rig's weights alone
 
 
@@ -213,16 +213,36 @@ def evaluate_session(path, truth_p, truth_e, rig_model, k_s, methods):
                 est = run_estimator("fit", session, EstimatorOptions(gas="isothermal", wrinkle_law="scaling")).estimates
             elif method == "closed-form k_s":
                 est = estimate_session(session, k_s=k_s, bootstrap_samples=0).estimates
+            elif method == "fit+rig, object":
+                continue  # estimated per object in run_rig
             else:
                 result = estimate_with_rig(session, rig_model, method=method.split("+")[0])
                 est = result.estimates
                 if method == "fit+rig":
                     out[CALIBRATION_WEIGHTS] = {**_errors(_calibration_weighted(result), truth_p, truth_e), "seconds": 0.0}
+                    out["rig_models"] = list(result.models)  # per model: weights, evidence, its own estimates
             pairs = {k: (v.value, v.ci95) for k, v in est.items() if k in ("gauge_pressure", "young_modulus")}
             out[method] = {**_errors(pairs, truth_p, truth_e), "seconds": time.perf_counter() - start}
         except ShelljaxError as err:
             out[method] = {"failed": str(err)[:300]}
     return out
+
+
+def _object_estimate(test, rig) -> list[dict]:
+    """Both sessions of a test object through the rig at once (shared E, h, R and rig terms): per session."""
+    from shelljax import ShelljaxError
+    from shelljax.rig import estimate_with_rig
+
+    start = time.perf_counter()
+    try:
+        est = estimate_with_rig(test["paths"], rig).estimates
+    except ShelljaxError as err:
+        return [{"failed": str(err)[:300]}] * len(test["paths"])
+    seconds = time.perf_counter() - start
+    e = est["young_modulus"]
+    return [{**_errors({"gauge_pressure": (est[f"gauge_pressure[{k}]"].value, est[f"gauge_pressure[{k}]"].ci95),
+                        "young_modulus": (e.value, e.ci95)}, p, test["object"]["young_modulus"]), "seconds": seconds}
+            for k, p in enumerate(test["pressures"])]  # fmt: skip
 
 
 def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int, manometer_std: float):
@@ -238,9 +258,12 @@ def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int, m
         k_s = calibrate_ks([load_session(p) for p in calibration]).k_s
         rows = []
         for test in tests:
+            joint = _object_estimate(test, rig) if "fit+rig, object" in methods else {}
             for k, (path, pressure) in enumerate(zip(test["paths"], test["pressures"])):
                 use = [m for m in methods if m != "bayes+rig" or k % bayes_every == 0]
                 row = evaluate_session(path, pressure, test["object"]["young_modulus"], rig, k_s, use)
+                if joint:
+                    row["fit+rig, object"] = joint[k]
                 rows.append(dict(radius=test["object"]["radius"], pressure=pressure,
                                  young_modulus=test["object"]["young_modulus"], results=row))  # fmt: skip
     return dict(rig=index, truth=truth, families=sorted(truth), calibration_seconds=seconds,
