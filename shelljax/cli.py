@@ -26,7 +26,10 @@ def _cmd_estimate(args) -> int:
 
     if args.rig is not None:
         return _estimate_with_rig(args)
-    session = load_session(args.session)
+    if len(args.session) > 1:
+        raise ShelljaxError(f"{len(args.session)} sessions given: without --rig, estimate one session at a time. Fix: "
+                            "pass one session, or several sessions of one object with --rig rig.toml")  # fmt: skip
+    session = load_session(args.session[0])
     k_s = None
     if args.method == "closed-form" and args.k_s is not None:
         if args.k_s <= 0 or args.k_s_std < 0:
@@ -65,7 +68,8 @@ def _estimate_with_rig(args) -> int:
     rig = load_rig(args.rig)
     result = estimate_with_rig(args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law,
                                seed=args.seed)  # fmt: skip
-    out = {"session": result.sources[0], "method": args.method, "rig": str(args.rig), **result.to_dict()}
+    out = {"session": result.sources[0] if len(result.sources) == 1 else list(result.sources), "method": args.method,
+           "rig": str(args.rig), **result.to_dict()}  # fmt: skip
     _print_estimates(out, result.estimates, args.json)
     if not args.json:
         for m in result.models:
@@ -269,7 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
 
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")
-    est.add_argument("session", help="session TOML file")
+    est.add_argument("session", nargs="+", help="session TOML file (with --rig: the sessions of one object, estimated at "
+                     "once with a shared E and measuring chain)")
     est.add_argument("--method", choices=["closed-form", "fit", "bayes"], default="closed-form",
                      help="closed-form: the paper's Procedures 2-3; fit: least squares through a shell model; "
                      "bayes: MCMC posterior through a shell model")

@@ -325,3 +325,18 @@ def test_a_model_whose_fit_fails_is_reported_not_dropped(calibrated, tmp_path, m
     assert all("forced" in f["message"] for f in rig.failed)
     assert all("sensor_gain" not in m.terms for m in rig.models)
     assert load_rig(write_rig(rig, tmp_path / "rig.toml")).failed == rig.failed
+
+
+def test_cli_estimates_the_sessions_of_one_object_at_once_through_the_rig(calibrated, tmp_path, capsys):
+    _, path, directory = calibrated
+    sessions = [str(_write_padded(SESSIONS / f"heldout_pezzi_{p}Pa.toml", directory)) for p in (1100, 1450)]
+    assert main(["estimate", *sessions, "--method", "fit", "--rig", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["session"] == sessions
+    for k, truth in enumerate((1100.0, 1450.0)):
+        p = out["estimates"][f"gauge_pressure[{k}]"]
+        assert p["ci95"][0] <= truth <= p["ci95"][1]
+    e = out["estimates"]["young_modulus"]
+    assert e["ci95"][0] <= 2.34e6 <= e["ci95"][1]  # the bundled Pezzi ball's E (shelljax/data/README.md)
+    assert main(["estimate", *sessions, "--method", "fit"]) == 2
+    assert "without --rig" in capsys.readouterr().err
