@@ -35,7 +35,7 @@ from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_s
 from ._measurement import MeasurementPrior, measured_baseline
 from ._model import WRINKLE_LAWS, StudyArrays, physical, study_arrays
 from ._robust import not_excluded, robust_range, separating
-from ._study import SHAPE_OBSERVABLES, Study, build_study
+from ._study import SHAPE_OBSERVABLES, Study, build_study, object_unknowns
 
 WIN_SE = 2.0
 WIN_NATS = 4.0
@@ -346,8 +346,7 @@ def diagnose(
     study = build_study(sessions, None if measurement is None else measurement.noise)
     base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
     base = measured_baseline(base, measurement)
-    baseline_free = ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
-        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+    baseline_free = object_unknowns(study)
     in_baseline = ()
     if measurement is not None:
         baseline_free += tuple(p for p in measurement.parameters if p not in baseline_free)

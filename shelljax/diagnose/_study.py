@@ -212,6 +212,12 @@ def _shape_points(sessions, unit_of):
     return si.astype(int), unit.astype(int), kind.astype(int), force, value, std
 
 
+def object_unknowns(study: Study) -> tuple[str, ...]:
+    """The object's own global unknowns besides P_g: E, and h and R where they carry a std."""
+    return ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
+        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+
+
 def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None, *,
                 min_trials: int = MIN_TRIALS) -> Study:
     """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`).

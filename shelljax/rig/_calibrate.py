@@ -39,6 +39,7 @@ from ..diagnose import GLOBAL_PARAMETERS, build_study, fit_candidate, loo_score,
 from ..diagnose._diagnose import WIN_NATS, WIN_SE
 from ..diagnose._effects import MANOMETER_STD, PRIOR_STD
 from ..diagnose._measurement import widened_grid, with_measurement
+from ..diagnose._study import object_unknowns
 from ..diagnose._model import WRINKLE_LAWS, physical
 from ..paper import PAPER_INDENTER_RADIUS
 from ..session import RigidPress, Session, file_sha256, load_rigid_press, load_session
@@ -149,16 +150,10 @@ def pooled_noise(studies) -> tuple[float, tuple[float, float]]:
     return tau, (a, b)
 
 
-def baseline_free(study) -> tuple[str, ...]:
-    """The object's own unknowns besides P_g: E, and h and R where they carry a std."""
-    return ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
-        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
-
-
 def model_data(base, study, terms, *, rig_prior=None):
     """``base`` arrays with the free mask and fixed values of a rig model with ``terms``;
     ``rig_prior`` = (parameters, mean u, covariance) puts the rig's correlated prior on them."""
-    return with_measurement(base, free=baseline_free(study) + freed_parameters(terms), fixes=fixed_values(terms),
+    return with_measurement(base, free=object_unknowns(study) + freed_parameters(terms), fixes=fixed_values(terms),
                             prior=rig_prior)
 
 

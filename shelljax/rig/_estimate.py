@@ -287,7 +287,7 @@ def _log_posterior_batch(data, u_batch, wrinkle_law: str):
     rows, physics = jax.vmap(lambda p: engine_inputs(p, data))(phys)
     n_draws, n_sessions = rows.shape[:2]
     flat = lambda v: v.reshape((n_draws * n_sessions,) + v.shape[2:])  # noqa: E731
-    curves = solve_curves(flat(rows), jax.tree_util.tree_map(flat, physics), data)  # scattered draws: no walk (chunk 0) is fastest
+    curves = solve_curves(flat(rows), jax.tree_util.tree_map(flat, physics), data)  # draws are scattered: walking curve to curve saves nothing
     curves = jax.tree_util.tree_map(lambda v: v.reshape((n_draws, n_sessions) + v.shape[1:]), curves)
 
     def one(u, c):
