@@ -13,7 +13,8 @@ also saturate exponentially and sensors also bend quadratically):
 
 Per rig: a calibration object (R 0.12–0.2 m) at 4 pressures with manometer readings (1 % noise),
 and ``--objects`` test objects of other R (0.08–0.30 m, log-uniform), h (0.6–2 mm) and E (1–5 MPa,
-log-uniform) at 2 pressures each, without manometer. The paper's protocol (5–20 N in 2.5 N steps,
+log-uniform) at 2 pressures each, without manometer. Each object's R and h are measured once, with
+the errors their sessions state (2 % and 5 %; ``--exact-geometry`` records the truth instead). The paper's protocol (5–20 N in 2.5 N steps,
 3 trials, one wrinkle count a trial) with the bundled sessions' noise (as
 ``experiments/blind_gap_study.py``). "Reality" is a finer engine than the estimators': the
 axisymmetric engine at 201 meridian elements from its own reference radius (0.15 m), sealed
@@ -49,6 +50,7 @@ N_TRIALS = 3
 REALITY_RADIUS = 0.15  # [m]
 REALITY_ELEMENTS = 201
 POISSON = DEFAULT_POISSON_RATIO
+RADIUS_STD, THICKNESS_STD = 0.02, 0.05  # relative std of the mesh's R and the caliper's h, as the sessions state
 F_REF = math.sqrt(FORCE_LEVELS[0] * FORCE_LEVELS[-1])  # [N]
 FAMILIES = ("pad", "finger", "sensor", "depth")
 METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s", "fit+rig, object")
@@ -141,22 +143,39 @@ def write_object(rng, obj, rig, pressures, directory: Path, name: str, manometer
             mean = scaling_wrinkle_count(pressure, obj["radius"], obj["young_modulus"], obj["thickness"], POISSON)
             counts.append(int(round(float(mean) + rng.normal(0.0, 0.5))))
         path = directory / f"{name}_{k}.toml"
-        write_session(path, object_name=name, radius=obj["radius"], radius_std=0.02 * obj["radius"],
-                      thickness=obj["thickness"], thickness_std=0.05 * obj["thickness"], trial=trial, force=force,
+        radius, thickness = obj.get("measured_radius", obj["radius"]), obj.get("measured_thickness", obj["thickness"])
+        write_session(path, object_name=name, radius=radius, radius_std=RADIUS_STD * radius,
+                      thickness=thickness, thickness_std=THICKNESS_STD * thickness, trial=trial, force=force,
                       depth=depth, wrinkle_counts=counts, poisson_ratio=POISSON,
                       manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))) if manometer else None)  # fmt: skip
         paths.append(path)
     return paths
 
 
-def make_rig_world(rng, n_imperfections: int, n_objects: int, directory: Path):
-    """Write one rig's calibration and test sessions; return (rig truth, calibration paths, tests)."""
+def measured_geometry(obj, geometry_rng) -> dict:
+    """``obj`` with the R and h its sessions record: the truth times (1 + their stated relative std × N(0, 1)).
+
+    ``geometry_rng`` None records the truth itself, which an interval that carries the stated std
+    of R and h is bound to over-cover.
+    """
+    if geometry_rng is None:
+        return obj
+    radius_error, thickness_error = geometry_rng.normal(0.0, (RADIUS_STD, THICKNESS_STD))
+    return {**obj, "measured_radius": obj["radius"] * (1 + radius_error),
+            "measured_thickness": obj["thickness"] * (1 + thickness_error)}
+
+
+def make_rig_world(rng, n_imperfections: int, n_objects: int, directory: Path, geometry_rng=None):
+    """Write one rig's calibration and test sessions; return (rig truth, calibration paths, tests).
+
+    Each object's R and h are measured once (``measured_geometry``) and recorded in all its sessions.
+    """
     from shelljax import NoConvergenceError
 
     rig = draw_rig(rng, n_imperfections)
     for _ in range(5):
         try:
-            obj = draw_object(rng, (0.12, 0.2))
+            obj = measured_geometry(draw_object(rng, (0.12, 0.2)), geometry_rng)
             pressures = obj["low_pressure"] * np.array([1.0, 1.3, 1.65, 2.0])
             calibration = write_object(rng, obj, rig, pressures, directory, "calibration", manometer=True)
             break
@@ -164,7 +183,7 @@ def make_rig_world(rng, n_imperfections: int, n_objects: int, directory: Path):
             continue
     tests = []
     while len(tests) < n_objects:
-        obj = draw_object(rng, (0.08, 0.30), log_radius=True)
+        obj = measured_geometry(draw_object(rng, (0.08, 0.30), log_radius=True), geometry_rng)
         pressures = obj["low_pressure"] * np.array([1.0, rng.uniform(1.4, 2.0)])
         try:
             paths = write_object(rng, obj, rig, pressures, directory, f"object{len(tests)}", manometer=False)
@@ -245,13 +264,13 @@ def _object_estimate(test, rig) -> list[dict]:
             for k, p in enumerate(test["pressures"])]  # fmt: skip
 
 
-def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int, manometer_std: float):
+def run_rig(index, rng, n_imperfections, n_objects, methods, bayes_every: int, manometer_std: float, geometry_rng=None):
     from shelljax.estimate import calibrate_ks
     from shelljax.rig import calibrate_rig
     from shelljax.session import load_session
 
     with tempfile.TemporaryDirectory() as tmp:
-        truth, calibration, _, tests = make_rig_world(rng, n_imperfections, n_objects, Path(tmp))
+        truth, calibration, _, tests = make_rig_world(rng, n_imperfections, n_objects, Path(tmp), geometry_rng)
         start = time.perf_counter()
         rig = calibrate_rig(calibration, manometer_std=manometer_std, progress=False)
         seconds = time.perf_counter() - start
@@ -319,17 +338,21 @@ def main():
     parser.add_argument("--bayes-every", type=int, default=2, help="bayes+rig on every n-th session of an object")
     parser.add_argument("--manometer-std", type=float, default=0.01,
                         help="the calibration's manometer accuracy, as the generator's noise (1 %%)")
+    parser.add_argument("--exact-geometry", action="store_true",
+                        help="record each object's true R and h in its sessions (with the stated std all the same)")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json"))
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(args.seed)
+    # a stream of its own, so the rigs, objects and noise are the same draws with or without it
+    geometry_rng = None if args.exact_geometry else np.random.default_rng([args.seed, 1])
     # imperfections per rig: 0, 1, 2, 3 in turn (every fourth rig is clean)
     counts = [i % 4 for i in range(args.rigs)]
     rigs = []
     out = Path(args.out)
     for i, n in enumerate(counts):
         start = time.perf_counter()
-        rigs.append(run_rig(i, rng, n, args.objects, args.methods, args.bayes_every, args.manometer_std))
+        rigs.append(run_rig(i, rng, n, args.objects, args.methods, args.bayes_every, args.manometer_std, geometry_rng))
         print(f"[{i + 1}/{len(counts)}] rig {rigs[-1]['truth']} -> {[m['terms'] for m in rigs[-1]['selected'][:3]]} "
               f"({time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
         summary = summarize(rigs, args.methods)
