@@ -64,7 +64,7 @@ def breakdown(system, state, dt: float, integrator) -> dict:
         return p.system.hessian_parts(x), p.point_hessian_blocks(x)
 
     def fresh_solve(p, y, b):
-        d.forget_factorisations()
+        s3.release_factorizations(keep_analyses=True)
         return solve(p, y, b)
 
     solve = eqx.filter_jit(lambda p, y, b: d.SparseNewton().linear_solve(p, y, b))

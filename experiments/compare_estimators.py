@@ -36,7 +36,7 @@ from shelljax.paper import PAPER_FORCES as FORCES
 from shelljax.virtual import (
     CURVES_PATH,
     QUANTITIES,
-    calibration_sessions,
+    draw_calibration_sessions,
     draw_sessions,
     load_curves,
     noise_free_session,
@@ -122,7 +122,7 @@ def main(argv=None):
 
     curves = load_curves(args.curves)
     sessions = draw_sessions(curves, realisations=args.realisations)
-    calib = calibrate_ks(calibration_sessions(curves))
+    calib = calibrate_ks(draw_calibration_sessions(curves))
     print(f"{len(curves)} curves, {len(sessions)} sessions; calibrated k_s = {calib.k_s.value:.4f} "
           f"± {calib.k_s.std:.4f}", flush=True)  # fmt: skip
     model = _forward_model(curves, args)

@@ -12,7 +12,7 @@ for τ = 10, whose wrinkles appear later). At every level:
   (``shelljax.shell3d.wrinkle_spectrum``, rings of 5 mm out to 10 cm around the indenter), on
   ``ball(R, h, n, pole_refinement=6)`` meshes of every ``--faces`` size (the refinement study),
   on a uniform icosphere (``--mesh icosphere``: no rings or sectors, an independent mesh), or on
-  ``random_sphere_mesh`` (``--mesh random``: seeded random vertices refined about the indenter,
+  ``shelljax.geometry.sphere_mesh``'s random layout (``--mesh random``: seeded random vertices refined about the indenter,
   no rings, sectors or spirals);
 * the axisymmetric engine's continuous count n (docs/axisym.md, *Wrinkle count*) at the 3D force;
 * 1.33 τ^½;
@@ -43,12 +43,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from long_runs import Checkpoint, Watchdog, run_with_restarts
 
 from shelljax.paper import DEFAULT_POISSON_RATIO as POISSON
 from shelljax.physics import scaling_wrinkle_count, tau
-from shelljax.virtual import (
-    FORCE_TOLERANCE, NEWTON_ITERATIONS, RADIUS, Checkpoint, Watchdog, run_with_restarts, solve_curve,
-)
+from shelljax.virtual import FORCE_TOLERANCE, NEWTON_ITERATIONS, RADIUS, solve_curve
 
 GAUGE_PRESSURE = 1300.0  # [Pa]
 YOUNG_MODULUS = 2.34e6  # [Pa]

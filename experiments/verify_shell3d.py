@@ -49,18 +49,18 @@ def p_exact(lam, h, nu=NU):
 
 def inflation(n_faces):
     h = 0.01
-    mesh = s3.sphere_mesh(1.0, n_faces)
+    mesh = s3.ShellMesh.sphere(1.0, n_faces)
     model, _, _ = sphere_model(mesh)
     q0 = np.concatenate([mesh.vertices.ravel(), np.zeros(3)])
     v0 = float(model.volume(jnp.asarray(q0)))
     p_small = 2 * E * h * 0.002 / (1 - NU)
     res = model.equilibrium(q0, params(h, p_small), atol=1e-9 * E * h)
-    lam = (float(model.volume(jnp.asarray(res.x))) / v0) ** (1 / 3)
+    lam = (float(model.volume(jnp.asarray(res.value))) / v0) ** (1 / 3)
     err_small = 2 * E * h * (lam - 1) / (1 - NU) / p_small - 1
-    q = res.x
+    q = res.value
     for lt in (1.1, 1.2, 1.3):
         res = model.equilibrium(q, params(h, p_exact(lt, h)), atol=1e-9 * E * h)
-        q = res.x
+        q = res.value
     lam = (float(model.volume(jnp.asarray(q))) / v0) ** (1 / 3)
     err_large = p_exact(lam, h) / p_exact(1.3, h) - 1
     # Incompressible-limit comparison at ν = 0.499 and a small stretch, where both laws agree.
@@ -68,7 +68,7 @@ def inflation(n_faces):
     mu = E / (2 * (1 + nu))
     p_inc = 2 * mu * h * (1 / 1.01 - 1 / 1.01**7)
     res = model.equilibrium(q0, params(h, p_inc, nu), atol=1e-9 * E * h)
-    lam = (float(model.volume(jnp.asarray(res.x))) / v0) ** (1 / 3)
+    lam = (float(model.volume(jnp.asarray(res.value))) / v0) ** (1 / 3)
     err_inc = 2 * mu * h * (1 / lam - 1 / lam**7) / p_inc - 1
     edge = np.sqrt(8 * np.pi / (np.sqrt(3) * mesh.n_faces))
     return dict(faces=mesh.n_faces, edge=edge, small_strain=err_small, exact_lambda_1p3=err_large, incompressible_lambda_1p01=err_inc)
@@ -76,7 +76,7 @@ def inflation(n_faces):
 
 def stiffness(pole_spacing, taus):
     h = 1e-4
-    mesh = s3.sphere_mesh(1.0, max_spacing=0.15, pole_spacing=pole_spacing, growth=0.15)
+    mesh = s3.ShellMesh.sphere(1.0, max_spacing=0.15, pole_spacing=pole_spacing, growth=0.15)
     model, top, bottom = sphere_model(mesh)
     b = E * h**3 / (12 * (1 - NU**2))
     q = np.concatenate([mesh.vertices.ravel(), np.zeros(3)])
@@ -84,7 +84,7 @@ def stiffness(pole_spacing, taus):
     for tau in taus:
         p = tau * 4 * np.sqrt(E * h * b)
         if p > 0:
-            q = model.equilibrium(q, params(h, p), atol=1e-10 * E * h).x
+            q = model.equilibrium(q, params(h, p), atol=1e-10 * E * h).value
         x = q[:-3].reshape(-1, 3)
         r_now = 0.5 * np.linalg.norm(x[top] - x[bottom])
         load = np.zeros(model.n_dofs)

@@ -33,5 +33,6 @@ if not _os.environ.get("SHELLJAX_NO_COMPILATION_CACHE") and _jax.config.jax_comp
     _jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 from ._errors import DeviceError, InvalidInputError, NoConvergenceError, ShelljaxError
+from ._solution import RESULTS, Solution
 
 __version__ = "0.1.0"

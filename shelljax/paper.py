@@ -1,8 +1,11 @@
 """The paper's constants and measurement protocol (Zhang et al., Sections 3.4 and 4.1), SI units.
 
 Everything a module needs to reproduce the paper's set-up lives here, once: the calibrated k_s,
-the force levels of the poke protocol, the finger radius and the assumed Poisson ratio. The laws
-these constants enter (τ, the wrinkle law, point-load stiffnesses) are in :mod:`shelljax.physics`.
+the force levels of the poke protocol, the finger radius, the assumed Poisson ratio, and the two
+laws the estimators read E by: τ and the wrinkle law n ≈ 1.33 τ^½. They are written in plain
+arithmetic, so they take numbers, NumPy and JAX arrays alike and this module imports nothing: the
+data layer's sensor emulator uses them without JAX. The other results of shell theory are in
+:mod:`shelljax.physics`, which re-exports these two.
 """
 
 from __future__ import annotations
@@ -14,3 +17,16 @@ PAPER_KS_STD = 0.035 * PAPER_KS  # [-]
 PAPER_FORCES = (5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)  # [N], the poke protocol's force levels
 PAPER_INDENTER_RADIUS = 8e-3  # [m], the finger pad of the estimators' forward model
 DEFAULT_POISSON_RATIO = 0.4  # [-], the paper's assumption (Section 3.4): rubbers sit at 0.3-0.4
+WRINKLE_PREFACTOR = 1.33  # [-], n ≈ 1.33 τ^½ (Vella et al. 2011; the paper's Eq. modulus-estimation-2)
+
+
+def tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
+    """Dimensionless pressure τ = P_g R² / √(E h B) [-] from P_g [Pa], R [m], E [Pa], h [m], ν [-],
+    with the flexural rigidity B = E h³ / (12 (1 − ν²)) [N·m] (``physics.bending_stiffness``)."""
+    bending = young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
+    return gauge_pressure * radius**2 / (young_modulus * thickness * bending) ** 0.5
+
+
+def scaling_wrinkle_count(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
+    """Vella's radial wrinkle count n = 1.33 τ^½ [-] (continuous)."""
+    return WRINKLE_PREFACTOR * tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio) ** 0.5

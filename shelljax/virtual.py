@@ -10,9 +10,9 @@ Two stages (SI units throughout):
    w0 = Δz(equator) − Δz(top pole) [m] (both vertical displacements from the inflated reference
    state, the axisymmetric engine's definition) is written with the mesh size and each level's
    wrinkle spectrum. The bundled curves (``CURVES_PATH``) are made by
-   ``experiments/make_virtual_sessions.py``, which runs every set in a child process under a
-   :class:`Watchdog` and resumes from a :class:`Checkpoint`: XLA's CPU runtime wedged in long runs
-   (docs/shell3d.md, *XLA:CPU hangs*).
+   ``tools/make_virtual_sessions.py``, which runs every set in a child process under a watchdog
+   and resumes from a checkpoint (``experiments/long_runs.py``): XLA's CPU runtime
+   wedged in long runs (docs/shell3d.md, *XLA:CPU hangs*).
 2. :func:`draw_sessions`: noisy sessions from the noise-free curves: ``N_TRIALS`` trials per force
    level, force noise N(0, ``FORCE_NOISE``) rounded to ``FORCE_ROUNDING``, depth noise N(0, σ_w)
    rounded to ``DEPTH_ROUNDING``, one wrinkle count per trial from Vella et al.'s law
@@ -24,12 +24,10 @@ Two stages (SI units throughout):
 from __future__ import annotations
 
 import json
-import os
 import platform
-import subprocess
-import threading
 import time
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -69,7 +67,7 @@ WRINKLE_RINGS = (0.1, 0.005)  # [m]: outer radius and width of the rings of the 
 RANDOM_MESH_REFINED_ARC = 0.06  # [m]: finest edges out to 6 cm of arc from the top pole (the wrinkled zone)
 RANDOM_MESH_MAX_SPACING = 8e-3  # [m]
 CURVES_DESCRIPTION = (
-    "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by experiments/make_virtual_sessions.py "
+    "Noise-free 3D-engine (shelljax.shell3d) force curves of virtual balls; made by tools/make_virtual_sessions.py "
     "--curves. SI units: force [N] (the indenter force of the displacement-controlled state found for each of the "
     "paper's 5-20 N levels, within 5 mN), w0/top_drop/travel/edges/wrinkle_amplitude [m], pressures and moduli [Pa]; "
     "wrinkle_mode [-] is the dominant angular mode of the normal displacement (shelljax.shell3d.wrinkle_spectrum), "
@@ -80,115 +78,49 @@ CURVES_DESCRIPTION = (
 QUANTITIES = ("gauge_pressure", "young_modulus")
 
 
-# --- long runs: watchdog and checkpoint ---------------------------------------------------------
-class Watchdog:
-    """Exits the process (status 3) when :meth:`beat` was not called for ``limit`` s (a wedged XLA
-    run); :func:`run_with_restarts` then restarts it from its checkpoint."""
+# --- curves at force levels or travels -------------------------------------------------------
+class SolvedLevelStore(Protocol):
+    """Where a long run keeps a curve's solved (travel [m], force [N], state) triples, so that a
+    restarted run resumes there (``Checkpoint`` in ``experiments/long_runs.py``: an npz file)."""
 
-    def __init__(self, limit: float):
-        self.limit = float(limit)
-        self.last = time.monotonic()
+    def load(self) -> list: ...
 
-    def beat(self) -> None:
-        """Record progress."""
-        self.last = time.monotonic()
-
-    def start(self) -> "Watchdog":
-        """Start watching in a daemon thread."""
-
-        def watch():
-            while True:
-                time.sleep(5)
-                if time.monotonic() - self.last > self.limit:
-                    print(f"watchdog: no progress for {self.limit:.0f} s, exiting for a restart", flush=True)
-                    os._exit(3)
-
-        threading.Thread(target=watch, daemon=True).start()
-        return self
+    def save(self, solved: list) -> None: ...
 
 
-class Checkpoint:
-    """Solved (travel [m], force [N], state) triples of one curve in an npz file (None: no file),
-    saved after every solve so that a restarted run resumes there; a save also beats the
-    ``watchdog``."""
-
-    def __init__(self, path: Path | None, watchdog: Watchdog | None = None):
-        self.path = None if path is None else Path(path)
-        self.watchdog = watchdog
-
-    def load(self) -> list[tuple[float, float, np.ndarray]]:
-        """The saved triples, by travel (empty without a file)."""
-        if self.path is None or not self.path.exists():
-            return []
-        saved = np.load(self.path)
-        if "travels" not in saved:
-            raise SystemExit(f"{self.path}: a checkpoint of an older version of this script (no travels); delete it")
-        return [(float(t), float(f), q) for t, f, q in zip(saved["travels"], saved["forces"], saved["states"])]
-
-    def save(self, solved) -> None:
-        """Write ``solved`` (the triples) and beat the watchdog."""
-        if self.watchdog is not None:
-            self.watchdog.beat()
-        if self.path is not None:
-            np.savez(self.path, travels=[s[0] for s in solved], forces=[s[1] for s in solved],
-                     states=np.stack([s[2] for s in solved]))  # fmt: skip
+def _resumed(checkpoint: SolvedLevelStore | None) -> dict:
+    return {} if checkpoint is None else {"solved": checkpoint.load(), "on_solve": checkpoint.save}
 
 
-def run_with_restarts(cmd: list[str], restarts: int, label: str) -> bool:
-    """Run a child process that checkpoints per level; restart it (up to ``restarts`` times) when
-    it exits abnormally (the watchdog's exit after a wedged XLA run). True when it succeeded."""
-    for attempt in range(restarts + 1):
-        if subprocess.run(cmd).returncode == 0:
-            return True
-        print(f"{label}: child exited abnormally (attempt {attempt + 1}), restarting from its checkpoint", flush=True)
-    return False
-
-
-def force_levels_by_travel(sim, forces, checkpoint: Checkpoint | None = None, max_solves: int = 40):
+def force_levels_by_travel(sim, forces, checkpoint: SolvedLevelStore | None = None, max_solves: int = 40):
     """[(force [N], state)] of ``sim`` (an Indentation) at each of ``forces`` within
     ``FORCE_MATCH``, resumed from and saved to ``checkpoint``
     (:func:`shelljax.shell3d.match_forces`)."""
     from .shell3d import match_forces
 
-    checkpoint = checkpoint or Checkpoint(None)
-    return match_forces(sim, tuple(forces), tolerance=FORCE_MATCH, solved=checkpoint.load(),
-                        on_solve=checkpoint.save, max_solves=max_solves)  # fmt: skip
+    return match_forces(sim, tuple(forces), tolerance=FORCE_MATCH, max_solves=max_solves, **_resumed(checkpoint))
 
 
-def travel_levels(sim, travels, checkpoint: Checkpoint | None = None):
+def travel_levels(sim, travels, checkpoint: SolvedLevelStore | None = None):
     """[(travel [m], state)] of ``sim`` at each of ``travels``, resumed from and saved to
     ``checkpoint`` (:func:`shelljax.shell3d.solve_travels`)."""
     from .shell3d import solve_travels
 
-    checkpoint = checkpoint or Checkpoint(None)
-    return solve_travels(sim, tuple(travels), solved=checkpoint.load(), on_solve=checkpoint.save)
+    return solve_travels(sim, tuple(travels), **_resumed(checkpoint))
 
 
 # --- meshes -------------------------------------------------------------------------------------
-def icosphere_shell(thickness: float, n_triangles: int, seed: int = 0):
-    """Icosphere shell of radius ``RADIUS`` and ≈ ``n_triangles`` faces (20·4^k), turned so that a
-    seeded random vertex is the top."""
-    import trimesh
-
-    from . import shell3d as s3
-
-    subdivisions = max(0, int(round(np.log(n_triangles / 20.0) / np.log(4.0))))
-    sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=RADIUS)
-    top = np.random.default_rng(seed).integers(len(sphere.vertices))
-    sphere.apply_transform(trimesh.geometry.align_vectors(sphere.vertices[top], [0.0, 0.0, 1.0]))
-    return s3.Shell(s3.ShellMesh.from_arrays(sphere.vertices, sphere.faces, name="icosphere"), thickness)
-
-
 def random_graded_shell(thickness: float, n_triangles: int, seed: int = 0):
-    """Shell on :func:`shelljax.shell3d.random_sphere_mesh` (no rings, sectors or spirals), refined
-    about the top pole, of ≈ ``n_triangles`` faces: its top edge length is searched for the count
-    (bottom pole edges twice as long). Raises SystemExit when the count is out of reach."""
+    """Shell on :func:`shelljax.geometry.sphere_mesh`'s random layout (no rings, sectors or
+    spirals), refined about the top pole, of ≈ ``n_triangles`` faces: its top edge length is
+    searched for the count (bottom pole edges twice as long). Raises SystemExit when the count is
+    out of reach."""
     from . import shell3d as s3
 
     def mesh(top, smoothing_iterations=25):
-        return s3.random_sphere_mesh(RADIUS, top_spacing=top, bottom_spacing=min(2.0 * top, RANDOM_MESH_MAX_SPACING),
-                                     max_spacing=RANDOM_MESH_MAX_SPACING, refined_arc=RANDOM_MESH_REFINED_ARC,
-                                     growth=0.15, seed=seed, smoothing_iterations=smoothing_iterations)  # fmt: skip
+        return s3.ShellMesh.sphere(RADIUS, layout="random", top_spacing=top, max_spacing=RANDOM_MESH_MAX_SPACING,
+                                   bottom_spacing=min(2.0 * top, RANDOM_MESH_MAX_SPACING), refined_arc=RANDOM_MESH_REFINED_ARC,
+                                   growth=0.15, seed=seed, smoothing_iterations=smoothing_iterations)  # fmt: skip
 
     # F = 2V − 4 is fixed before the smoothing, so the search skips it.
     low, high = np.log(3e-4), np.log(RANDOM_MESH_MAX_SPACING)
@@ -237,18 +169,19 @@ def _make_shell(mesh: str, thickness: float, n_triangles: int, pole_refinement: 
     if mesh == "ball":
         return s3.ball(RADIUS, thickness, n_triangles, pole_refinement=pole_refinement)
     if mesh == "icosphere":
-        return icosphere_shell(thickness, n_triangles)
+        # a seeded random vertex on top: no symmetry axis of the icosahedron under the indenter
+        return s3.Shell(s3.ShellMesh.sphere(RADIUS, n_triangles, layout="icosphere", seed=0), thickness)
     return random_graded_shell(thickness, n_triangles)
 
 
-def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: Checkpoint | None = None,
+def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: SolvedLevelStore | None = None,
                 forces: tuple[float, ...] = PAPER_FORCES, travels: tuple[float, ...] | None = None,
                 force_tolerance: float | None = None, mesh: str = "ball", max_newton_iterations: int = 60) -> dict:
     """3D force curve of one parameter set (P_g [Pa], E [Pa], h [m]) at ``forces`` [N] (each
     within ``FORCE_MATCH``), or, when ``travels`` [m] are given, at those indenter travels (both
     displacement-controlled); ``force_tolerance`` [N]: Newton's (None: the engine's default);
     ``mesh`` "ball" (``shell3d.ball``: rings about the poles, refined there), "icosphere"
-    (:func:`icosphere_shell`) or "random" (:func:`random_graded_shell`). Returns a JSON-ready dict (SI)."""
+    (``shelljax.geometry.sphere_mesh``'s, turned) or "random" (:func:`random_graded_shell`). Returns a JSON-ready dict (SI)."""
     from . import shell3d as s3
 
     pg, e, h = params
@@ -349,7 +282,7 @@ def draw_sessions(curves: list[dict], *, realisations: int = 2, base_seed: int =
     return out
 
 
-def calibration_sessions(curves: list[dict], *, base_seed: int = 7000) -> list:
+def draw_calibration_sessions(curves: list[dict], *, base_seed: int = 7000) -> list:
     """One calibration session (manometer = true P_g, 1 mm depth noise) per curve."""
     return [draw_session(c, 1.0e-3, base_seed + c.get("set", i), manometer=True, name=f"calib_set{c.get('set', i)}")
             for i, c in enumerate(curves)]  # fmt: skip

@@ -1,4 +1,7 @@
+import ast
+import functools
 import os
+from pathlib import Path
 
 
 def _default_xla_flag(flag: str) -> None:
@@ -37,10 +40,27 @@ import shelljax  # noqa: E402,F401  (x64 for every test, whatever it imports fir
 
 # Test files that run the same compiled programs go to one xdist worker, in file order, so that
 # the later ones find those programs in the persistent caches instead of compiling them again at
-# the same time on the other worker: the sim_to_real notebook's diagnosis is test_diagnose's joint
-# fit (4 sessions), and test_fit_axisym, the estimators notebook and test_runner_cli all fit with
-# the main job's program.
-SHARED_PROGRAMS = {name: "test_diagnose.py" for name in ("test_fit_axisym.py", "test_notebooks.py", "test_runner_cli.py")}
+# the same time on the other worker. A file says so itself, with a module-level
+# ``SHARED_PROGRAMS = "<group>"``, so that the group moves with the file when it is renamed: the
+# sim_to_real notebook's diagnosis is test_diagnose's joint fit (4 sessions), and
+# test_estimate_forward_model, the estimators notebook and test_runner_cli all fit with the main
+# job's program. The scheduler runs where no test module is imported, so it reads the name from
+# the file's source.
+GROUP_ATTRIBUTE = "SHARED_PROGRAMS"
+
+
+@functools.cache
+def programs_group(path: Path) -> str | None:
+    """The group a test file declares with a module-level ``SHARED_PROGRAMS = "<group>"``, or None."""
+    try:
+        tree = ast.parse(path.read_text())
+    except (OSError, SyntaxError, UnicodeDecodeError):  # pytest reports the file's own error
+        return None
+    for node in tree.body:
+        if (isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == GROUP_ATTRIBUTE for t in node.targets)
+                and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):  # fmt: skip
+            return node.value.value
+    return None
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -50,8 +70,8 @@ def pytest_xdist_make_scheduler(config, log):
     class SharedProgramsTogether(LoadFileScheduling):
         def _split_scope(self, nodeid):
             path = super()._split_scope(nodeid)
-            name = path.rpartition("/")[2]
-            return path.removesuffix(name) + SHARED_PROGRAMS[name] if name in SHARED_PROGRAMS else path
+            group = programs_group(config.rootpath / path)
+            return f"{GROUP_ATTRIBUTE}={group}" if group else path
 
     return SharedProgramsTogether(config, log)
 

@@ -96,6 +96,7 @@ def test_a_curve_the_walk_loses_is_solved_again_from_its_cold_start(batch_result
 _NEWTON_RTOL = 1e-7
 
 
+@pytest.mark.slow  # compiles the walked batch and its derivative
 def test_a_walked_batch_saves_iterations_and_differentiates_alike():
     rng = np.random.default_rng(3)
     params = np.asarray(PEZZI) * np.column_stack([rng.uniform(0.99, 1.01, size=(12, 3)), np.ones(12)])
@@ -141,10 +142,10 @@ def test_sealed_gas_conserves_pv(batch_result):
 
 
 def test_non_convergence_is_flagged_and_raised():
-    res = indentation_curves(PEZZI, FORCES, radius=RADIUS, max_iter=2, raise_on_failure=False, **KW)
+    res = indentation_curves(PEZZI, FORCES, radius=RADIUS, max_steps=2, raise_on_failure=False, **KW)
     assert not bool(np.all(res.converged))
     with pytest.raises(shelljax.NoConvergenceError):
-        indentation_curves(PEZZI, FORCES, radius=RADIUS, max_iter=2, **KW)
+        indentation_curves(PEZZI, FORCES, radius=RADIUS, max_steps=2, **KW)
 
 
 @pytest.mark.parametrize(

@@ -347,6 +347,7 @@ def test_gent_stiffening_stiffens_and_softening_softens(walked):
     assert np.all(cases["softened"].w0 > cases["isothermal"].w0)
 
 
+@pytest.mark.slow  # central differences in every effect
 def test_implicit_gradients_in_every_effect_match_central_differences(walked):
     cases, res = walked
 

@@ -77,6 +77,7 @@ def test_vella_linear_stiffness_across_three_decades_of_pressure():
     assert vella_linear_stiffness(269.0, R, E, H, NU) > 5 * reissner_stiffness(R, E, H, NU)
 
 
+@pytest.mark.slow  # a fine curve up to the onset
 def test_onset_of_compressive_hoop_stress_at_w0_minus_2_52():
     setup = pinch_setup(n_elements=201)
     pressure = 269.0  # τ ≈ 100, prestrain ≈ 1 %

@@ -219,7 +219,7 @@ def test_nearby_guesses_change_the_path_not_the_equilibrium():
 def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
     # A hammer surrogate node (sealed gas, E ≈ 198 MPa, τ ≈ 9): at the fourth level a ground node
     # hovers 4 nm above the plane, where the contact-predicted model's pull k·gap cancels its
-    # true load and the predicted step vanished (1e-17 m): Newton repeated it until max_iter.
+    # true load and the predicted step vanished (1e-17 m): Newton repeated it until max_steps.
     # (found with c_w = 2.5, the default then: with other c_w the Newton path misses that state)
     setup = Setup(radius=0.08, gas="isothermal", gas_volume_ratio=2.936825663641749, hoop_capacity=2.5)
     forces = np.array([5.192942604266566, 7.838569549712717, 10.484196495158868, 13.12982344060502])

@@ -13,6 +13,8 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax.axisym import Setup, indentation_curves_raw
 
+pytestmark = pytest.mark.slow  # solves the 3D shell
+
 P_G, E, H, NU, R = 1300.0, 2.34e6, 0.9e-3, 0.4, 0.13
 FORCE = 5.0  # [N]
 

@@ -1,9 +1,9 @@
-"""shelljax._compile_log: what JAX compiled inside a block, from JAX's monitoring events."""
+"""shelljax.runner._compile_log: what JAX compiled inside a block, from JAX's monitoring events."""
 
 import jax
 import jax.numpy as jnp
 
-from shelljax._compile_log import compile_log
+from shelljax.runner._compile_log import compile_log
 
 
 def _distinctive_program(x):

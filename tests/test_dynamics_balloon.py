@@ -11,12 +11,15 @@ import pytest
 
 from shelljax import NoConvergenceError
 from shelljax import dynamics as d
+from shelljax.geometry import sphere_mesh
+
+pytestmark = pytest.mark.slow  # dynamics runs of the spring balloon
 
 RADIUS, CENTRE_HEIGHT = 0.05, 0.15  # [m]
 
 
 def swing_system(wall_x=0.16):
-    nodes, faces = d.icosphere(RADIUS, 0)
+    nodes, faces = sphere_mesh(RADIUS, layout="icosphere", subdivisions=0)
     nodes = nodes + np.array([0.0, 0.0, CENTRE_HEIGHT])
     lowest = int(np.argmin(nodes[:, 2]))
     clamp = np.unique(faces[np.any(faces == lowest, axis=1)])  # the lowest node and its ring
@@ -65,7 +68,7 @@ def test_point_hessian_blocks_assemble_the_dense_hessian():
     import jax
     import jax.numpy as jnp
 
-    nodes0, _ = d.icosphere(RADIUS, 0)
+    nodes0, _ = sphere_mesh(RADIUS, layout="icosphere", subdivisions=0)
     system, nodes, clamp, _ = swing_system(wall_x=float(nodes0[:, 0].max()) + 1e-3)  # nodes 1 mm inside ĝ = 2 mm
     state = d.initial_state(system, nodes, np.tile([0.3, 0.0, 0.1], len(nodes)))
     potential = d.incremental_potential(system, d.Newmark(), state, 1e-3)

@@ -14,8 +14,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import shelljax
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax import dynamics as d
+from shelljax.geometry import sphere_mesh
 from shelljax.physics import STANDARD_GRAVITY
 
 MASS, K_LINEAR = 0.1, 1e4  # [kg], [N/m]: contact time π√(m/k) = 9.93 ms
@@ -182,6 +184,34 @@ def test_a_step_that_does_not_converge_raises_with_its_history():
     assert len(info.value.history) == 1 and info.value.history[0] > 0.0
 
 
+def test_a_step_minimiser_returns_the_shared_solution():
+    # The dynamics' minimisers return the package's one Solution, with the result code the engines use.
+    system = d.PointMassOnGround(MASS, [d.ground(HERTZ)])
+    state = d.initial_state(system, [0.0, 0.0, 1e-4], [0.0, 0.0, -1.0])
+    potential = d.incremental_potential(system, d.Newmark(), state, jnp.asarray(1e-3))
+    y0 = potential.free(state.position)
+    solved = d.DenseNewton().minimise(potential, y0)
+    assert isinstance(solved, shelljax.Solution) and bool(solved.converged)
+    assert solved.result == shelljax.RESULTS.successful and int(solved.stats["assemblies"]) == int(solved.iterations)
+    cut = d.DenseNewton(max_steps=1).minimise(potential, y0)
+    assert cut.result == shelljax.RESULTS.max_steps_reached and not bool(cut.converged)
+
+
+def test_one_plane_class_serves_the_dynamics_and_the_3d_engine():
+    from shelljax.shell3d import ContactConfig
+
+    assert d.Plane is shelljax.physics.Plane
+    ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 2.0], name="ground")
+    # A static setup's planes hash and compare by their numbers (they key compiled programs) ...
+    assert ground == d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground") and ground != d.Plane([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], name="ground")
+    config = ContactConfig(planes=(((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),))
+    assert config.planes == (ground,) and hash(config) == hash(ContactConfig(planes=(ground,)))
+    np.testing.assert_array_equal(np.asarray(ground.gap(jnp.array([[1.0, 2.0, 0.5]]))), [0.5])
+    # ... and carry no law of their own there: the setup's kind and friction apply to all of them.
+    with pytest.raises(InvalidInputError, match="ContactConfig"):
+        ContactConfig(planes=(d.ground(HERTZ),))
+
+
 def test_mass_proportional_rayleigh_damping_decays_velocity_exponentially():
     alpha = 10.0  # [1/s]
     system = d.PointMassOnGround(MASS, [d.ground(LINEAR)], gravity=0.0)
@@ -222,7 +252,7 @@ def test_contact_diameter_of_a_sphere_cut_by_a_plane(depth):
     # r = √(2Rh − h²). The icosphere's flat faces sit inside the sphere by at most the sag ℓ²/8R of
     # its longest edge ℓ, and a surface moved in by s moves the cut circle by s R / r: the bound.
     radius = 0.05
-    nodes, faces = d.icosphere(radius, subdivisions=4)
+    nodes, faces = sphere_mesh(radius, layout="icosphere", subdivisions=4)
     edges = d.mesh_edges(faces)
     normal = np.array([0.0, 0.0, 1.0])
     gaps = nodes[:, 2] + radius

@@ -17,7 +17,10 @@ import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax import dynamics as d
 from shelljax.cli import main
+from shelljax.geometry import sphere_mesh
 from shelljax.scenario import hold, load_scenario
+
+pytestmark = pytest.mark.slow  # the 3D hammer held and swung: dynamics runs
 
 R = 0.05  # the ball of test_free_vertices_are_not_prescribed [m]
 HEAD_FRONT = 0.16  # the hammer head's +x end [m]
@@ -141,5 +144,5 @@ def test_bad_prescribed_input_names_file_field_and_fix(tmp_path, change, field, 
 class _FakeShell:
     """Just what ``held_vertices`` reads: a 12-vertex icosphere as the inflated shape, gravity −z."""
 
-    inflated = d.icosphere(R)[0].reshape(-1)
+    inflated = sphere_mesh(R, layout="icosphere", subdivisions=0)[0].reshape(-1)
     gravity = np.array([0.0, 0.0, -9.80665])

@@ -27,6 +27,8 @@ from shelljax.physics import ATMOSPHERIC_PRESSURE, adiabatic_gas_energy, isother
 from shelljax.replica import load_replica, replica_volume, write_replica
 from shelljax.scenario import load_scenario
 
+pytestmark = pytest.mark.slow  # 3D shells in motion: every test runs the dynamics
+
 G = 9.80665
 RADIUS, THICKNESS, E, NU, P_G, MASS = 0.05, 0.5e-3, 2e6, 0.4, 5000.0, 0.1
 GHAT = 5e-4

@@ -1,24 +1,13 @@
 """Helpers of experiments/report_wrinkles3d.py (the 3D study itself takes an hour: docs/axisym.md)."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
+from _scripts import load_script
 
 from shelljax import virtual
 
-
-def _load_script(name: str):
-    """An experiments/ script as a module (scripts are not a package)."""
-    path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-rw = _load_script("report_wrinkles3d")
+load_script("experiments", "long_runs")  # the script's sibling import
+rw = load_script("experiments", "report_wrinkles3d")
 
 
 @pytest.mark.parametrize("target", [10.0, 40.0, 100.0])

@@ -58,6 +58,7 @@ def calibrated(tmp_path_factory):
     return rig, write_rig(rig, directory / "rig.toml"), directory
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_calibration_switches_the_pad_on_and_recovers_its_compliance(calibrated):
     rig, _, _ = calibrated
     assert rig.inclusion["pad_linear"] > 0.9, rig.models
@@ -71,6 +72,7 @@ def test_calibration_switches_the_pad_on_and_recovers_its_compliance(calibrated)
     assert all(m.delta <= 0 for m in rig.models)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_held_out_pressure_through_the_rig_is_right_and_the_fit_without_it_is_not(calibrated):
     from shelljax.estimate import EstimatorOptions, run_estimator
 
@@ -86,6 +88,7 @@ def test_held_out_pressure_through_the_rig_is_right_and_the_fit_without_it_is_no
     assert abs(plain.value / truth - 1) > 2 * abs(through.value / truth - 1), (plain.value, through.value)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_rig_file_round_trip_keeps_every_model(calibrated):
     rig, path, _ = calibrated
     again = load_rig(path)
@@ -106,6 +109,7 @@ def test_rig_file_round_trip_keeps_every_model(calibrated):
     (lambda t: t.replace('[[model]]\nterms = [\n    "pad_linear"', '[[model]]\nterms = [\n    "pad_tofu"', 1), "terms"),
     (lambda t: t.replace("force_ref = ", "force_ref = -", 1), "reference.force_ref"),
 ])  # fmt: skip
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_a_rig_file_edited_into_nonsense_is_refused_naming_the_field(calibrated, tmp_path, edit, field):
     _, path, _ = calibrated
     text = path.read_text()
@@ -117,6 +121,7 @@ def test_a_rig_file_edited_into_nonsense_is_refused_naming_the_field(calibrated,
         load_rig(bad)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_a_rig_of_other_forward_model_options_is_refused(calibrated):
     _, path, _ = calibrated
     held_out = SESSIONS / "heldout_pezzi_1100Pa.toml"
@@ -154,6 +159,7 @@ def test_psis_recovers_a_known_posterior_mean():
     assert np.sum(w * x) == pytest.approx(1.0, abs=0.03)  # a few Monte Carlo standard errors (≈ 0.01)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_cli_rig_calibrate_and_estimate(calibrated, tmp_path, capsys):
     rig, path, directory = calibrated
     held_out = _write_padded(SESSIONS / "heldout_pezzi_1450Pa.toml", directory)
@@ -168,19 +174,22 @@ def test_cli_rig_calibrate_and_estimate(calibrated, tmp_path, capsys):
     assert "--method fit" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_config_rig_table_names_the_rig_and_refuses_contradictions(calibrated, tmp_path):
     _, path, _ = calibrated
     config = tmp_path / "exp.toml"
     config.write_text(f'[estimators]\nmethods = ["fit"]\n[rig]\npath = "{path}"\n[sessions]\n'
                       'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
     loaded = load_config(config)
-    assert loaded.rig == path and loaded.gas == "isothermal" and loaded.wrinkle_law == "scaling"
+    options = loaded.estimator_options
+    assert loaded.rig == path and options.gas == "isothermal" and options.wrinkle_law == "scaling"
     config.write_text(f'[estimators]\nmethods = ["fit"]\ngas = "prescribed"\n[rig]\npath = "{path}"\n[sessions]\n'
                       'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
     with pytest.raises(InvalidInputError, match="estimators.gas"):
         load_config(config)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_replica_and_scenario_take_the_rig(calibrated, tmp_path):
     from shelljax.replica import export_replica
     from shelljax.scenario import load_scenario
@@ -230,6 +239,7 @@ def test_a_press_alone_measures_the_pad_and_the_depth_zero(tmp_path):
     assert fit.elpd.sum() > fit_press(data, (), 10.0).elpd.sum() + 20
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_calibration_with_a_press_pins_the_pad_down(calibrated, tmp_path):
     rig, _, directory = calibrated
     press = _press(tmp_path, np.random.default_rng(6))
@@ -244,6 +254,7 @@ def test_calibration_with_a_press_pins_the_pad_down(calibrated, tmp_path):
     assert any(c.get("kind") == "rigid_press" for c in with_press.calibration)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_cli_rig_calibrate_writes_the_rig_or_nothing(calibrated, tmp_path, capsys):
     _, _, directory = calibrated
     press = _press(tmp_path, np.random.default_rng(7))
@@ -261,6 +272,7 @@ def test_cli_rig_calibrate_writes_the_rig_or_nothing(calibrated, tmp_path, capsy
     assert "manometer_gauge_pressure" in capsys.readouterr().err and not refused.exists()
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_mixed_rigs_are_refused_in_a_calibration_and_in_an_estimate(calibrated, tmp_path):
     rig, _, _ = calibrated
     paths = []
@@ -279,6 +291,7 @@ def test_mixed_rigs_are_refused_in_a_calibration_and_in_an_estimate(calibrated, 
         estimate_with_rig(paths[1], load_rig(named))
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrated, tmp_path):
     from shelljax.rig._estimate import RigEstimate
 
@@ -293,6 +306,7 @@ def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrate
     assert rows["pad_linear"]["young_modulus_interval_shrink"] == pytest.approx(1.0, rel=1e-3)
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_diagnose_with_the_rig_as_baseline(calibrated, tmp_path, capsys):
     _, path, directory = calibrated
     calibration = [str(p) for p in sorted(directory.glob("calib_pezzi_*.toml"))]
@@ -308,6 +322,7 @@ def test_diagnose_with_the_rig_as_baseline(calibrated, tmp_path, capsys):
     assert "wrinkle_law" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_a_model_whose_fit_fails_is_reported_not_dropped(calibrated, tmp_path, monkeypatch):
     import shelljax.rig._calibrate as calibrate
 
@@ -327,6 +342,7 @@ def test_a_model_whose_fit_fails_is_reported_not_dropped(calibrated, tmp_path, m
     assert load_rig(write_rig(rig, tmp_path / "rig.toml")).failed == rig.failed
 
 
+@pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_cli_estimates_the_sessions_of_one_object_at_once_through_the_rig(calibrated, tmp_path, capsys):
     _, path, directory = calibrated
     sessions = [str(_write_padded(SESSIONS / f"heldout_pezzi_{p}Pa.toml", directory)) for p in (1100, 1450)]

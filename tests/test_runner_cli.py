@@ -13,10 +13,12 @@ from pathlib import Path
 import pytest
 
 from shelljax import InvalidInputError
-from shelljax._memory_mappings import memory_mappings
+from shelljax.runner._memory_mappings import memory_mappings
 from shelljax.cli import main
 from shelljax.config import bundled_data_dir, load_config
 from shelljax.runner import run_experiment, summary_table
+
+SHARED_PROGRAMS = "bundled-session fits"  # one xdist worker for the files that fit alike (conftest.py)
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER_CONFIG = REPO / "configs" / "paper.toml"
@@ -53,7 +55,8 @@ def _truth(session_path: str) -> dict[str, float]:
 def test_default_experiment_runs_all_three_estimators():
     config = load_config(PAPER_CONFIG)
     assert config.methods == ("closed-form", "fit", "bayes")
-    assert (config.forward_model, config.gas, config.wrinkle_law) == ("axisym", "isothermal", "scaling")
+    options = config.estimator_options
+    assert (options.forward_model, options.gas, options.wrinkle_law) == ("axisym", "isothermal", "scaling")
 
 
 def test_default_experiment_reports_pressure_and_modulus_for_every_session(paper_run):
@@ -95,9 +98,10 @@ def test_closed_form_held_out_errors_are_the_k_s_mismatch(paper_run):
         assert abs((1 + error) / (k_true / k_cal) - 1) < 3 * slope["std"] / slope["value"], (entry["session"], error)
 
 
+@pytest.mark.slow  # fits every held-out session
 def test_default_fit_recovers_held_out_pressures(tmp_path):
     # The default experiment's fit on the Pezzi sessions (one compiled engine, shared with
-    # tests/test_fit_axisym.py): the truth inside each 95 % interval, and the fit's error below
+    # tests/test_estimate_forward_model.py): the truth inside each 95 % interval, and the fit's error below
     # the closed form's on every session.
     names = ["heldout_pezzi_1100Pa", "heldout_pezzi_1450Pa", "pezzi"]
     config = paper_variant(tmp_path, ["closed-form", "fit"], [f"bundled:sessions/{n}.toml" for n in names])
@@ -141,7 +145,7 @@ def test_runner_releases_compiled_programs_after_a_session_only_when_crowded(tmp
     # after a session, below it keeps them: a jitted function's cache tells which happened.
     import jax
 
-    import shelljax._memory_mappings as mappings_module
+    import shelljax.runner._memory_mappings as mappings_module
 
     compiled = jax.jit(lambda x: x + 1.0)
     config = paper_variant(tmp_path, ["closed-form"], ["bundled:sessions/pezzi.toml"])
@@ -201,11 +205,11 @@ def test_config_carries_the_forward_model_options(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text('[estimators]\nmethods = ["fit"]\ngas = "isothermal"\nwrinkle_law = "scaling"\nbayes_surrogate = false\n'
                     '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')  # fmt: skip
-    config = load_config(path)
-    assert (config.gas, config.wrinkle_law, config.bayes_surrogate) == ("isothermal", "scaling", False)
+    options = load_config(path).estimator_options
+    assert (options.gas, options.wrinkle_law, options.surrogate) == ("isothermal", "scaling", False)
     path.write_text('[estimators]\nmethods = ["fit"]\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')
-    defaults = load_config(path)
-    assert (defaults.gas, defaults.wrinkle_law, defaults.bayes_surrogate) == ("prescribed", "mechanics", True)
+    defaults = load_config(path).estimator_options
+    assert (defaults.gas, defaults.wrinkle_law, defaults.surrogate) == ("prescribed", "mechanics", True)
 
 
 def test_version_and_plain_text_help(capsys):

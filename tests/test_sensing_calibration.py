@@ -12,11 +12,11 @@ from shelljax.sensing import (
     BELOW_RANGE,
     OK,
     AutoConsole,
-    Calibration,
     EmulatedDevice,
     EmulatedOperator,
     FilmSensor,
     LoadPoint,
+    SensorCalibration,
     SerialSensor,
     calibrate_sensor,
     fit_calibration,
@@ -81,7 +81,7 @@ def test_calibration_walk_on_the_emulator_recovers_its_film():
 
 
 def test_bundled_emulator_calibration_matches_the_emulator():
-    cal = Calibration.load(emulated_calibration_path())
+    cal = SensorCalibration.load(emulated_calibration_path())
     film = FilmSensor()
     for f in (5.0, 10.0, 20.0):
         reading = cal.force_from_conductance(film.conductance(f, t=0.0))
@@ -89,7 +89,7 @@ def test_bundled_emulator_calibration_matches_the_emulator():
 
 
 def test_out_of_range_is_flagged_never_silent():
-    cal = Calibration.load(emulated_calibration_path())
+    cal = SensorCalibration.load(emulated_calibration_path())
     a, beta = math.exp(cal.log_sensitivity), cal.exponent
     c_above = cal.zero + a * (1.3 * cal.force_max) ** beta
     c_below = cal.zero + a * (0.5 * cal.force_min) ** beta
@@ -107,7 +107,7 @@ def test_out_of_range_is_flagged_never_silent():
 def test_tare_removes_baseline_drift():
     # A film whose zero drifts by 0.002/s: after 60 s a stale zero misreads 5 N badly; a fresh
     # tare (the recorder takes one before every trial) brings the reading back.
-    cal = Calibration.load(emulated_calibration_path())
+    cal = SensorCalibration.load(emulated_calibration_path())
     drifting = FilmSensor(drift=0.002)
     t = 60.0
     c_5n = drifting.conductance(5.0, t)
@@ -125,7 +125,7 @@ def test_save_load_round_trip(tmp_path):
     cal = fit_calibration(synthetic_loads(np.random.default_rng(2)), sensor="left index")
     path = tmp_path / "cal.toml"
     cal.save(path)
-    assert Calibration.load(path) == cal
+    assert SensorCalibration.load(path) == cal
 
 
 @pytest.mark.parametrize(
@@ -137,7 +137,7 @@ def test_bad_calibration_files_name_the_field(tmp_path, field, value, match):
     data = fit_calibration(synthetic_loads(np.random.default_rng(3))).to_dict()
     data[field] = value
     with pytest.raises(InvalidInputError, match=match):
-        Calibration.from_dict(data, source="cal.toml")
+        SensorCalibration.from_dict(data, source="cal.toml")
 
 
 def test_fit_refuses_underdetermined_data():

@@ -17,7 +17,6 @@ from shelljax.estimate import estimate_session
 from shelljax.sensing import (
     AcquisitionPlan,
     AutoConsole,
-    Calibration,
     EmulatedDevice,
     EmulatedOperator,
     Faults,
@@ -25,6 +24,7 @@ from shelljax.sensing import (
     PtyLink,
     RecordingPaths,
     ScriptedConsole,
+    SensorCalibration,
     SerialSensor,
     acquire,
     read_sample_log,
@@ -32,7 +32,7 @@ from shelljax.sensing import (
 from shelljax.sensing import _cli as sensing_cli
 from shelljax.session import load_session
 
-CAL = Calibration.load(sensing_cli.emulated_calibration_path())
+CAL = SensorCalibration.load(sensing_cli.emulated_calibration_path())
 META = {
     "object": "emulated-ball",
     "geometry": {"radius": 0.13, "length_unit": "m"},
@@ -219,7 +219,7 @@ def cli(argv):
 def test_cli_calibrate_then_acquire_emulated(tmp_path):
     cal = tmp_path / "film.toml"
     assert cli(["sensor-calibrate", "--emulate-fast", "--yes", "--out", str(cal), "--cycles", "1"]) == 0
-    assert Calibration.load(cal).force_max == pytest.approx(2.5 * 9.80665)
+    assert SensorCalibration.load(cal).force_max == pytest.approx(2.5 * 9.80665)
     out = tmp_path / "demo.toml"
     code = cli(["acquire", "--emulate-fast", "--yes", "--emulate-faults", "--out", str(out), "--calibration", str(cal),
                 "--trials", "2", "--forces", "5:15:2.5", "--no-level-wrinkles"])  # fmt: skip

@@ -19,7 +19,7 @@ def _params(**kw):
 
 
 def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
-    mesh = s3.sphere_mesh(1.0, 200)
+    mesh = s3.ShellMesh.sphere(1.0, 200)
     with pytest.raises(InvalidInputError, match="not closed"):
         s3.ShellMesh.from_arrays(mesh.vertices, mesh.faces[1:])
     flipped = s3.ShellMesh.from_arrays(mesh.vertices, mesh.faces[:, ::-1])
@@ -30,9 +30,9 @@ def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
         s3.ShellMesh.from_arrays(mesh.vertices, bad)
 
 
-def test_random_sphere_mesh_is_closed_graded_and_seeded():
+def test_random_sphere_layout_is_closed_graded_and_seeded():
     radius, top, coarse = 0.13, 4e-3, 16e-3
-    mesh = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03)
+    mesh = s3.ShellMesh.sphere(radius, layout="random", top_spacing=top, max_spacing=coarse, refined_arc=0.03)
     v, f = mesh.vertices, mesh.faces
     # closed genus-0 surface on the sphere, outward oriented, a vertex at each pole
     assert mesh.n_vertices - 3 * len(f) // 2 + len(f) == 2
@@ -49,19 +49,19 @@ def test_random_sphere_mesh_is_closed_graded_and_seeded():
     # every face's flap stencil has six distinct vertices (no valence-3 vertex)
     assert all(len(set(row)) == 6 for row in mesh.stencil.tolist())
     # seeded: the same seed gives the same mesh, another seed another one
-    again = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03)
-    other = s3.random_sphere_mesh(radius, top_spacing=top, max_spacing=coarse, refined_arc=0.03, seed=1)
+    again = s3.ShellMesh.sphere(radius, layout="random", top_spacing=top, max_spacing=coarse, refined_arc=0.03)
+    other = s3.ShellMesh.sphere(radius, layout="random", top_spacing=top, max_spacing=coarse, refined_arc=0.03, seed=1)
     np.testing.assert_array_equal(again.vertices, v)
     assert not (other.vertices.shape == v.shape and np.allclose(other.vertices, v))
-    with pytest.raises(InvalidInputError, match="random_sphere_mesh"):
-        s3.random_sphere_mesh(radius, top_spacing=0.02, max_spacing=0.01)
+    with pytest.raises(InvalidInputError, match="layout='random'"):
+        s3.ShellMesh.sphere(radius, layout="random", top_spacing=0.02, max_spacing=0.01)
 
 
 def test_rest_curvature_of_sphere_converges_to_minus_identity_over_r():
     """ā⁻¹b̄ = −I/R on a sphere; the quadratic-patch curvature error is O(edge²)."""
     errs = []
     for n in (300, 1200):
-        mesh = s3.sphere_mesh(2.0, n)
+        mesh = s3.ShellMesh.sphere(2.0, n)
         a, b, _ = s3.rest_geometry(jnp.asarray(mesh.vertices[mesh.stencil]))
         m = np.asarray(jnp.linalg.solve(a, b)) * 2.0
         errs.append(np.max(np.abs(m + np.eye(2))))
@@ -76,7 +76,7 @@ def test_second_fundamental_form_is_the_six_point_quadratic_interpolant():
     solve of ``fundamental_forms`` on distorted stencils. Both are the same unique interpolant,
     so they agree to round-off (1e-9 relative allows for the conditioning of the 6×6 solve)."""
     rng = np.random.default_rng(6)
-    mesh = s3.sphere_mesh(1.0, 300)
+    mesh = s3.ShellMesh.sphere(1.0, 300)
     stencils = mesh.vertices[mesh.stencil[:40]] * 1.05 + 0.01 * rng.normal(size=(40, 6, 3))
     for p in stencils:
         e1, e2 = p[1] - p[0], p[2] - p[0]
@@ -97,7 +97,7 @@ def test_second_fundamental_form_is_the_six_point_quadratic_interpolant():
 def test_scaled_sphere_energies_match_analytic_values():
     """x = λX: C = λ²I exactly per face and M = (λ−1) ā⁻¹b̄ exactly, so the membrane energy is
     exact to round-off and the bending energy off only by the rest-curvature error (≤ 4 %)."""
-    mesh = s3.sphere_mesh(1.0, 1200)
+    mesh = s3.ShellMesh.sphere(1.0, 1200)
     lam = 1.2
     model = ShellModel(mesh, mesh.vertices, ModelConfig(mesh.n_vertices), rigid_mode_pins(mesh.vertices))
     q = np.concatenate([lam * mesh.vertices.ravel(), np.zeros(3)])
@@ -126,7 +126,7 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
     import shelljax.shell3d._hessian as model_module
 
     rng = np.random.default_rng(3)
-    mesh = s3.sphere_mesh(1.0, 120)
+    mesh = s3.ShellMesh.sphere(1.0, 120)
     contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
     cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact)
     fixed = np.zeros(3 * mesh.n_vertices + 3, dtype=bool)
@@ -167,7 +167,7 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     import shelljax.shell3d._hessian as model_module
 
     rng = np.random.default_rng(5)
-    mesh = s3.sphere_mesh(1.0, 150)
+    mesh = s3.ShellMesh.sphere(1.0, 150)
     n_chunks = -(-mesh.n_faces // 35)
     assert n_chunks * -(-mesh.n_faces // n_chunks) > mesh.n_faces  # the last chunk overlaps its predecessor
     contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
@@ -199,7 +199,7 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
 
 def test_element_energy_derivatives_match_central_differences():
     rng = np.random.default_rng(4)
-    mesh = s3.sphere_mesh(1.0, 200)
+    mesh = s3.ShellMesh.sphere(1.0, 200)
     rest = jnp.asarray(mesh.vertices[mesh.stencil[7]])
     a, b, area = s3.rest_geometry(rest[None])
     p = rest * 1.03 + 0.01 * rng.normal(size=rest.shape)
@@ -234,7 +234,7 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     from shelljax.shell3d._contact import contact_stiffness
 
     rng = np.random.default_rng(11)
-    mesh = s3.sphere_mesh(1.0, 120)
+    mesh = s3.ShellMesh.sphere(1.0, 120)
     ghat, ground = 0.05, -1.02
     contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, ground), (0.0, 0.0, 1.0)),), activation_distance=ghat)
     cfg = ModelConfig(mesh.n_vertices, contact=contact)
@@ -278,6 +278,7 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
         np.testing.assert_allclose(product, newton_matrix @ v, rtol=0, atol=1e-9 * np.abs(newton_matrix @ v).max())
 
 
+@pytest.mark.slow  # solves the 3D shell
 def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     """A ball poked 5 mm deep, its ground-contact vertices then pushed to 1e-4 of their equilibrium
     gaps: with the true Hessian a Newton step can at most double a log barrier's gap (measured:
@@ -295,11 +296,11 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     start = np.concatenate([x.ravel(), state.indenter_center])
     softened = model.equilibrium(start, params, atol=sim.atol)
     plain = newton(EquilibriumProblem(model, model.host_params(params), barrier_aids=False), start,
-                   atol=sim.atol, max_iter=60)  # fmt: skip
+                   atol=sim.atol, max_steps=60)  # fmt: skip
     # Same equilibrium: all three stop at max |force| ≤ atol ≈ 5.5e-6 N, which the softest
     # stiffness of a vertex (its membrane's, E h ≈ 2e3 N/m) turns into ≤ 3e-9 m.
-    np.testing.assert_allclose(softened.x, plain.x, rtol=0, atol=1e-8)
-    np.testing.assert_allclose(softened.x, state.q, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(softened.value, plain.value, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(softened.value, state.q, rtol=0, atol=1e-8)
     print(f"Newton iterations from 1e-4 of the ground gaps: {plain.iterations} with the Hessian, "
           f"{softened.iterations} with the softened matrix")
     assert plain.iterations >= 10, plain.iterations  # the crawl this guards against is there

@@ -10,6 +10,8 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 
+pytestmark = pytest.mark.slow  # solves the 3D shell
+
 RADIUS = 0.13  # m
 
 

@@ -1,13 +1,17 @@
 """Bundled virtual 3D-engine curves (shelljax/data/virtual/curves.json) and session drawing.
 
-No 3D solve: the curves were made by experiments/make_virtual_sessions.py --curves.
+No 3D solve: the curves were made by tools/make_virtual_sessions.py --curves; its checkpoint is
+experiments/long_runs.py's.
 """
 
 import numpy as np
 import pytest
+from _scripts import load_script
 
 import shelljax.virtual as mvs
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
+
+long_runs = load_script("experiments", "long_runs")
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +98,7 @@ def test_test_and_calibration_sets(curves):
     sessions = mvs.draw_sessions(curves, realisations=4)  # as experiments/compare_estimators.py
     assert len(sessions) == len(curves) * len(mvs.NOISE_LEVELS) * 4 >= 50
     assert len({t["seed"] for t, _ in sessions}) == len(sessions)  # independent draws
-    calib = mvs.calibration_sessions(curves)
+    calib = mvs.draw_calibration_sessions(curves)
     assert all(s.manometer_gauge_pressure == c["gauge_pressure"] for s, c in zip(calib, curves))
     assert all(s.manometer_gauge_pressure is None for _, s in sessions)
 
@@ -148,7 +152,7 @@ class _FakeIndentation:
         self.solves += 1
         if depth - history[-1][0] > self.max_newton_step:
             raise NoConvergenceError("fake: step too long", [1.0])
-        return SimpleNamespace(x=np.array([depth])), {}, 0.0
+        return SimpleNamespace(value=np.array([depth])), {}, 0.0  # a shelljax.Solution's value
 
 
 @pytest.fixture
@@ -161,7 +165,7 @@ def fake_force(monkeypatch):
 def test_force_levels_by_travel_hit_every_level(fake_force, tmp_path):
     sim = _FakeIndentation()
     ckpt = tmp_path / "levels.npz"
-    levels = mvs.force_levels_by_travel(sim, PAPER_FORCES, mvs.Checkpoint(ckpt))
+    levels = mvs.force_levels_by_travel(sim, PAPER_FORCES, long_runs.Checkpoint(ckpt))
     forces = np.array([f for f, _ in levels])
     np.testing.assert_allclose(forces, PAPER_FORCES, atol=mvs.FORCE_MATCH)
     # the state returned is the one whose force was recorded
@@ -171,7 +175,7 @@ def test_force_levels_by_travel_hit_every_level(fake_force, tmp_path):
     assert sim.solves <= 14 + 3 * len(PAPER_FORCES)
     # a restarted run finds every level in its checkpoint without solving again
     again = _FakeIndentation()
-    resumed = mvs.force_levels_by_travel(again, PAPER_FORCES, mvs.Checkpoint(ckpt))
+    resumed = mvs.force_levels_by_travel(again, PAPER_FORCES, long_runs.Checkpoint(ckpt))
     assert again.solves == 0
     np.testing.assert_array_equal([f for f, _ in resumed], forces)
 
@@ -191,4 +195,4 @@ def test_checkpoint_of_an_older_format_is_refused(tmp_path):
     old = tmp_path / "old.npz"
     np.savez(old, forces=[5.0], states=np.zeros((1, 3)))  # the force-controlled format: no travels
     with pytest.raises(SystemExit, match="older version"):
-        mvs.Checkpoint(old).load()
+        long_runs.Checkpoint(old).load()

@@ -11,7 +11,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._errors import InvalidInputError, NoConvergenceError
-from .._hilbert import hilbert_order
+from ._hilbert import hilbert_order
 from .._parallel import map_batch
 from ..paper import PAPER_FORCES
 from ._model import CurvePhysics, Setup, curve_single
@@ -284,7 +284,7 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
             raise NoConvergenceError(
                 f"axisymmetric Newton did not converge for {len(bad)} (batch, force) entries; "
                 f"first: params[{b}] = {p[b].tolist()}, force {f[k]} N. Try more elements "
-                "(n_elements), a larger max_iter, or a different ramp.",
+                "(n_elements), a larger max_steps, or a different ramp.",
                 history=np.asarray(res.residual[b]).tolist(),
             )
     return res

@@ -58,7 +58,7 @@ class Setup(eqx.Module):
     ``indenter_radius`` a (the default of the traced ``CurvePhysics.indenter_radius``, and the
     Newton step cap); ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
     force solved first (load stepping; none by default: the flattened start converges without);
-    ``atol`` [N]: Newton tolerance on the out-of-balance force; ``max_iter``: Newton iterations
+    ``atol`` [N]: Newton tolerance on the out-of-balance force; ``max_steps``: Newton iterations
     per load step; ``predictor``: "none" (start from the last converged state: the most robust),
     "secant" (extrapolate the last two states) or "tangent" (Euler step);
     ``substeps``: equal load steps per interval between requested forces (raise it when the
@@ -79,7 +79,7 @@ class Setup(eqx.Module):
     contact_stiffness: float = eqx.field(static=True, default=1e11)
     ramp: tuple = eqx.field(static=True, default=())
     atol: float = eqx.field(static=True, default=1e-7)
-    max_iter: int = eqx.field(static=True, default=100)
+    max_steps: int = eqx.field(static=True, default=100)
     predictor: str = eqx.field(static=True, default="none")
     substeps: int = eqx.field(static=True, default=1)
     gas_volume_ratio: float = eqx.field(static=True, default=1.0)
@@ -127,7 +127,7 @@ class Setup(eqx.Module):
     def options(self) -> SolverOptions:
         # Newton steps capped at one indenter radius of motion relative to the indenter
         # (_newton._step_cap), between tunnelling and slow steps (docs/axisym.md, *Solver*)
-        return SolverOptions(self.atol, self.max_iter, 30, self.indenter_radius)
+        return SolverOptions(self.atol, self.max_steps, 30, self.indenter_radius)
 
 
 # κ of each named gas law (p V^κ constant): gas = "polytropic" with this traced κ is that law, so one
@@ -211,8 +211,8 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
     r0, y0, p = _inflation(setup, pressure, young, thick, nu, bending_scale, physics)
     if guesses is not None:
         y0 = jnp.concatenate([y0[None], jax.lax.stop_gradient(guesses)])
-    y, res, it, _ = equilibrium(_indentation_config(setup), setup.options(), p, y0)
-    return r0, y, res, it
+    sol = equilibrium(_indentation_config(setup), setup.options(), p, y0)
+    return r0, sol.value, sol.stats["residual"], sol.iterations
 
 
 def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics: CurvePhysics):
@@ -381,7 +381,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
         guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
         if nearby_guesses is not None:
             guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
-        y, res, it, _ = equilibrium(cfg, opts, p, guess)
+        sol = equilibrium(cfg, opts, p, guess)
+        y, res, it = sol.value, sol.stats["residual"], sol.iterations
         y_inf = jnp.where(inflating, y, y_inf)
         inflated_zc, inflated_base, first = indentation(y_inf)
         zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))

@@ -4,8 +4,9 @@
 backtracking on the energy) inside ``lax.while_loop`` so it jits and vmaps; convergence is
 measured in force units: max |∂E/∂y| [N] over the free unknowns ≤ ``atol``. Its derivative
 with respect to the parameters is the implicit one, dy = −H⁻¹ ∂²E/∂y∂θ · dθ, through
-``jax.custom_jvp`` + ``lax.custom_linear_solve`` (so reverse mode works too); Newton iterations
-are never unrolled.
+``jax.custom_jvp`` + ``lax.custom_linear_solve`` (:func:`shelljax._solution.implicit_tangent`,
+shared with the 3D engine, so reverse mode works too); Newton iterations are never unrolled. It
+returns the package's one :class:`shelljax.Solution`.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from ._energy import (
     split,
     total_energy,
 )
+from .._solution import RESULTS, Solution, implicit_tangent
 from ..physics import ATMOSPHERIC_PRESSURE
 from ._hessian import hessian_at
 from ._linalg import StructuredHessian, structured_solve
@@ -40,17 +42,17 @@ MIN_DESCENT_FRACTION = 1e-3  # of a Jacobi-scaled gradient step's rate, for a co
 class SolverOptions(eqx.Module):
     """Newton settings, all static: hashable, so a jit or ``custom_jvp`` can key on them.
 
-    ``atol`` [N]: tolerance on the out-of-balance force; ``max_iter``: Newton iterations;
-    ``max_backtracks``: line-search halvings per iteration; ``max_step`` [m] caps one Newton step:
+    ``atol`` [N]: tolerance on the out-of-balance force; ``max_steps``: Newton iterations;
+    ``max_halvings``: line-search halvings per iteration; ``step_cap`` [m] caps one Newton step:
     the nodes' motion relative to a spherical indenter (``_step_cap``), or the largest coordinate
     change without one. It keeps the indenter from tunnelling through the shell (a penalty contact
     cannot stop a jump past it).
     """
 
     atol: float = eqx.field(static=True, default=1e-7, converter=float)
-    max_iter: int = eqx.field(static=True, default=60, converter=int)
-    max_backtracks: int = eqx.field(static=True, default=30, converter=int)
-    max_step: float = eqx.field(static=True, default=float("inf"), converter=float)
+    max_steps: int = eqx.field(static=True, default=60, converter=int)
+    max_halvings: int = eqx.field(static=True, default=30, converter=int)
+    step_cap: float = eqx.field(static=True, default=float("inf"), converter=float)
 
 
 def _free(cfg: Config, p: Params, dtype):
@@ -145,17 +147,17 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
     return d
 
 
-def _step_cap(d, y, cfg: Config, p: Params, max_step):
-    """Largest step length α ≤ 1 along ``d`` allowed by ``max_step`` [m].
+def _step_cap(d, y, cfg: Config, p: Params, step_cap):
+    """Largest step length α ≤ 1 along ``d`` allowed by ``step_cap`` [m].
 
     Under a spherical indenter the cap is on each node's motion relative to the indenter, and
-    a node farther away than ``max_step`` may move up to its gap: α |Δx_i − Δc| ≤
-    max(max_step, gap_i). A node can pass through the sphere only by moving relative to it by
+    a node farther away than ``step_cap`` may move up to its gap: α |Δx_i − Δc| ≤
+    max(step_cap, gap_i). A node can pass through the sphere only by moving relative to it by
     more than its gap, so this keeps the indenter from tunnelling while letting the shell and the
     indenter translate together. Without an indenter (or while inflating) the cap is on every
     coordinate.
     """
-    coordinate_cap = jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
+    coordinate_cap = jnp.minimum(1.0, step_cap / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))
     if cfg.loading != "sphere":
         return coordinate_cap
     n = cfg.n_nodes
@@ -164,7 +166,7 @@ def _step_cap(d, y, cfg: Config, p: Params, max_step):
     relative = jnp.sqrt(jnp.sum((dx - jnp.stack([jnp.zeros_like(dzc), dzc])) ** 2, axis=-1))
     # A traced indenter radius smaller than the static cap shrinks it (a small sphere is
     # tunnelled through by a shorter jump); a larger one keeps the static cap.
-    allowed = jnp.maximum(jnp.minimum(max_step, p.indenter_radius), indenter_gaps(x, zc, p))
+    allowed = jnp.maximum(jnp.minimum(step_cap, p.indenter_radius), indenter_gaps(x, zc, p))
     sphere_cap = jnp.minimum(1.0, jnp.min(allowed / jnp.maximum(relative, 1e-300)))
     return jnp.where(p.inflating, coordinate_cap, sphere_cap)
 
@@ -228,7 +230,7 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
 
     def cond(state):
         _, _, _, res, it, _, _ = state
-        return (res > opts.atol) & (it < opts.max_iter)
+        return (res > opts.atol) & (it < opts.max_steps)
 
     def body(state):
         y, g, e, _, it, hist, mu = state
@@ -244,14 +246,14 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
         # 2·alpha0 with no trial made, so one copy of the energy and gradient is compiled, not two.
         def ls_cond(s):
             alpha, e_new, _, k = s
-            return (~accept(alpha, e_new)) & (k < opts.max_backtracks)
+            return (~accept(alpha, e_new)) & (k < opts.max_halvings)
 
         def ls_body(s):
             alpha, _, _, k = s
             alpha = 0.5 * alpha
             return (alpha, *energy_and_grad(y + alpha * d), k + 1)
 
-        alpha0 = _step_cap(d, y, cfg, p, opts.max_step)
+        alpha0 = _step_cap(d, y, cfg, p, opts.step_cap)
         no_trial = tied_to(y, jnp.asarray(jnp.inf, e.dtype), jnp.zeros_like(g), jnp.asarray(-1))
         alpha, e_new, g_trial, backtracks = jax.lax.while_loop(ls_cond, ls_body, (2.0 * alpha0, *no_trial))
         # A step the line search could not accept is not taken (it may sit past the infinite-energy
@@ -271,43 +273,45 @@ def _newton(cfg: Config, opts: SolverOptions, p: Params, y0):
     e0, g0 = energy_and_grad(y0)
     g0 = g0 * free
     res0 = jnp.max(jnp.abs(g0))
-    hist0 = jnp.full((opts.max_iter,), jnp.nan, y0.dtype)
+    hist0 = jnp.full((opts.max_steps,), jnp.nan, y0.dtype)
     state = (y0, g0, e0, res0, *tied_to(y0, jnp.asarray(0), hist0, jnp.zeros((), y0.dtype)))
     y, _, _, res, it, hist, _ = jax.lax.while_loop(cond, body, state)
     return y, res, it.astype(y.dtype), hist
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def equilibrium(cfg: Config, opts: SolverOptions, p: Params, y0):
-    """Equilibrium unknowns y* [m] from initial guess y0 [m] ((n_y,), or (m, n_y) candidate
-    guesses, of which Newton starts from the one of lowest energy; NaN rows are never taken).
-
-    Returns (y*, final residual max|∂E/∂y| [N], Newton iterations (float), residual history
-    (max_iter,) [N], NaN past the last iteration). y* is differentiable in ``p`` (implicit
-    function theorem); it does not depend on y0 (no tangent flows through the guess).
-    """
+def _equilibrium(cfg: Config, opts: SolverOptions, p: Params, y0):
+    """(y*, final residual [N], iterations (float: a tangent-free output), history [N])."""
     return _newton(cfg, opts, p, y0)
 
 
-@equilibrium.defjvp
+@_equilibrium.defjvp
 def _equilibrium_jvp(cfg, opts, primals, tangents):
     p, y0 = primals
     dp, _ = tangents
-    out = equilibrium(cfg, opts, p, y0)
+    out = _equilibrium(cfg, opts, p, y0)
     y = out[0]
-    free = _free(cfg, p, y.dtype)
-    fixed = 1.0 - free
-    _, dg = jax.jvp(lambda pp: residual(y, cfg, pp), (p,), (dp,))
     hess = hessian_at(y, cfg, p)
-
-    def matvec(v):
-        return jax.jvp(lambda yy: residual(yy, cfg, p), (y,), (v,))[1] + fixed * v
-
-    dy = jax.lax.custom_linear_solve(
-        matvec, -dg, solve=lambda _, b: structured_solve(hess, b), symmetric=True
-    )
+    dy = implicit_tangent(lambda yy, pp: residual(yy, cfg, pp), y, p, dp, _free(cfg, p, y.dtype),
+                          lambda b: structured_solve(hess, b))  # fmt: skip
     zeros = tuple(jnp.zeros_like(o) for o in out[1:])
     return out, (dy,) + zeros
+
+
+def equilibrium(cfg: Config, opts: SolverOptions, p: Params, y0) -> Solution:
+    """Equilibrium of the meridian from initial guess y0 [m] ((n_y,), or (m, n_y) candidate
+    guesses, of which Newton starts from the one of lowest energy; NaN rows are never taken).
+
+    Returns a :class:`shelljax.Solution`: ``value`` y* [m], ``result`` (``successful`` once
+    max|∂E/∂y| ≤ ``opts.atol``), ``iterations`` (a float), ``history`` (max_steps,) [N] (NaN past
+    the last iteration) and ``stats["residual"]``, the final max|∂E/∂y| [N]. y* is
+    differentiable in ``p`` (implicit function theorem); it does not depend on y0 (no tangent
+    flows through the guess).
+    """
+    y, res, it, hist = _equilibrium(cfg, opts, p, y0)
+    result = RESULTS.where(res <= opts.atol, RESULTS.successful,
+                           RESULTS.where(jnp.isfinite(res), RESULTS.max_steps_reached, RESULTS.nonfinite))  # fmt: skip
+    return Solution(y, result, it, hist, {"residual": res})
 
 
 __all__ = ["SolverOptions", "equilibrium", "hessian_at", "residual"]

@@ -45,8 +45,8 @@ def pinch_state(setup: Setup, pressure, young, thick, nu, force, bending_scale=1
     p = _params(young, thick, nu, r0, pressure, setup, force=force,
                 bending_scale=bending_scale)
     opts = SolverOptions(setup.atol, 200, 30, 0.05 * setup.radius)
-    y, res, _, _ = equilibrium(cfg, opts, p, y_inf if guess is None else guess)
-    return y, y_inf, p, res
+    sol = equilibrium(cfg, opts, p, y_inf if guess is None else guess)
+    return sol.value, y_inf, p, sol.stats["residual"]
 
 
 def pinch_linear_stiffness(setup: Setup, pressure, young, thick, nu, bending_scale=1.0):

@@ -52,7 +52,7 @@ SHAPE_VARIANTS = (  # label, CurvePhysics overrides / parameter changes, force f
 )
 
 
-def calibration_sessions(ball: str) -> list:
+def paper_calibration_sessions(ball: str) -> list:
     """The bundled calibration sessions of ``ball`` ("pezzi" or "yoga"), by pressure."""
     from ..session import bundled_sessions, load_session
 
@@ -79,7 +79,7 @@ def _scan_rows(study, data, ball: str, scans: dict):
 def ks_scan(ball: str, scans: dict = KS_SCANS) -> dict:
     """The engine's k_s [-] at each calibration state of ``ball`` for every (effect, magnitude) of
     ``scans``: {"pressures": P_g [Pa], "rows": [{effect, u, k_s, converged}]}."""
-    study = build_study(calibration_sessions(ball))
+    study = build_study(paper_calibration_sessions(ball))
     data = study_arrays(study)
     n_s = study.n_sessions
     free = np.ones(data.free.shape[0], bool)

@@ -15,14 +15,14 @@ from ._contact import (
     TabulatedCompressionCurve,
     ground,
 )
-from ._cor import Calibration, Impact, calibrate_contact_damping, contact_diameter, measured_cor, mesh_edges
+from ._cor import DampingCalibration, Impact, calibrate_contact_damping, contact_diameter, measured_cor, mesh_edges
 from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
-from ._minimise import AbstractMinimiser, DenseNewton, KeptMatrix, MinimiserResult, simplified_newton_loop, solve_step
+from ._minimise import AbstractMinimiser, DenseNewton, KeptMatrix, simplified_newton_loop, solve_step
 from ._output import write_results
 from ._potential import IncrementalPotential, incremental_potential
 from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness
 from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
 from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation
 from ._shell import ShellDynamicSystem, remeshed, shell_system
-from ._sparse import SparseNewton, forget_factorisations
-from ._systems import PointMassOnGround, SpringBalloon, icosphere
+from ._sparse import SparseNewton
+from ._systems import PointMassOnGround, SpringBalloon

@@ -12,6 +12,9 @@ separated). Its normal force is λ(g) = −de/dg [N] ≥ 0. Two kinds:
 
 Each law also gives the weight w(g) ∈ [0, 1] of its point in the contact damping potential and the
 gap below which the point counts as touching (for impact detection).
+
+The plane itself is :class:`shelljax.physics.Plane`, the one plane of the package (the 3D engine's
+static contact setup uses it too), re-exported here as ``dynamics.Plane``.
 """
 
 from __future__ import annotations
@@ -26,33 +29,11 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._errors import InvalidInputError
-from ..physics import barrier_energy, plane_gap
+from ..physics import Plane, barrier_energy
+from ..physics._contact import check_nonnegative, check_positive  # noqa: F401 (the dynamics modules take them from here)
 
 # 16-point Gauss–Legendre nodes and weights on [−1, 1]: the energy ∫₀^δ F of a smooth curve to ~1e-15.
 _GL_NODES, _GL_WEIGHTS = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(16))
-
-
-def _concrete(value) -> bool:
-    """Whether ``value`` can be checked on the host (not a tracer inside jit or grad)."""
-    return not isinstance(value, jax.core.Tracer)
-
-
-def check_nonnegative(name: str, value, fix: str) -> None:
-    """Raise InvalidInputError if a concrete ``value`` is negative or not finite."""
-    if _concrete(value):
-        v = np.asarray(value, dtype=float)
-        if not np.all(np.isfinite(v)) or np.any(v < 0.0):
-            raise InvalidInputError(f"{name} must be finite and ≥ 0; got {v.tolist()}. {fix}")
-
-
-def check_positive(name: str, value, fix: str) -> None:
-    """Raise InvalidInputError if a concrete ``value`` is missing, ≤ 0 or not finite."""
-    if value is None:
-        raise InvalidInputError(f"{name} is missing. {fix}")
-    if _concrete(value):
-        v = np.asarray(value, dtype=float)
-        if not np.all(np.isfinite(v)) or np.any(v <= 0.0):
-            raise InvalidInputError(f"{name} must be finite and > 0; got {v.tolist()}. {fix}")
 
 
 class AbstractContactLaw(eqx.Module):
@@ -220,41 +201,6 @@ class TabulatedCompressionCurve(AbstractContactLaw):
 
     def contact_distance(self):
         return jnp.asarray(0.0)
-
-
-class Plane(eqx.Module):
-    """A rigid plane through ``point`` (3,) [m] with unit ``normal`` (3,) pointing to the free side.
-
-    ``law``: its contact law; ``friction`` μ [-] (lagged, smoothed Coulomb) with slip tolerance
-    ε [m]; ``damping`` c [N·s/m]: the normal contact damping of each touching point, the dashpot of
-    the potential (c / 2Δt) Σ wᵢ ((xᵢ − xᵢⁿ)·n)²; ``name`` labels its outputs.
-    """
-
-    point: Float[Array, "3"] = eqx.field(converter=jnp.asarray)
-    normal: Float[Array, "3"]
-    law: AbstractContactLaw
-    friction: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    slip_tolerance: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    damping: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    name: str = eqx.field(static=True)
-
-    def __init__(self, point, normal, law, *, friction=0.0, slip_tolerance=1e-4, damping=0.0, name="plane"):
-        n = jnp.asarray(normal, dtype=float)
-        if _concrete(n):
-            norm = float(np.linalg.norm(np.asarray(n)))
-            if n.shape != (3,) or not np.isfinite(norm) or norm == 0.0:
-                raise InvalidInputError(f"Plane {name!r}: normal must be a nonzero 3-vector; got {np.asarray(normal).tolist()}.")
-        self.point, self.normal, self.law = point, n / jnp.linalg.norm(n), law
-        self.friction, self.slip_tolerance, self.damping, self.name = friction, slip_tolerance, damping, name
-
-    def __check_init__(self):
-        check_nonnegative(f"Plane {self.name!r} friction μ [-]", self.friction, "Give μ ≥ 0 (0 for frictionless).")
-        check_positive(f"Plane {self.name!r} slip_tolerance ε [m]", self.slip_tolerance, "Give ε > 0, e.g. 1e-4 m.")
-        check_nonnegative(f"Plane {self.name!r} damping c [N·s/m]", self.damping, "Give c ≥ 0 (0 for an elastic contact).")
-
-    def gap(self, points: Float[Array, "k 3"]) -> Float[Array, " k"]:
-        """Signed gaps [m] of points (k, 3) [m] to this plane."""
-        return plane_gap(points, self.point, self.normal)
 
 
 def ground(law: AbstractContactLaw, *, height: float = 0.0, friction=0.0, slip_tolerance=1e-4, damping=0.0) -> Plane:

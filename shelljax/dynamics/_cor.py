@@ -137,7 +137,7 @@ def measured_cor(trajectory: Trajectory) -> tuple[Impact, ...]:
 
 
 @dataclasses.dataclass(frozen=True)
-class Calibration:
+class DampingCalibration:
     """The calibrated damping c [N·s/m], its simulated COR [-], and every (c, COR) evaluated."""
 
     damping: float
@@ -151,7 +151,7 @@ def calibrate_contact_damping(
     bracket: tuple[float, float],
     *,
     rtol: float = 1e-4,
-) -> Calibration:
+) -> DampingCalibration:
     """The contact damping c [N·s/m] in ``bracket`` whose simulated COR equals ``target_cor``.
 
     ``simulate(c)`` returns the COR [-] of a run with damping c, or its ``Trajectory`` (its first
@@ -188,4 +188,4 @@ def calibrate_contact_damping(
             "(the integrator's own dissipation) or a COR measurement check."
         )
     c = scipy.optimize.brentq(lambda c: cor(c) - target_cor, lo, hi, xtol=rtol * hi, rtol=rtol)
-    return Calibration(float(c), cor(c), tuple(evaluations))
+    return DampingCalibration(float(c), cor(c), tuple(evaluations))

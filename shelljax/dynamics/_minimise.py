@@ -1,8 +1,8 @@
 """Minimisers of a step's incremental potential, and the step solution's implicit derivative.
 
 A minimiser is the pluggable part of a step: ``minimise(potential, y0, memory)`` returns the
-minimiser y* [m] of ``potential.value`` with its convergence record (and what it keeps for the next
-step, ``memory``), and ``linear_solve(potential, y, b)`` returns ∇²Φ_inc(y)⁻¹ b, which the implicit
+minimiser y* [m] of ``potential.value`` as the package's one :class:`shelljax.Solution` (its
+``state``: what it keeps for the next step, the ``memory``), and ``linear_solve(potential, y, b)`` returns ∇²Φ_inc(y)⁻¹ b, which the implicit
 derivative needs. ``DenseNewton`` does both densely (small systems); the 3D shell engine plugs in
 its sparse Newton through the same methods.
 
@@ -15,7 +15,10 @@ matrix is this iterate's (Newton's own criterion) or θ, measured in this solve,
 tolerance too).
 
 ``solve_step`` differentiates y* implicitly: ∇Φ_inc(y*, θ) = 0 gives, for a cotangent ȳ,
-θ̄ = −(∂²Φ_inc/∂θ∂y)ᵀ λ with ∇²Φ_inc λ = ȳ; Newton's iterations are never unrolled.
+θ̄ = −(∂²Φ_inc/∂θ∂y)ᵀ λ with ∇²Φ_inc λ = ȳ; Newton's iterations are never unrolled. It is a
+``custom_vjp``, not the engines' shared ``custom_jvp`` tangent (``shelljax._solution``): the step's
+Solution carries the kept Newton matrix for the next step, whose cotangent a VJP may drop but to
+which a JVP would have to give a tangent (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -25,21 +28,20 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
+from .._solution import RESULTS, Solution
 from ._potential import IncrementalPotential
 
 
-class MinimiserResult(eqx.Module):
-    """y* [m]; ``converged``; Newton ``iterations``; ``history``: ‖∇Φ_inc‖∞ [N] per iteration (NaN
-    after the last); ``assemblies``: Newton matrices assembled; ``memory``: kept for the next step."""
-
-    y: Float[Array, " m"]
-    converged: Bool[Array, ""]
-    iterations: Int[Array, ""]
-    history: Float[Array, " K"]
-    assemblies: Int[Array, ""]
-    memory: object = None
+def _solution(max_steps: int, y, converged, iterations, history, assemblies, memory=None) -> Solution:
+    """The step's :class:`shelljax.Solution`: ``value`` y* [m]; ``history`` ‖∇Φ_inc‖∞ [N] per
+    iteration (NaN after the last); ``stats["assemblies"]``: Newton matrices assembled; ``state``:
+    the memory kept for the next step. A loop that stopped early unconverged did so on a failed
+    line search; one that ran its ``max_steps``, on the iteration bound."""
+    result = RESULTS.where(converged, RESULTS.successful,
+                           RESULTS.where(iterations < max_steps, RESULTS.line_search_failed, RESULTS.max_steps_reached))  # fmt: skip
+    return Solution(y, result, iterations, history, {"assemblies": assemblies}, memory)
 
 
 class KeptMatrix(eqx.Module):
@@ -59,9 +61,9 @@ class AbstractMinimiser(eqx.Module):
     """What a step needs from a solver: a minimisation and a linear solve with its Hessian."""
 
     @abc.abstractmethod
-    def minimise(self, potential: IncrementalPotential, y0: Float[Array, " m"], memory=None) -> MinimiserResult:
+    def minimise(self, potential: IncrementalPotential, y0: Float[Array, " m"], memory=None) -> Solution:
         """Minimise ``potential.value`` from the feasible start y0 [m], keeping it feasible;
-        ``memory``: the previous step's ``MinimiserResult.memory`` (None: none)."""
+        ``memory``: the previous step's ``Solution.state`` (None: none)."""
 
     def initial_memory(self, potential: IncrementalPotential, y0: Float[Array, " m"]):
         """The ``memory`` before a roll-out's first step (same pytree structure as after a step)."""
@@ -128,7 +130,7 @@ def _move(potential, y, f, alpha, f_new, found, p):
     return y_new, jnp.where(found, f_new, f), potential.gradient(y_new)
 
 
-def newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], direction) -> MinimiserResult:
+def newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], direction) -> Solution:
     """Newton's method with a feasibility-keeping backtracking line search (traceable).
 
     ``direction(y, g)`` gives the step [m] at y [m] with gradient g [N]; reads ``step_tolerance``
@@ -153,11 +155,11 @@ def newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m
     init = dict(y=y0, f=potential.value(y0), g=potential.gradient(y0), k=jnp.asarray(0), done=jnp.asarray(False),
                 converged=jnp.asarray(False), history=history0)  # fmt: skip
     out = jax.lax.while_loop(cond, body, init)
-    return MinimiserResult(out["y"], out["converged"], out["k"], out["history"], out["k"])
+    return _solution(minimiser.max_steps, out["y"], out["converged"], out["k"], out["history"], out["k"])
 
 
 def simplified_newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], assemble, solve,
-                           memory: KeptMatrix) -> MinimiserResult:  # fmt: skip
+                           memory: KeptMatrix) -> Solution:  # fmt: skip
     """Simplified Newton (module doc) with the line search of :func:`newton_loop` (traceable).
 
     ``assemble(y)`` gives Newton's matrix values at y [m]; ``solve(values, g)`` the step [m] for
@@ -194,11 +196,12 @@ def simplified_newton_loop(minimiser, potential: IncrementalPotential, y0: Float
                 converged=jnp.asarray(False), history=history0, kept=memory, previous=jnp.asarray(0.0, dtype=y0.dtype),
                 assemblies=jnp.asarray(0))  # fmt: skip
     out = jax.lax.while_loop(cond, body, init)
-    return MinimiserResult(out["y"], out["converged"], out["k"], out["history"], out["assemblies"], out["kept"])
+    return _solution(minimiser.max_steps, out["y"], out["converged"], out["k"], out["history"], out["assemblies"],
+                     out["kept"])  # fmt: skip
 
 
 @eqx.filter_custom_vjp
-def solve_step(potential: IncrementalPotential, minimiser: AbstractMinimiser, y0: Float[Array, " m"], memory=None) -> MinimiserResult:
+def solve_step(potential: IncrementalPotential, minimiser: AbstractMinimiser, y0: Float[Array, " m"], memory=None) -> Solution:
     """Minimise a step's potential; y* is differentiable in ``potential`` (implicitly, see module doc)."""
     return minimiser.minimise(potential, y0, memory)
 
@@ -206,12 +209,12 @@ def solve_step(potential: IncrementalPotential, minimiser: AbstractMinimiser, y0
 @solve_step.def_fwd
 def _solve_step_fwd(perturbed, potential, minimiser, y0, memory=None):
     result = minimiser.minimise(potential, y0, memory)
-    return result, result.y
+    return result, result.value
 
 
 @solve_step.def_bwd
 def _solve_step_bwd(y_star, grad_obj, perturbed, potential, minimiser, y0, memory=None):
-    y_bar = grad_obj.y if grad_obj.y is not None else jnp.zeros_like(y_star)
+    y_bar = grad_obj.value if grad_obj.value is not None else jnp.zeros_like(y_star)
     lam = minimiser.linear_solve(potential, y_star, y_bar)
     _, vjp = eqx.filter_vjp(lambda pot: jax.grad(pot.value)(y_star), potential)
     (grad_potential,) = vjp(-lam)

@@ -94,7 +94,7 @@ def observe(
     if result is None:
         converged, iterations, history, matrices = jnp.asarray(True), jnp.asarray(0), jnp.full((max_steps,), jnp.nan), jnp.asarray(0)
     else:
-        converged, iterations, history, matrices = result.converged, result.iterations, result.history, result.assemblies
+        converged, iterations, history, matrices = result.converged, result.iterations, result.history, result.stats["assemblies"]
     return StepRecord(
         time_s=t, com_position_m=com, com_velocity_m_per_s=com_velocity, contact_force_N=forces,
         min_gap_m=jnp.stack(gaps) if gaps else jnp.zeros((0,)), gas_pressure_Pa=jnp.asarray(pressure, dtype=float),
@@ -137,9 +137,9 @@ def _step_kept(system, state, dt, integrator, minimiser, rayleigh, memory):
     start = jnp.where(better, extrapolated, start)
     feasible = potential.is_feasible(start)
     result = solve_step(potential, minimiser, jax.lax.stop_gradient(start), memory)
-    x_new = potential.full(result.y)
+    x_new = potential.full(result.value)
     new_state = integrator.advance(state, x_new, potential.dt)
-    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible), result.memory
+    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible), result.state
 
 
 def rollout(

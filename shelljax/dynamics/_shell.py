@@ -7,7 +7,8 @@ P_g at the inflated volume), and gravity on the lumped vertex masses. Contact, d
 are the dynamics core's planes, with every vertex a contact point.
 
 ``shell_system`` builds one from a :class:`shelljax.shell3d.Shell`: the rest shape comes from the
-engine's rest-shape solve, so the inflated shell ``inflated`` is in equilibrium at t = 0.
+engine's rest-shape solve (:func:`shelljax.shell3d.inflated_reference`, in the mesh's own frame), so the
+inflated shell ``inflated`` is in equilibrium at t = 0.
 
 Prescribed motion: ``prescribed_vertices`` (static indices) follow ``prescribed``, a
 :class:`PrescribedRotation` of their positions (e.g. a hand holding the hammer's handle and
@@ -34,7 +35,6 @@ from jaxtyping import Array, Float, Int
 from .._errors import InvalidInputError
 from ..physics import ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY
 from ..shell3d import (
-    Indentation,
     ModelConfig,
     Shell,
     ShellGeometry,
@@ -46,6 +46,7 @@ from ..shell3d import (
     gas_energy,
     gas_rank_one,
     hessian_values,
+    inflated_reference,
 )
 from ._contact import Plane, check_positive
 from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
@@ -211,20 +212,16 @@ def shell_system(
     and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium, in the
     mesh's frame (its lowest vertex where the mesh has it).
     """
-    sim = Indentation(shell, young_modulus, poisson_ratio, gauge_pressure, gas="prescribed", ground=False)
-    # The engine poses the mesh on its ground; its bottom vertex stays where it put it: move back to the mesh's frame.
-    bottom = int(np.argmin(shell.mesh.vertices[:, 2]))
-    shift = shell.mesh.vertices[bottom] - np.asarray(sim.q_reference[3 * bottom : 3 * bottom + 3])
-    rest = np.asarray(sim.rest) + shift
-    inflated = (np.asarray(sim.q_reference[:-3]).reshape(-1, 3) + shift).reshape(-1)
+    params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness), float(gauge_pressure))
+    reference = inflated_reference(shell, params)
+    inflated = reference.inflated.reshape(-1)
     n = shell.mesh.n_vertices
     config = ModelConfig(n, gas=gas, heat_capacity_ratio=heat_capacity_ratio)
     fixed = np.zeros(3 * n + 3, dtype=bool)
     fixed[-3:] = True
-    model = ShellModel(shell.mesh, rest, config, fixed)
-    params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness), float(gauge_pressure))
+    model = ShellModel(shell.mesh, reference.rest, config, fixed)
     if gas != "prescribed":
-        params = params.replace(reference_volume=float(sim.reference_volume), atmospheric_pressure=ATMOSPHERIC_PRESSURE)
+        params = params.replace(reference_volume=reference.reference_volume, atmospheric_pressure=ATMOSPHERIC_PRESSURE)
     key = _pattern_key(model.pattern)
     PATTERNS.setdefault(key, model.pattern)
     return ShellDynamicSystem(

@@ -15,7 +15,9 @@ computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.Spa
 symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
 derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
 Newton's matrix is kept across iterations and steps while it contracts (``reuse_matrix``,
-:func:`simplified_newton_loop`); the host keeps recent factorisations by content.
+:func:`simplified_newton_loop`); the host keeps recent factorisations by content
+(:func:`shelljax.shell3d.kept_factorization`, which owns every factorisation cache;
+:func:`shelljax.shell3d.release_factorizations` frees them).
 Newton's step shifts a Hessian that is not positive definite by a multiple of its mean diagonal;
 the implicit derivative's solve is never shifted.
 β's gas rank-one term at xₙ is left out of Newton's matrix (an approximation of its step only).
@@ -34,7 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ..shell3d import SparseSolver
+from ..shell3d import SparseSolver, kept_factorization
 from ._minimise import AbstractMinimiser, KeptMatrix, newton_loop, simplified_newton_loop
 from ._shell import PATTERNS, ShellDynamicSystem
 
@@ -126,16 +128,6 @@ def _free_assembly(key: int, n: int, free: np.ndarray) -> _FreeAssembly:
     return _ASSEMBLIES[cache_key]
 
 
-#: The last factorised matrices, by content: a kept Newton matrix (``simplified_newton_loop``) is
-#: factorised once however many steps it serves.
-_FACTORS: dict = {}
-
-
-def forget_factorisations() -> None:
-    """Drop the host's kept factorisations (the next solve factorises afresh; e.g. to time it)."""
-    _FACTORS.clear()
-
-
 def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
     """rhs ↦ (K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; None if not
     positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
@@ -145,9 +137,11 @@ def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
     arrays = [np.asarray(a, dtype=np.float64) for a in (data, blocks, diag, c2, u, coeffs, columns)]
     free = np.asarray(free, dtype=np.int64)
     fingerprint = (int(key), bool(shift), free.size, hash(b"".join(a.tobytes() for a in arrays) + free.tobytes()))
-    if fingerprint in _FACTORS:
-        return _FACTORS[fingerprint]
-    data, blocks, diag, c2, u, coeffs, columns = arrays
+    return kept_factorization(fingerprint, lambda: _factorise(key, shift, *arrays, free))
+
+
+def _factorise(key, shift, data, blocks, diag, c2, u, coeffs, columns, free):
+    """The solve of :func:`_factorised`, made afresh."""
     assembly = _free_assembly(int(key), blocks.shape[0] * 3, free)
     values = assembly.values(data, blocks, diag[free])
     rank = (float(c2), u[free]) if float(c2) != 0.0 else None
@@ -164,9 +158,6 @@ def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
             continue
         apply = _woodbury(solver, columns[:, free], coeffs)
         break
-    if len(_FACTORS) >= 4:
-        _FACTORS.pop(next(iter(_FACTORS)))
-    _FACTORS[fingerprint] = apply
     return apply
 
 

@@ -125,11 +125,3 @@ class SpringBalloon(AbstractDynamicSystem):
 
     def surface_faces(self):
         return np.asarray(self.faces)
-
-
-def icosphere(radius: float, subdivisions: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes (N, 3) [m] and outward faces of an icosphere of ``radius`` [m] (12 nodes at 0 subdivisions)."""
-    import trimesh
-
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
-    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=int)

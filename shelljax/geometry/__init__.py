@@ -1,4 +1,5 @@
-"""Geometry data layer: mesh input (metres), enclosed volume, local radius of curvature.
+"""Geometry data layer: mesh input (metres), enclosed volume, local radius of curvature, and the
+sphere meshes every engine builds on (:func:`sphere_mesh`).
 
 numpy + trimesh only; nothing here imports JAX.
 """
@@ -21,4 +22,5 @@ from ._primitives import (
     HAMMER_POKE_POINT,
     make_ball_mesh,
     make_hammer_mesh,
+    sphere_mesh,
 )

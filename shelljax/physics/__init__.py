@@ -2,6 +2,7 @@
 closed-form results of shell theory (SI units)."""
 
 from ._contact import (
+    Plane,
     barrier_energy,
     friction_energy,
     friction_force,

@@ -11,6 +11,10 @@ Two choices, both C¹ or smoother so Newton sees continuous forces:
 
 Gaps for the rigid bodies shelljax models: a sphere (finger) and a plane (ground, wall).
 
+``Plane`` is the one rigid plane of the package, used by the 3D engine's static contact setup
+(``shell3d.ContactConfig.planes``, where the law and friction are the setup's) and by the
+dynamics' systems (with its own law, friction and damping).
+
 Friction (``friction_energy``): the smoothed, lagged Coulomb potential of Incremental Potential
 Contact (Li et al. 2020, ACM TOG 39(4) 49, Sec. 5): D = μ λ f₀(‖u‖) per contact point, with the
 normal force λ [N] and the slip origin ("anchor") frozen at a lagged state, u [m] the tangential
@@ -20,8 +24,38 @@ to μ λ once ‖u‖ ≥ ε (sliding) and growing linearly, with stiffness 2 μ
 
 from __future__ import annotations
 
+from typing import Any
+
+import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import InvalidInputError
+
+
+def _concrete(value) -> bool:
+    """Whether ``value`` can be checked on the host (not a tracer inside jit or grad)."""
+    return not isinstance(value, jax.core.Tracer)
+
+
+def check_nonnegative(name: str, value, fix: str) -> None:
+    """Raise InvalidInputError if a concrete ``value`` is negative or not finite."""
+    if _concrete(value):
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)) or np.any(v < 0.0):
+            raise InvalidInputError(f"{name} must be finite and ≥ 0; got {v.tolist()}. {fix}")
+
+
+def check_positive(name: str, value, fix: str) -> None:
+    """Raise InvalidInputError if a concrete ``value`` is missing, ≤ 0 or not finite."""
+    if value is None:
+        raise InvalidInputError(f"{name} is missing. {fix}")
+    if _concrete(value):
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)) or np.any(v <= 0.0):
+            raise InvalidInputError(f"{name} must be finite and > 0; got {v.tolist()}. {fix}")
 
 
 def sphere_gap(points, center, radius):
@@ -115,3 +149,53 @@ def friction_force(
     f1 = jnp.where(y < eps, 2.0 * y / eps - y**2 / eps**2, 1.0)
     direction = u / jnp.where(y > 0.0, y, 1.0)[..., None]
     return -(friction * jnp.asarray(normal_force) * f1)[..., None] * direction
+
+
+class Plane(eqx.Module):
+    """A rigid plane through ``point`` (3,) [m] with unit ``normal`` (3,) pointing to the free side.
+
+    ``law``: its contact law (a ``dynamics.AbstractContactLaw``; None in the 3D engine's static
+    setup, whose ``ContactConfig`` sets the law and friction of all its planes); ``friction`` μ [-]
+    (lagged, smoothed Coulomb) with slip tolerance ε [m]; ``damping`` c [N·s/m]: the normal contact
+    damping of each touching point, the dashpot of the potential (c / 2Δt) Σ wᵢ ((xᵢ − xᵢⁿ)·n)²;
+    ``name`` labels its outputs.
+
+    Equal planes (the same numbers) compare and hash equal, so a plane can sit in a static, jit-keyed
+    setup; inside a traced computation compare their arrays instead.
+    """
+
+    point: Float[Array, "3"] = eqx.field(converter=jnp.asarray)
+    normal: Float[Array, "3"]
+    law: Any
+    friction: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    slip_tolerance: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    damping: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    name: str = eqx.field(static=True)
+
+    def __init__(self, point, normal, law=None, *, friction=0.0, slip_tolerance=1e-4, damping=0.0, name="plane"):
+        n = jnp.asarray(normal, dtype=float)
+        if _concrete(n):
+            norm = float(np.linalg.norm(np.asarray(n)))
+            if n.shape != (3,) or not np.isfinite(norm) or norm == 0.0:
+                raise InvalidInputError(f"Plane {name!r}: normal must be a nonzero 3-vector; got {np.asarray(normal).tolist()}.")
+        self.point, self.normal, self.law = point, n / jnp.linalg.norm(n), law
+        self.friction, self.slip_tolerance, self.damping, self.name = friction, slip_tolerance, damping, name
+
+    def __check_init__(self):
+        check_nonnegative(f"Plane {self.name!r} friction μ [-]", self.friction, "Give μ ≥ 0 (0 for frictionless).")
+        check_positive(f"Plane {self.name!r} slip_tolerance ε [m]", self.slip_tolerance, "Give ε > 0, e.g. 1e-4 m.")
+        check_nonnegative(f"Plane {self.name!r} damping c [N·s/m]", self.damping, "Give c ≥ 0 (0 for an elastic contact).")
+
+    def gap(self, points: Float[Array, "k 3"]) -> Float[Array, " k"]:
+        """Signed gaps [m] of points (k, 3) [m] to this plane."""
+        return plane_gap(points, self.point, self.normal)
+
+    def _numbers(self):
+        leaves, treedef = jax.tree_util.tree_flatten(self)
+        return treedef, tuple(tuple(np.ravel(np.asarray(leaf)).tolist()) for leaf in leaves)
+
+    def __hash__(self):
+        return hash(self._numbers())
+
+    def __eq__(self, other):
+        return type(other) is type(self) and self._numbers() == other._numbers()

@@ -1,7 +1,9 @@
 """Closed-form results of pressurized thin-shell theory (SI units).
 
-* τ = P_g R² / √(E h B), the dimensionless pressure (Vella et al. 2011);
-* Vella's wrinkle law n ≈ 1.33 τ^½ and the wrinkling onset W(0) = −2.52;
+* τ = P_g R² / √(E h B), the dimensionless pressure (Vella et al. 2011), and Vella's wrinkle law
+  n ≈ 1.33 τ^½: defined in :mod:`shelljax.paper` (the laws the paper's estimator reads E by),
+  re-exported here;
+* the wrinkling onset W(0) = −2.52;
 * the point-load stiffness of an unpressurized sphere (Reissner) and of a pressurized one (Vella
   et al. 2012), the references of the engines' shallow-shell checks.
 
@@ -12,24 +14,15 @@ Young's modulus E [Pa], thickness h [m], Poisson ratio ν [-]. ``tau`` and
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
+from ..paper import WRINKLE_PREFACTOR, scaling_wrinkle_count, tau
 from ._material import bending_stiffness
 
-WRINKLE_PREFACTOR = 1.33  # [-], n ≈ 1.33 τ^½ (Vella et al. 2011; the paper's Eq. modulus-estimation-2)
+__all__ = ["CRITICAL_W", "WRINKLE_PREFACTOR", "reissner_stiffness", "scaling_wrinkle_count", "tau",
+           "vella_linear_stiffness"]  # fmt: skip
+
 CRITICAL_W = 2.52  # [-], wrinkling onset at the dimensionless depth W(0) = −2.52 (Vella et al. 2011)
-
-
-def tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
-    """Dimensionless pressure τ = P_g R² / √(E h B) [-] from P_g [Pa], R [m], E [Pa], h [m], ν [-]."""
-    b = bending_stiffness(young_modulus, thickness, poisson_ratio)
-    return gauge_pressure * radius**2 / jnp.sqrt(young_modulus * thickness * b)
-
-
-def scaling_wrinkle_count(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
-    """Vella's radial wrinkle count n = 1.33 τ^½ [-] (continuous)."""
-    return WRINKLE_PREFACTOR * jnp.sqrt(tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio))
 
 
 def reissner_stiffness(radius, young_modulus, thickness, poisson_ratio):

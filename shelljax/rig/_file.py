@@ -10,13 +10,12 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import tomli_w
 
-from .._errors import InvalidInputError
+from .._toml import TomlReader, read_toml
 from ..diagnose._effects import LINEAR_SCALE, MIN_INDENTER_FRACTION, UNITS
 from ._calibrate import ESTIMATOR_GASES, Rig, RigModel
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
@@ -93,48 +92,28 @@ def write_rig(rig: Rig, path: str | Path) -> Path:
     return path
 
 
-class _Checker:
-    def __init__(self, path: Path):
-        self.path = path
-
-    def fail(self, field: str, problem: str, fix: str) -> InvalidInputError:
-        return InvalidInputError(f"{self.path}: field '{field}': {problem}. Fix: {fix}")
-
-    def get(self, table: dict, key: str, kind, field: str):
-        if key not in table:
-            raise self.fail(field, "missing", "re-create the file with `shelljax rig calibrate`")
-        value = table[key]
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if not isinstance(value, kind) or (kind is float and not math.isfinite(value)):
-            raise self.fail(field, f"{value!r} is not a {'finite number' if kind is float else kind.__name__}",
-                            "re-create the file with `shelljax rig calibrate`")  # fmt: skip
-        return value
-
-
-def _read_model(check: _Checker, table: dict, i: int) -> RigModel:
+def _read_model(check: TomlReader, table: dict, i: int) -> RigModel:
     where = f"model[{i}]"
-    terms = check_terms(check.get(table, "terms", list, f"{where}.terms"), where=f"{check.path}: field '{where}.terms'")
-    scaled = check.get(table, "scaled", dict, f"{where}.scaled")
-    names = tuple(check.get(scaled, "names", list, f"{where}.scaled.names"))
+    terms = check_terms(check.typed(table, "terms", list, f"{where}."), where=f"{check.path}: field '{where}.terms'")
+    scaled = check.typed(table, "scaled", dict, f"{where}.")
+    names = tuple(check.typed(scaled, "names", list, f"{where}.scaled."))
     if names != freed_parameters(terms):
         raise check.fail(f"{where}.scaled.names", f"{list(names)} are not the parameters of terms {list(terms)} "
-                         f"({list(freed_parameters(terms))})", "re-create the file with `shelljax rig calibrate`")  # fmt: skip
-    mean = np.asarray(check.get(scaled, "mean", list, f"{where}.scaled.mean"), float)
-    cov = np.asarray(check.get(scaled, "covariance", list, f"{where}.scaled.covariance"), float).reshape(-1)
+                         f"({list(freed_parameters(terms))})")  # fmt: skip
+    mean = np.asarray(check.typed(scaled, "mean", list, f"{where}.scaled."), float)
+    cov = np.asarray(check.typed(scaled, "covariance", list, f"{where}.scaled."), float).reshape(-1)
     if mean.shape != (len(names),) or cov.size != len(names) ** 2 or not np.all(np.isfinite(cov)) \
             or not np.all(np.isfinite(mean)):
         raise check.fail(f"{where}.scaled", f"mean {mean.tolist()} / covariance of {cov.size} entries do not fit "
-                         f"{len(names)} parameters", "re-create the file with `shelljax rig calibrate`")  # fmt: skip
+                         f"{len(names)} parameters")  # fmt: skip
     cov = cov.reshape(len(names), len(names))
     if names and (not np.allclose(cov, cov.T, rtol=1e-8, atol=0) or np.min(np.linalg.eigvalsh(cov)) <= 0):
-        raise check.fail(f"{where}.scaled.covariance", "not symmetric positive definite",
-                         "re-create the file with `shelljax rig calibrate`")  # fmt: skip
-    weight = check.get(table, "weight", float, f"{where}.weight")
+        raise check.fail(f"{where}.scaled.covariance", "not symmetric positive definite")
+    weight = check.typed(table, "weight", float, f"{where}.")
     if not 0 < weight <= 1:
-        raise check.fail(f"{where}.weight", f"{weight!r} is not in (0, 1]", "re-create the file with `shelljax rig calibrate`")
-    ev = check.get(table, "evidence", dict, f"{where}.evidence")
-    num = lambda k: check.get(ev, k, float, f"{where}.evidence.{k}")  # noqa: E731
+        raise check.fail(f"{where}.weight", f"{weight!r} is not in (0, 1]")
+    ev = check.typed(table, "evidence", dict, f"{where}.")
+    num = lambda k: check.typed(ev, k, float, f"{where}.evidence.")  # noqa: E731
     return RigModel(terms=terms, parameters=names, mean=mean, covariance=cov, fixes=fixed_values(terms),
                     elpd=num("elpd"), elpd_se=num("elpd_se"), delta=num("delta_elpd"), delta_se=num("delta_se"),
                     weight=weight)  # fmt: skip
@@ -150,48 +129,45 @@ def load_rig(path: str | Path) -> Rig:
     from .. import __version__
 
     path = Path(path)
-    check = _Checker(path)
-    if not path.is_file():
-        raise InvalidInputError(f"{path}: no such rig file. Fix: make one with `shelljax rig calibrate SESSIONS... --out {path}`")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise InvalidInputError(f"{path}: not a readable TOML file ({err}). Fix: re-create it with `shelljax rig calibrate`") from err
+    data = read_toml(path, "rig file", fix_missing=f"make one with `shelljax rig calibrate SESSIONS... --out {path}`",
+                     fix_syntax="re-create it with `shelljax rig calibrate`")  # fmt: skip
+    # a rig file is written by `shelljax rig calibrate`, so every field's fix is to write it again
+    check = TomlReader(path, fix="re-create the file with `shelljax rig calibrate`", doc="docs/rig.md")
     fmt = data.get("format")
     if fmt != FORMAT:
         raise check.fail("format", f"{fmt!r} is not this shelljax's rig format {FORMAT}", "re-calibrate the rig with this version")
-    version = check.get(data, "shelljax_version", str, "shelljax_version")
+    version = check.typed(data, "shelljax_version", str)
     if version.split(".")[:2] != __version__.split(".")[:2]:
         raise check.fail("shelljax_version", f"made by shelljax {version}, incompatible with {__version__} (the models may differ)",
                          "re-calibrate the rig with this version")  # fmt: skip
-    fm = check.get(data, "forward_model", dict, "forward_model")
-    ref = check.get(data, "reference", dict, "reference")
-    noise = check.get(data, "noise", dict, "noise")
-    force_ref = check.get(ref, "force_ref", float, "reference.force_ref")
-    radius = check.get(ref, "indenter_radius", float, "reference.indenter_radius")
-    tau = check.get(noise, "trial_offset_std", float, "noise.trial_offset_std")
-    a = check.get(noise, "depth_scatter_a", float, "noise.depth_scatter_a")
-    b = check.get(noise, "depth_scatter_b", float, "noise.depth_scatter_b")
+    fm = check.typed(data, "forward_model", dict)
+    ref = check.typed(data, "reference", dict)
+    noise = check.typed(data, "noise", dict)
+    force_ref = check.typed(ref, "force_ref", float, "reference.")
+    radius = check.typed(ref, "indenter_radius", float, "reference.")
+    tau = check.typed(noise, "trial_offset_std", float, "noise.")
+    a = check.typed(noise, "depth_scatter_a", float, "noise.")
+    b = check.typed(noise, "depth_scatter_b", float, "noise.")
     for field, value in (("reference.force_ref", force_ref), ("reference.indenter_radius", radius)):
         if value <= 0:
-            raise check.fail(field, f"{value!r} is not positive", "re-create the file with `shelljax rig calibrate`")
+            raise check.fail(field, f"{value!r} is not positive")
     for field, value in (("noise.trial_offset_std", tau), ("noise.depth_scatter_a", a), ("noise.depth_scatter_b", b)):
         if value < 0:
-            raise check.fail(field, f"{value!r} is negative", "re-create the file with `shelljax rig calibrate`")
+            raise check.fail(field, f"{value!r} is negative")
     if a + b <= 0:
-        raise check.fail("noise.depth_scatter_a", "the depth scatter is zero", "re-create the file with `shelljax rig calibrate`")
-    tables = check.get(data, "model", list, "model")
+        raise check.fail("noise.depth_scatter_a", "the depth scatter is zero")
+    tables = check.typed(data, "model", list)
     if not tables:
-        raise check.fail("model", "no model", "re-create the file with `shelljax rig calibrate`")
+        raise check.fail("model", "no model")
     models = tuple(_read_model(check, t, i) for i, t in enumerate(tables))
     total = sum(m.weight for m in models)
     if abs(total - 1.0) > 1e-6:
-        raise check.fail("model.weight", f"the weights add up to {total:.6g}, not 1", "re-create the file with `shelljax rig calibrate`")
+        raise check.fail("model.weight", f"the weights add up to {total:.6g}, not 1")
     selection = data.get("selection", {})
     from ..diagnose._model import WRINKLE_LAWS
 
-    gas = check.get(fm, "gas", str, "forward_model.gas")
-    law = check.get(fm, "wrinkle_law", str, "forward_model.wrinkle_law")
+    gas = check.typed(fm, "gas", str, "forward_model.")
+    law = check.typed(fm, "wrinkle_law", str, "forward_model.")
     if gas not in ESTIMATOR_GASES or law not in WRINKLE_LAWS:
         raise check.fail("forward_model", f"gas {gas!r} / wrinkle_law {law!r} unknown",
                          f"use a gas of {', '.join(ESTIMATOR_GASES)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}")  # fmt: skip
@@ -201,11 +177,11 @@ def load_rig(path: str | Path) -> Rig:
                not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
                force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
                calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version,
-               name=_name(check, data), manometer_std=check.get(data, "manometer_std", float, "manometer_std"),
+               name=_name(check, data), manometer_std=check.typed(data, "manometer_std", float),
                failed=tuple(selection.get("failed", [])))  # fmt: skip
 
 
-def _name(check: _Checker, data: dict) -> str | None:
+def _name(check: TomlReader, data: dict) -> str | None:
     name = data.get("name")
     if name is not None and (not isinstance(name, str) or not name.strip()):
         raise check.fail("name", f"{name!r} is not a rig's name", 'write name = "alice-index-film3", or delete the line')

@@ -9,9 +9,9 @@ from ._calibration import (
     ADC_SATURATED,
     BELOW_RANGE,
     OK,
-    Calibration,
     ForceReading,
     LoadPoint,
+    SensorCalibration,
     fit_calibration,
     load_point,
 )

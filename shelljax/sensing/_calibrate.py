@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._calibration import Calibration, LoadPoint, fit_calibration, load_point
+from ._calibration import LoadPoint, SensorCalibration, fit_calibration, load_point
 from ._capture import HumanOperator, Operator, Pump, SampleLog
 from ._console import Console
 from ._driver import SerialSensor
@@ -36,8 +36,8 @@ def calibrate_sensor(
     operator: Operator | None = None,
     log_path: str | Path | None = None,
     durable: bool = True,
-) -> Calibration:
-    """Walk through loading the sensor with ``masses`` [kg] and fit a :class:`Calibration`.
+) -> SensorCalibration:
+    """Walk through loading the sensor with ``masses`` [kg] and fit a :class:`SensorCalibration`.
 
     ``masses`` must include 0 (the unloaded reading). ``gravity`` [m/s²] turns masses into
     forces. Every sample is logged to ``log_path`` (CSV, durable) if given.
@@ -92,7 +92,7 @@ class _NullLog:
         self.n_rows += len(rows)
 
 
-def emulated_calibration(seed: int = 0) -> Calibration:
+def emulated_calibration(seed: int = 0) -> SensorCalibration:
     """Calibrate the default emulated film (virtual clock, no prompts): how the bundled
     ``shelljax/data/calibration/emulated-film.toml`` was made."""
     from ._console import AutoConsole

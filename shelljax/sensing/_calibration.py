@@ -9,7 +9,7 @@ Model (documented in docs/sensing.md):
 2. Conductance → force: ``c - c0 = a F**β`` (``model = "power"``), or with β fixed to 1
    (``model = "linear_conductance"``, the datasheet's "conductance linear in force"). ``c0`` is
    the zero-load reading (tare); it moves when the film is re-mounted or drifts, and is
-   re-measured by :meth:`Calibration.with_zero` (the recorder tares before every trial).
+   re-measured by :meth:`SensorCalibration.with_zero` (the recorder tares before every trial).
 3. Fit: least squares of ``ln(c - c0) = ln a + β ln F`` over the loaded readings. The
    residual scatter ``s`` (in ln c: noise, hysteresis, creep, model error) and the covariance of
    ``(ln a, β)`` give a per-reading standard uncertainty of the force (delta method)::
@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import math
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -35,6 +34,7 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from .._toml import REQUIRED, TomlReader, read_toml
 
 SCHEMA_KIND = "shelljax-force-sensor-calibration"
 SCHEMA_VERSION = 1
@@ -67,7 +67,7 @@ class ForceReading:
 
 
 @dataclasses.dataclass(frozen=True)
-class Calibration:
+class SensorCalibration:
     """A fitted force-film calibration. See the module docstring for the model.
 
     Attributes:
@@ -148,7 +148,7 @@ class Calibration:
         c0 = self.zero if zero is None else zero
         return c0 + math.exp(self.log_sensitivity) * force**self.exponent
 
-    def with_zero(self, zero: float, zero_std: float | None = None) -> "Calibration":
+    def with_zero(self, zero: float, zero_std: float | None = None) -> "SensorCalibration":
         """The same calibration re-tared: zero-load conductance proxy ``zero`` [-]."""
         return dataclasses.replace(self, zero=float(zero),
                                    zero_std=self.zero_std if zero_std is None else float(zero_std))  # fmt: skip
@@ -180,27 +180,19 @@ class Calibration:
         Path(path).write_text(_HEADER + tomli_w.dumps(self.to_dict()))
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "<dict>") -> "Calibration":
-        def fail(field: str, problem: str) -> InvalidInputError:
-            return InvalidInputError(
-                f"{source}: field '{field}': {problem}. Fix: use a file written by "
-                "`shelljax.sensing.Calibration.save` (see docs/sensing.md), or re-calibrate"
-            )
-
+    def from_dict(cls, data: dict, source: str = "<dict>") -> "SensorCalibration":
+        # a calibration is written by a program, so every field's fix is to write it again
+        reader = TomlReader(source, fix="use a file written by `shelljax.sensing.SensorCalibration.save` (see docs/sensing.md), "
+                            "or re-calibrate")  # fmt: skip
+        fail = reader.fail
         if data.get("kind") != SCHEMA_KIND:
             raise fail("kind", f"expected {SCHEMA_KIND!r}, got {data.get('kind')!r}")
         if data.get("schema_version") != SCHEMA_VERSION:
             raise fail("schema_version", f"expected {SCHEMA_VERSION}, got {data.get('schema_version')!r}")
         for key, allowed in (("model", MODELS), ("transform", TRANSFORMS)):
-            if data.get(key) not in allowed:
-                raise fail(key, f"{data.get(key)!r} is not one of {allowed}")
-        numbers = {}
-        for key in ("adc_max", "log_sensitivity", "exponent", "residual_std", "zero", "zero_std",
-                    "force_min", "force_max", "gravity"):  # fmt: skip
-            value = data.get(key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise fail(key, f"expected a finite number, got {value!r}")
-            numbers[key] = value
+            reader.choice(data, key, "", allowed, REQUIRED, what=key)
+        numbers = {key: reader.number(data, key) for key in ("adc_max", "log_sensitivity", "exponent", "residual_std", "zero",
+                                                              "zero_std", "force_min", "force_max", "gravity")}  # fmt: skip
         if numbers["exponent"] <= 0 or numbers["force_max"] <= numbers["force_min"] or numbers["force_min"] <= 0:
             raise fail("exponent/force_min/force_max", "need exponent > 0 and 0 < force_min < force_max")
         cov = np.asarray(data.get("covariance"), dtype=np.float64)
@@ -223,18 +215,11 @@ class Calibration:
         )  # fmt: skip
 
     @classmethod
-    def load(cls, path: str | Path) -> "Calibration":
+    def load(cls, path: str | Path) -> "SensorCalibration":
         """Read a calibration TOML; raises :class:`~shelljax.InvalidInputError` naming the field."""
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError as error:
-            raise InvalidInputError(
-                f"{path}: calibration file not found. Fix: pass --calibration with an existing file, "
-                "or create one with `shelljax sensor-calibrate`"
-            ) from error
-        except tomllib.TOMLDecodeError as error:
-            raise InvalidInputError(f"{path}: not valid TOML ({error}). Fix: re-save the calibration") from error
+        data = read_toml(path, "calibration file", fix_syntax="re-save the calibration",
+                         fix_missing="pass --calibration with an existing file, or create one with `shelljax sensor-calibrate`")
         return cls.from_dict(data, source=str(path))
 
 
@@ -253,7 +238,7 @@ def fit_calibration(
     adc_max: int = 1023,
     sensor: str = "",
     gravity: float = 9.80665,
-) -> Calibration:
+) -> SensorCalibration:
     """Fit the calibration model to readings under known loads.
 
     Args:
@@ -315,7 +300,7 @@ def fit_calibration(
             f"calibration: fitted exponent β={beta:.3g} is not positive (the reading falls with load). "
             "Fix: check the wiring and that the loads were entered in the right order"
         )
-    return Calibration(
+    return SensorCalibration(
         model=model, transform=transform, adc_max=int(adc_max), log_sensitivity=log_a,
         exponent=beta, covariance=((float(cov[0, 0]), float(cov[0, 1])), (float(cov[1, 0]), float(cov[1, 1]))),
         residual_std=math.sqrt(s2), zero=c0, zero_std=zero_std, force_min=float(force.min()),
@@ -328,7 +313,7 @@ def fit_calibration(
 def load_point(force: float, raw: Sequence[int] | np.ndarray, *, transform: str = "divider",
                adc_max: int = 1023) -> LoadPoint:  # fmt: skip
     """Summarize raw counts taken under a known ``force`` [N] as a :class:`LoadPoint`."""
-    probe = Calibration(model="power", transform=transform, adc_max=adc_max, log_sensitivity=0.0,
+    probe = SensorCalibration(model="power", transform=transform, adc_max=adc_max, log_sensitivity=0.0,
                         exponent=1.0, covariance=((0.0, 0.0), (0.0, 0.0)), residual_std=0.0,
                         zero=0.0, zero_std=0.0, force_min=1.0, force_max=2.0)  # fmt: skip
     c = probe.conductance(np.asarray(raw))

@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ._calibration import OK, Calibration
+from ._calibration import OK, SensorCalibration
 from ._console import Console
 from ._driver import Sample, SerialSensor
 
@@ -151,7 +151,7 @@ class Pump:
     def __init__(
         self,
         driver: SerialSensor,
-        calibration: Calibration | None,
+        calibration: SensorCalibration | None,
         log: SampleLog,
         console: Console,
         *,

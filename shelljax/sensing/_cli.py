@@ -18,7 +18,7 @@ from pathlib import Path
 from .._errors import DeviceError, InvalidInputError
 from ..paper import PAPER_FORCES
 from ._calibrate import DEFAULT_MASSES, calibrate_sensor
-from ._calibration import MODELS, Calibration
+from ._calibration import MODELS, SensorCalibration
 from ._capture import HumanOperator
 from ._console import AutoConsole, Console, TerminalConsole
 from ._driver import DEFAULT_BAUD, SerialSensor, logger
@@ -244,7 +244,7 @@ def cmd_acquire(args) -> int:
                 depth_source="channel" if args.depth_from_channel else "prompt", depth_unit=args.depth_unit,
                 depth_scale=depth_scale, ask_level_wrinkles=not args.no_level_wrinkles,
             )  # fmt: skip
-            kwargs = {"calibration": Calibration.load(cal_path), "plan": plan, "meta": _meta(args, out, device)}
+            kwargs = {"calibration": SensorCalibration.load(cal_path), "plan": plan, "meta": _meta(args, out, device)}
         try:
             result = acquire(driver, out, console, operator=operator, resume=args.resume, **kwargs)
         except (KeyboardInterrupt, EOFError):

@@ -27,8 +27,7 @@ from collections.abc import Callable
 import numpy as np
 import serial
 
-from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
-from ..physics import scaling_wrinkle_count
+from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS, scaling_wrinkle_count
 from ._protocol import HELLO_REQUEST, Hello, RawSample, format_hello, format_sample
 
 

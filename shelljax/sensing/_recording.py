@@ -39,7 +39,7 @@ import tomli_w
 from .._errors import InvalidInputError
 from ..paper import PAPER_FORCES
 from ..session import LENGTH_UNITS
-from ._calibration import ADC_SATURATED, Calibration
+from ._calibration import ADC_SATURATED, SensorCalibration
 from ._capture import HumanOperator, Operator, Pump, Reading, SampleLog, accept_force
 from ._console import Console
 from ._driver import SerialSensor
@@ -68,7 +68,7 @@ class AcquisitionPlan:
     depth_scale: float | None = None
     ask_level_wrinkles: bool = True
 
-    def check(self, calibration: Calibration) -> None:
+    def check(self, calibration: SensorCalibration) -> None:
         """Raise :class:`InvalidInputError` if the plan cannot be recorded with ``calibration``."""
         if len(self.forces) < 3 or any(not f > 0 for f in self.forces):
             raise InvalidInputError(f"--forces {self.forces}: need at least 3 positive force levels [N]")
@@ -221,11 +221,11 @@ def _resumed(paths: RecordingPaths):
         )
     state = _State.from_events(EventLog.read(paths.events), paths.events)
     start = state.start
-    calibration = Calibration.from_dict(start["calibration"], source=str(paths.events))
+    calibration = SensorCalibration.from_dict(start["calibration"], source=str(paths.events))
     return state, calibration, _plan_from_dict(start["plan"]), start["meta"]
 
 
-def _started(paths: RecordingPaths, calibration: Calibration | None, plan: AcquisitionPlan | None,
+def _started(paths: RecordingPaths, calibration: SensorCalibration | None, plan: AcquisitionPlan | None,
              meta: dict | None) -> _State:  # fmt: skip
     """The state of a new recording, after checking that nothing would be overwritten."""
     if calibration is None or plan is None or meta is None:
@@ -250,7 +250,7 @@ def acquire(
     out: str | Path,
     console: Console,
     *,
-    calibration: Calibration | None = None,
+    calibration: SensorCalibration | None = None,
     plan: AcquisitionPlan | None = None,
     meta: dict | None = None,
     operator: Operator | None = None,
@@ -315,7 +315,7 @@ class _Walk:
 
     def __init__(self, pump: Pump, plan: AcquisitionPlan, meta: dict, console: Console,
                  operator: Operator, events: EventLog, state: _State, paths: RecordingPaths,
-                 calibration: Calibration):  # fmt: skip
+                 calibration: SensorCalibration):  # fmt: skip
         self.pump, self.plan, self.meta, self.console = pump, plan, meta, console
         self.operator, self.events, self.state, self.paths = operator, events, state, paths
         self.calibration = calibration

@@ -164,14 +164,14 @@ def _read_header(reader: _Reader, data: dict) -> dict:
     notes = data.get("notes", "")
     if not isinstance(notes, str):
         raise reader.fail("notes", f"expected text, got {notes!r}", 'write notes = "..."')
-    poisson_ratio = reader.number(data, "poisson_ratio", required=False, positive=False)
+    poisson_ratio = reader.number(data, "poisson_ratio", default=None)
     poisson_ratio = DEFAULT_POISSON_RATIO if poisson_ratio is None else poisson_ratio
     if not -1.0 < poisson_ratio < 0.5:
         raise reader.fail("poisson_ratio", f"value {poisson_ratio} outside (-1, 0.5)", "rubbers sit at 0.3-0.5; the default is 0.4")
-    mass = reader.number(data, "mass", required=False)
+    mass = reader.number(data, "mass", default=None, positive=True)
     if mass is not None:
         mass *= reader.unit(data, "mass_unit", "mass", "kg")
-    manometer = reader.number(data, "manometer_gauge_pressure", required=False)
+    manometer = reader.number(data, "manometer_gauge_pressure", default=None, positive=True)
     if manometer is not None:
         manometer *= reader.unit(data, "pressure_unit", "pressure", "Pa")
         if manometer > 1e6:
@@ -190,8 +190,8 @@ def _read_wall(reader: _Reader, data: dict) -> tuple[float, float]:
     """(thickness h [m], its standard deviation [m]) from [wall]."""
     wall = reader.table(data, "wall", _WALL_KEYS, required=True)
     wall_scale = reader.unit(wall, "thickness_unit", "length", "m", "wall.")
-    thickness = reader.number(wall, "thickness", "wall.") * wall_scale
-    thickness_std = reader.number(wall, "thickness_std", "wall.", positive=False) * wall_scale
+    thickness = reader.number(wall, "thickness", "wall.", positive=True) * wall_scale
+    thickness_std = reader.number(wall, "thickness_std", "wall.") * wall_scale
     if thickness_std < 0:
         raise reader.fail("wall.thickness_std", f"value {thickness_std} is negative", "write a standard deviation >= 0")
     if thickness > 0.05:
@@ -218,8 +218,8 @@ def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
         return {"radius": float(radius), "radius_std": float(radius_std), "mesh_path": mesh_path,
                 "poke_point": poke_point, "fit_radius": fit_radius, "fit_rms_residual": fit_rms,
                 "enclosed_volume": mesh_volume}  # fmt: skip
-    radius = reader.number(geometry, "radius", "geometry.") * length_scale
-    radius_std = (reader.number(geometry, "radius_std", "geometry.", required=False, positive=False) or 0.0) * length_scale
+    radius = reader.number(geometry, "radius", "geometry.", positive=True) * length_scale
+    radius_std = (reader.number(geometry, "radius_std", "geometry.", default=None) or 0.0) * length_scale
     if radius > 50.0:
         raise reader.fail(
             "geometry.radius", f"{radius:g} m is implausibly large",
@@ -504,7 +504,7 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     poke_point = np.asarray(raw_point, dtype=np.float64) * length_scale
     if not np.all(np.isfinite(poke_point)):
         raise reader.fail("geometry.poke_point", f"{raw_point!r} is not finite", "write three finite numbers")
-    fit_radius = reader.number(geometry, "fit_radius", "geometry.", required=False)
+    fit_radius = reader.number(geometry, "fit_radius", "geometry.", default=None, positive=True)
     fit_radius = None if fit_radius is None else fit_radius * length_scale
     unit_name = geometry.get("length_unit", "m")
     try:

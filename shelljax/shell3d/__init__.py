@@ -12,8 +12,10 @@ Quick start (SI units)::
     state.wrinkles(max_radius=0.08, ring_width=0.005).count   # radial wrinkles (angular Fourier)
 
 Lower layers, for benchmarks and verification: :class:`ShellModel` (energy, gradient, sparse
-Hessian, :meth:`ShellModel.equilibrium`), the Newton solver (:func:`newton` on an
-:class:`AbstractEnergyProblem`), the sparse factorization (:class:`SparseSolver`) and implicit
+Hessian, :meth:`ShellModel.equilibrium`), the free shell's rest shape and pressurized reference
+state (:func:`inflated_reference`), the Newton solver (:func:`newton` on an
+:class:`AbstractEnergyProblem`, returning a :class:`shelljax.Solution`), the sparse factorization
+(:class:`SparseSolver`, its caches freed by :func:`release_factorizations`) and implicit
 differentiation (:func:`implicit_equilibrium`).
 """
 
@@ -25,12 +27,12 @@ from ._hessian import face_hessians, hessian_values
 from ._hessian import rank_one as gas_rank_one
 from ._implicit import implicit_equilibrium
 from ._indent import Indentation, IndentationState, Shell, ball, load
-from ._mesh import ShellMesh, random_sphere_mesh, sphere_mesh
+from ._mesh import ShellMesh
 from ._model import EquilibriumProblem, ShellModel, rigid_mode_pins
-from ._newton import AbstractEnergyProblem, NewtonResult, newton
+from ._newton import AbstractEnergyProblem, newton
 from ._params import ShellParams
 from ._observables import observables
-from ._rest import solve_rest_shape
+from ._rest import InflatedReference, inflated_reference, solve_rest_shape
 from ._search import match_forces, solve_travels
-from ._sparse import SparseSolver, SparsityPattern, release_factorizations
+from ._sparse import SparseSolver, SparsityPattern, kept_factorization, release_factorizations
 from ._wrinkles import WrinkleSpectrum, wrinkle_spectrum

@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 from .._errors import InvalidInputError
+from ..physics import Plane
 
 GAS_MODELS = ("prescribed", "isothermal", "adiabatic")
 
@@ -21,11 +22,27 @@ def _as_float(value) -> float:
         return math.nan
 
 
+def _static_plane(plane, index: int) -> Plane:
+    """``plane`` as a :class:`Plane` of the static setup (a (point, normal) pair becomes one)."""
+    if not isinstance(plane, Plane):
+        point, normal = plane
+        plane = Plane(point, normal, name="ground" if index == 0 else f"plane {index}")
+    own = plane.law is not None or float(plane.friction) != 0.0 or float(plane.damping) != 0.0
+    if own:
+        raise InvalidInputError(
+            f"planes[{index}] ({plane.name!r}) has its own contact law, friction or damping; the 3D engine's "
+            "planes take theirs from ContactConfig (kind, friction): give the plane's point and normal only."
+        )
+    return plane
+
+
 @dataclasses.dataclass(frozen=True)
 class ContactConfig:
     """Static contact setup (hashable; part of the jit key).
 
-    ``indenter_radius`` [m] or None; ``planes``: tuple of (point (3,), unit normal (3,)) [m];
+    ``indenter_radius`` [m] or None; ``planes``: tuple of :class:`shelljax.physics.Plane` (or of
+    (point (3,) [m], unit normal (3,)) pairs, made planes) without a law, friction or damping of
+    their own: this setup's ``kind`` and ``friction`` apply to all of them;
     ``kind``: "barrier" (IPC log barrier, no penetration, surface stops within
     ``activation_distance`` ĝ [m] of the body) or "penalty" (quadratic; a vertex pressed by the
     reference pressure penetrates by ``activation_distance``).
@@ -60,6 +77,7 @@ class ContactConfig:
             )
         object.__setattr__(self, "friction", mu)
         object.__setattr__(self, "slip_tolerance", None if mu == 0 else eps)
+        object.__setattr__(self, "planes", tuple(_static_plane(p, i) for i, p in enumerate(self.planes)))
 
     @property
     def has_friction(self) -> bool:

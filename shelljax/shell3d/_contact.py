@@ -15,7 +15,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
-from ..physics import barrier_energy, friction_energy, penalty_energy, plane_gap, sphere_gap
+from ..physics import barrier_energy, friction_energy, penalty_energy, sphere_gap
 from ._config import ContactConfig, ModelConfig, split_dofs
 
 # Barrier calibration: the IPC barrier's force at g = ĝ/10 is κ ĝ · 12.2 (φ(s) = 2(s−1)ln s +
@@ -45,16 +45,16 @@ def sphere_contact_energy(x, c, geometry, config):
 
 
 def plane_contact_energy(x, plane, geometry, config):
-    """Contact energy [J] of all vertices against one plane (point, normal)."""
+    """Contact energy [J] of all vertices against one :class:`shelljax.physics.Plane`."""
     k = contact_stiffness(geometry, config.contact)
-    gap = plane_gap(x, jnp.asarray(plane[0]), jnp.asarray(plane[1]))
+    gap = plane.gap(x)
     return jnp.sum(contact_potential(gap, k, config.contact))
 
 
 def plane_normal_forces(x, plane, geometry, config) -> Float[Array, " V"]:
     """Normal contact force magnitude λ = −dφ/dgap [N] (≥ 0) of every vertex on one plane."""
     k = contact_stiffness(geometry, config.contact)
-    gap = plane_gap(x, jnp.asarray(plane[0]), jnp.asarray(plane[1]))
+    gap = plane.gap(x)
     dphi = jax.vmap(jax.grad(contact_potential), in_axes=(0, 0, None))(gap, k, config.contact)
     return -dphi
 
@@ -91,7 +91,7 @@ def friction_potential(x, params, config) -> Float[Array, ""]:
     mu = friction_coefficient(params, config)
     e = jnp.zeros(())
     for i, plane in enumerate(config.contact.planes):
-        e = e + jnp.sum(vertex_friction(x, anchor, lam[i], jnp.asarray(plane[1]), mu, config.contact))
+        e = e + jnp.sum(vertex_friction(x, anchor, lam[i], plane.normal, mu, config.contact))
     return e
 
 
@@ -102,7 +102,7 @@ def min_gap(q, geometry, config):
     if config.contact.indenter_radius is not None:
         g = jnp.minimum(g, jnp.min(sphere_gap(x, c, config.contact.indenter_radius)))
     for plane in config.contact.planes:
-        g = jnp.minimum(g, jnp.min(plane_gap(x, jnp.asarray(plane[0]), jnp.asarray(plane[1]))))
+        g = jnp.minimum(g, jnp.min(plane.gap(x)))
     return g
 
 
@@ -125,7 +125,7 @@ def stacked_friction_forces(q, params, config):
     out = []
     for i, plane in enumerate(config.contact.planes):
         e = lambda y, i=i, plane=plane: jnp.sum(  # noqa: E731
-            vertex_friction(y, anchor, lam[i], jnp.asarray(plane[1]), mu, config.contact)
+            vertex_friction(y, anchor, lam[i], plane.normal, mu, config.contact)
         )
         out.append(-jax.grad(e)(x))
     return jnp.stack(out)
@@ -148,7 +148,7 @@ def body_gap_and_normal(x, c, config: ModelConfig, body: int):
             distance = np.linalg.norm(offset, axis=1)
             return distance - contact.indenter_radius, offset / distance[:, None]
         body -= 1
-    point, normal = (np.asarray(a, dtype=np.float64) for a in contact.planes[body])
+    point, normal = (np.asarray(a, dtype=np.float64) for a in (contact.planes[body].point, contact.planes[body].normal))
     return (x - point) @ normal, np.broadcast_to(normal, x.shape)
 
 

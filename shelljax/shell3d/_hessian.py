@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..physics import plane_gap, sphere_gap
+from ..physics import sphere_gap
 from ._config import ModelConfig, split_dofs
 from ._contact import contact_potential, contact_stiffness, friction_coefficient, friction_data, vertex_friction
 from ._energy import face_energy, gas_energy, rest_geometry, total_energy, volume
@@ -84,10 +84,10 @@ def _contact_hessians(q, params, geometry, config):
         # The friction of a vertex on a plane involves only that vertex: it shares the plane's
         # per-vertex 3×3 block (same sparsity pattern with or without friction).
         def single(y, kv, y_hat, lam_v, plane=plane):
-            gap = plane_gap(y, jnp.asarray(plane[0]), jnp.asarray(plane[1]))
+            gap = plane.gap(y)
             e = contact_potential(gap, kv, config.contact)
             if friction:
-                e = e + vertex_friction(y, y_hat, lam_v, jnp.asarray(plane[1]), mu, config.contact)
+                e = e + vertex_friction(y, y_hat, lam_v, plane.normal, mu, config.contact)
             return e
 
         y_hat = anchor if friction else x
@@ -128,9 +128,9 @@ def barrier_softening(q, gradient, geometry, config) -> Float[Array, "V 3 3"]:
     slope = jax.vmap(jax.grad(contact_potential), in_axes=(0, 0, None))
     curvature = jax.vmap(jax.grad(jax.grad(contact_potential)), in_axes=(0, 0, None))
     blocks = jnp.zeros((config.n_vertices, 3, 3))
-    for point, normal in config.contact.planes:
-        normal = jnp.asarray(normal)
-        gap = plane_gap(x, jnp.asarray(point), normal)
+    for plane in config.contact.planes:
+        normal = plane.normal
+        gap = plane.gap(x)
         push = -slope(gap, k, config.contact)
         pressed = push > 0.0
         ratio = 1.0 + (vertex_gradient @ normal) / jnp.where(pressed, push, 1.0)

@@ -3,7 +3,8 @@
 At an equilibrium r(x*, θ) = ∇ₓE(x*, θ) = 0 on the free dofs, so dx* = −H⁻¹ ∂r/∂θ dθ with the
 (symmetric) Hessian H = ∂r/∂x. The primal solve is a host Newton run (``jax.pure_callback``), the
 tangent solve a ``jax.lax.custom_linear_solve`` whose matvec is a JAX Hessian-vector product and
-whose solve is the same host sparse factorization (CHOLMOD or SuperLU, + Sherman–Morrison) as in Newton. Being
+whose solve is the same host sparse factorization (CHOLMOD or SuperLU, + Sherman–Morrison) as in
+Newton (:func:`shelljax._solution.implicit_tangent`, shared with the axisymmetric engine). Being
 symmetric, the same solve serves the transpose, so both ``jax.jvp``/``jacfwd`` and
 ``jax.grad``/``jacrev`` work, also under ``jax.jit``. No Newton iteration is unrolled and no dense
 Hessian is formed.
@@ -17,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._solution import implicit_tangent
 from ._sparse import SparseSolver
 
 
@@ -45,21 +47,15 @@ def implicit_equilibrium(
     def _equilibrium_jvp(primals, tangents):
         (theta,), (dtheta,) = primals, tangents
         x = equilibrium(theta)
-        _, dr = jax.jvp(lambda th: residual(x, th), (theta,), (dtheta,))
 
-        def matvec(v):
-            hv = jax.jvp(lambda y: residual(y, theta), (x,), (mask * v,))[1]
-            return mask * hv + (1.0 - mask) * v
+        def host(x_, theta_, b_):
+            theta_np = jax.tree_util.tree_map(np.asarray, theta_)
+            mat, rank_one = hessian_host(np.asarray(x_), theta_np)
+            return SparseSolver(mat, rank_one, symmetric=True).apply_inverse(np.asarray(b_))
 
-        def tangent_solve(_matvec, b):
-            def host(x_, theta_, b_):
-                theta_np = jax.tree_util.tree_map(np.asarray, theta_)
-                mat, rank_one = hessian_host(np.asarray(x_), theta_np)
-                return SparseSolver(mat, rank_one, symmetric=True).apply_inverse(np.asarray(b_))
-
+        def solve(b):
             return jax.pure_callback(host, out_shape, x, theta, b)
 
-        dx = jax.lax.custom_linear_solve(matvec, -mask * dr, tangent_solve, symmetric=True)
-        return x, dx
+        return x, implicit_tangent(residual, x, theta, dtheta, mask, solve)
 
     return equilibrium

@@ -37,18 +37,17 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import ATMOSPHERIC_PRESSURE
+from ..physics import ATMOSPHERIC_PRESSURE, Plane
 from ._config import ContactConfig, ModelConfig
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
-from ._mesh import ShellMesh, sphere_mesh
+from ._mesh import ShellMesh
 from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
 from ._params import ShellParams
-from ._rest import solve_rest_scale, solve_rest_shape
+from ._rest import inflated_reference
 from ._search import match_forces, solve_travels
 from ._steps import accumulate_slip, feasible_start, initial_slip, secant_predict
-from ._sparse import release_factorizations
 from ._wrinkles import wrinkle_spectrum
 
 #: Lagging stops once the normal forces change by less than this fraction of their largest value.
@@ -73,7 +72,7 @@ def ball(radius: float, thickness: float, n_triangles: int = 5000, *, pole_refin
     ``n_triangles`` faces refined ``pole_refinement``× at the top (indenter) and bottom (ground)."""
     if not radius > 0:
         raise InvalidInputError(f"radius: must be a positive length in m, got {radius}.")
-    mesh = sphere_mesh(radius, n_triangles, pole_refinement=pole_refinement, growth=growth, name="ball")
+    mesh = ShellMesh.sphere(radius, n_triangles, pole_refinement=pole_refinement, growth=growth, name="ball")
     return Shell(mesh=mesh, thickness=float(thickness))
 
 
@@ -192,7 +191,8 @@ class Indentation:
     the scan as stress-free, i.e. inflate it a second time);
     ``force_tolerance`` [N]: Newton tolerance on the largest nodal force residual (default
     1e-8 E h L, L the shell's size); ``max_newton_iterations``: Newton iterations per load step
-    before it raises (default 60; deep, wrinkling states can converge linearly and need more);
+    before it raises (default 60; deep, wrinkling states can converge linearly and need more;
+    Newton's ``max_steps``, named apart from ``max_step``, the continuation step in depth);
     ``max_step`` [m]: largest continuation step in depth;
     ``friction`` μ [-] ≥ 0: Coulomb coefficient between shell and ground (default 0: frictionless;
     the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
@@ -238,8 +238,20 @@ class Indentation:
                                        float(gauge_pressure), mass=None if mass is None else float(mass))  # fmt: skip
         self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
         self._fixed = rigid_mode_pins(scan)
-        self._reference_state(scan, rest_shape, gas, indenter_radius)
-        planes = (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),) if ground else ()
+        reference = inflated_reference(shell, self.base_params, vertices=scan, rest_shape=rest_shape, atol=self.atol)
+        self.rest, self.reference_volume = reference.rest, reference.reference_volume
+        #: Largest distance [m] between the pressurized reference state and the scan.
+        self.rest_mismatch = reference.rest_mismatch
+        if gas != "prescribed":
+            self.base_params = self.base_params.replace(reference_volume=self.reference_volume,
+                                                        atmospheric_pressure=ATMOSPHERIC_PRESSURE)  # fmt: skip
+        self.indenter_radius = float(indenter_radius)
+        #: The indenter's start (3,) [m], at first touch above the inflated top vertex.
+        self.top_height = float(reference.inflated[self.top, 2])
+        x_top = reference.inflated[self.top]
+        self.touch_center = np.array([x_top[0], x_top[1], self.top_height + indenter_radius + 0.5 * self.gap0])
+        self.q_reference = np.concatenate([reference.inflated.ravel(), self.touch_center])
+        planes = (Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), name="ground"),) if ground else ()
         contact_cfg = ContactConfig(
             indenter_radius=float(indenter_radius), planes=planes, kind=contact,
             activation_distance=float(self.activation_distance), reference_pressure=float(max(gauge_pressure, 1e3)),
@@ -261,42 +273,6 @@ class Indentation:
         ghat = activation_distance or (2e-4 * size / 0.13 if contact == "barrier" else 2e-5 * size / 0.13)
         self.activation_distance = ghat
         return scan + np.array([0.0, 0.0, 0.5 * ghat if contact == "barrier" else 0.0])
-
-    def _reference_state(self, scan, rest_shape: str, gas: str, indenter_radius: float) -> None:
-        """Rest shape and pressurized reference state of the free shell (no contacts): sets
-        ``rest``, ``q_reference``, ``rest_mismatch``, ``reference_volume`` [m³], ``top_height``
-        [m], ``touch_center`` [m] (the indenter at first touch) and the sealed gas's parameters."""
-        # The bottom vertex's height is pinned only to remove the vertical translation.
-        free_fixed = self._fixed.copy()
-        free_fixed[3 * self.bottom + 2] = True
-        mesh = self.shell.mesh
-        free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), free_fixed)
-        q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
-        pressurized = float(self.base_params.gauge_pressure) > 0
-        if rest_shape == "exact" and pressurized:
-            self.rest = solve_rest_shape(free_model, scan, self.base_params, atol=self.atol)
-        elif rest_shape == "solve" and pressurized:
-            self.rest, q_scan, _ = solve_rest_scale(free_model, scan, self.base_params, atol=self.atol)
-        else:
-            self.rest = scan
-        free_model = free_model.with_rest(self.rest)
-        ref = free_model.equilibrium(q_scan, self.base_params, atol=self.atol, name="reference state")
-        #: Largest distance [m] between the pressurized reference state and the scan.
-        self.rest_mismatch = float(np.max(np.linalg.norm(ref.x[:-3].reshape(-1, 3) - scan, axis=1)))
-        self.q_reference = ref.x
-        self.reference_volume = float(free_model.volume(jnp.asarray(ref.x)))
-        # The free shell is done with: its factor would otherwise live on through the contact
-        # model's compilation, until that model's first factorization.
-        release_factorizations()
-        if gas != "prescribed":
-            self.base_params = self.base_params.replace(reference_volume=self.reference_volume,
-                                                        atmospheric_pressure=ATMOSPHERIC_PRESSURE)  # fmt: skip
-        x_ref = ref.x[:-3].reshape(-1, 3)
-        self.top_height = float(x_ref[self.top, 2])
-        self.indenter_radius = float(indenter_radius)
-        self.touch_center = np.array([x_ref[self.top, 0], x_ref[self.top, 1],
-                                      self.top_height + indenter_radius + 0.5 * self.gap0])  # fmt: skip
-        self.q_reference[-3:] = self.touch_center
 
     def with_friction(self, friction: float, slip_tolerance: float | None = None) -> "Indentation":
         """The same simulation (shell, rest shape, reference state, settings) with another ground
@@ -334,15 +310,16 @@ class Indentation:
         # The last load step's last factorization preconditions this one (same control mode only).
         control = "force" if model.config.force_control else "depth"
         kept_control, kept = self._kept_factorization
-        res = model.equilibrium(q0, params, atol=self.atol, max_iter=self.max_newton_iterations,
+        res = model.equilibrium(q0, params, atol=self.atol, max_steps=self.max_newton_iterations,
                                 factorization=kept if kept_control == control else None, name=label)  # fmt: skip
-        self._kept_factorization = (control, res.last_factorization)
+        self._kept_factorization = (control, res.state)
         return res
 
     def _lagged_step(self, model, q_guess, params, label, q_start):
         """One load step from the converged ``q_start``, with lagged friction if μ > 0.
 
-        Returns (NewtonResult, friction params dict, relative lag change of the normal forces).
+        Returns (:class:`shelljax.Solution`, friction params dict, relative lag change of the normal
+        forces); its ``iterations`` and ``stats`` counts add up the re-solves.
         """
         if not model.config.contact.has_friction:
             return self._step(model, q_guess, params, label, q_start), {}, 0.0
@@ -351,19 +328,20 @@ class Indentation:
             "friction_normal_force": model.plane_normal_forces(q_start),
         }
         res = self._step(model, q_guess, params.replace(**lagged), label, q_start)
-        iterations, factorizations, products = res.iterations, res.factorizations, res.products
+        iterations, factorizations, products = res.iterations, res.stats["factorizations"], res.stats["products"]
         for k in range(self.friction_iterations + 1):
-            current = model.plane_normal_forces(res.x)
+            current = model.plane_normal_forces(res.value)
             change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
             change /= max(float(np.max(np.abs(current))), 1e-300)
             if change < FRICTION_LAG_TOLERANCE or k == self.friction_iterations:
                 break
             lagged = {**lagged, "friction_normal_force": current}
-            res = self._step(model, res.x, params.replace(**lagged), f"{label} (friction lag {k + 1})", res.x)
+            res = self._step(model, res.value, params.replace(**lagged), f"{label} (friction lag {k + 1})", res.value)
             iterations += res.iterations
-            factorizations += res.factorizations
-            products += res.products
-        res = dataclasses.replace(res, iterations=iterations, factorizations=factorizations, products=products)
+            factorizations += res.stats["factorizations"]
+            products += res.stats["products"]
+        stats = {**res.stats, "factorizations": factorizations, "products": products}
+        res = dataclasses.replace(res, iterations=iterations, stats=stats)
         return res, lagged, change
 
     def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
@@ -401,10 +379,10 @@ class Indentation:
             for d in self._substeps(history[-1][0], depth):
                 q_start = history[-1][1]
                 res, lagged, change = self._depth_step(history, d)
-                slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
-                history.append((d, res.x))
-            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.factorizations, res.products)  # fmt: skip
+                slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.value)
+                history.append((d, res.value))
+            return IndentationState(self, res.value, depth, res.iterations, res.history, lagged, change, slip[0],
+                                    res.stats["factorizations"], res.stats["products"])  # fmt: skip
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
 
@@ -416,7 +394,7 @@ class Indentation:
 
     def _depth_step(self, history, depth: float):
         """One displacement-controlled load step to travel ``depth`` [m] from the last state of
-        ``history`` [(travel, q)], secant-predicted: (NewtonResult, friction params, lag change)."""
+        ``history`` [(travel, q)], secant-predicted: (Solution, friction params, lag change)."""
         guess = secant_predict(history, depth)
         guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
         return self._lagged_step(self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m",
@@ -435,11 +413,11 @@ class Indentation:
             res, lagged, change = self._lagged_step(
                 self.force_model, guess, params, f"indentation force {force:.4g} N", q_start
             )
-            slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.x)
-            history.append((force, res.x))
-            depth = float(self.touch_center[2] - res.x[-1])
-            return IndentationState(self, res.x, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.factorizations, res.products)  # fmt: skip
+            slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.value)
+            history.append((force, res.value))
+            depth = float(self.touch_center[2] - res.value[-1])
+            return IndentationState(self, res.value, depth, res.iterations, res.history, lagged, change, slip[0],
+                                    res.stats["factorizations"], res.stats["products"])  # fmt: skip
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 
@@ -478,8 +456,8 @@ class Indentation:
 
         def minimise_at(theta):
             q = self._step(model, cache["q"], params_of(theta), "implicit-diff primal", cache["q"])
-            cache["q"] = q.x
-            return q.x
+            cache["q"] = q.value
+            return q.value
 
         def residual(q, theta):
             return model.gradient(q, params_of(theta))

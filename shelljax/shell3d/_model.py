@@ -45,7 +45,8 @@ from ._hessian import (
     softens,
 )
 from ._mesh import ShellMesh
-from ._newton import AbstractEnergyProblem, NewtonResult, newton
+from .._solution import Solution
+from ._newton import AbstractEnergyProblem, newton
 from ._params import FRICTION_FIELDS, ShellParams
 from ._sparse import SparseSolver, SparsityPattern
 
@@ -217,19 +218,20 @@ class ShellModel(eqx.Module):
             rank = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank
 
-    def equilibrium(self, q0, params, *, atol: float, max_iter: int = 60, factorization=None,
-                    name: str = "shell Newton", barrier_aids: bool = True) -> NewtonResult:
-        """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]; NewtonResult.
+    def equilibrium(self, q0, params, *, atol: float, max_steps: int = 60, factorization=None,
+                    name: str = "shell Newton", barrier_aids: bool = True) -> Solution:
+        """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]: a
+        :class:`shelljax.Solution` (raises NoConvergenceError where Newton fails).
 
         Steps are inexact Newton steps (CG on exact Hessian-vector products) preconditioned by a
         kept factorization, ``factorization`` (e.g. the previous load step's
-        ``last_factorization``) first: :func:`newton` on :class:`EquilibriumProblem`. With
+        ``Solution.state``) first: :func:`newton` on :class:`EquilibriumProblem`. With
         ``barrier_aids``, Newton's matrix is the Hessian with the planes' barriers softened where
         they press harder than the load (:func:`barrier_softening`; it equals the Hessian at
         equilibrium), and the line search keeps the vertices out of the bodies
         (:meth:`EquilibriumProblem.feasible_trial`)."""
         problem = EquilibriumProblem(self, self.host_params(params), barrier_aids)
-        return newton(problem, q0, atol=atol, max_iter=max_iter, factorization=factorization, name=name)
+        return newton(problem, q0, atol=atol, max_steps=max_steps, factorization=factorization, name=name)
 
     def linear_response(self, q, params, load) -> np.ndarray:
         """Displacement [m] solving H u = load [N] at state q (exact Hessian; pins held)."""

@@ -14,8 +14,9 @@ Each iteration first tries the exact Hessian (quadratic convergence); if it is n
 definite (its Cholesky factorization fails) or its step is not a descent direction, it retries
 with the per-element PSD-projected Hessian and finally with a diagonal shift. An indefinite
 Hessian is never solved by LU here: its Newton step heads for saddles as readily as for minima.
-A failure raises :class:`shelljax.NoConvergenceError` carrying the residual history; a result is
-never returned without meeting the tolerance.
+The result is the package's one :class:`shelljax.Solution`; a failure sets its ``result`` code
+and, by default (``throw=True``), raises :class:`shelljax.NoConvergenceError` from it carrying the
+residual history, so that a result is never returned without meeting the tolerance.
 
 Once a full Newton step has been taken, the next iteration first reuses the last factorization
 (a lagged-Hessian or Shamanskii step: one back-substitution instead of an assembly and a
@@ -37,7 +38,6 @@ dot products steals the core that XLA's products use (docs/shell3d.md, *Solver*)
 from __future__ import annotations
 
 import abc
-import dataclasses
 from typing import Any
 
 import equinox as eqx
@@ -46,6 +46,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from .._errors import NoConvergenceError
+from .._solution import RESULTS, Solution, raise_if_failed
 from ._sparse import SparseSolver
 
 
@@ -138,43 +139,34 @@ class AbstractRootProblem(AbstractEnergyProblem):
         return -float(gradient @ gradient)
 
 
-@dataclasses.dataclass(frozen=True)
-class NewtonResult:
-    """Converged state ``x`` with its residual history [N] (max |free gradient| per iterate) and
-    the number of Hessian ``factorizations`` it took (≤ iterations: see factorization reuse), the
-    Hessian-vector ``products`` of its CG solves, and the ``last_factorization`` (a SparseSolver or
-    None) to precondition a nearby minimisation with."""
-
-    x: np.ndarray
-    iterations: int
-    history: list
-    energy: float
-    factorizations: int = 0
-    products: int = 0
-    last_factorization: object = dataclasses.field(default=None, repr=False)
-
-
 def newton(
     problem: AbstractEnergyProblem,
     x0,
     *,
     atol: float,
-    max_iter: int = 60,
+    max_steps: int = 60,
     max_halvings: int = 40,
     armijo: float = 1e-4,
     reuse_factorization: bool = True,
     factorization=None,
     name: str = "Newton",
-) -> NewtonResult:
+    throw: bool = True,
+) -> Solution:
     """Minimise ``problem``'s energy from ``x0`` to max |∇E| ≤ ``atol`` [N] over its free dofs.
 
+    ``max_steps``: Newton iterations; ``max_halvings``: line-search halvings per iteration;
     ``reuse_factorization``: try the last factorization before a new one (module docstring);
-    ``factorization``: a kept factorization to start with. Raises NoConvergenceError with the
-    history.
+    ``factorization``: a kept factorization to start with. Returns a :class:`shelljax.Solution`
+    (``value`` x [m]; ``history`` [N] from the start's residual on; ``stats``: ``energy`` [J],
+    ``factorizations`` (≤ iterations: see factorization reuse), ``products`` (CG's
+    Hessian-vector products); ``state``: the last factorization, a SparseSolver or None, to
+    precondition a nearby minimisation with). With ``throw``, a failure raises
+    NoConvergenceError with the history instead.
     """
     with threadpool_limits(limits=1, user_api="blas"):
         run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name)
-        return run.minimise(x0, max_iter)
+        solution = run.minimise(x0, max_steps)
+    return raise_if_failed(solution, name, run.failure) if throw else solution
 
 
 class _NewtonRun:
@@ -189,44 +181,46 @@ class _NewtonRun:
         self.forcing = CG_FORCING_MAX
         # the last factorization, while lagged steps keep converging fast (or CG with it does)
         self.reusable = self.solver = factorization if reuse_factorization else None
+        self.failure = ""  # what went wrong, in more words than the result code
 
-    def minimise(self, x0, max_iter: int) -> NewtonResult:
+    def minimise(self, x0, max_steps: int) -> Solution:
         self.x = np.array(x0, dtype=np.float64)
         self.e = float(self.problem.energy(self.x))
+        self.history = []
         if not np.isfinite(self.e):
-            raise NoConvergenceError(f"{self.name}: the initial state is infeasible (energy = {self.e}).")
+            self.failure = f"the initial state is infeasible (energy = {self.e})."
+            return self._result(0, RESULTS.infeasible_start)
         self._evaluate_gradient()
         self.history = [float(np.max(np.abs(self.g)))]
-        for it in range(max_iter):
+        for it in range(max_steps):
             if self.history[-1] <= self.atol:
-                return self._result(it)
+                return self._result(it, RESULTS.successful)
             if not np.isfinite(self.history[-1]):
                 break
             step, slope, reused = self._direction(it)
+            if step is None:
+                return self._result(it, RESULTS.no_descent_direction)
             alpha, x_try, e_try = self._line_search(step, slope)
             if alpha is None:
                 if reused:  # a stale factorization is no reason to fail: refactorize and retry
                     self.reusable = None
                     continue
-                raise NoConvergenceError(
-                    f"{self.name}: line search failed at iteration {it} (no sufficient decrease after "
-                    f"{self.max_halvings} halvings; step norm {np.linalg.norm(step):.3e}).",
-                    self.history,
-                )
+                self.failure = (f"line search failed at iteration {it} (no sufficient decrease after "
+                                f"{self.max_halvings} halvings; step norm {np.linalg.norm(step):.3e}).")  # fmt: skip
+                return self._result(it, RESULTS.line_search_failed)
             self._accept(x_try, e_try, alpha, reused)
         if self.history[-1] <= self.atol:
-            return self._result(max_iter)
-        raise NoConvergenceError(
-            f"{self.name}: residual {self.history[-1]:.3e} N above tolerance {self.atol:.3e} N after {max_iter} "
-            "iterations. Use smaller continuation steps or allow more iterations (max_iter; "
-            "shell3d.Indentation(max_newton_iterations=...)).",
-            self.history,
+            return self._result(max_steps, RESULTS.successful)
+        self.failure = (
+            f"residual {self.history[-1]:.3e} N above tolerance {self.atol:.3e} N after {max_steps} "
+            "iterations. Use smaller continuation steps or allow more iterations (max_steps; "
+            "shell3d.Indentation(max_newton_iterations=...))."
         )
+        return self._result(max_steps, RESULTS.max_steps_reached)
 
-    def _result(self, iterations: int) -> NewtonResult:
-        return NewtonResult(x=self.x, iterations=iterations, history=self.history, energy=self.e,
-                            factorizations=self.factorizations, products=self.products,
-                            last_factorization=self.solver)  # fmt: skip
+    def _result(self, iterations: int, result) -> Solution:
+        stats = {"energy": self.e, "factorizations": self.factorizations, "products": self.products}
+        return Solution(self.x, result, iterations, self.history, stats, self.solver)
 
     def _evaluate_gradient(self) -> None:
         self.current = self.problem.gradient(self.x)
@@ -245,11 +239,9 @@ class _NewtonRun:
             slope = self.problem.slope(self.g, d)
             if np.all(np.isfinite(d)) and slope < 0.0:
                 return d, slope, False
-        raise NoConvergenceError(
-            f"{self.name}: no descent direction at iteration {it} (Hessian singular or indefinite "
-            "even after projection and shift).",
-            self.history,
-        )
+        self.failure = (f"no descent direction at iteration {it} (Hessian singular or indefinite "
+                        "even after projection and shift).")  # fmt: skip
+        return None, None, False
 
     def _reused_direction(self):
         """Newton step through the kept factorization: directly, or as CG's preconditioner."""
@@ -362,4 +354,4 @@ def _on_course(start: float, remaining: float, target: float, used: int) -> bool
     return rate < 1.0 and used + np.log(target / remaining) / np.log(rate) <= CG_MAX_ITERATIONS
 
 
-__all__ = ["AbstractEnergyProblem", "AbstractRootProblem", "NewtonResult", "newton"]
+__all__ = ["AbstractEnergyProblem", "AbstractRootProblem", "newton"]

@@ -16,15 +16,19 @@ amplifies short-wavelength bumps of its rest shape.)
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import NoConvergenceError
+from .._errors import InvalidInputError, NoConvergenceError
 from ..geometry import signed_volume
+from ._config import ModelConfig
 from ._hessian import rest_jacobian_values
-from ._model import ShellModel
+from ._model import ShellModel, rigid_mode_pins
 from ._newton import AbstractRootProblem, newton
 from ._params import ShellParams
+from ._sparse import release_factorizations
 
 
 def _membrane_strain(scan, faces, params) -> tuple[float, float]:
@@ -38,11 +42,12 @@ def _membrane_strain(scan, faces, params) -> tuple[float, float]:
     return p * radius * (1 - nu) / (2 * e * h), area
 
 
-def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
+def solve_rest_shape(model, scan, params, *, atol: float, max_steps: int = 30):
     """Rest vertices (V, 3) [m] of ``model``'s mesh for which ``scan`` (V, 3) [m] is in equilibrium.
 
     ``model``: a :class:`ShellModel` without contacts, pins fixing the rigid modes, prescribed
-    gas; ``params``: its parameters (gauge pressure P_g [Pa], E [Pa], ν, h [m]); ``atol`` [N].
+    gas; ``params``: its parameters (gauge pressure P_g [Pa], E [Pa], ν, h [m]); ``atol`` [N];
+    ``max_steps``: Newton iterations per pressure level.
     """
     scan = np.asarray(scan, dtype=np.float64)
     strain, _ = _membrane_strain(scan, model.mesh.faces, params)
@@ -54,7 +59,7 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_iter: int = 30):
     target = float(params.gauge_pressure)
     for level in (0.25, 0.5, 0.75, 1.0):
         level_params = params.replace(gauge_pressure=target * level)
-        rest = _newton_rest(model, scan, q_scan, rest, level_params, atol, max_iter, level == 1.0)
+        rest = _newton_rest(model, scan, q_scan, rest, level_params, atol, max_steps, level == 1.0)
     return rest
 
 
@@ -85,28 +90,26 @@ class RestShapeProblem(AbstractRootProblem):
         return self.model.pattern.matrix(data)
 
 
-def _newton_rest(model, scan, q_scan, rest, params, atol, max_iter, final):
+def _newton_rest(model, scan, q_scan, rest, params, atol, max_steps, final):
     """Newton on the rest vertices from ``rest`` to max |r| ≤ ``atol`` [N] (1000 ``atol`` unless
     ``final``: a pressure level on the way only needs to get close). Backtracking on ‖r‖: the first
     steps can overshoot on stiff short modes."""
     problem = RestShapeProblem(model, scan, q_scan, params)
     x0 = np.concatenate([np.asarray(rest).ravel(), np.zeros(3)])
-    try:
-        res = newton(problem, x0, atol=atol if final else 1e3 * atol, max_iter=max_iter, max_halvings=20,
-                     armijo=0.0, reuse_factorization=False, name="rest shape")  # fmt: skip
-    except NoConvergenceError as err:
-        history = err.history
-        last = history[-1] if history else float("nan")
+    res = newton(problem, x0, atol=atol if final else 1e3 * atol, max_steps=max_steps, max_halvings=20,
+                 armijo=0.0, reuse_factorization=False, name="rest shape", throw=False)  # fmt: skip
+    if not bool(res.converged):
+        last = res.history[-1] if res.history else float("nan")
         raise NoConvergenceError(
             f"rest shape: the scan is not an equilibrium of any rest shape found (max force residual "
             f"{last:.3e} N, tolerance {atol:.3e} N); the pressure may be too high for the given "
             "E and h.",
-            history,
-        ) from err
-    return problem._rest(res.x)
+            res.history,
+        )
+    return problem._rest(res.value)
 
 
-def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, max_iter: int = 20):
+def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, max_steps: int = 20):
     """Rest shape as the scan shrunk uniformly about its centroid, scaled so that the pressurized
     equilibrium encloses the scan's volume to ``rtol``.
 
@@ -129,9 +132,9 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     scale = 1.0 / (1.0 + strain)
     q = np.concatenate([scan.ravel(), np.zeros(3)])
     history = []
-    for _ in range(max_iter):
+    for _ in range(max_steps):
         rest = anchor + (scan - anchor) * scale
-        q = model.with_rest(rest).equilibrium(q, params, atol=atol, name="rest-scale forward solve").x
+        q = model.with_rest(rest).equilibrium(q, params, atol=atol, name="rest-scale forward solve").value
         vol = float(model.volume(jnp.asarray(q)))
         history.append(abs(vol / v_scan - 1.0))
         if history[-1] <= rtol:
@@ -140,6 +143,62 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
         scale *= (v_scan / vol) ** (1.0 / 3.0)
     raise NoConvergenceError(
         f"rest shape: the pressurized volume misses the scan's by {history[-1]:.3e} (relative) "
-        f"after {max_iter} iterations.",
+        f"after {max_steps} iterations.",
         history,
     )
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class InflatedReference:
+    """A free shell's stress-free shape and its pressurized equilibrium (no contacts).
+
+    ``rest`` (V, 3) [m]: the rest vertices; ``inflated`` (V, 3) [m]: the equilibrium at the
+    gauge pressure, in the frame of the vertices it was solved from (the bottom vertex stays
+    put); ``reference_volume`` [m³]: its enclosed volume, where a sealed gas holds P_g;
+    ``rest_mismatch`` [m]: the largest distance between ``inflated`` and the scan.
+    """
+
+    rest: np.ndarray
+    inflated: np.ndarray
+    reference_volume: float
+    rest_mismatch: float
+
+
+def inflated_reference(shell, params: ShellParams, *, vertices=None, rest_shape: str = "solve",
+                       atol: float | None = None) -> InflatedReference:
+    """The rest shape and pressurized reference state of ``shell`` (a :class:`Shell`; its mesh is
+    the pressurized scan [m]) under ``params`` (E [Pa], ν, h [m], P_g [Pa], mass), free of contacts.
+
+    ``vertices`` (V, 3) [m]: the scan in the caller's frame (default: the mesh's own);
+    ``rest_shape``: "solve" (the scan shrunk uniformly to its pressurized volume), "exact" (the
+    inverse problem on every rest vertex) or "scan" (the scan taken as stress-free); ``atol`` [N]:
+    Newton's force tolerance (default 1e-8 E h L, L the shell's size). The horizontal rigid modes
+    are pinned as :func:`rigid_mode_pins` does and the bottom vertex's height is held, so the
+    inflated state stays in the scan's frame. Frees the free shell's kept factorizations.
+    """
+    if rest_shape not in ("solve", "exact", "scan"):
+        raise InvalidInputError(f"rest_shape: use 'solve', 'exact' or 'scan', got {rest_shape!r}.")
+    mesh = shell.mesh
+    scan = np.asarray(mesh.vertices if vertices is None else vertices, dtype=np.float64)
+    if atol is None:
+        atol = 1e-8 * float(params.young_modulus) * float(params.thickness) * float(np.ptp(scan, axis=0).max())
+    fixed = rigid_mode_pins(scan)
+    # The bottom vertex's height is pinned only to remove the vertical translation.
+    fixed[3 * int(np.argmin(scan[:, 2])) + 2] = True
+    free_model = ShellModel(mesh, scan, ModelConfig(mesh.n_vertices), fixed)
+    q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
+    pressurized = float(params.gauge_pressure) > 0
+    rest = scan
+    if rest_shape == "exact" and pressurized:
+        rest = solve_rest_shape(free_model, scan, params, atol=atol)
+    elif rest_shape == "solve" and pressurized:
+        rest, q_scan, _ = solve_rest_scale(free_model, scan, params, atol=atol)
+    free_model = free_model.with_rest(rest)
+    q = free_model.equilibrium(q_scan, params, atol=atol, name="reference state").value
+    inflated = q[:-3].reshape(-1, 3)
+    volume = float(free_model.volume(jnp.asarray(q)))
+    # The free shell is done with: its factor would otherwise live on through the caller's
+    # contact model's compilation, until that model's first factorization.
+    release_factorizations()
+    return InflatedReference(rest=rest, inflated=inflated, reference_volume=volume,
+                             rest_mismatch=float(np.max(np.linalg.norm(inflated - scan, axis=1))))  # fmt: skip

@@ -34,8 +34,8 @@ def solve_travel(sim, solved: list, travel: float, halvings: int = 3) -> None:
             solve_travel(sim, solved, d, halvings - 1)
             history = [(0.0, sim.q_reference)] + [(t, q) for t, _, q in solved if t <= d]
             continue
-        history.append((d, np.asarray(res.x)))
-        force = float(observables(sim, res.x, sim.params_at(res.x))["force"])
+        history.append((d, np.asarray(res.value)))
+        force = float(observables(sim, res.value, sim.params_at(res.value))["force"])
         solved.append((d, force, history[-1][1]))
         solved.sort(key=lambda s: s[0])
 

@@ -451,13 +451,34 @@ _CHOLESKY_KEPT = 1
 _ANALYSED: list = []  # orderings holding a Cholesky analysis, oldest first
 
 
-def release_factorizations() -> None:
-    """Free every cached Cholesky analysis, and with it its factor storage.
+#: Factorizations kept by content (a fingerprint of the matrix), oldest first: the dynamics' kept
+#: Newton matrix is factorized once however many steps it serves. This module owns every host
+#: factorization cache, so that one call releases them all.
+_KEPT: dict = {}
+
+
+def kept_factorization(fingerprint, factorize, keep: int = 4):
+    """The factorization (whatever ``factorize()`` returns) kept under the hashable
+    ``fingerprint``, made and kept among the ``keep`` newest if it is not there yet."""
+    if fingerprint in _KEPT:
+        return _KEPT[fingerprint]
+    value = factorize()
+    if len(_KEPT) >= keep:
+        _KEPT.pop(next(iter(_KEPT)))
+    _KEPT[fingerprint] = value
+    return value
+
+
+def release_factorizations(keep_analyses: bool = False) -> None:
+    """Free every cached factorization: the factorizations kept by content and the Cholesky
+    analyses (and with them their factor storage) unless ``keep_analyses``.
 
     For a caller done with a sparsity pattern: a later factorization of that pattern redoes its
-    symbolic analysis (orderings stay cached).
+    symbolic analysis (orderings stay cached). ``keep_analyses``: only the numeric
+    factorizations go (e.g. to time a numeric factorization on its own).
     """
-    while _ANALYSED:
+    _KEPT.clear()
+    while _ANALYSED and not keep_analyses:
         _ANALYSED.pop(0)._cholesky.clear()
 
 

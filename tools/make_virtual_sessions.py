@@ -6,7 +6,7 @@ watchdog; a child whose XLA run wedged is restarted and resumes from its per-lev
 
 Usage::
 
-    python experiments/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600]
+    python tools/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600]
 """
 
 from __future__ import annotations
@@ -17,7 +17,11 @@ import sys
 import time
 from pathlib import Path
 
+from experiment_scripts import load_experiment
+
 from shelljax import virtual
+
+long_runs = load_experiment("long_runs")
 
 
 def _parse(argv=None):
@@ -39,13 +43,13 @@ def _parse(argv=None):
 
 def _solve_sets(args, sets) -> None:
     """Solve ``sets`` in this process and append each finished curve to ``args.out``."""
-    watchdog = virtual.Watchdog(args.watchdog).start()
+    watchdog = long_runs.Watchdog(args.watchdog).start()
     data = json.loads(args.out.read_text()) if args.out.exists() else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
     done = {(c["gauge_pressure"], c["young_modulus"], c["thickness"], c["n_faces"]) for c in data["curves"]}
     for i in sets:
         p = virtual.PARAMETER_SETS[i]
         t0 = time.perf_counter()
-        checkpoint = virtual.Checkpoint(Path(f"/tmp/shelljax_virtual_set{i}_{args.n_triangles}_travel.npz"), watchdog)
+        checkpoint = long_runs.Checkpoint(Path(f"/tmp/shelljax_virtual_set{i}_{args.n_triangles}_travel.npz"), watchdog)
         try:
             c = virtual.solve_curve(p, args.n_triangles, args.pole_refinement, checkpoint,
                                     force_tolerance=virtual.FORCE_TOLERANCE,
@@ -77,7 +81,7 @@ def main(argv=None):
         cmd = [sys.executable, __file__, "--curves", "--child", "--sets", str(i), "--out", str(args.out),
                "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
                "--watchdog", str(args.watchdog)]  # fmt: skip
-        virtual.run_with_restarts(cmd, args.restarts, f"set {i}")
+        long_runs.run_with_restarts(cmd, args.restarts, f"set {i}")
 
 
 if __name__ == "__main__":

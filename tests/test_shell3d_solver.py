@@ -5,8 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from shelljax import NoConvergenceError
+from shelljax import RESULTS, NoConvergenceError
 from shelljax.shell3d import (
+    kept_factorization,
     AbstractEnergyProblem,
     SparseSolver,
     SparsityPattern,
@@ -145,14 +146,21 @@ def test_newton_converges_in_force_units_and_reports_failure():
     energy, grad, hess, b = _quartic_problem()
     free = np.ones(b.size, dtype=bool)
     res = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
-    assert np.max(np.abs(grad(res.x))) <= 1e-12
+    assert np.max(np.abs(grad(res.value))) <= 1e-12
     # Quadratic convergence: the last residuals drop super-linearly.
     h = res.history
     assert h[-1] < 1e-3 * h[-2] or h[-1] < 1e-14
-    assert res.factorizations == res.iterations
+    assert res.stats["factorizations"] == res.iterations
     with pytest.raises(NoConvergenceError) as err:
-        newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, max_iter=2)
+        newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, max_steps=2)
     assert len(err.value.history) == 3 and "residual history" in str(err.value)
+    # Without throw, the same failure is the Solution's result code (the raise above comes from it).
+    flagged = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, max_steps=2, throw=False)
+    assert flagged.result == RESULTS.max_steps_reached and not bool(flagged.converged)
+    assert flagged.history == err.value.history and flagged.iterations == 2
+    assert bool(res.converged) and res.result == RESULTS.successful
+    infeasible = newton(_problem(lambda x: np.inf, grad, hess, free), np.zeros(b.size), atol=1e-12, throw=False)
+    assert infeasible.result == RESULTS.infeasible_start
 
 
 def test_newton_reuses_factorizations_only_while_they_contract():
@@ -168,14 +176,14 @@ def test_newton_reuses_factorizations_only_while_they_contract():
 
     exact = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
     lagged = newton(_problem(energy, grad, counting_hess, free), np.zeros(b.size), atol=1e-12)
-    assert np.max(np.abs(grad(lagged.x))) <= 1e-12
-    assert lagged.factorizations == len(factorized) < exact.factorizations
+    assert np.max(np.abs(grad(lagged.value))) <= 1e-12
+    assert lagged.stats["factorizations"] == len(factorized) < exact.stats["factorizations"]
     # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
-    np.testing.assert_allclose(lagged.x, exact.x, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
+    np.testing.assert_allclose(lagged.value, exact.value, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
     # Every lagged step but the last (which may stop early at the tolerance) contracted enough to
     # be followed by another lagged step; all other steps were fresh factorizations.
     h = lagged.history
-    reused_steps = lagged.iterations - lagged.factorizations
+    reused_steps = lagged.iterations - lagged.stats["factorizations"]
     assert reused_steps > 0
     ratios = np.array(h[:-1]) / np.array(h[1:])
     assert np.sum(ratios >= REUSE_CONTRACTION) >= reused_steps - 1
@@ -191,18 +199,18 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
 
     exact = newton(_problem(energy, grad, hess, free), np.zeros(b.size), atol=1e-12, reuse_factorization=False)
     inexact = newton(_problem(energy, grad, hess, free, hessian_operator=operator), np.zeros(b.size), atol=1e-12)
-    assert np.max(np.abs(grad(inexact.x))) <= 1e-12
+    assert np.max(np.abs(grad(inexact.value))) <= 1e-12
     # Strictly convex (Hessian ≥ 0.5 I): both minimisers lie within |∇E| / 0.5 of the unique one.
-    np.testing.assert_allclose(inexact.x, exact.x, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
+    np.testing.assert_allclose(inexact.value, exact.value, atol=2 * np.sqrt(b.size) * 1e-12 / 0.5)
     # A factorization preconditions the steps after it while CG converges on it: fewer are made.
-    assert inexact.factorizations < exact.factorizations
-    assert inexact.products >= inexact.iterations - inexact.factorizations > 0
+    assert inexact.stats["factorizations"] < exact.stats["factorizations"]
+    assert inexact.stats["products"] >= inexact.iterations - inexact.stats["factorizations"] > 0
     # Handed to a nearby problem (5 % more load), it is all that problem needs either.
     shifted = lambda x: grad(x) - 0.05 * b  # noqa: E731
     energy_shifted = lambda x: energy(x) - 0.05 * b @ x  # noqa: E731
-    again = newton(_problem(energy_shifted, shifted, hess, free, hessian_operator=operator), inexact.x, atol=1e-12, factorization=inexact.last_factorization)  # fmt: skip
-    assert np.max(np.abs(shifted(again.x))) <= 1e-12
-    assert again.factorizations == 0 and again.last_factorization is inexact.last_factorization
+    again = newton(_problem(energy_shifted, shifted, hess, free, hessian_operator=operator), inexact.value, atol=1e-12, factorization=inexact.state)  # fmt: skip
+    assert np.max(np.abs(shifted(again.value))) <= 1e-12
+    assert again.stats["factorizations"] == 0 and again.state is inexact.state
 
 
 def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minimum():
@@ -255,13 +263,13 @@ def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minim
     projected = newton(_problem(energy, grad, hess, free, project=keep_gap), start, atol=1e-10, reuse_factorization=False)
     assert infeasible == [] and len(trials) >= projected.iterations
     for res in (plain, projected):
-        assert np.max(np.abs(grad(res.x))) <= 1e-10
+        assert np.max(np.abs(grad(res.value))) <= 1e-10
     # At the minimum every spring carries the push, compressed by its whole rest length 0.1, so
     # all beads sit at x₀ = μ/push. The barrier (μ/x₀² = 1e6 N/m) holds x₀; the rest is a
     # fixed–free chain of 4 springs, smallest eigenvalue 4k sin²(π/18) ≈ 1.2 N/m, so
     # |x − x*| ≤ √5 · 1e-10 N / 1.2 N/m ≈ 2e-10 m.
-    np.testing.assert_allclose(projected.x, mu / push, atol=5e-10)
-    np.testing.assert_allclose(plain.x, mu / push, atol=5e-10)
+    np.testing.assert_allclose(projected.value, mu / push, atol=5e-10)
+    np.testing.assert_allclose(plain.value, mu / push, atol=5e-10)
 
 
 def test_preconditioned_cg_gives_up_on_a_poor_preconditioner_or_negative_curvature():
@@ -358,6 +366,21 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
     np.testing.assert_allclose(SparseSolver(second, symmetric=True).apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
 
 
+def test_one_call_releases_every_kept_factorization():
+    # The factorizations kept by content (the dynamics' kept Newton matrices) live in the same
+    # module as the Cholesky analyses, so release_factorizations frees both.
+    import shelljax.shell3d._sparse as sparse_module
+
+    made = []
+    first = kept_factorization(("test", 1), lambda: made.append(1) or "factor")
+    assert kept_factorization(("test", 1), lambda: made.append(2) or "other") == first == "factor" and made == [1]
+    release_factorizations(keep_analyses=True)
+    assert not sparse_module._KEPT
+    assert kept_factorization(("test", 1), lambda: made.append(3) or "again") == "again" and made == [1, 3]
+    release_factorizations()
+    assert not sparse_module._KEPT and not sparse_module._ANALYSED
+
+
 def test_nodal_pattern_build_equals_the_entrywise_one():
     """The shell models' patterns are built from node pairs; the entrywise build is the reference."""
     from shelljax.shell3d._sparse import _dof_pattern, _nodal_blocks, _nodal_pattern
@@ -411,7 +434,7 @@ def test_implicit_equilibrium_forward_and_reverse_match_finite_differences():
                 free,
             ),
             np.zeros(n), atol=1e-13,
-        ).x
+        ).value
 
     def hessian_host(x, th):
         return _fold(lap + sp.diags(3 * x**2), free)
@@ -457,6 +480,6 @@ def test_newton_runs_with_single_threaded_blas_and_restores_it():
         return energy(x)
 
     result = newton(_problem(watched_energy, grad, hess, np.ones(b.size, dtype=bool)), np.zeros(b.size), atol=1e-10)
-    assert np.max(np.abs(grad(result.x))) <= 1e-10
+    assert np.max(np.abs(grad(result.value))) <= 1e-10
     assert seen and all(threads and max(threads) == 1 for threads in seen)
     assert blas_threads() == before

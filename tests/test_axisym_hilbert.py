@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import shelljax  # noqa: F401  (x64)
-from shelljax._hilbert import hilbert_index, hilbert_order
+from shelljax.axisym._hilbert import hilbert_index, hilbert_order
 
 
 @pytest.mark.parametrize("dims, bits", [(2, 1), (2, 4), (3, 3), (4, 2)])

@@ -7,16 +7,18 @@ pressures each without one. Reality, protocol and noise are experiments/rig_tran
 (the axisymmetric engine at 201 elements, sealed isothermal gas); each session's notes give its
 truth. They feed `shelljax rig calibrate`, the README's example and notebooks/rig_calibration.ipynb.
 
-Run:  python experiments/make_rig_sessions.py
+Run:  python tools/make_rig_sessions.py
 """
 
 from __future__ import annotations
 
 import numpy as np
-from rig_transfer_study import write_object
+from experiment_scripts import load_experiment
 
 from shelljax.config import bundled_data_dir
 from shelljax.session import load_session, write_session
+
+write_object = load_experiment("rig_transfer_study").write_object
 
 RIG = {"pad": {"kind": "hertz", "compression_at_20N": 4e-3, "f0": 8.0}, "finger": {"radius": 15e-3},
        "sensor": {"kind": "gain", "gain": 1.08, "exponent": 1.0, "beta": 0.0}}  # fmt: skip
@@ -35,7 +37,7 @@ def main():
         obj = dict(radius=radius, thickness=thickness, young_modulus=young)
         for path, pressure in zip(write_object(rng, obj, RIG, pressures, out, name, manometer), pressures):
             s = load_session(path)
-            truth = (f"virtual session (experiments/make_rig_sessions.py): truth P_g = {pressure:.1f} Pa, E = {young:.4g} Pa; "
+            truth = (f"virtual session (tools/make_rig_sessions.py): truth P_g = {pressure:.1f} Pa, E = {young:.4g} Pa; "
                      "rig: Hertzian pad 4 mm at 20 N, 15 mm finger, force sensor reading 8 % low")  # fmt: skip
             target = out / f"{name}_{pressure:04.0f}Pa.toml"
             write_session(target, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std,

@@ -1,12 +1,12 @@
 """Export the default experiment's traced fit program into the package (``shelljax/data/programs/``).
 
 A fit's program is kept across processes by its key (package sources, jax and jaxlib versions, the
-arguments' structure; ``shelljax/_programs.py``). Shipping the one ``shelljax run
+arguments' structure; ``shelljax/estimate/_programs.py``). Shipping the one ``shelljax run
 configs/paper.toml`` uses lets a new user's first fit skip its tracing: only XLA compiles.
 Any change to the package's sources changes the key, so run this after every such change
-(``tests/test_programs.py`` fails until you do)::
+(``tests/test_estimate_programs.py`` fails until you do)::
 
-    python experiments/ship_programs.py [--config configs/paper.toml]
+    python tools/ship_programs.py [--config configs/paper.toml]
 
 It fits every calibration and estimation session of the config (one program serves all of a
 structure), then replaces the shipped programs with the ones those fits exported.
@@ -32,15 +32,15 @@ def main() -> None:
     os.environ.pop("SHELLJAX_NO_COMPILATION_CACHE", None)
 
     import shelljax
-    from shelljax.config import estimator_option_fields, load_config
-    from shelljax.estimate import EstimatorOptions, run_estimator
+    from shelljax.config import load_config
+    from shelljax.estimate import run_estimator
     from shelljax.session import load_session
 
     shipped = Path(shelljax.__file__).resolve().parent / "data" / "programs"
     if shipped.parent.parent != ROOT / "shelljax":
         raise SystemExit(f"shelljax is imported from {shipped.parent.parent}, not this checkout: pip install -e {ROOT}")
     config = load_config(args.config)
-    options = EstimatorOptions(**estimator_option_fields(config))
+    options = config.estimator_options
     # the shipped programs move aside while the fits run: a fit that finds its program there
     # (sources unchanged) would export nothing
     previous = Path(tempfile.mkdtemp(prefix="shelljax-shipped-")) / "programs"

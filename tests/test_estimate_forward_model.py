@@ -16,6 +16,8 @@ from shelljax.estimate import AxisymForwardModel, fit_session
 from shelljax.estimate._problem import jacobian
 from shelljax.session import Session
 
+SHARED_PROGRAMS = "bundled-session fits"  # one xdist worker for the files that fit alike (conftest.py)
+
 FORCES = jnp.asarray(np.tile(np.arange(5.0, 20.01, 2.5), 3))
 TRUTH = (1300.0, 2.34e6, 0.9e-3, 0.13)  # P_g [Pa], E [Pa], h [m], R [m]: the paper's Pezzi ball
 
@@ -36,6 +38,7 @@ def _depth(model, theta):
     return model(theta[0], theta[1], theta[2], theta[3], FORCES).depth
 
 
+@pytest.mark.slow  # central differences of the engine
 def test_depth_gradient_matches_central_differences(model):
     theta = jnp.asarray(TRUTH)
     jac = jax.jacfwd(functools.partial(_depth, model))(theta)
@@ -74,6 +77,7 @@ def test_both_gas_laws_run_one_program(model):
     assert np.all(np.asarray(_depth(model, theta)) < 0.97 * free)
 
 
+@pytest.mark.slow  # fits through the engine
 def test_fit_recovers_parameters_of_its_own_model(model):
     p, e, h, r = TRUTH
     pred = model(p, e, h, r, FORCES)

@@ -1,4 +1,4 @@
-"""Traced programs kept across processes (shelljax/_programs.py) and the shipped fit program."""
+"""Traced programs kept across processes (shelljax/estimate/_programs.py) and the shipped fit program."""
 
 import warnings
 from pathlib import Path
@@ -9,9 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from shelljax import _programs
-from shelljax.config import estimator_option_fields, load_config
-from shelljax.estimate import EstimatorOptions, options_forward_model
+from shelljax.estimate import _programs
+from shelljax.config import load_config
+from shelljax.estimate import options_forward_model
 from shelljax.estimate._fit import _solve
 from shelljax.estimate._problem import ALL_NAMES, build_problem, padded_problem
 from shelljax.session import load_session
@@ -97,16 +97,16 @@ def test_a_program_with_a_host_callback_falls_back_to_jit(tmp_path, monkeypatch)
 
 
 def test_the_default_experiments_fit_program_is_shipped_for_these_sources():
-    """Fails after any change to the package's sources until ``experiments/ship_programs.py`` runs."""
+    """Fails after any change to the package's sources until ``tools/ship_programs.py`` runs."""
     config = load_config(ROOT / "configs" / "paper.toml")
-    options = EstimatorOptions(**estimator_option_fields(config))
+    options = config.estimator_options
     session = load_session(config.sessions[0])
     problem = build_problem(session, options_forward_model(session, options), start_pressure=1e3,
                             start_modulus=1e6, depth_noise=None, nuisance=options.nuisance)  # fmt: skip
     padded, _, _ = padded_problem(problem)
     key = _programs.program_key(_solve.__qualname__, (padded, jnp.zeros(len(ALL_NAMES)), 1e-8, 1e-8), {"max_steps": 200})
     path = _programs.SHIPPED_DIR / (key + _programs.SUFFIX)
-    assert path.is_file(), f"{path.name} is not shipped: run python experiments/ship_programs.py"
+    assert path.is_file(), f"{path.name} is not shipped: run python tools/ship_programs.py"
     exported = jax.export.deserialize(bytearray(path.read_bytes()))
     leaves = jax.tree_util.tree_leaves((padded, jnp.zeros(len(ALL_NAMES)), 1e-8, 1e-8))
     assert [a.shape for a in exported.in_avals] == [np.shape(leaf) for leaf in leaves]

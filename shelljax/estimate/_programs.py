@@ -14,7 +14,7 @@ itself, keyed by everything that shapes it:
 
 A program is looked for in memory, then in ``programs/`` under JAX's persistent-cache directory
 (see :mod:`shelljax`; off with ``SHELLJAX_NO_COMPILATION_CACHE=1``), then among the programs the
-package ships (``shelljax/data/programs/``, written by ``experiments/ship_programs.py`` for the
+package ships (``shelljax/data/programs/``, written by ``tools/ship_programs.py`` for the
 default experiment's fit), and is traced and stored only when none has it. The program that
 runs is the exported one in every case, so a run does not depend on where it came from.
 
@@ -37,7 +37,9 @@ import jax
 import jaxlib
 import numpy as np
 
-PACKAGE_DIR = Path(__file__).resolve().parent
+# shelljax/, not estimate/: every source of the package shapes the key, and the shipped programs
+# are the package's data (pyproject's package-data)
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
 SHIPPED_DIR = PACKAGE_DIR / "data" / "programs"
 SUFFIX = ".jaxexport"
 # jaxlib's CPU linear-algebra kernels the fit calls (QR for Levenberg–Marquardt's damped step);

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as _dt
 import json
 import platform
@@ -15,12 +16,10 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from . import __version__
-from ._compile_log import compile_log
-from ._errors import ShelljaxError
-from ._memory_mappings import release_compiled_programs_if_crowded
-from .config import ExperimentConfig, estimator_option_fields, load_config
-from .estimate import (
+from .. import __version__
+from .._errors import ShelljaxError
+from ..config import ExperimentConfig, load_config
+from ..estimate import (
     ConvergenceWarning,
     Estimate,
     EstimatorOptions,
@@ -30,7 +29,10 @@ from .estimate import (
     paper_k_s,
     run_estimator,
 )
-from .session import Session, file_sha256, load_session
+from ..rig import estimate_with_rig, load_rig
+from ..session import Session, file_sha256, load_session
+from ._compile_log import compile_log
+from ._memory_mappings import release_compiled_programs_if_crowded
 
 
 def _fresh_run_dir(config: ExperimentConfig, output_dir: Path | None) -> Path:
@@ -74,7 +76,7 @@ def _block(result) -> dict:
 
 
 def _estimator_options(config: ExperimentConfig, k_s: Estimate) -> EstimatorOptions:
-    return EstimatorOptions(k_s=k_s, seed=config.seed, **estimator_option_fields(config))
+    return dataclasses.replace(config.estimator_options, k_s=k_s)
 
 
 def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_dir: Path, figures: bool):
@@ -93,7 +95,7 @@ def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_di
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     if figures:
-        from .plots import plot_posterior
+        from ..plots import plot_posterior  # matplotlib loads only when figures are asked for
 
         paths = plot_posterior(post.samples, post.chain, post.names, session.source.stem, run_dir / "figures")
         block["_figures"] = [str(p.relative_to(run_dir)) for p in paths]
@@ -128,9 +130,7 @@ def _simulation_methods(session: Session, config: ExperimentConfig, options: Est
         try:
             with _stage(f"{session.source.name}: {method}", stages, verbose):
                 if rig is not None:
-                    from .rig import estimate_with_rig
-
-                    result = estimate_with_rig(session, rig, method=method, seed=config.seed)
+                    result = estimate_with_rig(session, rig, method=method, seed=config.estimator_options.seed)
                     out[method] = (_block(result), result)
                 elif method == "fit":
                     fit = run_estimator("fit", session, options, model=model)
@@ -150,7 +150,7 @@ def _plotted(estimates: dict[str, Estimate | None]) -> dict:
 def _calibration(config: ExperimentConfig, calibration_sessions: list[Session]):
     """(k_s calibration or None, the k_s [-] the closed form uses)."""
     if calibration_sessions:
-        calibration = calibrate_ks(calibration_sessions, through_origin=config.through_origin)
+        calibration = calibrate_ks(calibration_sessions, through_origin=config.estimator_options.through_origin)
         return calibration, calibration.k_s
     if config.k_s is not None:
         return None, Estimate.lognormal(config.k_s, (config.k_s_std or 0.0) / config.k_s, "1", "given in config")
@@ -164,7 +164,7 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
         "machine": platform.platform(),
         "config": {"path": str(config.source), "sha256": file_sha256(config.source), "name": config.name,
                    "description": config.description, "methods": list(config.methods),
-                   "bootstrap_samples": config.bootstrap_samples, "seed": config.seed},  # fmt: skip
+                   "bootstrap_samples": config.estimator_options.bootstrap_samples, "seed": config.estimator_options.seed},  # fmt: skip
         "units": "SI: Pa, m, N, kg; '1' marks dimensionless quantities",
         "k_s": k_s.to_dict(),
         "sessions": [],
@@ -193,13 +193,13 @@ def _estimate_session_entry(session: Session, config: ExperimentConfig, options:
             row["estimates"][method] = _plotted(result.estimates)
             entry["figures"] += block.pop("_figures", [])
             if method == "fit" and rig is None:
-                model_curves[f"{method}: {config.forward_model} model"] = result.predicted_depth
+                model_curves[f"{method}: {config.estimator_options.forward_model} model"] = result.predicted_depth
     if session.manometer_gauge_pressure is not None:
         for method, estimates in row["estimates"].items():
             error = estimates["gauge_pressure"].value / session.manometer_gauge_pressure - 1.0
             entry["estimates"][method]["gauge_pressure_relative_error_vs_manometer"] = error
     if config.figures:
-        from .plots import plot_force_depth
+        from ..plots import plot_force_depth  # matplotlib loads only when figures are asked for
 
         fig = plot_force_depth(session, closed, run_dir / "figures" / f"force_depth_{session.source.stem}.png",
                                model_curves=model_curves)  # fmt: skip
@@ -231,11 +231,7 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
     calibration, k_s = _calibration(config, calibration_sessions)
     options = _estimator_options(config, k_s)
-    rig = None
-    if config.rig is not None:
-        from .rig import load_rig
-
-        rig = load_rig(config.rig)
+    rig = None if config.rig is None else load_rig(config.rig)
 
     run_dir = _fresh_run_dir(config, None if output_dir is None else Path(output_dir))
     shutil.copy2(config.source, run_dir / "config.toml")
@@ -256,7 +252,7 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     if calibration is not None:
         results["calibration"] = _calibration_record(calibration)
     if config.figures:
-        from .plots import plot_calibration, plot_estimate_summary
+        from ..plots import plot_calibration, plot_estimate_summary  # matplotlib loads only when figures are asked for
 
         if calibration is not None:
             plot_calibration(calibration, held_out, run_dir / "figures" / "calibration.png")

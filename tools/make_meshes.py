@@ -1,6 +1,6 @@
 """Regenerate the bundled meshes in shelljax/data/meshes (deterministic).
 
-    python experiments/make_meshes.py
+    python tools/make_meshes.py
 
 - hammer.stl: inflatable hammer toy (shelljax.geometry.make_hammer_mesh, defaults), binary STL, m.
 - beach_ball.ply: icosphere R = 0.25 m (4 subdivisions) with photogrammetry-like radial noise,
