@@ -29,6 +29,7 @@ import numpy as np
 import shelljax  # noqa: F401  (x64)
 from shelljax.axisym import Setup, cpu_workers, indentation_curves_raw, map_batch
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
+from shelljax.physics import ShellProperties
 
 
 def _params(n, seed=0):
@@ -37,6 +38,12 @@ def _params(n, seed=0):
     return base * rng.uniform(0.85, 1.15, size=(n, 4)) * np.array([1, 1, 1, 0]) + np.array(
         [0, 0, 0, DEFAULT_POISSON_RATIO]
     )
+
+
+def _shell(rows):
+    """The rows (n, 4) of P_g [Pa], E [Pa], h [m], ν [-] as the engine's ShellProperties."""
+    return ShellProperties(gauge_pressure=rows[:, 0], young_modulus=rows[:, 1], thickness=rows[:, 2],
+                           poisson_ratio=rows[:, 3])
 
 
 def _work(result):
@@ -72,13 +79,13 @@ def main(argv=None):
     rows = []
 
     one = _params(1)
-    t1, r1 = _time(lambda: indentation_curves_raw(one, forces, setup), args.repeats)
+    t1, r1 = _time(lambda: indentation_curves_raw(_shell(one), forces, setup), args.repeats)
     rows.append(("single 7-level curve", 1, t1, t1, *_work(r1), "< 0.020 s"))
 
     workers = cpu_workers() if args.workers is None else args.workers
 
     def batch(params, n_workers):
-        return map_batch(lambda rows: indentation_curves_raw(rows, forces, setup, args.chunk),
+        return map_batch(lambda rows: indentation_curves_raw(_shell(rows), forces, setup, args.chunk),
                          params, n_workers)
 
     b64 = _params(64, 1)

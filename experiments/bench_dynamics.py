@@ -30,6 +30,7 @@ import numpy as np
 
 import shelljax.shell3d as s3
 from shelljax import dynamics as d
+from shelljax.physics import ShellProperties
 
 jax.config.update("jax_enable_x64", True)
 
@@ -48,7 +49,8 @@ def _median_time(fn, *args, repeats: int = 7) -> float:
 def _system(faces: int, gas: str):
     shell = s3.ball(0.13, 0.9e-3, n_triangles=faces)
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(1e-3, 1e3), name="ground")
-    return shell, d.shell_system(shell, 2.34e6, 0.4, 1300.0, gas=gas, mass=0.8, planes=[ground])
+    return shell, d.shell_system(shell, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=shell.thickness,
+                                                 poisson_ratio=0.4), gas=gas, mass=0.8, planes=[ground])
 
 
 def breakdown(system, state, dt: float, integrator) -> dict:

@@ -34,10 +34,12 @@ def run_one(n_triangles: int, repeats: int) -> dict:
     import numpy as np
 
     import shelljax.shell3d as s3
+    from shelljax.physics import ShellProperties
 
     t0 = time.perf_counter()
-    ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=n_triangles)
-    sim = s3.Indentation(ball, 2.34e6, 0.4, 1300.0, gas="isothermal", indenter_radius=0.008, progress=False)
+    pezzi = ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=0.9e-3, poisson_ratio=0.4)
+    ball = s3.ball(radius=0.13, thickness=pezzi.thickness, n_triangles=n_triangles)
+    sim = s3.Indentation(ball, pezzi, gas="isothermal", indenter_radius=0.008, progress=False)
     setup = time.perf_counter() - t0
     t0 = time.perf_counter()
     states = sim.curve(DEPTHS)

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from shelljax.physics import scaling_wrinkle_count
+from shelljax.physics import ShellProperties, scaling_wrinkle_count
 
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 SHAPE_FORCES = (10.0, 20.0)  # [N]
@@ -78,7 +78,7 @@ def reality_curves(obj, truth, pressure, true_forces):
 
     scale = obj["radius"] / REALITY_RADIUS
     thickness = obj["thickness"] * truth.get("thickness_factor", 1.0)
-    stretch = float(inflation_stretch(pressure, obj["radius"], thickness, obj["young_modulus"], POISSON))
+    stretch = float(inflation_stretch(pressure, obj["radius"], obj["young_modulus"], thickness, POISSON))
     mass = truth.get("body_mass", 0.0)
     areal_weight = mass * STANDARD_GRAVITY / (4 * math.pi * (obj["radius"] / stretch) ** 2)
     physics = CurvePhysics(
@@ -87,8 +87,9 @@ def reality_curves(obj, truth, pressure, true_forces):
         stiffening=np.array([truth.get("stiffening", 0.0)]), areal_weight=np.array([areal_weight]),
         friction_coefficient=np.array([truth.get("friction_coefficient", 0.0)]),
     )  # fmt: skip
-    params = np.array([[pressure, obj["young_modulus"], thickness / scale, POISSON]])
-    curve = indentation_curves(params, np.asarray(true_forces) / scale**2, radius=REALITY_RADIUS,
+    shell = ShellProperties(gauge_pressure=pressure, young_modulus=obj["young_modulus"], thickness=thickness / scale,
+                            poisson_ratio=POISSON, radius=REALITY_RADIUS)
+    curve = indentation_curves(shell, np.asarray(true_forces) / scale**2,
                                n_elements=REALITY_ELEMENTS, gas="polytropic", physics=physics, workers=1)  # fmt: skip
     return {k: scale * np.asarray(getattr(curve, k)[0]) for k in
             ("w0", "height", "upper_diameter", "contact_diameter", "sunken_depth")}

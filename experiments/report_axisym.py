@@ -33,7 +33,8 @@ from shelljax.axisym import (
     pinch_state,
 )
 from shelljax.paper import DEFAULT_POISSON_RATIO as NU, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from shelljax.physics import CRITICAL_W, reissner_stiffness, scaling_wrinkle_count, tau, vella_linear_stiffness
+from shelljax.physics import (CRITICAL_W, ShellProperties, reissner_stiffness, scaling_wrinkle_count, tau,
+                              vella_linear_stiffness)
 
 PEZZI = (1300.0, 2.34e6, 0.9e-3, NU, 0.13)
 OBJECTS = {  # bundled objects (shelljax/data/README.md): P_g, E, h, ν, R
@@ -44,13 +45,17 @@ OBJECTS = {  # bundled objects (shelljax/data/README.md): P_g, E, h, ν, R
 }
 
 
+def _shell(p, e, h, nu):
+    return ShellProperties(gauge_pressure=p, young_modulus=e, thickness=h, poisson_ratio=nu)
+
+
 def section_stiffness():
     e, nu, r, h = 1e7, 0.3, 0.1, 9.4e-5
     pressures = [0.0, 0.269, 2.69, 26.9, 269.0]
     rows = []
     for n_el in (101, 201, 401):
         s = pinch_setup(n_elements=n_el)
-        f = jax.jit(lambda p: pinch_linear_stiffness(s, p, e, h, nu))
+        f = jax.jit(lambda p: pinch_linear_stiffness(s, _shell(p, e, h, nu)))
         for p in pressures:
             k = float(f(p))
             ref = vella_linear_stiffness(p, r, e, h, nu)
@@ -72,11 +77,11 @@ def _onset(setup, p, e, h, nu, r, bs, fmax):
 
     @jax.jit
     def run(force, guess):
-        y, y_inf, pp, res = pinch_state(setup, p, e, h, nu, force, bs, guess)
+        y, y_inf, pp, res = pinch_state(setup, _shell(p, e, h, nu), force, bs, guess)
         w0, mh, ann = pinch_observables(setup, y, y_inf, pp)
         return y, w0 * r / lp2, mh, res, ann
 
-    _, guess, _, _ = pinch_state(setup, p, e, h, nu, 0.0, bs)
+    _, guess, _, _ = pinch_state(setup, _shell(p, e, h, nu), 0.0, bs)
     prev = None
     for force in np.linspace(fmax / 40, fmax, 40):
         guess, wd, mh, res, ann = run(force, guess)
@@ -109,7 +114,7 @@ def section_onset():
 def _curves(obj, forces, **kw):
     p, e, h, nu, r = obj
     setup = Setup(radius=r, **kw)
-    res = indentation_curves_raw(np.array([[p, e, h, nu]]), np.asarray(forces), setup)
+    res = indentation_curves_raw(_shell(p, e, h, nu), np.asarray(forces), setup)
     return {k: np.asarray(v)[0] for k, v in res.__dict__.items()}
 
 
@@ -262,7 +267,7 @@ def section_cross3d():
 
         p, e, h, nu, r = PEZZI
         ball = s3.ball(radius=r, thickness=h, n_triangles=4000)
-        sim = s3.Indentation(ball, young_modulus=e, poisson_ratio=nu, gauge_pressure=p,
+        sim = s3.Indentation(ball, _shell(p, e, ball.thickness, nu),
                              gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True)
         states = sim.force_curve([5.0, 10.0])
         obs3 = [s.observables() for s in states]

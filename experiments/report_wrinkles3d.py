@@ -46,7 +46,7 @@ import numpy as np
 from long_runs import Checkpoint, Watchdog, run_with_restarts
 
 from shelljax.paper import DEFAULT_POISSON_RATIO as POISSON
-from shelljax.physics import scaling_wrinkle_count, tau
+from shelljax.physics import ShellProperties, scaling_wrinkle_count, tau
 from shelljax.virtual import FORCE_TOLERANCE, NEWTON_ITERATIONS, RADIUS, solve_curve
 
 GAUGE_PRESSURE = 1300.0  # [Pa]
@@ -79,8 +79,9 @@ def axisym_curve(thickness: float, forces, relax: bool = True, raise_on_failure:
     "converged" [bool] per force."""
     from shelljax.axisym import indentation_curves
 
-    res = indentation_curves(np.array([[GAUGE_PRESSURE, YOUNG_MODULUS, thickness, POISSON]]), np.asarray(forces),
-                             radius=RADIUS, relax=relax, raise_on_failure=raise_on_failure)  # fmt: skip
+    shell = ShellProperties(gauge_pressure=GAUGE_PRESSURE, young_modulus=YOUNG_MODULUS, thickness=thickness,
+                            poisson_ratio=POISSON, radius=RADIUS)
+    res = indentation_curves(shell, np.asarray(forces), relax=relax, raise_on_failure=raise_on_failure)  # fmt: skip
     out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0],
            "converged": np.asarray(res.converged)[0]}
     out.update({k: np.asarray(getattr(res, field))[0] for k, (_, field) in COMPARED.items()})

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from shelljax.physics import scaling_wrinkle_count
+from shelljax.physics import ShellProperties, scaling_wrinkle_count
 
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 N_TRIALS = 3
@@ -116,8 +116,9 @@ def reality_w0(obj, rig, pressure, forces):
     physics = CurvePhysics(indenter_radius=np.array([radius / scale]), gas_volume_ratio=np.ones(1),
                            gas_exponent=np.ones(1), stiffening=np.zeros(1), areal_weight=np.zeros(1),
                            friction_coefficient=np.zeros(1))  # fmt: skip
-    params = np.array([[pressure, obj["young_modulus"], obj["thickness"] / scale, POISSON]])
-    curve = indentation_curves(params, np.asarray(forces) / scale**2, radius=REALITY_RADIUS, n_elements=REALITY_ELEMENTS,
+    shell = ShellProperties(gauge_pressure=pressure, young_modulus=obj["young_modulus"],
+                            thickness=obj["thickness"] / scale, poisson_ratio=POISSON, radius=REALITY_RADIUS)
+    curve = indentation_curves(shell, np.asarray(forces) / scale**2, n_elements=REALITY_ELEMENTS,
                                gas="polytropic", physics=physics, workers=1)  # fmt: skip
     return scale * np.asarray(curve.w0[0])
 

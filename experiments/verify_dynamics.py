@@ -38,7 +38,7 @@ import numpy as np
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax import dynamics as d
-from shelljax.physics import STANDARD_GRAVITY as G
+from shelljax.physics import STANDARD_GRAVITY as G, ShellProperties
 
 jax.config.update("jax_enable_x64", True)
 
@@ -54,7 +54,7 @@ def _shell(radius, thickness, faces):
 def make_system(args, gas="isothermal", gravity=G, faces=None):
     shell = _shell(args.radius, args.thickness, faces or args.faces)
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(args.ghat, 1e3), name="ground")
-    return d.shell_system(shell, args.young, 0.4, args.pressure, gas=gas, mass=args.mass, planes=[ground], gravity=gravity)
+    return d.shell_system(shell, ShellProperties(gauge_pressure=args.pressure, young_modulus=args.young, thickness=shell.thickness, poisson_ratio=0.4), gas=gas, mass=args.mass, planes=[ground], gravity=gravity)
 
 
 def contact_diameter(x, ghat):

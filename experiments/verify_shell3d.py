@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import shelljax.shell3d as s3
-from shelljax.physics import ATMOSPHERIC_PRESSURE, lame_constants_2d, vella_linear_stiffness
+from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, lame_constants_2d, vella_linear_stiffness
 from shelljax.shell3d import ModelConfig, ShellModel, rigid_mode_pins
 
 E, NU = 1.0e6, 0.3
@@ -39,7 +39,7 @@ def sphere_model(mesh):
 
 
 def params(h, p, nu=NU):
-    return s3.ShellParams(young_modulus=E, poisson_ratio=nu, thickness=h, gauge_pressure=p)
+    return s3.ShellParams.of(ShellProperties(gauge_pressure=p, young_modulus=E, thickness=h, poisson_ratio=nu))
 
 
 def p_exact(lam, h, nu=NU):
@@ -132,7 +132,7 @@ def main(argv=None):
     report["point_load"] = {"rows": stiff, "rates_last_pair": rates}
     # 3. Sealed gas and balance on a ball indentation.
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=1000 if args.quick else 3000)
-    sim = s3.Indentation(ball, 2.34e6, 0.4, 1300.0, gas="isothermal", indenter_radius=0.008, progress=False)
+    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4), gas="isothermal", indenter_radius=0.008, progress=False)
     rows = []
     p0v0 = (ATMOSPHERIC_PRESSURE + 1300.0) * sim.reference_volume
     print("\n3. Sealed isothermal ball (R = 0.13 m, h = 0.9 mm, E = 2.34 MPa, P_g = 1300 Pa)")

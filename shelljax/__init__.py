@@ -34,5 +34,6 @@ if not _os.environ.get("SHELLJAX_NO_COMPILATION_CACHE") and _jax.config.jax_comp
 
 from ._errors import DeviceError, InvalidInputError, NoConvergenceError, ShelljaxError
 from ._solution import RESULTS, Solution
+from .physics import ShellProperties
 
 __version__ = "0.1.0"

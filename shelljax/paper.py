@@ -2,13 +2,15 @@
 
 Everything a module needs to reproduce the paper's set-up lives here, once: the calibrated k_s,
 the force levels of the poke protocol, the finger radius, the assumed Poisson ratio, and the two
-laws the estimators read E by: τ and the wrinkle law n ≈ 1.33 τ^½. They are written in plain
-arithmetic, so they take numbers, NumPy and JAX arrays alike and this module imports nothing: the
-data layer's sensor emulator uses them without JAX. The other results of shell theory are in
+laws the estimators read E by: τ and the wrinkle law n ≈ 1.33 τ^½. They are plain arithmetic, so
+they take numbers, NumPy and JAX arrays alike, and this module imports only ``math``: the data
+layer's sensor emulator uses them without JAX. The other results of shell theory are in
 :mod:`shelljax.physics`, which re-exports these two.
 """
 
 from __future__ import annotations
+
+import math
 
 PAPER_KS = 0.64  # [-], calibrated on a Pezzi and a yoga ball (Section 4.1)
 # The paper quotes no error bar on k_s; its held-out pressures came out with 3.5 % mean relative
@@ -24,9 +26,16 @@ def tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
     """Dimensionless pressure τ = P_g R² / √(E h B) [-] from P_g [Pa], R [m], E [Pa], h [m], ν [-],
     with the flexural rigidity B = E h³ / (12 (1 − ν²)) [N·m] (``physics.bending_stiffness``)."""
     bending = young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
-    return gauge_pressure * radius**2 / (young_modulus * thickness * bending) ** 0.5
+    return gauge_pressure * radius**2 / _sqrt(young_modulus * thickness * bending)
 
 
 def scaling_wrinkle_count(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
     """Vella's radial wrinkle count n = 1.33 τ^½ [-] (continuous)."""
-    return WRINKLE_PREFACTOR * tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio) ** 0.5
+    return WRINKLE_PREFACTOR * _sqrt(tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio))
+
+
+def _sqrt(x):
+    # the array's own sqrt (NumPy's, or JAX's when traced), else math's: each is IEEE's correctly
+    # rounded square root, where x ** 0.5 is a pow that may round otherwise
+    namespace = getattr(x, "__array_namespace__", None)
+    return namespace().sqrt(x) if namespace is not None else math.sqrt(x)

@@ -85,7 +85,7 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
     also returns the replica's dictionary: ``(system, replica)``."""
     from . import dynamics as d
     from . import shell3d as s3
-    from .physics import STANDARD_GRAVITY
+    from .physics import STANDARD_GRAVITY, ShellProperties
 
     directory = Path(directory)
     path = directory / "replica.json"
@@ -97,7 +97,9 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
             raise InvalidInputError(f"{path}: field '{name}.value' is missing. Fix: re-export the replica")
     value = lambda k: float(replica[k]["value"])  # noqa: E731
     shell = s3.load(directory / replica["mesh"], value("thickness_m"))
-    system = d.shell_system(shell, value("youngs_modulus_Pa"), value("poisson_ratio"), value("gauge_pressure_Pa"), gas=replica["gas"],
+    properties = ShellProperties(gauge_pressure=value("gauge_pressure_Pa"), young_modulus=value("youngs_modulus_Pa"),
+                                 thickness=shell.thickness, poisson_ratio=value("poisson_ratio"))
+    system = d.shell_system(shell, properties, gas=replica["gas"],
                             mass=value("mass_kg"), planes=planes, gravity=STANDARD_GRAVITY if gravity is None else gravity)  # fmt: skip
     return system, replica
 

@@ -32,7 +32,7 @@ from typing import Protocol
 import numpy as np
 
 from .paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from .physics import scaling_wrinkle_count, tau
+from .physics import ShellProperties, scaling_wrinkle_count, tau
 
 CURVES_PATH = Path(__file__).resolve().parent / "data" / "virtual" / "curves.json"
 RADIUS = 0.13  # [m]
@@ -187,9 +187,10 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: So
     pg, e, h = params
     shell = _make_shell(mesh, h, n_triangles, pole_refinement)
     t0 = time.perf_counter()
-    sim = s3.Indentation(shell, young_modulus=e, poisson_ratio=DEFAULT_POISSON_RATIO, gauge_pressure=pg,
-                         gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True, progress=False,
-                         force_tolerance=force_tolerance, max_newton_iterations=max_newton_iterations)  # fmt: skip
+    properties = ShellProperties(gauge_pressure=pg, young_modulus=e, thickness=shell.thickness,
+                                 poisson_ratio=DEFAULT_POISSON_RATIO)
+    sim = s3.Indentation(shell, properties, gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True,
+                         progress=False, force_tolerance=force_tolerance, max_newton_iterations=max_newton_iterations)  # fmt: skip
     reference = sim.q_reference[:-3].reshape(-1, 3)
     faces = shell.mesh.faces
     edge_len = np.linalg.norm(shell.mesh.vertices[faces[:, [0, 1, 2]]] - shell.mesh.vertices[faces[:, [1, 2, 0]]], axis=-1)

@@ -10,6 +10,9 @@ import pytest
 
 import shelljax
 from shelljax.axisym import Setup, indentation_curves, indentation_curves_raw
+from shelljax.physics import ShellProperties
+
+from _shells import shell
 
 RADIUS = 0.13
 PEZZI = [1300.0, 2.34e6, 9e-4, 0.4]  # P_g [Pa], E [Pa], h [m], ν
@@ -20,7 +23,7 @@ KW = dict(substeps=3)  # 15 N apart: three load steps per interval
 @pytest.fixture(scope="module")
 def batch_result():
     params = np.array([PEZZI, [1800.0, 3.0e6, 7e-4, 0.35]])
-    return params, indentation_curves(params, FORCES, radius=RADIUS, **KW)
+    return params, indentation_curves(shell(params), FORCES, radius=RADIUS, **KW)
 
 
 def test_global_force_balance_and_monotone_curve(batch_result):
@@ -36,7 +39,7 @@ def test_global_force_balance_and_monotone_curve(batch_result):
 
 def test_batch_elements_are_independent(batch_result):
     params, res = batch_result
-    swapped = indentation_curves(params[::-1], FORCES, radius=RADIUS, **KW)
+    swapped = indentation_curves(shell(params[::-1]), FORCES, radius=RADIUS, **KW)
     np.testing.assert_allclose(swapped.w0[::-1], res.w0, rtol=1e-8)
 
 
@@ -44,7 +47,7 @@ def test_one_curve_unbatched_is_its_row_of_a_vmapped_batch(batch_result):
     # a batch of one skips vmap: the same Newton iterations from the same start, so the same
     # equilibrium up to round-off (1e-8, as for the swapped batch above)
     params, res = batch_result
-    alone = indentation_curves(params[:1], FORCES, radius=RADIUS, **KW)
+    alone = indentation_curves(shell(params[:1]), FORCES, radius=RADIUS, **KW)
     np.testing.assert_allclose(alone.w0, res.w0[:1], rtol=1e-8)
     np.testing.assert_allclose(alone.wrinkle_count, res.wrinkle_count[:1], rtol=1e-8)
     np.testing.assert_array_equal(alone.iterations, res.iterations[:1])
@@ -56,7 +59,7 @@ def test_uneven_chunks_match_one_vmapped_batch(batch_result):
     results, reorder them nor drop a curve."""
     params, res = batch_result
     three = np.vstack([params, [[1500.0, 2.6e6, 8e-4, 0.45]]])
-    chunked = indentation_curves(three, FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
+    chunked = indentation_curves(shell(three), FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
     assert chunked.w0.shape == (3, len(FORCES))
     np.testing.assert_allclose(chunked.w0[:2], res.w0, rtol=_NEWTON_RTOL)
     assert bool(np.all(chunked.converged[2]))
@@ -75,16 +78,16 @@ def test_a_curve_the_walk_loses_is_solved_again_from_its_cold_start(batch_result
     three = np.vstack([params, [[1500.0, 2.6e6, 8e-4, 0.45]]])
     real = _api.indentation_curves_raw
 
-    def walk_loses_the_pezzi_ball(rows, forces, setup, chunk=0, physics=None):
-        out = real(rows, forces, setup, chunk, physics)
+    def walk_loses_the_pezzi_ball(properties, forces, setup, chunk=0, physics=None):
+        out = real(properties, forces, setup, chunk, physics)
         if chunk == 0:
             return out
-        lost = jnp.all(rows == jnp.asarray(PEZZI), axis=1)[:, None]
+        lost = jnp.all(_api._rows(properties) == jnp.asarray(PEZZI), axis=1)[:, None]
         return eqx.tree_at(lambda r: (r.converged, r.w0), out,
                            (out.converged & ~lost, jnp.where(lost, jnp.nan, out.w0)))  # fmt: skip
 
     monkeypatch.setattr(_api, "indentation_curves_raw", walk_loses_the_pezzi_ball)
-    walked = indentation_curves(three, FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
+    walked = indentation_curves(shell(three), FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
     assert bool(np.all(walked.converged))
     np.testing.assert_allclose(walked.w0[:2], res.w0, rtol=_NEWTON_RTOL)
 
@@ -107,7 +110,7 @@ def test_a_walked_batch_saves_iterations_and_differentiates_alike():
     @functools.partial(jax.jit, static_argnums=0)
     def curves(chunk, theta):
         def depth(q):
-            res = indentation_curves_raw(q, forces, setup, chunk)
+            res = indentation_curves_raw(shell(q), forces, setup, chunk)
             return res.w0, res
 
         _, w0_dot, res = jax.jvp(depth, (theta,), (tangent,), has_aux=True)
@@ -127,7 +130,7 @@ def test_a_walked_batch_saves_iterations_and_differentiates_alike():
 
 def test_sealed_gas_conserves_pv(batch_result):
     params, pref = batch_result
-    res = indentation_curves(params, FORCES, radius=RADIUS, gas="isothermal", **KW)
+    res = indentation_curves(shell(params), FORCES, radius=RADIUS, gas="isothermal", **KW)
     p_abs = np.asarray(res.pressure) + shelljax.physics.ATMOSPHERIC_PRESSURE
     v = np.asarray(res.volume)
     # Isothermal ideal gas: p·V is the same at every force level ...
@@ -142,20 +145,35 @@ def test_sealed_gas_conserves_pv(batch_result):
 
 
 def test_non_convergence_is_flagged_and_raised():
-    res = indentation_curves(PEZZI, FORCES, radius=RADIUS, max_steps=2, raise_on_failure=False, **KW)
+    res = indentation_curves(shell(PEZZI), FORCES, radius=RADIUS, max_steps=2, raise_on_failure=False, **KW)
     assert not bool(np.all(res.converged))
     with pytest.raises(shelljax.NoConvergenceError):
-        indentation_curves(PEZZI, FORCES, radius=RADIUS, max_steps=2, **KW)
+        indentation_curves(shell(PEZZI), FORCES, radius=RADIUS, max_steps=2, **KW)
 
 
 @pytest.mark.parametrize(
     "params, forces",
     [([1300.0, -1.0, 9e-4, 0.4], FORCES), ([1300.0, 2e6, 9e-4, 0.6], FORCES),
-     (PEZZI, (10.0, 5.0)), ([1.0, 2.0], FORCES)],
+     (PEZZI, (10.0, 5.0)), ([[1300.0, 1300.0], [2e6, 2e6, 2e6], 9e-4, 0.4], FORCES), (PEZZI + [0.2], FORCES)],
 )
 def test_invalid_input(params, forces):
+    if len(params) == 4 and isinstance(params[1], list):  # fields of unequal batches
+        properties = ShellProperties(**dict(zip(("gauge_pressure", "young_modulus", "thickness", "poisson_ratio"), params)))
+    elif len(params) == 5:  # a radius that is not the one asked for
+        properties = shell(params[:4], radius=params[4])
+    else:
+        properties = shell(params)
     with pytest.raises(shelljax.InvalidInputError):
-        indentation_curves(params, forces, radius=RADIUS)
+        indentation_curves(properties, forces, radius=RADIUS)
+
+
+def test_only_a_shell_properties_is_taken():
+    with pytest.raises(shelljax.InvalidInputError, match="ShellProperties"):
+        indentation_curves(np.asarray([PEZZI]), FORCES, radius=RADIUS)
+    with pytest.raises(TypeError):  # keyword-only: a pressure and a modulus cannot swap places
+        ShellProperties(*PEZZI)
+    with pytest.raises(shelljax.InvalidInputError, match="radius"):
+        indentation_curves(shell(PEZZI), FORCES)
 
 
 def test_implicit_gradient_matches_central_differences():
@@ -163,14 +181,14 @@ def test_implicit_gradient_matches_central_differences():
     forces = jnp.asarray(FORCES)
 
     def outputs(theta):
-        res = indentation_curves_raw(theta[None], forces, setup)
+        res = indentation_curves_raw(shell(theta[None]), forces, setup)
         return jnp.stack([jnp.sum(res.w0) + 0.1 * jnp.sum(res.height), res.wrinkle_count[0, 1]])
 
     jac = np.asarray(jax.jit(jax.jacrev(outputs))(jnp.asarray(PEZZI)))
     for j in range(3):  # P_g, E, h (ν enters the same way)
         step = 1e-4 * PEZZI[j]
         # θ ± step as one batch of two, as batch_result solves: its compiled program, not another
-        pair = indentation_curves(np.asarray(PEZZI) + np.outer([step, -step], np.eye(4)[j]), FORCES, radius=RADIUS, **KW)
+        pair = indentation_curves(shell(np.asarray(PEZZI) + np.outer([step, -step], np.eye(4)[j])), FORCES, radius=RADIUS, **KW)
         observed = np.stack([np.sum(pair.w0, axis=1) + 0.1 * np.sum(pair.height, axis=1), pair.wrinkle_count[:, 1]])
         fd = (observed[:, 0] - observed[:, 1]) / (2 * step)
         # curve observables: central differences are O(step²) ≈ 1e-8 accurate, plus single
@@ -184,9 +202,9 @@ def test_walls_meeting_is_not_a_converged_state():
     # The Pezzi ball's top pole reaches the bottom wall between 40 and 45 N (docs/axisym.md); the
     # model has no self-contact, so past it the top passes through the bottom onto the ground and
     # w0 stalls at ≈ 217 mm. Such a level must never count as a solved ball.
-    res = indentation_curves(PEZZI, (20.0, 60.0), radius=RADIUS, raise_on_failure=False, **KW)
+    res = indentation_curves(shell(PEZZI), (20.0, 60.0), radius=RADIUS, raise_on_failure=False, **KW)
     gap = np.asarray(res.wall_gap)[0]
     assert gap[0] > 0.1 and bool(res.converged[0, 0])  # 20 N: the walls are ≈ 16 cm apart
     assert gap[1] < PEZZI[2] and not bool(res.converged[0, 1])
     with pytest.raises(shelljax.NoConvergenceError, match="top wall onto the bottom wall"):
-        indentation_curves(PEZZI, (20.0, 60.0), radius=RADIUS, **KW)
+        indentation_curves(shell(PEZZI), (20.0, 60.0), radius=RADIUS, **KW)

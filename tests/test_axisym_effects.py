@@ -20,6 +20,8 @@ from shelljax.axisym import (CurvePhysics, Setup, gent_sphere_pressure, indentat
 from shelljax.axisym._energy import split
 from shelljax.physics import (
     ATMOSPHERIC_PRESSURE,
+    GAS_LAWS,
+    ShellProperties,
     adiabatic_gas_energy,
     adiabatic_gauge_pressure,
     gent_membrane_invariants,
@@ -31,6 +33,8 @@ from shelljax.physics import (
     polytropic_gas_energy,
     polytropic_gauge_pressure,
 )
+
+from _shells import shell
 
 # --- polytropic gas ------------------------------------------------------------------------------
 
@@ -161,7 +165,8 @@ def test_inflated_gent_sphere_follows_the_closed_form():
     # shear part by 1/(1 − s I) ≈ 1.7).
     pressure, radius = 2.0e4, 0.13
     setup = Setup(radius=radius, n_elements=101)
-    inflated = jax.jit(lambda s: inflate(setup, pressure, E, H, NU, stiffening=s))  # one compilation
+    properties = ShellProperties(gauge_pressure=pressure, young_modulus=E, thickness=H, poisson_ratio=NU)
+    inflated = jax.jit(lambda s: inflate(setup, properties, stiffening=s))  # one compilation
     found = {}
     for stiffening in (0.0, 0.5):
         r0, y, res, _ = inflated(stiffening)
@@ -169,7 +174,7 @@ def test_inflated_gent_sphere_follows_the_closed_form():
         centre = 0.5 * (x[0, 1] + x[-1, 1])
         radii = np.hypot(np.asarray(x[:, 0]), np.asarray(x[:, 1] - centre))
         lam = radii.mean() / float(r0)
-        exact = float(gent_sphere_pressure(lam, r0, H, E, NU, stiffening))
+        exact = float(gent_sphere_pressure(lam, r0, E, H, NU, stiffening))
         # as the Neo-Hookean check (test_axisym_physics.py): bending O(h²/R²) ≈ 5e-5, the polygon
         # O(Δθ²) ≈ 1e-4 (measured 1.9e-4 and 0.9e-4 for s = 0 and 0.5), so 1e-3
         assert abs(exact / pressure - 1.0) < 1e-3, (stiffening, exact)
@@ -267,7 +272,7 @@ def _rows():
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _curves(setup, chunk, params, forces, physics):
-    return indentation_curves_raw(params, forces, setup, chunk, physics)
+    return indentation_curves_raw(shell(params), forces, setup, chunk, physics)
 
 
 @pytest.fixture(scope="module")
@@ -293,10 +298,14 @@ def _assert_same_curve(a, b, rtol=NEWTON_RTOL):
 
 def test_polytropic_exponents_one_and_zero_are_the_isothermal_and_prescribed_gases(walked):
     cases, _ = walked
-    # κ = 1 with a traced finger and gas volume equal to a Setup's static ones: that Setup's curve
-    isothermal = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="isothermal", gas_volume_ratio=2.5,
-                             indenter_radius=6e-3))
+    # κ = 1 with a traced finger and gas volume: the isothermal law's own program, its finger the
+    # Setup's and its gas volume traced
+    isothermal = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="isothermal", indenter_radius=6e-3),
+                       CurvePhysics(gas_volume_ratio=np.full(1, 2.5)))
     _assert_same_curve(cases["isothermal_override"], isothermal)
+    # the named adiabatic gas is the polytropic program at κ = γ, by default
+    adiabatic = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="adiabatic"))
+    _assert_same_curve(cases["adiabatic"], adiabatic)
     prescribed = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="prescribed"))
     _assert_same_curve(cases["prescribed"], prescribed)
     np.testing.assert_allclose(cases["prescribed"].pressure, PEZZI[0], rtol=1e-9)
@@ -353,7 +362,7 @@ def test_implicit_gradients_in_every_effect_match_central_differences(walked):
 
     def depths(values):
         physics = CurvePhysics(**{name: values[j][None] for j, name in enumerate(FIELDS)})
-        curve = indentation_curves_raw(PEZZI[None], FORCES, SETUP, 0, physics)
+        curve = indentation_curves_raw(shell(PEZZI[None]), FORCES, SETUP, 0, physics)
         return curve.w0[0], curve
 
     base = jnp.asarray([FD_BASE[name] for name in FIELDS])
@@ -401,9 +410,11 @@ def test_checked_api_validates_the_physics():
     physics = CurvePhysics.defaults(Setup(radius=RADIUS), 1)
     bad = CurvePhysics(**{**{n: getattr(physics, n) for n in FIELDS}, "indenter_radius": jnp.asarray([-1e-3])})
     with pytest.raises(shelljax.InvalidInputError, match="indenter_radius"):
-        indentation_curves(PEZZI, FORCES, radius=RADIUS, physics=bad)
+        indentation_curves(shell(PEZZI), FORCES, radius=RADIUS, physics=bad)
     wrong_shape = CurvePhysics(**{**{n: getattr(physics, n) for n in FIELDS}, "areal_weight": jnp.zeros(3)})
     with pytest.raises(shelljax.InvalidInputError, match="areal_weight"):
-        indentation_curves(PEZZI, FORCES, radius=RADIUS, physics=wrong_shape)
+        indentation_curves(shell(PEZZI), FORCES, radius=RADIUS, physics=wrong_shape)
     with pytest.raises(shelljax.InvalidInputError, match="gas"):
-        Setup(gas="adiabatic")
+        Setup(gas="steam")
+    # the named laws are the 3D engine's and the dynamics' (physics.GAS_LAWS)
+    assert all(Setup(gas=name).gas == name for name in GAS_LAWS)

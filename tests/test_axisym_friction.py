@@ -16,6 +16,8 @@ from shelljax.axisym._energy import ground_friction_energy, rest_nodes
 from shelljax.axisym._hessian import hessian_at
 from shelljax.axisym._model import _params
 
+from _shells import shell
+
 SETUP = Setup(radius=0.13, n_elements=41, gas="isothermal")
 THETA = (1300.0, 2.34e6, 0.9e-3, 0.4)  # P_g [Pa], E [Pa], h [m], ν [-]: the Pezzi-like ball
 FORCES = jnp.array([5.0, 10.0, 15.0])  # [N]
@@ -28,7 +30,7 @@ def _physics(mu):
 
 
 def _curve(mu):
-    return curve_single(SETUP, *THETA, FORCES, return_states=True, physics=_physics(mu))
+    return curve_single(SETUP, shell(THETA), FORCES, return_states=True, physics=_physics(mu))
 
 
 @jax.jit
@@ -56,7 +58,7 @@ def test_zero_friction_is_the_frictionless_curve_exactly(lanes):
     # friction and with nonzero lagged anchors and normal forces: μ λ̂ f₀ adds an exact 0.0 to the
     # energy, gradient and Hessian. Unbatched, the two agree bit for bit; the vmapped program sums
     # in another order (measured 8e-16 relative in w0), hence 1e-13, with identical iterations.
-    plain = jax.tree_util.tree_map(np.asarray, jax.jit(lambda: curve_single(SETUP, *THETA, FORCES, return_states=True))())
+    plain = jax.tree_util.tree_map(np.asarray, jax.jit(lambda: curve_single(SETUP, shell(THETA), FORCES, return_states=True))())
     assert np.any(out["friction_normal_force"][0] > 0)
     for key in ("w0", "contact_diameter", "contact_diameter_mesh", "volume"):
         np.testing.assert_allclose(out[key][0], plain[key], rtol=1e-13, err_msg=key)

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 
 import shelljax.axisym._newton as newton
-from shelljax.axisym import Setup
+from shelljax.axisym import CurvePhysics, Setup
 from shelljax.axisym._energy import Config, constrained_mask, enclosed_volume, split, total_energy
 from shelljax.axisym._hessian import hessian_at
 from shelljax.axisym._linalg import StructuredHessian, _inverse_4x4, structured_solve
 from shelljax.axisym._model import _params, curve_single, inflate
+
+from _shells import shell
 
 
 def test_closed_form_block_inverse_matches_lapack():
@@ -79,7 +81,7 @@ FORCES = np.array([5.0, 10.0, 15.0])  # [N]
 
 def _cold_curve(setup):
     """curve_single from its usual start, jitted anew (Newton constants are read at trace time)."""
-    return jax.jit(lambda theta: curve_single(setup, *theta, FORCES, return_states=True))
+    return jax.jit(lambda theta: curve_single(setup, shell(theta), FORCES, return_states=True))
 
 
 @functools.lru_cache(maxsize=None)
@@ -101,7 +103,7 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     setup = Setup(radius=0.13, n_elements=21, gas=gas)
     params = tuple(PEZZI)
     states = _indented_states(setup)
-    r0, y_inflated, _, _ = inflate(setup, *params)
+    r0, y_inflated, _, _ = inflate(setup, shell(params))
     x_inflated, _ = split(y_inflated, len(setup.theta()))
     cfg = Config(theta=setup.theta(), gas=gas, loading=loading, ground=loading != "none",
                  pin_bottom=loading == "none", relax=True, hoop_capacity=setup.hoop_capacity)
@@ -195,7 +197,7 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
 def test_nearby_guesses_change_the_path_not_the_equilibrium():
     setup = Setup(radius=0.13, n_elements=61)
     cold = _cold_curve(setup)
-    warm = jax.jit(lambda theta, guesses: curve_single(setup, *theta, FORCES, nearby_guesses=guesses))
+    warm = jax.jit(lambda theta, guesses: curve_single(setup, shell(theta), FORCES, nearby_guesses=guesses))
     alone = cold(PEZZI)
     neighbour = cold(PEZZI * np.array([1.004, 0.995, 1.003, 1.0]))  # P_g, E, h within 0.5 %
     missing = jnp.full_like(neighbour["state"], jnp.nan)
@@ -221,12 +223,13 @@ def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
     # hovers 4 nm above the plane, where the contact-predicted model's pull k·gap cancels its
     # true load and the predicted step vanished (1e-17 m): Newton repeated it until max_steps.
     # (found with c_w = 2.5, the default then: with other c_w the Newton path misses that state)
-    setup = Setup(radius=0.08, gas="isothermal", gas_volume_ratio=2.936825663641749, hoop_capacity=2.5)
+    setup = Setup(radius=0.08, gas="isothermal", hoop_capacity=2.5)
+    physics = CurvePhysics(gas_volume_ratio=2.936825663641749)
     forces = np.array([5.192942604266566, 7.838569549712717, 10.484196495158868, 13.12982344060502])
     params = (4322.770123333427, 197785522.1706926, 0.00030831352398951936, 0.4)
 
     def residuals():
-        return np.asarray(jax.jit(lambda: curve_single(setup, *params, forces))()["residual"])
+        return np.asarray(jax.jit(lambda: curve_single(setup, shell(params), forces, physics=physics))()["residual"])
 
     assert np.all(residuals() <= setup.atol)
     monkeypatch.setattr(newton, "MIN_DESCENT_FRACTION", 0.0)  # the former rule (read at trace time)
@@ -271,7 +274,7 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
     # weight off (one solver program for both). The state must be the equilibrium of the plain
     # inflation problem: prescribed gauge pressure, nothing touching, unrelaxed wall, bottom pinned.
     setup = Setup(radius=0.13, n_elements=21, gas="isothermal")
-    r0, y, res, _ = inflate(setup, *PEZZI)
+    r0, y, res, _ = inflate(setup, shell(PEZZI))
     # the same solve, jitted inside the curve and run op by op here: equal to round-off
     np.testing.assert_allclose(np.asarray(_indented_states(setup)[0]), np.asarray(y), rtol=0, atol=1e-14)
     assert float(res) <= setup.atol

@@ -12,6 +12,7 @@ import pytest
 
 import shelljax.shell3d as s3
 from shelljax.axisym import Setup, indentation_curves_raw
+from shelljax.physics import ShellProperties
 
 pytestmark = pytest.mark.slow  # solves the 3D shell
 
@@ -21,12 +22,12 @@ FORCE = 5.0  # [N]
 
 @pytest.fixture(scope="module")
 def both():
-    ball = s3.ball(radius=R, thickness=H, n_triangles=2000)
-    sim = s3.Indentation(ball, young_modulus=E, poisson_ratio=NU, gauge_pressure=P_G, gas="prescribed",
+    ball = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=H, poisson_ratio=NU)  # one ball, both engines
+    sim = s3.Indentation(s3.ball(radius=R, thickness=H, n_triangles=2000), ball, gas="prescribed",
                          indenter_radius=0.008, ground=True, progress=False)  # fmt: skip
     obs3 = sim.solve(force=FORCE).observables()
     # 61 meridian elements are within 0.35 % of 401 on every observable (docs/axisym.md)
-    axi = indentation_curves_raw(np.array([[P_G, E, H, NU]]), np.array([FORCE]), Setup(radius=R, n_elements=61, relax=False))
+    axi = indentation_curves_raw(ball, np.array([FORCE]), Setup(radius=R, n_elements=61, relax=False))
     assert bool(np.all(axi.converged))
     return obs3, {k: float(np.asarray(getattr(axi, k))[0, 0]) for k in ("top_drop", "height", "sunken_depth", "contact_diameter", "pressure")}
 

@@ -19,6 +19,7 @@ from shelljax import dynamics as d
 from shelljax.cli import main
 from shelljax.geometry import sphere_mesh
 from shelljax.scenario import hold, load_scenario
+from shelljax.physics import ShellProperties
 
 pytestmark = pytest.mark.slow  # the 3D hammer held and swung: dynamics runs
 
@@ -104,7 +105,9 @@ def test_free_vertices_are_not_prescribed(tmp_path):
     config.write_text(SWING)
     scenario = load_scenario(config)
     ground = d.Plane([0.0, 0.0, -1.0], [0.0, 0.0, 1.0], d.BarrierContact(5e-4, 1e3), name="ground")
-    system = hold(scenario, d.shell_system(s3.ball(R, 5e-4, n_triangles=200), 2e6, 0.4, 5000.0, mass=0.1, planes=[ground]))
+    system = hold(scenario, d.shell_system(s3.ball(R, 5e-4, n_triangles=200),
+                                           ShellProperties(gauge_pressure=5000.0, young_modulus=2e6, thickness=5e-4, poisson_ratio=0.4),
+                                           mass=0.1, planes=[ground]))
     held = set(system.prescribed_vertices)
     dofs = set(system.prescribed_dofs())
     top = int(np.argmax(np.asarray(system.inflated).reshape(-1, 3)[:, 2]))

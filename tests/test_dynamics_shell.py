@@ -23,7 +23,7 @@ from shelljax import dynamics as d
 from shelljax.cli import main
 from shelljax.config import bundled_data_dir
 from shelljax.dynamics._shell import PATTERNS, _pattern_key
-from shelljax.physics import ATMOSPHERIC_PRESSURE, adiabatic_gas_energy, isothermal_gas_energy
+from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
 from shelljax.scenario import load_scenario
 
@@ -31,6 +31,7 @@ pytestmark = pytest.mark.slow  # 3D shells in motion: every test runs the dynami
 
 G = 9.80665
 RADIUS, THICKNESS, E, NU, P_G, MASS = 0.05, 0.5e-3, 2e6, 0.4, 5000.0, 0.1
+BALL = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=THICKNESS, poisson_ratio=NU)
 GHAT = 5e-4
 CHUNK = 50  # one compiled chunk length for every run of the module
 
@@ -43,7 +44,7 @@ def shell():
 @pytest.fixture(scope="module")
 def system(shell):
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(GHAT, 1e3), name="ground")
-    return d.shell_system(shell, E, NU, P_G, gas="isothermal", mass=MASS, planes=[ground])
+    return d.shell_system(shell, BALL, gas="isothermal", mass=MASS, planes=[ground])
 
 
 def _impact_state(system, height):
@@ -113,7 +114,7 @@ def test_sealed_gas_energy_is_accurate_near_its_reference_volume(gas, exponent):
 
 def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_times_the_isothermal(shell, system):
     # 12.5 ms at 0.25 ms: contact onset (step 6, where gas-energy round-off can stall Newton) and 3 mm of compression.
-    adiabatic = d.shell_system(shell, E, NU, P_G, gas="adiabatic", mass=MASS, planes=system.planes)
+    adiabatic = d.shell_system(shell, BALL, gas="adiabatic", mass=MASS, planes=system.planes)
     # one mesh, one sparsity pattern: its key (a static field) lets both systems share compiled
     # steps; the key is the pattern's content, so another set of fixed dofs is another key
     assert adiabatic.pattern_key == system.pattern_key

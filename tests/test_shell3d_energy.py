@@ -7,7 +7,7 @@ import pytest
 
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
-from shelljax.physics import lame_constants_2d
+from shelljax.physics import ShellProperties, lame_constants_2d
 from shelljax.geometry import signed_volume
 from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 
@@ -16,6 +16,13 @@ E, NU, H = 1.0e6, 0.3, 1.0e-3
 
 def _params(**kw):
     return s3.ShellParams(young_modulus=E, poisson_ratio=NU, thickness=H, gauge_pressure=500.0).replace(**kw)
+
+
+def test_shell_params_are_keyword_only_and_built_from_shell_properties():
+    with pytest.raises(TypeError):
+        s3.ShellParams(E, NU, H, 500.0)
+    built = s3.ShellParams.of(ShellProperties(gauge_pressure=500.0, young_modulus=E, thickness=H, poisson_ratio=NU))
+    assert jax.tree_util.tree_all(jax.tree_util.tree_map(np.array_equal, built, _params()))
 
 
 def test_open_or_inconsistent_meshes_are_rejected_and_orientation_fixed():
@@ -286,7 +293,7 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     from shelljax.shell3d import EquilibriumProblem, newton
 
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=600)
-    sim = s3.Indentation(ball, 2.34e6, 0.4, 1300.0, progress=False)
+    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4), progress=False)
     state = sim.solve(depth=0.005)
     model, params = sim.model, sim.params_at(state.q)
     x = state.vertices.copy()

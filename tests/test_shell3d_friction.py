@@ -7,7 +7,7 @@ import pytest
 
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
-from shelljax.physics import friction_energy, friction_force, friction_mollifier
+from shelljax.physics import ShellProperties, friction_energy, friction_force, friction_mollifier
 from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel
 
 from _balance import net_vertical_residual
@@ -15,6 +15,7 @@ from _balance import net_vertical_residual
 pytestmark = pytest.mark.slow  # solves the 3D shell
 
 R, H, E, NU, PG = 0.13, 0.9e-3, 2.34e6, 0.4, 1300.0
+PEZZI = ShellProperties(gauge_pressure=PG, young_modulus=E, thickness=H, poisson_ratio=NU)
 N_TRI = 600  # 325 vertices, ~25 in ground contact at 2 cm: enough for stick/slip statistics
 DEPTH = 0.02
 MUS = (0.0, 0.05, 0.5, 2.0)
@@ -23,7 +24,7 @@ MUS = (0.0, 0.05, 0.5, 2.0)
 @pytest.fixture(scope="module")
 def frictionless():
     ball = s3.ball(R, H, N_TRI)
-    return s3.Indentation(ball, E, NU, PG, gas="isothermal", rest_shape="scan", progress=False)
+    return s3.Indentation(ball, PEZZI, gas="isothermal", rest_shape="scan", progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -101,13 +102,13 @@ def test_friction_force_is_mu_lambda_when_sliding_and_never_more():
 def test_invalid_friction_inputs_raise_clear_errors():
     ball = s3.ball(R, H, 200)
     with pytest.raises(InvalidInputError, match="friction.*-0.2"):
-        s3.Indentation(ball, E, NU, PG, friction=-0.2, rest_shape="scan")
+        s3.Indentation(ball, PEZZI, friction=-0.2, rest_shape="scan")
     with pytest.raises(InvalidInputError, match="slip_tolerance.*0.0"):
-        s3.Indentation(ball, E, NU, PG, friction=0.3, slip_tolerance=0.0, rest_shape="scan")
+        s3.Indentation(ball, PEZZI, friction=0.3, slip_tolerance=0.0, rest_shape="scan")
     with pytest.raises(InvalidInputError, match="friction"):
         ContactConfig(friction=float("nan"))
     with pytest.raises(InvalidInputError, match="friction_iterations"):
-        s3.Indentation(ball, E, NU, PG, friction=0.3, friction_iterations=-1, rest_shape="scan")
+        s3.Indentation(ball, PEZZI, friction=0.3, friction_iterations=-1, rest_shape="scan")
 
 
 # --- the model's sparse Hessian with friction -----------------------------------------------------

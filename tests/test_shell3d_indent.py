@@ -9,7 +9,7 @@ import pytest
 
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
-from shelljax.physics import ATMOSPHERIC_PRESSURE
+from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties
 from shelljax.shell3d import EquilibriumProblem, SparseSolver
 from shelljax.shell3d._contact import BARRIER_STEP_FRACTION, body_gaps
 from shelljax.physics import STANDARD_GRAVITY as GRAVITY
@@ -20,6 +20,7 @@ from _balance import net_vertical_residual
 pytestmark = pytest.mark.slow  # solves the 3D shell
 
 R, H, E, NU, PG = 0.13, 0.9e-3, 2.34e6, 0.4, 1300.0
+PEZZI = ShellProperties(gauge_pressure=PG, young_modulus=E, thickness=H, poisson_ratio=NU)
 N_TRI = 500
 
 
@@ -30,22 +31,26 @@ def ball():
 
 @pytest.fixture(scope="module")
 def sealed(ball):
-    return s3.Indentation(ball, E, NU, PG, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False)
+    return s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False)
 
 
 def test_bad_inputs_raise_clear_errors(ball):
     with pytest.raises(InvalidInputError, match="young_modulus"):
-        s3.Indentation(ball, -1.0, NU, PG)
+        s3.Indentation(ball, ShellProperties(gauge_pressure=PG, young_modulus=-1.0, thickness=ball.thickness, poisson_ratio=NU))
     with pytest.raises(InvalidInputError, match="gas"):
-        s3.Indentation(ball, E, NU, PG, gas="steam", rest_shape="scan")
+        s3.Indentation(ball, PEZZI, gas="steam", rest_shape="scan")
     with pytest.raises(InvalidInputError, match="max_newton_iterations"):
-        s3.Indentation(ball, E, NU, PG, max_newton_iterations=0)
+        s3.Indentation(ball, PEZZI, max_newton_iterations=0)
+    with pytest.raises(InvalidInputError, match="thickness"):  # one wall: the shell's h and the properties' agree
+        s3.Indentation(ball, ShellProperties(gauge_pressure=PG, young_modulus=E, thickness=2 * H, poisson_ratio=NU))
+    with pytest.raises(TypeError):  # keyword-only: no positional E, ν, P_g to swap
+        s3.Indentation(ball, E, NU, PG)
 
 
 def test_newton_iteration_limit_is_the_users(ball):
     # One Newton iteration cannot converge a 4 mm poke from the unloaded shell: the error must say
     # so with the limit the user set, not the default 60 (the rest state is not limited by it).
-    sim = s3.Indentation(ball, E, NU, PG, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
+    sim = s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
                          progress=False, max_newton_iterations=1)  # fmt: skip
     with pytest.raises(NoConvergenceError, match="after 1 iterations"):
         sim.solve(depth=0.004)
@@ -81,7 +86,7 @@ def test_sealed_gas_conserves_pv_and_forces_balance(sealed):
 
 def test_weight_adds_to_ground_reaction(ball):
     mass = 0.4
-    sim = s3.Indentation(ball, E, NU, PG, indenter_radius=0.01, mass=mass, rest_shape="scan", progress=False)
+    sim = s3.Indentation(ball, PEZZI, indenter_radius=0.01, mass=mass, rest_shape="scan", progress=False)
     st = sim.solve(depth=0.004)
     obs = st.observables()
     unbalance = obs["ground_reaction"] - obs["force"] - mass * GRAVITY
@@ -94,7 +99,7 @@ def test_force_control_reproduces_displacement_control(ball):
     # state matches the prescribed one to atol (the residual on the indenter's dof): 1e-8 N here,
     # well inside the 1e-6 relative (≈ 7e-7 N) asserted. With the default atol (5.5e-6 N) this
     # check passed or failed with the Newton path (a kept preconditioner from earlier solves).
-    sim = s3.Indentation(ball, E, NU, PG, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
+    sim = s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
                          force_tolerance=1e-8, progress=False)  # fmt: skip
     st = sim.solve(depth=0.006)
     force = st.observables()["force"]
@@ -123,7 +128,7 @@ def test_export_and_plot(sealed, tmp_path):
 def test_equilibrium_force_gradients_match_central_differences(ball):
     # Central differences of F need primal solves far below the default force tolerance (≈ 5e-6 N
     # here, about the F difference of a 1e-3 relative step × 2e-3): 1e-10 N.
-    sim = s3.Indentation(ball, E, NU, PG, indenter_radius=0.01, rest_shape="scan", progress=False,
+    sim = s3.Indentation(ball, PEZZI, indenter_radius=0.01, rest_shape="scan", progress=False,
                          force_tolerance=1e-10)  # fmt: skip
     force = sim.force_function(depth=0.005)
     theta = {"gauge_pressure": jnp.asarray(PG), "young_modulus": jnp.asarray(E), "thickness": jnp.asarray(H)}
@@ -148,7 +153,7 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     stopped before the volume could move; the rest solve now tightens it to the volume target."""
     from shelljax.geometry import signed_volume
 
-    sim = s3.Indentation(ball, E, NU, PG, gas="prescribed", indenter_radius=0.01, progress=False,
+    sim = s3.Indentation(ball, PEZZI, gas="prescribed", indenter_radius=0.01, progress=False,
                          force_tolerance=force_tolerance)  # fmt: skip
     scan_volume = signed_volume(ball.mesh.vertices, ball.mesh.faces)
     assert float(sim.model.volume(sim.q_reference)) == pytest.approx(scan_volume, rel=1e-6)

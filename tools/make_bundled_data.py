@@ -29,7 +29,7 @@ import tomli_w
 from shelljax.config import bundled_data_dir
 from shelljax.geometry import HAMMER_HEAD_RADIUS, HAMMER_POKE_POINT, enclosed_volume, load_mesh
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
-from shelljax.physics import scaling_wrinkle_count, tau
+from shelljax.physics import ShellProperties, scaling_wrinkle_count, tau
 
 SESSIONS = bundled_data_dir() / "sessions"
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
@@ -55,11 +55,12 @@ def _mesh_volume_ratio(mesh_file: str, radius: float) -> float:
 
 def engine_depths(gauge_pressure, obj, radius, forces, gas_volume_ratio):
     """Noise-free local dimple depths w0 [m] of the engine at increasing ``forces`` [N]."""
-    from shelljax.axisym import indentation_curves
+    from shelljax.axisym import CurvePhysics, indentation_curves
 
-    params = np.array([gauge_pressure, obj["young_modulus"], obj["thickness"], POISSON])
-    curve = indentation_curves(params, np.asarray(forces), radius=radius, n_elements=N_ELEMENTS,
-                               gas="isothermal", gas_volume_ratio=gas_volume_ratio, workers=1)  # fmt: skip
+    shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=obj["young_modulus"], thickness=obj["thickness"],
+                            poisson_ratio=POISSON, radius=radius)
+    curve = indentation_curves(shell, np.asarray(forces), n_elements=N_ELEMENTS, gas="isothermal",
+                               physics=CurvePhysics(gas_volume_ratio=gas_volume_ratio), workers=1)  # fmt: skip
     return np.asarray(curve.w0[0])
 
 

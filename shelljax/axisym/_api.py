@@ -14,7 +14,8 @@ from .._errors import InvalidInputError, NoConvergenceError
 from ._hilbert import hilbert_order
 from .._parallel import map_batch
 from ..paper import PAPER_FORCES
-from ._model import CurvePhysics, Setup, curve_single
+from ..physics import ShellProperties
+from ._model import CurvePhysics, Setup, _shell, curve_single
 from ._observables import wrinkle_count
 
 
@@ -63,8 +64,9 @@ class CurveResult(eqx.Module):
 def _one(setup: Setup, theta, forces, physics: CurvePhysics, nearby_guesses=None):
     """(CurveResult fields, (equilibrium states (1 + k, n_y) [m]: inflated, then each level;
     inflation residual [N])) of one parameter set and its (scalar) physics."""
-    pressure, young, thick, nu = theta[0], theta[1], theta[2], theta[3]
-    out = curve_single(setup, pressure, young, thick, nu, forces, return_states=True,
+    young, thick, nu = theta[1], theta[2], theta[3]
+    properties = ShellProperties(gauge_pressure=theta[0], young_modulus=young, thickness=thick, poisson_ratio=nu)
+    out = curve_single(setup, properties, forces, return_states=True,
                        nearby_guesses=nearby_guesses, physics=physics)
     n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
                       setup.radius, young, thick, nu)
@@ -142,48 +144,74 @@ def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
         lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
-def indentation_curves_raw(params, forces, setup: Setup, chunk: int = 0,
+def _rows(properties: ShellProperties) -> Float[Array, "b 4"]:
+    """(batch, 4) columns P_g [Pa], E [Pa], h [m], ν [-]: the compiled program's parameter rows."""
+    fields = (properties.gauge_pressure, properties.young_modulus, properties.thickness, properties.poisson_ratio)
+    columns = jnp.broadcast_arrays(*(jnp.asarray(v, jnp.float64) for v in fields))
+    return jnp.atleast_2d(jnp.stack(columns, axis=-1))
+
+
+def indentation_curves_raw(properties: ShellProperties, forces, setup: Setup, chunk: int = 0,
                            physics: CurvePhysics | None = None) -> CurveResult:
     """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
 
-    ``params`` (batch, 4): columns P_g [Pa], E [Pa], h [m], ν [-]; ``forces`` (k,) [N].
-    ``physics``: per-curve traced effects (:class:`CurvePhysics`, every field (batch,); None:
-    ``CurvePhysics.defaults(setup, batch)``, today's physics); with or without it the same
-    program runs, and curves are differentiable in its values as in ``params``.
+    ``properties``: :class:`shelljax.physics.ShellProperties` whose P_g [Pa], E [Pa], h [m], ν [-]
+    have shape (batch,) (scalars: one curve; its radius, if set, is ``setup.radius``); ``forces``
+    (k,) [N]. ``physics``: per-curve traced effects (:class:`CurvePhysics`, fields () or (batch,);
+    None: the default physics, the Setup's); with or without it the same program runs, and curves
+    are differentiable in its values as in ``properties``.
     ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
     a stretch of the batch ordered along a Hilbert curve and starting every curve from its
     predecessor's equilibria (fewer Newton iterations on dense batches, docs/axisym.md); 0 vmaps
     the whole batch at once, every curve from scratch. The results agree to the Newton tolerance
-    either way. Differentiable in ``params`` (implicit differentiation of every equilibrium).
+    either way. Differentiable in ``properties`` (implicit differentiation of every equilibrium).
     """
-    params = jnp.asarray(params, jnp.float64)
-    if physics is None:
-        physics = CurvePhysics.defaults(setup, params.shape[0])
-    physics = jax.tree_util.tree_map(lambda v: jnp.broadcast_to(jnp.asarray(v, jnp.float64), params.shape[:1]),
-                                     physics)
+    _shell(properties, setup, "indentation_curves_raw")  # a ShellProperties, of the Setup's radius if it has one
+    params = _rows(properties)
+    physics = (CurvePhysics() if physics is None else physics).resolved(setup, params.shape[0])
     # a batch that fits in one chunk is solved unwalked: one program whatever the chunk it asked for
     chunk = int(chunk) if params.shape[0] > int(chunk) > 0 else 0
     return CurveResult(**_batched(setup, params, jnp.asarray(forces, jnp.float64), chunk, physics))
 
 
-def _check(params, forces, radius):
-    p = np.asarray(params, dtype=float)
-    if p.ndim == 1:
-        p = p[None]
-    if p.ndim != 2 or p.shape[1] != 4:
+_FIELDS = ("gauge_pressure", "young_modulus", "thickness", "poisson_ratio")
+
+
+def _check(properties, forces, radius):
+    """((batch, 4) rows P_g, E, h, ν, forces [N], radius [m]) of the checked input."""
+    if not isinstance(properties, ShellProperties):
         raise InvalidInputError(
-            f"indentation_curves: params has shape {np.shape(params)}; expected (batch, 4) "
-            "columns (P_g [Pa], E [Pa], h [m], nu [-])."
+            f"indentation_curves: expected a physics.ShellProperties, got {type(properties).__name__}. "
+            "Fix: ShellProperties(gauge_pressure=…, young_modulus=…, thickness=…, poisson_ratio=…), "
+            "fields () or (batch,)"
         )
-    names = ("P_g", "E", "h")
-    for j, name in enumerate(names):
+    try:
+        columns = np.broadcast_arrays(*(np.asarray(getattr(properties, k), float) for k in _FIELDS))
+        p = np.atleast_2d(np.stack(columns, -1))
+    except ValueError:
+        p = None
+    if p is None or p.ndim != 2:
+        shapes = {k: np.shape(getattr(properties, k)) for k in _FIELDS}
+        raise InvalidInputError(
+            f"indentation_curves: the properties' fields have shapes {shapes}; expected () or (batch,)."
+        )
+    for j, name in enumerate(_FIELDS[:3]):
         if not np.all(np.isfinite(p[:, j])) or np.any(p[:, j] <= 0):
             raise InvalidInputError(
-                f"indentation_curves: params[:, {j}] ({name}) must be finite and > 0; got "
+                f"indentation_curves: properties.{name} must be finite and > 0; got "
                 f"{p[:, j][~(np.isfinite(p[:, j]) & (p[:, j] > 0))][:3]}."
             )
     if np.any(p[:, 3] <= -1.0) or np.any(p[:, 3] >= 0.5):
-        raise InvalidInputError("indentation_curves: params[:, 3] (nu) must lie in (-1, 0.5).")
+        raise InvalidInputError("indentation_curves: properties.poisson_ratio must lie in (-1, 0.5).")
+    own = None if properties.radius is None else np.unique(np.asarray(properties.radius, float))
+    if own is not None and (own.size != 1 or (radius is not None and own[0] != float(radius))):
+        raise InvalidInputError(
+            f"indentation_curves: properties.radius {own[:3]} m and radius = {radius!r} m disagree (one radius "
+            "per batch: the engine's mesh is static). Fix: give the radius once, the same for every curve"
+        )
+    radius = radius if own is None else float(own[0])
+    if radius is None:
+        raise InvalidInputError("indentation_curves: no radius. Fix: set properties.radius or pass radius= [m]")
     f = np.asarray(forces, dtype=float)
     if f.ndim != 1 or f.size == 0 or np.any(f <= 0) or np.any(np.diff(f) <= 0):
         raise InvalidInputError(
@@ -194,7 +222,7 @@ def _check(params, forces, radius):
         raise InvalidInputError(f"indentation_curves: radius must be > 0 [m]; got {radius!r}.")
     if np.any(p[:, 2] >= 0.2 * radius):
         raise InvalidInputError("indentation_curves: thickness h must be < 0.2 R (thin shell).")
-    return p, f
+    return p, f, radius
 
 
 # (lowest allowed value, whether it is excluded) of each CurvePhysics field
@@ -234,15 +262,17 @@ def _retry_from_cold_starts(res: CurveResult, rows, solve, workers) -> CurveResu
     return jax.tree_util.tree_map(lambda whole, part: jnp.asarray(whole).at[failed].set(part), res, again)
 
 
-def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_failure: bool = True,
+def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radius: float | None = None,
+                       raise_on_failure: bool = True,
                        chunk: int = 8, workers: int | None = None, physics: CurvePhysics | None = None,
                        **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
-    ``params``: (batch, 4) or (4,) array of (P_g [Pa], E [Pa], h [m], ν [-]); ``forces`` [N]:
-    increasing positive forces (default: the paper's 5–20 N in 2.5 N steps); ``radius`` [m]:
-    inflated radius R. Further keywords go to :class:`Setup` (``n_elements``, ``grading``,
-    ``gas`` = "prescribed" | "isothermal" | "polytropic", ``relax``, ``indenter_radius`` [m],
+    ``properties``: :class:`shelljax.physics.ShellProperties` of fields () or (batch,): P_g [Pa],
+    E [Pa], h [m], ν [-], and the inflated radius R [m] (one for the batch) unless ``radius`` [m]
+    gives it; ``forces`` [N]: increasing positive forces (default: the paper's 5–20 N in 2.5 N
+    steps). Further keywords go to :class:`Setup` (``n_elements``, ``grading``, ``gas`` =
+    "prescribed" | "isothermal" | "adiabatic" | "polytropic", ``relax``, ``indenter_radius`` [m],
     ``contact_stiffness`` [N/m³], ``atol`` [N], ...). ``physics``: per-curve effects
     (:class:`CurvePhysics`, fields () or (batch,); None: the Setup's defaults).
 
@@ -254,13 +284,14 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
     GPU; see :func:`map_batch`). For use inside jit/vmap/grad call
     :func:`indentation_curves_raw`.
     """
-    p, f = _check(params, forces, radius)
+    p, f, radius = _check(properties, forces, radius)
     setup = Setup(radius=float(radius), **setup_kwargs)  # raises InvalidInputError on a bad field
-    columns = _check_physics(CurvePhysics.defaults(setup) if physics is None else physics, p.shape[0], setup)
+    columns = _check_physics((CurvePhysics() if physics is None else physics).resolved(setup), p.shape[0], setup)
 
     def solve(rows, lanes=chunk):
         # the physics columns travel with their params through map_batch's split
-        return indentation_curves_raw(rows[:, :4], f, setup, lanes,
+        shell = ShellProperties(**{name: rows[:, j] for j, name in enumerate(_FIELDS)})
+        return indentation_curves_raw(shell, f, setup, lanes,
                                       CurvePhysics(**{name: rows[:, 4 + j] for j, name in enumerate(_PHYSICS_BOUNDS)}))
 
     rows = np.concatenate([p, columns], axis=1)
@@ -275,7 +306,8 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
             if float(res.wall_gap[b, k]) <= p[b, 2]:
                 raise NoConvergenceError(
                     f"axisymmetric curve: at force {f[k]} N the indenter pushed the top wall onto the "
-                    f"bottom wall of params[{b}] = {p[b].tolist()} (top pole {float(res.wall_gap[b, k]):.3g} m "
+                    f"bottom wall of curve {b} (P_g, E, h, ν) = {p[b].tolist()} "
+                    f"(top pole {float(res.wall_gap[b, k]):.3g} m "
                     "above the bottom pole, thickness h larger); self-contact is not modelled, so this "
                     f"and larger forces have no ball state ({len(bad)} (batch, force) entries failed). "
                     "Fix: use smaller forces, or pass raise_on_failure=False and drop the unconverged levels.",
@@ -283,7 +315,7 @@ def indentation_curves(params, forces=PAPER_FORCES, *, radius: float, raise_on_f
                 )
             raise NoConvergenceError(
                 f"axisymmetric Newton did not converge for {len(bad)} (batch, force) entries; "
-                f"first: params[{b}] = {p[b].tolist()}, force {f[k]} N. Try more elements "
+                f"first: curve {b} (P_g, E, h, ν) = {p[b].tolist()}, force {f[k]} N. Try more elements "
                 "(n_elements), a larger max_steps, or a different ramp.",
                 history=np.asarray(res.residual[b]).tolist(),
             )

@@ -45,6 +45,8 @@ from ..physics import (
 )
 from ._geometry import gauss_points_2
 
+# the compiled program's gas laws: the adiabatic one (and every other κ) is "polytropic", whose κ
+# is traced (``Params.gas_exponent``)
 GAS_MODELS = ("prescribed", "isothermal", "polytropic")
 RELAX_WIDTH = 1e-3  # [-] smoothing width of the wrinkling switch, in units of stretch²
 # c_w [-]: hoop compression a wrinkled wall carries, in classical buckling resultants, calibrated
@@ -63,10 +65,7 @@ class Config(eqx.Module):
     "point" (point force on the top pole); ``ground``: rigid plane under the bottom pole;
     ``pin_bottom``: fix z of the bottom pole (removes the vertical rigid mode when nothing
     else does); ``relax``: relaxation of compressive hoop stress (wrinkling), which saturates at
-    ``hoop_capacity`` [-] times the classical buckling resultant (0: tension field);
-    ``gas_volume_ratio`` [-]: a static factor on the traced ``Params.gas_volume_ratio`` (the sealed
-    gas volume over the ball's inflated volume is their product; the curve API leaves this at 1
-    and passes each curve's ratio traced).
+    ``hoop_capacity`` [-] times the classical buckling resultant (0: tension field).
     """
 
     theta: tuple = eqx.field(static=True)
@@ -75,7 +74,6 @@ class Config(eqx.Module):
     ground: bool = eqx.field(static=True, default=False)
     pin_bottom: bool = eqx.field(static=True, default=True)
     relax: bool = eqx.field(static=True, default=False)
-    gas_volume_ratio: float = eqx.field(static=True, default=1.0)
     hoop_capacity: float = eqx.field(static=True, default=0.0)
 
     def __check_init__(self):
@@ -96,7 +94,7 @@ class Params(eqx.Module):
     ground_z [m] (height of the ground plane), contact_stiffness k_c [N/m³] (contact pressure
     per unit penetration: penetration = contact pressure / k_c), bending_scale [-] (multiplies
     the bending energy; 1 for physical shells, < 1 only to emulate large τ in shallow-shell checks),
-    gas_volume_ratio [-] (sealed gas volume over V_ref, times ``Config.gas_volume_ratio``),
+    gas_volume_ratio [-] (sealed gas volume over V_ref),
     gas_exponent κ [-] (gas = "polytropic" only: p V^κ constant; 0 prescribed, 1 isothermal,
     1.4 adiabatic), stiffening s [-] (Gent stiffening 1/J_m of the membrane; 0: Neo-Hookean),
     areal_weight q [Pa] (self-weight ρ h g per unit rest area along −z, with the ground only;
@@ -291,17 +289,12 @@ def enclosed_volume(x):
     return jnp.pi * jnp.sum(dz * (ra**2 + ra * rb + rb**2)) / 3.0
 
 
-def gas_volume_ratio(cfg: Config, p: Params):
-    """Sealed gas volume over the reference volume [-]: the static and the traced factor."""
-    return cfg.gas_volume_ratio * p.gas_volume_ratio
-
-
 def gas_energy(volume, cfg: Config, p: Params):
     """Gas potential [J] of the enclosed volume [m³] (shared ``physics`` gas laws)."""
     if cfg.gas == "prescribed":
         return prescribed_pressure_energy(volume, p.gauge_pressure)
     # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
-    gas_volume = gas_volume_ratio(cfg, p) * p.reference_volume
+    gas_volume = p.gas_volume_ratio * p.reference_volume
     if cfg.gas == "polytropic":
         sealed = polytropic_gas_energy(volume - p.reference_volume + gas_volume, gas_volume,
                                        p.gauge_pressure, p.gas_exponent)

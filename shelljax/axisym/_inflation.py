@@ -30,10 +30,11 @@ def uniform_stretch_density(stretch, rest_radius, thickness, young_modulus, pois
     return membrane + bending_scale * bending
 
 
-def inflation_stretch(gauge_pressure, radius, thickness, young_modulus, poisson_ratio,
+def inflation_stretch(gauge_pressure, radius, young_modulus, thickness, poisson_ratio,
                       bending_scale=1.0, iterations: int = 30, stiffening=0.0):
-    """Uniform stretch λ = R / R0 [-] of a Neo-Hookean sphere inflated to radius R [m] by P_g [Pa]
-    (Gent-stiffened by ``stiffening`` s [-]; 0: Neo-Hookean)."""
+    """Uniform stretch λ = R / R0 [-] of a Neo-Hookean sphere of E [Pa], h [m], ν [-] inflated to
+    radius R [m] by P_g [Pa] (Gent-stiffened by ``stiffening`` s [-]; 0: Neo-Hookean). The shell's
+    parameters come in the one order of ``physics.ShellProperties``: P_g, R, E, h, ν."""
 
     def residual(lam):
         r0 = radius / lam
@@ -51,7 +52,7 @@ def inflation_stretch(gauge_pressure, radius, thickness, young_modulus, poisson_
     return jax.lax.fori_loop(0, iterations, step, lam0)
 
 
-def neo_hookean_sphere_pressure(stretch, rest_radius, thickness, young_modulus, poisson_ratio):
+def neo_hookean_sphere_pressure(stretch, rest_radius, young_modulus, thickness, poisson_ratio):
     """Closed-form membrane inflation law P_g(λ) [Pa] of the compressible Neo-Hookean sphere.
 
     P = h [2β(λ − 1/λ) + α(λ³ − 1/λ)] / (R0 λ²), α = Eν/(1−ν²), β = E/(2(1+ν)) (hand-derived;
@@ -65,13 +66,13 @@ def neo_hookean_sphere_pressure(stretch, rest_radius, thickness, young_modulus, 
     )
 
 
-def gent_sphere_pressure(stretch, rest_radius, thickness, young_modulus, poisson_ratio, stiffening):
+def gent_sphere_pressure(stretch, rest_radius, young_modulus, thickness, poisson_ratio, stiffening):
     """Closed-form membrane inflation law P_g(λ) [Pa] of the Gent-stiffened compressible sphere.
 
     P = h [2β(λ − 1/λ)/(1 − s I) + α(λ³ − 1/λ)] / (R0 λ²), I = 2λ² − 2 − 4 ln λ: the Neo-Hookean
     law with β → β/(1 − s I) (hand-derived from ``physics.gent_membrane_invariants`` with
     C = λ² I; an independent check of the numerical inflation). ``stiffening`` s [-], λ [-],
-    R0 [m], h [m], E [Pa], ν [-].
+    R0 [m], E [Pa], h [m], ν [-] (the order of every shell law: P_g, R, E, h, ν).
     """
     alpha, beta = lame_constants_2d(young_modulus, poisson_ratio)
     lam = stretch

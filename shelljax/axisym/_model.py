@@ -10,19 +10,20 @@ area-weighted penalty: contact pressure = k_c × penetration, so the penetration
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import AIR_HEAT_CAPACITY_RATIO
+from ..physics import GAS_EXPONENTS, GAS_LAWS, ShellProperties
 from ._energy import (
-    GAS_MODELS,
     WRINKLED_HOOP_CAPACITY,
     Config,
     Params,
@@ -44,17 +45,23 @@ from ._tracing import tied_to
 # units of the radius, so similar balls stay similar.
 FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
 
+# the named laws of ``physics.GAS_LAWS``, and "polytropic": the sealed gas whose κ is the traced
+# ``CurvePhysics.gas_exponent`` (the adiabatic gas compiles to it, with κ = γ by default)
+SETUP_GASES = GAS_LAWS + ("polytropic",)
+
 
 class Setup(eqx.Module):
     """Static description of an indentation experiment on a ball (all lengths in m).
 
     ``radius`` R: inflated radius; ``n_elements``: meridian elements pole to pole (made odd);
-    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: "prescribed" (constant P_g,
-    the paper's model), "isothermal" (sealed ideal gas, P_g is the gauge pressure before
-    indentation) or "polytropic" (sealed gas with p V^κ constant, κ the traced
-    ``CurvePhysics.gas_exponent``); ``relax``: relaxation of compressive hoop stress (wrinkled shell), which
-    saturates at ``hoop_capacity`` [-] classical buckling resultants E h²/(R0 √(3(1−ν²)))
-    (default calibrated on a 3D curve, see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
+    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: one of ``physics.GAS_LAWS``,
+    "prescribed" (constant P_g, the paper's model), "isothermal" or "adiabatic" (sealed ideal gas,
+    P_g is the gauge pressure before indentation), or "polytropic" (sealed gas with p V^κ constant,
+    κ the traced ``CurvePhysics.gas_exponent``, so that one program serves every law; "adiabatic"
+    is this program with κ = γ unless ``CurvePhysics.gas_exponent`` says otherwise); ``relax``:
+    relaxation of compressive hoop stress (wrinkled shell), which saturates at ``hoop_capacity``
+    [-] classical buckling resultants E h²/(R0 √(3(1−ν²))) (default calibrated on a 3D curve,
+    see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
     ``indenter_radius`` a (the default of the traced ``CurvePhysics.indenter_radius``, and the
     Newton step cap); ``contact_stiffness`` k_c [N/m³]; ``ramp``: fractions of the first
     force solved first (load stepping; none by default: the flattened start converges without);
@@ -62,10 +69,7 @@ class Setup(eqx.Module):
     per load step; ``predictor``: "none" (start from the last converged state: the most robust),
     "secant" (extrapolate the last two states) or "tangent" (Euler step);
     ``substeps``: equal load steps per interval between requested forces (raise it when the
-    requested forces are far apart; the paper's 2.5 N steps need 1); ``gas_volume_ratio`` [-]:
-    with ``gas = "isothermal"``, the sealed gas volume over the ball's inflated volume 4/3 π R³
-    (1: a ball; an object's enclosed volume over 4/3 π R³ when only its poke region is a sphere;
-    the default of the traced ``CurvePhysics.gas_volume_ratio``); ``friction_slip_tolerance`` ε
+    requested forces are far apart; the paper's 2.5 N steps need 1); ``friction_slip_tolerance`` ε
     [m]: slip below which a node sticks to the ground under friction (``CurvePhysics.
     friction_coefficient``; None: ``FRICTION_SLIP_TOLERANCE`` × R, the 3D engine's default scaled).
     """
@@ -82,15 +86,14 @@ class Setup(eqx.Module):
     max_steps: int = eqx.field(static=True, default=100)
     predictor: str = eqx.field(static=True, default="none")
     substeps: int = eqx.field(static=True, default=1)
-    gas_volume_ratio: float = eqx.field(static=True, default=1.0)
     hoop_capacity: float = eqx.field(static=True, default=WRINKLED_HOOP_CAPACITY)
     friction_slip_tolerance: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
-        if self.gas not in GAS_MODELS:
+        if self.gas not in SETUP_GASES:
             raise InvalidInputError(
-                f"Setup: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(GAS_MODELS)} "
-                "(the adiabatic gas is 'polytropic' with CurvePhysics.gas_exponent = 1.4)"
+                f"Setup: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(SETUP_GASES)} "
+                "('polytropic': a sealed gas of κ = CurvePhysics.gas_exponent)"
             )
         if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
             raise InvalidInputError(
@@ -102,11 +105,6 @@ class Setup(eqx.Module):
                 f"Setup: hoop_capacity = {self.hoop_capacity!r} must be a number >= 0 (hoop compression "
                 "of the wrinkled wall in classical buckling resultants). Fix: 0 for a tension field, "
                 f"or the calibrated default {WRINKLED_HOOP_CAPACITY}"
-            )
-        if not (math.isfinite(self.gas_volume_ratio) and self.gas_volume_ratio > 0):
-            raise InvalidInputError(
-                f"Setup: gas_volume_ratio = {self.gas_volume_ratio!r} must be a positive number "
-                "(sealed gas volume / 4/3 π R³). Fix: pass 1 for a ball"
             )
         eps = self.friction_slip_tolerance
         if eps is not None and not (math.isfinite(eps) and eps > 0):
@@ -130,24 +128,23 @@ class Setup(eqx.Module):
         return SolverOptions(self.atol, self.max_steps, 30, self.indenter_radius)
 
 
-# κ of each named gas law (p V^κ constant): gas = "polytropic" with this traced κ is that law, so one
-# compiled program serves them all
-GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": AIR_HEAT_CAPACITY_RATIO}
-
-
 class CurvePhysics(eqx.Module):
     """Per-curve physical effects, traced: one compiled program serves every value.
 
     Each field is a scalar for :func:`curve_single` and has shape (batch,) for
     :func:`~shelljax.axisym.indentation_curves_raw`. ``indenter_radius`` a [m] (the finger);
-    ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, gases "isothermal" and
-    "polytropic"); ``gas_exponent`` κ [-] (gas "polytropic" only: p V^κ constant; 0 is the
-    prescribed gauge pressure, 1 isothermal, 1.4 adiabatic); ``stiffening`` s = 1/J_m [-] (Gent
+    ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, the sealed gases: 1 for a ball, an
+    object's enclosed volume over 4/3 π R³ when only its poke region is a sphere); ``gas_exponent``
+    κ [-] (gases "polytropic" and "adiabatic": p V^κ constant; 0 is the prescribed gauge pressure,
+    1 isothermal, 1.4 adiabatic, ``physics.GAS_EXPONENTS``); ``stiffening`` s = 1/J_m [-] (Gent
     stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
-    default: frictionless). :meth:`defaults` gives the default physics.
+    default: frictionless); ``contact_stiffness`` k_c [N/m³] (None: the Setup's, a compile-time
+    constant). Every field has a default: ``indenter_radius`` None is the Setup's finger and
+    ``gas_exponent`` None the κ of the Setup's gas (1 for "polytropic"); :meth:`resolved` fills
+    them in, :meth:`defaults` is the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
@@ -155,26 +152,34 @@ class CurvePhysics(eqx.Module):
     scale² and its depths scale times as large.
     """
 
-    indenter_radius: Float[Array, "*batch"]
-    gas_volume_ratio: Float[Array, "*batch"]
-    gas_exponent: Float[Array, "*batch"]
-    stiffening: Float[Array, "*batch"]
-    areal_weight: Float[Array, "*batch"]
+    indenter_radius: Float[Array, "*batch"] | None = None
+    gas_volume_ratio: Float[Array, "*batch"] = 1.0
+    gas_exponent: Float[Array, "*batch"] | None = None
+    stiffening: Float[Array, "*batch"] = 0.0
+    areal_weight: Float[Array, "*batch"] = 0.0
     friction_coefficient: Float[Array, "*batch"] = 0.0
     contact_stiffness: Float[Array, "*batch"] | None = None
 
+    def resolved(self, setup: Setup, batch: int | None = None) -> "CurvePhysics":
+        """Every field a float64 array, of shape (batch,) when ``batch`` is given: the finger and κ
+        left None are ``setup``'s (its finger, its gas's κ); ``contact_stiffness`` may stay None."""
+        # the prescribed and isothermal programs never read κ: they keep the polytropic default, 1
+        kappa = GAS_EXPONENTS["adiabatic"] if setup.gas == "adiabatic" else GAS_EXPONENTS["isothermal"]
+        filled = dataclasses.replace(
+            self, indenter_radius=setup.indenter_radius if self.indenter_radius is None else self.indenter_radius,
+            gas_exponent=kappa if self.gas_exponent is None else self.gas_exponent)  # fmt: skip
+
+        def array(v):
+            v = jnp.asarray(v, jnp.float64)
+            return v if batch is None else jnp.broadcast_to(v, (int(batch),))
+
+        return jax.tree_util.tree_map(array, filled)
+
     @classmethod
     def defaults(cls, setup: Setup, batch: int | None = None) -> "CurvePhysics":
-        """``setup``'s finger and gas volume ratio, κ = 1, s = 0, q = 0, μ = 0: scalars, or (batch,);
+        """``setup``'s finger and gas κ, volume ratio 1, s = 0, q = 0, μ = 0: scalars, or (batch,);
         the contact stiffness None (the Setup's, a compile-time constant)."""
-        shape = () if batch is None else (int(batch),)
-
-        def full(v):
-            return jnp.full(shape, v, dtype=jnp.float64)
-
-        return cls(indenter_radius=full(setup.indenter_radius), gas_volume_ratio=full(setup.gas_volume_ratio),
-                   gas_exponent=full(GAS_EXPONENTS["isothermal"]), stiffening=full(0.0), areal_weight=full(0.0),
-                   friction_coefficient=full(0.0))  # fmt: skip
+        return cls().resolved(setup, batch)
 
     def similar(self, scale) -> "CurvePhysics":
         """The physics of the similar ball with every length times ``scale`` [-]: a × scale, and
@@ -188,7 +193,7 @@ class CurvePhysics(eqx.Module):
 def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_volume=1.0,
             ground_z=0.0, bending_scale=1.0, physics: CurvePhysics | None = None):
     f = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
-    physics = CurvePhysics.defaults(setup) if physics is None else physics
+    physics = CurvePhysics.defaults(setup) if physics is None else physics.resolved(setup)
     stiffness = setup.contact_stiffness if physics.contact_stiffness is None else physics.contact_stiffness
     return Params(f(young), f(thick), f(nu), f(rest_radius), f(pressure), f(ref_volume),
                   f(force), f(physics.indenter_radius), f(ground_z), f(stiffness),
@@ -197,8 +202,24 @@ def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_vo
                   friction_slip_tolerance=f(setup.slip_tolerance()))
 
 
-def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses=None, stiffening=0.0):
-    """Inflated (pre-indentation) state of the discrete sphere.
+def _shell(properties: ShellProperties, setup: Setup, caller: str):
+    """(P_g [Pa], E [Pa], h [m], ν [-]) of ``properties``, whose radius, if it has one, must be
+    the Setup's: the engine's radius is static (the mesh), the properties' traced."""
+    if not isinstance(properties, ShellProperties):
+        raise InvalidInputError(
+            f"{caller}: expected a physics.ShellProperties, got {type(properties).__name__}. "
+            "Fix: ShellProperties(gauge_pressure=…, young_modulus=…, thickness=…, poisson_ratio=…)"
+        )
+    if properties.radius is not None and not isinstance(properties.radius, jax.Array):
+        if np.any(np.asarray(properties.radius, dtype=float) != float(setup.radius)):
+            raise InvalidInputError(f"{caller}: properties.radius = {properties.radius!r} m is not the Setup's radius "
+                                    f"{setup.radius!r} m. Fix: leave it None or pass Setup(radius=…) the same value")
+    return properties.gauge_pressure, properties.young_modulus, properties.thickness, properties.poisson_ratio
+
+
+def inflate(setup: Setup, properties: ShellProperties, bending_scale=1.0, guesses=None, stiffening=0.0):
+    """Inflated (pre-indentation) state of the discrete sphere of ``properties`` (scalar fields;
+    the radius is ``setup.radius``).
 
     Returns (rest radius R0 [m], inflated unknowns y [m], residual [N], iterations). The bottom
     pole height is pinned at −R (rigid mode); nothing touches the ball (the indenter's z_c is
@@ -207,6 +228,7 @@ def inflate(setup: Setup, pressure, young, thick, nu, bending_scale=1.0, guesses
     ``stiffening`` s [-]: Gent stiffening of the membrane (0: Neo-Hookean); the rest radius
     R0 = R/λ comes from the same law.
     """
+    pressure, young, thick, nu = _shell(properties, setup, "inflate")
     physics = eqx.tree_at(lambda c: c.stiffening, CurvePhysics.defaults(setup), jnp.asarray(stiffening, jnp.float64))
     r0, y0, p = _inflation(setup, pressure, young, thick, nu, bending_scale, physics)
     if guesses is not None:
@@ -220,7 +242,7 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
     indentation's configuration (``Params.inflating``): the continuous sphere's stretch, the gas at
     its gauge pressure, no contact stiffness, load, weight or friction, and the ground and the
     indenter parked 10 R away."""
-    lam = inflation_stretch(pressure, setup.radius, thick, young, nu, bending_scale, stiffening=physics.stiffening)
+    lam = inflation_stretch(pressure, setup.radius, young, thick, nu, bending_scale, stiffening=physics.stiffening)
     r0 = setup.radius / lam
     far = 10.0 * setup.radius
     # (the sealed gas's reference volume is not used while inflating; the ball's keeps it finite)
@@ -233,8 +255,9 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
 
 
 def _indentation_config(setup: Setup) -> Config:
-    # the gas volume ratio is traced (``Params.gas_volume_ratio``): the static factor stays 1
-    return Config(theta=setup.theta(), gas=setup.gas, loading="sphere", ground=True,
+    # the adiabatic gas is the polytropic program, its κ traced (``CurvePhysics.resolved``)
+    gas = "polytropic" if setup.gas == "adiabatic" else setup.gas
+    return Config(theta=setup.theta(), gas=gas, loading="sphere", ground=True,
                   pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
 
 
@@ -329,12 +352,13 @@ def _levels(obs, n_ramp: int, m: int):
     return out
 
 
-def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale=1.0,
+def curve_single(setup: Setup, properties: ShellProperties, forces, bending_scale=1.0,
                  return_states: bool = False, nearby_guesses=None, physics: CurvePhysics | None = None):
-    """One force-controlled curve (unbatched, traceable). ``forces`` (k,) [N], increasing.
+    """One force-controlled curve (unbatched, traceable) of ``properties`` (scalar P_g, E, h, ν;
+    the radius is ``setup.radius``). ``forces`` (k,) [N], increasing.
 
-    ``physics``: the curve's traced effects (:class:`CurvePhysics` of scalars; None:
-    ``CurvePhysics.defaults(setup)``, the default physics). Curves are differentiable in them too.
+    ``physics``: the curve's traced effects (:class:`CurvePhysics` of scalars; None: the default
+    physics; None fields are the Setup's). Curves are differentiable in them too.
 
     Returns a dict of (k,) arrays: the observables, ``residual`` [N], ``iterations`` (Newton
     iterations of the level's load steps) and ``rest_radius`` [m] (scalar); with
@@ -354,7 +378,8 @@ def curve_single(setup: Setup, pressure, young, thick, nu, forces, bending_scale
     the guesses beyond the tolerance ``atol``, and no derivative flows through them.
     """
     forces = jnp.asarray(forces, dtype=jnp.float64)
-    physics = CurvePhysics.defaults(setup) if physics is None else physics
+    pressure, young, thick, nu = _shell(properties, setup, "curve_single")
+    physics = (CurvePhysics() if physics is None else physics).resolved(setup)
     cfg = _indentation_config(setup)
     r0, y_inflation, p_inflation = _inflation(setup, pressure, young, thick, nu, bending_scale, physics)
     schedule, first_load = _load_schedule(setup, forces)

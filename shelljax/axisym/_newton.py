@@ -21,7 +21,6 @@ from ._energy import (
     Config,
     Params,
     fixed_mask,
-    gas_volume_ratio,
     ground_gaps,
     indenter_gaps,
     node_rest_areas,
@@ -210,7 +209,7 @@ def _gas_energy_scale(cfg: Config, p: Params):
     if cfg.gas not in ("isothermal", "polytropic"):
         return 0.0
     scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
-             * jnp.abs(gas_volume_ratio(cfg, p)))
+             * jnp.abs(p.gas_volume_ratio))
     return jnp.where(p.inflating, 0.0, scale)  # an inflating ball's gas is held at its pressure
 
 

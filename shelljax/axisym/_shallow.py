@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 
 from ._energy import Config, hoop_tension, rest_nodes, split
-from ._model import Setup, _params, inflate
+from ..physics import ShellProperties
+from ._model import Setup, _params, _shell, inflate
 from ._newton import SolverOptions, equilibrium
 from ._observables import compressive_annulus
 
@@ -37,10 +38,11 @@ def pinch_config(setup: Setup, relax=False) -> Config:
                   pin_bottom=True, relax=relax)
 
 
-def pinch_state(setup: Setup, pressure, young, thick, nu, force, bending_scale=1.0,
-                guess=None, relax=False):
-    """Equilibrium (y [m], inflated y [m], params, residual [N]) of the pole pinch at force F [N]."""
-    r0, y_inf, _, _ = inflate(setup, pressure, young, thick, nu, bending_scale)
+def pinch_state(setup: Setup, properties: ShellProperties, force, bending_scale=1.0, guess=None, relax=False):
+    """Equilibrium (y [m], inflated y [m], params, residual [N]) of the pole pinch at force F [N]
+    of the ball of ``properties`` (scalar P_g, E, h, ν; the radius is ``setup.radius``)."""
+    pressure, young, thick, nu = _shell(properties, setup, "pinch_state")
+    r0, y_inf, _, _ = inflate(setup, properties, bending_scale)
     cfg = pinch_config(setup, relax)
     p = _params(young, thick, nu, r0, pressure, setup, force=force,
                 bending_scale=bending_scale)
@@ -49,12 +51,13 @@ def pinch_state(setup: Setup, pressure, young, thick, nu, force, bending_scale=1
     return sol.value, y_inf, p, sol.stats["residual"]
 
 
-def pinch_linear_stiffness(setup: Setup, pressure, young, thick, nu, bending_scale=1.0):
-    """Local linear stiffness k = 2 / (dδ/dF) [N/m] at F = 0, by implicit differentiation."""
+def pinch_linear_stiffness(setup: Setup, properties: ShellProperties, bending_scale=1.0):
+    """Local linear stiffness k = 2 / (dδ/dF) [N/m] at F = 0 of the ball of ``properties``, by
+    implicit differentiation."""
     n = len(setup.theta())
 
     def approach(force):
-        y, _, _, _ = pinch_state(setup, pressure, young, thick, nu, force, bending_scale)
+        y, _, _, _ = pinch_state(setup, properties, force, bending_scale)
         x, _ = split(y, n)
         return x[0, 1] - x[-1, 1]  # minus the pole distance [m]
 

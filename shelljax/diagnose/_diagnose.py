@@ -28,7 +28,7 @@ import numpy as np
 from scipy import stats
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ..axisym import GAS_EXPONENTS
+from ..physics import GAS_EXPONENTS
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score

@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..axisym import GAS_EXPONENTS, CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
+from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
+from ..physics import GAS_EXPONENTS, ShellProperties
 from ..estimate import FAILED_RESIDUAL, count_log_likelihood
 from ..paper import PAPER_INDENTER_RADIUS
 from ..physics import STANDARD_GRAVITY, scaling_wrinkle_count
@@ -190,12 +191,12 @@ def pad_compression(force, phys, data: StudyArrays):
 
 
 def engine_inputs(phys, data: StudyArrays):
-    """Engine rows (s, 4) [P_g, E, h/scale, ν] and the CurvePhysics of every session."""
+    """The engine's ShellProperties (fields (s,): P_g, E, h/scale, ν) and the CurvePhysics of every session."""
     scale = phys["radius"] / R_REF
     pressure, young, thick, nu = phys["gauge_pressure"], phys["young_modulus"], phys["thickness"], data.poisson_ratio
-    rows = jnp.stack([pressure, jnp.broadcast_to(young, pressure.shape), thick / scale,
-                      jnp.broadcast_to(nu, pressure.shape)], axis=1)  # fmt: skip
-    stretch = jax.vmap(lambda p, r: inflation_stretch(p, r, thick, young, nu))(pressure, phys["radius"])
+    shell = ShellProperties(gauge_pressure=pressure, young_modulus=jnp.broadcast_to(young, pressure.shape),
+                            thickness=thick / scale, poisson_ratio=jnp.broadcast_to(nu, pressure.shape))  # fmt: skip
+    stretch = jax.vmap(lambda p, r: inflation_stretch(p, r, young, thick, nu))(pressure, phys["radius"])
     rest_area = 4.0 * jnp.pi * (phys["radius"] / stretch) ** 2
     ones = jnp.ones_like(pressure)
     physics = CurvePhysics(
@@ -204,7 +205,7 @@ def engine_inputs(phys, data: StudyArrays):
         areal_weight=phys["body_mass"] * STANDARD_GRAVITY / rest_area,
         friction_coefficient=phys["friction_coefficient"] * ones,
     )  # fmt: skip
-    return rows, physics
+    return shell, physics
 
 
 def engine_setup() -> Setup:
@@ -212,9 +213,9 @@ def engine_setup() -> Setup:
     return Setup(radius=R_REF, n_elements=N_ELEMENTS, gas="polytropic", indenter_radius=PAPER_INDENTER_RADIUS)
 
 
-def solve_curves(rows, physics, data: StudyArrays, chunk: int = 0):
-    """The engine's curves on the study's grid (reference frame), one row per session (or draw)."""
-    return indentation_curves_raw(rows, data.grid, engine_setup(), chunk, physics=physics)
+def solve_curves(shell: ShellProperties, physics, data: StudyArrays, chunk: int = 0):
+    """The engine's curves on the study's grid (reference frame), one per session (or draw)."""
+    return indentation_curves_raw(shell, data.grid, engine_setup(), chunk, physics=physics)
 
 
 def _at(curves_field, session, force_ref, grid):
@@ -284,8 +285,8 @@ class JointProblem(eqx.Module):
     wrinkle_law: str = eqx.field(static=True)
 
     def residuals_and_prediction(self, u, args=None):
-        rows, physics = engine_inputs(physical(u, self.data), self.data)
-        pred, ok = predict(u, self.data, solve_curves(rows, physics, self.data), self.wrinkle_law)
+        shell, physics = engine_inputs(physical(u, self.data), self.data)
+        pred, ok = predict(u, self.data, solve_curves(shell, physics, self.data), self.wrinkle_law)
         r = jnp.concatenate([*data_residuals(pred, self.data), prior_residuals(u, self.data)])
         ok = ok & jnp.all(jnp.isfinite(r))
         return jnp.where(ok, r, FAILED_RESIDUAL), (pred, ok)

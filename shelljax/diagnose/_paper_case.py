@@ -135,12 +135,12 @@ def shape_sensitivity(pressure=1300.0, force=20.0, radius=0.13, thickness=0.9e-3
     """Change [%] of H, D_u, D_l and d of a ball (P_g [Pa], R [m], h [m], E [Pa], ν [-]) at
     ``force`` [N] under each of :data:`SHAPE_VARIANTS`, with the values [m]."""
     from ..axisym import CurvePhysics, indentation_curves, inflation_stretch
-    from ..physics import STANDARD_GRAVITY
+    from ..physics import STANDARD_GRAVITY, ShellProperties
 
     rows, keys = [], tuple(PAPER_SHAPE_ERROR)
     for label, change, factor in SHAPE_VARIANTS:
         h = thickness * change.get("thickness_factor", 1.0)
-        stretch = float(inflation_stretch(pressure, radius, h, young_modulus, poisson_ratio))
+        stretch = float(inflation_stretch(pressure, radius, young_modulus, h, poisson_ratio))
         weight = change.get("body_mass", 0.0) * STANDARD_GRAVITY / (4 * math.pi * (radius / stretch) ** 2)
         physics = CurvePhysics(
             indenter_radius=np.array([change.get("indenter_radius", PAPER_INDENTER_RADIUS)]),
@@ -148,8 +148,9 @@ def shape_sensitivity(pressure=1300.0, force=20.0, radius=0.13, thickness=0.9e-3
             stiffening=np.array([change.get("stiffening", 0.0)]), areal_weight=np.array([weight]),
             friction_coefficient=np.array([change.get("friction_coefficient", 0.0)]),
         )  # fmt: skip
-        curve = indentation_curves(np.array([[pressure, young_modulus, h, poisson_ratio]]),
-                                   np.array([5.0, force * factor]), radius=radius, gas="polytropic",
+        shell = ShellProperties(gauge_pressure=pressure, young_modulus=young_modulus, thickness=h,
+                                poisson_ratio=poisson_ratio, radius=radius)
+        curve = indentation_curves(shell, np.array([5.0, force * factor]), gas="polytropic",
                                    physics=physics, workers=1)  # fmt: skip
         rows.append({"label": label, "values_m": {k: float(getattr(curve, k)[0, -1]) for k in keys}})
     base = rows[0]["values_m"]

@@ -33,7 +33,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._errors import InvalidInputError
-from ..physics import ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY
+from ..physics import AIR_HEAT_CAPACITY_RATIO, ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY, ShellProperties
 from ..shell3d import (
     ModelConfig,
     Shell,
@@ -195,24 +195,31 @@ def _node_masses(model: ShellModel, mass, wall_density, thickness) -> np.ndarray
 
 def shell_system(
     shell: Shell,
-    young_modulus: float,
-    poisson_ratio: float,
-    gauge_pressure: float,
+    properties: ShellProperties,
     *,
     gas: str = "isothermal",
     mass: float | None = None,
     wall_density: float | None = None,
     planes=(),
     gravity=STANDARD_GRAVITY,
-    heat_capacity_ratio: float = 1.4,
+    heat_capacity_ratio: float = AIR_HEAT_CAPACITY_RATIO,
 ) -> ShellDynamicSystem:
-    """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with E [Pa],
-    ν [-], gauge pressure P_g [Pa], ``gas`` ("prescribed", "isothermal", "adiabatic"), the mass
+    """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with the E [Pa],
+    ν [-] and gauge pressure P_g [Pa] of ``properties`` (a ``physics.ShellProperties`` whose
+    thickness is the shell's; its radius is not read), ``gas`` (one of ``physics.GAS_LAWS``:
+    "prescribed", "isothermal", "adiabatic", the last with ``heat_capacity_ratio`` γ [-]), the mass
     from ``mass`` [kg] (spread by rest area) or ``wall_density`` [kg/m³] × h × area, ``planes``
     and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium, in the
     mesh's frame (its lowest vertex where the mesh has it).
     """
-    params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness), float(gauge_pressure))
+    if not isinstance(properties, ShellProperties) or float(properties.thickness) != float(shell.thickness):
+        raise InvalidInputError(
+            f"shell_system: expected a physics.ShellProperties whose thickness is the shell's {shell.thickness!r} m, "
+            f"got {properties!r}. Fix: ShellProperties(gauge_pressure=…, young_modulus=…, thickness=shell.thickness, "
+            "poisson_ratio=…)"
+        )
+    params = ShellParams(young_modulus=float(properties.young_modulus), poisson_ratio=float(properties.poisson_ratio),
+                         thickness=float(shell.thickness), gauge_pressure=float(properties.gauge_pressure))
     reference = inflated_reference(shell, params)
     inflated = reference.inflated.reshape(-1)
     n = shell.mesh.n_vertices

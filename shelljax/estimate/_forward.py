@@ -10,6 +10,7 @@ law and the axisymmetric shell engine are interchangeable.
 from __future__ import annotations
 
 import abc
+import math
 import dataclasses
 import warnings
 
@@ -18,7 +19,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
-from ..physics import scaling_wrinkle_count
+from ..physics import ShellProperties, scaling_wrinkle_count
 
 
 class Prediction(eqx.Module):
@@ -107,20 +108,26 @@ class AxisymForwardModel(AbstractForwardModel):
     def for_forces(cls, radius: float, forces, *, poisson_ratio: float = DEFAULT_POISSON_RATIO, n_grid: int = 7,
                    wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]; ``setup_kwargs``
-        go to the engine's ``Setup`` (its finger, gas law, gas volume ratio and penalty become traced fields)."""
+        go to the engine's ``Setup`` (its finger, gas law and penalty become traced fields), but for
+        ``gas_volume_ratio`` [-] (sealed gas volume / 4/3 π R³, a traced ``CurvePhysics`` field; default 1)."""
         from .._errors import InvalidInputError
-        from ..axisym import GAS_EXPONENTS, Setup
+        from ..axisym import Setup
+        from ..physics import GAS_EXPONENTS
 
         if wrinkle_law not in WRINKLE_LAWS:
             raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: use one of {', '.join(WRINKLE_LAWS)}")
         forces = jnp.asarray(forces)
+        ratio = setup_kwargs.pop("gas_volume_ratio", 1.0)
+        if not (math.isfinite(ratio) and ratio > 0):
+            raise InvalidInputError(f"gas_volume_ratio = {ratio!r} must be a positive number (sealed gas volume / "
+                                    "4/3 π R³). Fix: pass 1 for a ball")  # fmt: skip
         given = Setup(radius=float(radius), **setup_kwargs)  # checks every field
-        engine = dataclasses.replace(given, radius=ENGINE_RADIUS, indenter_radius=ENGINE_RADIUS, gas_volume_ratio=1.0,
+        engine = dataclasses.replace(given, radius=ENGINE_RADIUS, indenter_radius=ENGINE_RADIUS,
                                      contact_stiffness=Setup().contact_stiffness, gas="polytropic")  # fmt: skip
         # a "polytropic" Setup carries no κ: the engine's default, CurvePhysics.defaults' isothermal κ = 1
         gas_exponent = GAS_EXPONENTS["isothermal" if given.gas == "polytropic" else given.gas]
         return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()), poisson_ratio=poisson_ratio,
-                   indenter_radius=given.indenter_radius, gas_volume_ratio=given.gas_volume_ratio,
+                   indenter_radius=given.indenter_radius, gas_volume_ratio=float(ratio),
                    contact_stiffness=given.contact_stiffness, gas_exponent=gas_exponent, n_grid=n_grid, setup=engine,
                    wrinkle_law=wrinkle_law)  # fmt: skip
 
@@ -143,8 +150,9 @@ class AxisymForwardModel(AbstractForwardModel):
 
         scale, physics = self.engine_frame(radius)
         grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
-        params = jnp.stack([gauge_pressure, young_modulus, thickness / scale, jnp.asarray(self.poisson_ratio, jnp.float64)])
-        curve = indentation_curves_raw(params[None], grid / scale**2, self.setup, physics=physics)
+        shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=young_modulus, thickness=thickness / scale,
+                                poisson_ratio=self.poisson_ratio)  # fmt: skip
+        curve = indentation_curves_raw(shell, grid / scale**2, self.setup, physics=physics)
         depth = jnp.interp(forces, grid, scale * curve.w0[0])
         if self.wrinkle_law == "mechanics":
             count = curve.wrinkle_count[0, -1]

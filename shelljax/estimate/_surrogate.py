@@ -24,6 +24,7 @@ from jaxtyping import Array, Float
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError, NoConvergenceError
+from ..physics import ShellProperties
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
 
 SURROGATE_AXES = ("gauge_pressure", "young_modulus", "thickness", "radius")
@@ -140,9 +141,9 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
         # exact similarity (see AxisymForwardModel): lengths scale by s = R / R₀, forces by s²
         scale, physics = model.engine_frame(math.exp(log_radius))
         scale = float(scale)
-        params = np.column_stack([np.exp(mesh[:, 0]), np.exp(mesh[:, 1]), np.exp(mesh[:, 2]) / scale,
-                                  np.full(len(mesh), model.poisson_ratio)])  # fmt: skip
-        curves = indentation_curves(params, grid / scale**2, radius=model.setup.radius, raise_on_failure=False,
+        shell = ShellProperties(gauge_pressure=np.exp(mesh[:, 0]), young_modulus=np.exp(mesh[:, 1]),
+                                thickness=np.exp(mesh[:, 2]) / scale, poisson_ratio=model.poisson_ratio)
+        curves = indentation_curves(shell, grid / scale**2, radius=model.setup.radius, raise_on_failure=False,
                                     workers=workers, physics=physics, **setup_fields)  # fmt: skip
         converged = np.asarray(curves.converged).all(axis=1)
         if not converged.all():

@@ -1,5 +1,6 @@
 """Physics layer: material, gas, contact and self-weight energies as pure JAX functions, and the
-closed-form results of shell theory (SI units)."""
+closed-form results of shell theory (SI units), and the one :class:`ShellProperties` (P_g, E, h, ν,
+R) the engines and estimators take."""
 
 from ._contact import (
     Plane,
@@ -14,6 +15,8 @@ from ._contact import (
 from ._gas import (
     AIR_HEAT_CAPACITY_RATIO,
     ATMOSPHERIC_PRESSURE,
+    GAS_EXPONENTS,
+    GAS_LAWS,
     adiabatic_gas_energy,
     adiabatic_gauge_pressure,
     isothermal_gas_energy,
@@ -33,6 +36,7 @@ from ._material import (
     neo_hookean_membrane_density,
     neo_hookean_membrane_invariants,
 )
+from ._properties import ShellProperties
 from ._shell_theory import (
     CRITICAL_W,
     WRINKLE_PREFACTOR,

@@ -15,6 +15,11 @@ gauge pressure acting on the wall. All pressures in Pa, volumes in m³, energies
 
 Here p₀ = P_atm + P_g0 is the absolute pressure at the reference volume V₀.
 
+The named laws and their κ are :data:`GAS_EXPONENTS` (:data:`GAS_LAWS`): "prescribed" (κ = 0),
+"isothermal" (κ = 1) and "adiabatic" (κ = γ of air). Both engines and the dynamics take a gas by
+these names; the axisymmetric engine also has "polytropic", its sealed gas whose κ is a traced
+per-curve value (``axisym.CurvePhysics.gas_exponent``), so that one compiled program serves every law.
+
 The sealed gases' energies vanish at V₀ and are evaluated from the volume change u = (V − V₀)/V₀
 as ln(V / V₀) = log1p(u) and (V₀ / V)^(γ−1) − 1 = expm1(−(γ − 1) log1p(u)), so they carry the
 round-off of their own (small) value, not of the terms p₀V₀ ≈ 50 J (isothermal) or
@@ -31,6 +36,10 @@ import jax.numpy as jnp
 
 ATMOSPHERIC_PRESSURE = 101_325.0  # [Pa], standard atmosphere
 AIR_HEAT_CAPACITY_RATIO = 1.4  # [-], diatomic ideal gas
+
+#: κ [-] of each named gas law (p V^κ constant); their names are the engines' ``gas`` values.
+GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": AIR_HEAT_CAPACITY_RATIO}
+GAS_LAWS = tuple(GAS_EXPONENTS)
 
 # φ(x) = (eˣ − 1)/x = Σ xⁿ/(n + 1)! is evaluated by its Taylor series for |x| < 0.1, where the
 # closed form's derivatives lose digits (d²/dx² of expm1(x)/x cancels to ≈ eps/x² relative): the

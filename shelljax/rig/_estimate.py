@@ -284,10 +284,10 @@ def updated_weights(calibration_weights, log_evidence) -> np.ndarray:
 def _log_posterior_batch(data, u_batch, wrinkle_law: str):
     """Log posterior [-] of each row of ``u_batch``: one batched engine solve for every draw."""
     phys = jax.vmap(lambda u: physical(u, data))(u_batch)
-    rows, physics = jax.vmap(lambda p: engine_inputs(p, data))(phys)
-    n_draws, n_sessions = rows.shape[:2]
+    shell, physics = jax.vmap(lambda p: engine_inputs(p, data))(phys)
+    n_draws, n_sessions = shell.gauge_pressure.shape[:2]
     flat = lambda v: v.reshape((n_draws * n_sessions,) + v.shape[2:])  # noqa: E731
-    curves = solve_curves(flat(rows), jax.tree_util.tree_map(flat, physics), data)  # draws are scattered: walking curve to curve saves nothing
+    curves = solve_curves(jax.tree_util.tree_map(flat, shell), jax.tree_util.tree_map(flat, physics), data)  # draws are scattered: walking curve to curve saves nothing
     curves = jax.tree_util.tree_map(lambda v: v.reshape((n_draws, n_sessions) + v.shape[1:]), curves)
 
     def one(u, c):

@@ -18,6 +18,7 @@ import numpy as np
 from .._toml import TomlReader, read_toml
 from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
 from ..estimate import METHODS, EstimatorOptions
+from ..physics import GAS_LAWS
 
 _TABLES = {
     "object": {"session", "estimate", "gauge_pressure_Pa", "youngs_modulus_Pa", "gas", "mesh", "mesh_faces", "mass_kg", "wall_density_kg_per_m3",
@@ -221,7 +222,7 @@ def load_scenario(path: str | Path) -> Scenario:
     session = _session_path(r, obj.get("session"))
     if session is None and not direct:
         raise r.fail("object.session", "missing and P_g, E are not given", "name a session, or give object.gauge_pressure_Pa and object.youngs_modulus_Pa")
-    gas = r.choice(obj, "gas", "object.", ("prescribed", "isothermal", "adiabatic"), "adiabatic")
+    gas = r.choice(obj, "gas", "object.", GAS_LAWS, "adiabatic")
     # a poke is slow, so a sealed object's gas is isothermal while it is estimated, whatever its law in the impact
     estimators_table = _table(r, data, "estimators")
     rig = rig_settings(path, _table(r, data, "rig"), estimators_table)

@@ -15,6 +15,7 @@ from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from ..object_estimate import estimated_parameters
+from ..physics import ShellProperties
 from ..session import load_session
 from ._load import Scenario
 
@@ -78,8 +79,10 @@ def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
                 friction=p.friction, slip_tolerance=p.slip_tolerance, damping=damping, name=p.name)
         for p in scenario.planes
     ]  # fmt: skip
-    return d.shell_system(obj.shell, obj.young_modulus, obj.poisson_ratio, obj.gauge_pressure, gas=scenario.gas,
-                          mass=obj.mass, wall_density=obj.wall_density, planes=planes)  # fmt: skip
+    properties = ShellProperties(gauge_pressure=obj.gauge_pressure, young_modulus=obj.young_modulus,
+                                 thickness=obj.shell.thickness, poisson_ratio=obj.poisson_ratio)
+    return d.shell_system(obj.shell, properties, gas=scenario.gas, mass=obj.mass, wall_density=obj.wall_density,
+                          planes=planes)  # fmt: skip
 
 
 def _integrator(scenario: Scenario):

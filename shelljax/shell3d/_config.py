@@ -6,9 +6,9 @@ import dataclasses
 import math
 
 from .._errors import InvalidInputError
-from ..physics import Plane
+from ..physics import AIR_HEAT_CAPACITY_RATIO, GAS_LAWS, Plane
 
-GAS_MODELS = ("prescribed", "isothermal", "adiabatic")
+GAS_MODELS = GAS_LAWS  # the shared named laws: "prescribed", "isothermal", "adiabatic"
 
 #: Default friction slip tolerance ε = ĝ/100: well below the slip friction is meant to stop
 #: (docs/shell3d.md, *Model*, ground friction).
@@ -100,7 +100,7 @@ class ModelConfig:
 
     n_vertices: int
     gas: str = "prescribed"
-    heat_capacity_ratio: float = 1.4
+    heat_capacity_ratio: float = AIR_HEAT_CAPACITY_RATIO
     contact: ContactConfig = ContactConfig()
     force_control: bool = False
 

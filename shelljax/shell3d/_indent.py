@@ -37,7 +37,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import ATMOSPHERIC_PRESSURE, Plane
+from ..physics import ATMOSPHERIC_PRESSURE, Plane, ShellProperties
 from ._config import ContactConfig, ModelConfig
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
@@ -153,6 +153,22 @@ def _is_count(value, least: int) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= least
 
 
+def _shell_properties(properties, shell: Shell) -> tuple[float, float, float]:
+    """(E [Pa], ν [-], P_g [Pa]) of ``properties``, whose thickness must be the shell's: the two
+    are one wall, and a silent choice between them would change the answer."""
+    if not isinstance(properties, ShellProperties):
+        raise InvalidInputError(
+            f"Indentation: expected a physics.ShellProperties, got {type(properties).__name__}. Fix: Indentation("
+            "shell, ShellProperties(gauge_pressure=…, young_modulus=…, thickness=shell.thickness, poisson_ratio=…))"
+        )
+    if float(properties.thickness) != float(shell.thickness):
+        raise InvalidInputError(
+            f"Indentation: properties.thickness = {properties.thickness!r} m is not the shell's thickness "
+            f"{shell.thickness!r} m. Fix: build both from the same h"
+        )
+    return float(properties.young_modulus), float(properties.poisson_ratio), float(properties.gauge_pressure)
+
+
 def _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
                      friction_iterations, max_newton_iterations) -> None:
     """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
@@ -177,10 +193,12 @@ def _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radi
 class Indentation:
     """Poke a pressurized shell on the ground with a rigid sphere.
 
-    Arguments (SI units): ``shell`` (:class:`Shell`), ``young_modulus`` E [Pa], ``poisson_ratio``
-    ν [-], ``gauge_pressure`` P_g [Pa] of the scanned state; ``gas``: "prescribed" (constant
-    P_g, the paper's model), "isothermal" or "adiabatic" (sealed ideal gas that holds P_g at the
-    scanned volume); ``indenter_radius`` [m]; ``ground``: put a rigid plane under the shell;
+    Arguments (SI units): ``shell`` (:class:`Shell`), ``properties``
+    (:class:`shelljax.physics.ShellProperties`: E [Pa], ν [-], the gauge pressure P_g [Pa] of the
+    scanned state, and the shell's thickness h [m]; its radius is not read, the mesh is the
+    geometry); ``gas``: one of ``physics.GAS_LAWS``, "prescribed" (constant P_g, the paper's
+    model), "isothermal" or "adiabatic" (sealed ideal gas that holds P_g at the scanned volume);
+    ``indenter_radius`` [m]; ``ground``: put a rigid plane under the shell;
     ``mass`` [kg] adds gravity; ``contact``: "barrier" (default; IPC log barrier, no
     penetration, surfaces stop within ``activation_distance`` [m] of a body) or "penalty"
     (penetration ≈ ``activation_distance`` × local contact pressure / reference pressure);
@@ -204,9 +222,7 @@ class Indentation:
     def __init__(
         self,
         shell: Shell,
-        young_modulus: float,
-        poisson_ratio: float = 0.4,
-        gauge_pressure: float = 0.0,
+        properties: ShellProperties,
         *,
         gas: str = "prescribed",
         indenter_radius: float = PAPER_INDENTER_RADIUS,
@@ -223,6 +239,7 @@ class Indentation:
         slip_tolerance: float | None = None,
         friction_iterations: int = 2,
     ):
+        young_modulus, poisson_ratio, gauge_pressure = _shell_properties(properties, shell)
         _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
                          friction_iterations, max_newton_iterations)  # fmt: skip
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
@@ -234,8 +251,9 @@ class Indentation:
         self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
         self.max_step = max_step or 0.02 * self.size
         #: The model parameters at the indenter's start (:class:`ShellParams`, SI).
-        self.base_params = ShellParams(float(young_modulus), float(poisson_ratio), float(shell.thickness),
-                                       float(gauge_pressure), mass=None if mass is None else float(mass))  # fmt: skip
+        self.base_params = ShellParams(young_modulus=young_modulus, poisson_ratio=poisson_ratio,
+                                       thickness=float(shell.thickness), gauge_pressure=gauge_pressure,
+                                       mass=None if mass is None else float(mass))  # fmt: skip
         self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
         self._fixed = rigid_mode_pins(scan)
         reference = inflated_reference(shell, self.base_params, vertices=scan, rest_shape=rest_shape, atol=self.atol)

@@ -8,7 +8,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..physics import ATMOSPHERIC_PRESSURE
+from .._errors import InvalidInputError
+from ..physics import ATMOSPHERIC_PRESSURE, ShellProperties
 
 
 def _array(value):
@@ -31,12 +32,14 @@ class ShellParams(eqx.Module):
     every vertex on every plane) and ``friction_coefficient`` μ [-], which overrides the config's μ
     (differentiable; :meth:`ShellModel.host_params` sets it, so that models differing only in μ > 0
     share one compilation). An absent entry changes the pytree, hence the compiled functions' key.
+    Every entry is keyword-only; :meth:`of` builds the parameters from a
+    :class:`shelljax.physics.ShellProperties`.
     """
 
-    young_modulus: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    poisson_ratio: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    thickness: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    gauge_pressure: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    young_modulus: Float[Array, ""] = eqx.field(converter=jnp.asarray, kw_only=True)
+    poisson_ratio: Float[Array, ""] = eqx.field(converter=jnp.asarray, kw_only=True)
+    thickness: Float[Array, ""] = eqx.field(converter=jnp.asarray, kw_only=True)
+    gauge_pressure: Float[Array, ""] = eqx.field(converter=jnp.asarray, kw_only=True)
     indenter_center: Float[Array, " 3"] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.zeros(3))
     indenter_force: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
     reference_volume: Float[Array, ""] | None = eqx.field(converter=_array, default=None)
@@ -46,6 +49,18 @@ class ShellParams(eqx.Module):
     friction_anchor: Float[Array, "V 3"] | None = eqx.field(converter=_array, default=None)
     friction_normal_force: Float[Array, "P V"] | None = eqx.field(converter=_array, default=None)
     friction_coefficient: Float[Array, ""] | None = eqx.field(converter=_array, default=None)
+
+    @classmethod
+    def of(cls, properties: ShellProperties, **extra) -> "ShellParams":
+        """The parameters of ``properties`` (scalar P_g [Pa], E [Pa], h [m], ν [-]; its radius is
+        not read: the mesh is the geometry) and the ``extra`` entries."""
+        if not isinstance(properties, ShellProperties):
+            raise InvalidInputError(
+                f"expected a physics.ShellProperties, got {type(properties).__name__}. Fix: "
+                "ShellProperties(gauge_pressure=…, young_modulus=…, thickness=…, poisson_ratio=…)"
+            )
+        return cls(young_modulus=properties.young_modulus, poisson_ratio=properties.poisson_ratio,
+                   thickness=properties.thickness, gauge_pressure=properties.gauge_pressure, **extra)
 
     @property
     def outside_pressure(self) -> Float[Array, ""]:
