@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._effects import GLOBAL_PARAMETERS
-from ._model import N_GRID, R_REF, StudyArrays
+from ._model import N_GRID, StudyArrays, engine_force_bounds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,10 +35,7 @@ class MeasurementPrior:
 
 def widened_grid(data: StudyArrays, forces_true, span: tuple[float, float]) -> StudyArrays:
     """``data`` with its engine force grid [N] (reference frame) covering ``forces_true`` [N] by ``span``."""
-    scale = np.asarray(data.radius) / R_REF
-    lo = span[0] * float(np.min(forces_true)) / float(np.max(scale)) ** 2
-    hi = span[1] * float(np.max(forces_true)) / float(np.min(scale)) ** 2
-    return eqx.tree_at(lambda d: d.grid, data, jnp.linspace(lo, hi, N_GRID))
+    return eqx.tree_at(lambda d: d.grid, data, jnp.linspace(*engine_force_bounds(data.radius, forces_true, span), N_GRID))
 
 
 def with_measurement(data: StudyArrays, *, free: tuple[str, ...] = (), fixes: dict | None = None,

@@ -32,10 +32,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
-from ..physics import GAS_EXPONENTS, ShellProperties
+from ..physics import GAS_EXPONENTS, STANDARD_GRAVITY, ShellProperties, Similarity, scaling_wrinkle_count
 from ..estimate import FAILED_RESIDUAL, count_log_likelihood
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import STANDARD_GRAVITY, scaling_wrinkle_count
 from ._effects import (
     FREE_THICKNESS_STD,
     FRICTION_REFERENCE,
@@ -131,9 +130,6 @@ def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: floa
         if idx.size:
             block = study.whitening[np.ix_(idx, idx)]
             constant[u] = np.sum(np.log(np.abs(np.diag(block)))) - 0.5 * idx.size * math.log(2 * math.pi)
-    scale = np.asarray(study.radius) / R_REF
-    lo = GRID_SPAN[0] * float(np.min(study.force)) / float(np.max(scale)) ** 2
-    hi = GRID_SPAN[1] * float(np.max(study.force)) / float(np.min(scale)) ** 2
     levels = np.unique(study.level)
     force_ref = math.sqrt(levels[0] * levels[-1]) if force_ref is None else float(force_ref)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
@@ -148,7 +144,7 @@ def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: floa
         thickness=f(study.thickness), poisson_ratio=f(study.poisson_ratio),
         mass_ref=f(study.mass if study.mass is not None else UNWEIGHED_MASS), indenter_radius=f(indenter_radius),
         gas_exponent=f(GAS_EXPONENTS[gas]), gas_volume_ratio=f(study.gas_volume_ratio),
-        force_ref=f(force_ref), grid=f(np.linspace(lo, hi, N_GRID)),
+        force_ref=f(force_ref), grid=f(np.linspace(*engine_force_bounds(study.radius, study.force, GRID_SPAN), N_GRID)),
         prior_mean=f(mean), prior_std=f(std), free=jnp.asarray(np.arange(n_u) < s), u_base=f(np.zeros(n_u)),
         rig_whitening=f(np.zeros((n_u, n_u))), rig_mean=f(np.zeros(n_u)), n_units=study.n_units,
     )  # fmt: skip
@@ -190,17 +186,27 @@ def pad_compression(force, phys, data: StudyArrays):
     return phys["finger_compliance"] * data.force_ref * (force / data.force_ref) ** phys["pad_exponent"]
 
 
+def engine_force_bounds(radius, forces, span: tuple[float, float]) -> tuple[float, float]:
+    """The ends [N] of the engine's force grid (its frame) covering, by ``span``, the true
+    ``forces`` [N] on balls of every session's ``radius`` [m]: the smallest force on the largest
+    ball to the largest on the smallest."""
+    scale = Similarity.between(np.asarray(radius), R_REF).scale
+    lo = span[0] * float(np.min(forces)) / float(np.max(scale)) ** 2
+    hi = span[1] * float(np.max(forces)) / float(np.min(scale)) ** 2
+    return lo, hi
+
+
 def engine_inputs(phys, data: StudyArrays):
     """The engine's ShellProperties (fields (s,): P_g, E, h/scale, ν) and the CurvePhysics of every session."""
-    scale = phys["radius"] / R_REF
+    similarity = Similarity.between(phys["radius"], R_REF)
     pressure, young, thick, nu = phys["gauge_pressure"], phys["young_modulus"], phys["thickness"], data.poisson_ratio
     shell = ShellProperties(gauge_pressure=pressure, young_modulus=jnp.broadcast_to(young, pressure.shape),
-                            thickness=thick / scale, poisson_ratio=jnp.broadcast_to(nu, pressure.shape))  # fmt: skip
+                            thickness=similarity.length_to_engine(thick), poisson_ratio=jnp.broadcast_to(nu, pressure.shape))  # fmt: skip
     stretch = jax.vmap(lambda p, r: inflation_stretch(p, r, young, thick, nu))(pressure, phys["radius"])
     rest_area = 4.0 * jnp.pi * (phys["radius"] / stretch) ** 2
     ones = jnp.ones_like(pressure)
     physics = CurvePhysics(
-        indenter_radius=phys["indenter_radius"] / scale, gas_volume_ratio=data.gas_volume_ratio * ones,
+        indenter_radius=similarity.length_to_engine(phys["indenter_radius"]), gas_volume_ratio=data.gas_volume_ratio * ones,
         gas_exponent=phys["gas_exponent"] * ones, stiffening=phys["stiffening"] * ones,
         areal_weight=phys["body_mass"] * STANDARD_GRAVITY / rest_area,
         friction_coefficient=phys["friction_coefficient"] * ones,
@@ -227,13 +233,15 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
     """Predictions at u from the sessions' curves: depth [m], count [-], shape [m], the
     sample's wrinkled regime (bool) and whether every needed force level converged."""
     phys = physical(u, data)
-    scale = phys["radius"] / R_REF
+    similarity = Similarity.between(phys["radius"], R_REF)
+    at_depth, at_shape = similarity.at(data.depth_session), similarity.at(data.shape_session)
     f_true = true_force(data.force, phys, data)
-    f_ref = f_true / scale[data.depth_session] ** 2
-    w0 = scale[data.depth_session] * _at(curves.w0, data.depth_session, f_ref, data.grid)
+    f_ref = at_depth.force_to_engine(f_true)
+    w0 = at_depth.length_from_engine(_at(curves.w0, data.depth_session, f_ref, data.grid))
     depth = w0 + phys["depth_offset"] + pad_compression(f_true, phys, data)
     wrinkled = _at(curves.min_hoop_tension, data.depth_session, f_ref, data.grid) < 0.0
-    top = jax.ops.segment_max(f_ref, data.depth_session, num_segments=scale.shape[0])
+    n_sessions = phys["radius"].shape[0]
+    top = jax.ops.segment_max(f_ref, data.depth_session, num_segments=n_sessions)
     if wrinkle_law == "scaling":
         per_session = scaling_wrinkle_count(phys["gauge_pressure"], phys["radius"], phys["young_modulus"],
                                             phys["thickness"], data.poisson_ratio)  # fmt: skip
@@ -241,11 +249,11 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
         per_session = jax.vmap(lambda n, f: jnp.interp(f, data.grid, n))(curves.wrinkle_count, top)
     count = per_session[data.count_session]
     shape_fields = jnp.stack([curves.height, curves.upper_diameter, curves.contact_diameter, curves.sunken_depth])
-    shape_ref = true_force(data.shape_force, phys, data) / scale[data.shape_session] ** 2
-    shape = scale[data.shape_session] * jax.vmap(
-        lambda k, s, f: jnp.interp(f, data.grid, shape_fields[k, s]))(data.shape_kind, data.shape_session, shape_ref)
+    shape_ref = at_shape.force_to_engine(true_force(data.shape_force, phys, data))
+    shape = at_shape.length_from_engine(jax.vmap(
+        lambda k, s, f: jnp.interp(f, data.grid, shape_fields[k, s]))(data.shape_kind, data.shape_session, shape_ref))
     # every grid level up to one above the largest force a session needs must have converged
-    needed = jnp.maximum(top, jax.ops.segment_max(shape_ref, data.shape_session, num_segments=scale.shape[0]))
+    needed = jnp.maximum(top, jax.ops.segment_max(shape_ref, data.shape_session, num_segments=n_sessions))
     step = data.grid[1] - data.grid[0]
     ok = jnp.all(curves.converged | (data.grid[None, :] > needed[:, None] + step))
     ok = ok & jnp.all(jnp.isfinite(depth)) & jnp.all(jnp.isfinite(count)) & jnp.all(jnp.isfinite(shape))

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
-from ..physics import ShellProperties, scaling_wrinkle_count
+from ..physics import ShellProperties, Similarity, scaling_wrinkle_count
 
 
 class Prediction(eqx.Module):
@@ -132,28 +132,28 @@ class AxisymForwardModel(AbstractForwardModel):
                    wrinkle_law=wrinkle_law)  # fmt: skip
 
     def engine_frame(self, radius):
-        """(s = R / R₀ [-], the engine's ``CurvePhysics`` at R₀ of the ball of radius R [m])."""
+        """(the ``Similarity`` R → R₀, the engine's ``CurvePhysics`` at R₀) of the ball of radius R [m]."""
         from ..axisym import CurvePhysics
 
-        scale = radius / self.setup.radius
-        measured = self.reference_radius / self.setup.radius
+        measured = Similarity.between(self.reference_radius, self.setup.radius)
         default = CurvePhysics.defaults(self.setup)
-        physics = CurvePhysics(indenter_radius=jnp.asarray(self.indenter_radius / measured, jnp.float64),
+        physics = CurvePhysics(indenter_radius=jnp.asarray(measured.length_to_engine(self.indenter_radius), jnp.float64),
                                gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
                                gas_exponent=jnp.asarray(self.gas_exponent, jnp.float64), stiffening=default.stiffening,
                                areal_weight=default.areal_weight, friction_coefficient=default.friction_coefficient,
-                               contact_stiffness=jnp.asarray(self.contact_stiffness * measured, jnp.float64))  # fmt: skip
-        return scale, physics
+                               contact_stiffness=jnp.asarray(measured.penalty_to_engine(self.contact_stiffness), jnp.float64))  # fmt: skip
+        return Similarity.between(radius, self.setup.radius), physics
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
         from ..axisym import indentation_curves_raw
 
-        scale, physics = self.engine_frame(radius)
+        similarity, physics = self.engine_frame(radius)
         grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
-        shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=young_modulus, thickness=thickness / scale,
+        shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=young_modulus,
+                                thickness=similarity.length_to_engine(thickness),
                                 poisson_ratio=self.poisson_ratio)  # fmt: skip
-        curve = indentation_curves_raw(shell, grid / scale**2, self.setup, physics=physics)
-        depth = jnp.interp(forces, grid, scale * curve.w0[0])
+        curve = indentation_curves_raw(shell, similarity.force_to_engine(grid), self.setup, physics=physics)
+        depth = jnp.interp(forces, grid, similarity.length_from_engine(curve.w0[0]))
         if self.wrinkle_law == "mechanics":
             count = curve.wrinkle_count[0, -1]
         else:

@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ..physics import ShellProperties
+from ..physics import ShellProperties, Similarity
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
 
 SURROGATE_AXES = ("gauge_pressure", "young_modulus", "thickness", "radius")
@@ -138,12 +138,11 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
     bar = tqdm(axes[3], desc=f"surrogate ({int(np.prod(counts))} curves)",
                disable=None if progress is None else not progress)
     for r_index, log_radius in enumerate(bar):
-        # exact similarity (see AxisymForwardModel): lengths scale by s = R / R₀, forces by s²
-        scale, physics = model.engine_frame(math.exp(log_radius))
-        scale = float(scale)
+        similarity, physics = model.engine_frame(math.exp(log_radius))
+        similarity = Similarity(scale=float(similarity.scale))
         shell = ShellProperties(gauge_pressure=np.exp(mesh[:, 0]), young_modulus=np.exp(mesh[:, 1]),
-                                thickness=np.exp(mesh[:, 2]) / scale, poisson_ratio=model.poisson_ratio)
-        curves = indentation_curves(shell, grid / scale**2, radius=model.setup.radius, raise_on_failure=False,
+                                thickness=similarity.length_to_engine(np.exp(mesh[:, 2])), poisson_ratio=model.poisson_ratio)
+        curves = indentation_curves(shell, similarity.force_to_engine(grid), radius=model.setup.radius, raise_on_failure=False,
                                     workers=workers, physics=physics, **setup_fields)  # fmt: skip
         converged = np.asarray(curves.converged).all(axis=1)
         if not converged.all():
@@ -153,7 +152,7 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
                 f"h = {bad[2]:.4g} m, R = {math.exp(log_radius):.4g} m ({int((~converged).sum())} of "
                 f"{converged.size} nodes). Fix: narrow the box or sample the exact model (surrogate=False)"
             )
-        block = np.concatenate([scale * np.asarray(curves.w0), np.asarray(curves.wrinkle_count)[:, -1:]], axis=1)
+        block = np.concatenate([similarity.length_from_engine(np.asarray(curves.w0)), np.asarray(curves.wrinkle_count)[:, -1:]], axis=1)
         values[:, :, :, r_index, :] = block.reshape(counts[0], counts[1], counts[2], -1)
     return surrogate_from_values(values, lower, upper, grid, model.poisson_ratio, model.wrinkle_law)
 

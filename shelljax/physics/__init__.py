@@ -37,6 +37,7 @@ from ._material import (
     neo_hookean_membrane_invariants,
 )
 from ._properties import ShellProperties
+from ._similarity import Similarity
 from ._shell_theory import (
     CRITICAL_W,
     WRINKLE_PREFACTOR,
