@@ -265,3 +265,21 @@ def test_contact_diameter_of_a_sphere_cut_by_a_plane(depth):
     tilted = d.contact_diameter(nodes @ rotation.T, edges, gaps, rotation @ normal, depth)
     assert tilted == pytest.approx(diameter, rel=1e-12)
     assert d.contact_diameter(nodes, edges, gaps + 1.0, normal, depth) == 0.0
+
+
+
+def test_the_most_deformed_step_is_the_flattest_while_touching():
+    from shelljax.dynamics._output import most_deformed_step
+
+    # a tetrahedron "ball" 0.1 m tall: flattest (0.05 m) in the air at step 0, which must not count;
+    # touching the ground (gap 0 ≤ contact distance) at steps 1 and 2, flatter at step 1
+    def ball(height, lift):
+        return np.array([[0.0, 0.0, lift], [0.05, 0.0, lift], [0.0, 0.05, lift], [0.0, 0.0, lift + height]]).ravel()
+
+    positions = np.stack([ball(0.05, 0.2), ball(0.08, 0.0), ball(0.09, 0.0)])
+    trajectory = d.Trajectory(
+        records={"position_m": positions, "time_s": np.arange(3) * 1e-3, "min_gap_m": np.array([[0.2], [0.0], [0.0]])},
+        plane_names=("ground",), plane_normals=np.array([[0.0, 0.0, 1.0]]), contact_distances_m=np.array([1e-3]),
+        gravity_m_per_s2=np.array([0.0, 0.0, -9.81]), dt_s=1e-3, faces=np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]),
+    )  # fmt: skip
+    assert most_deformed_step(trajectory) == (1, 0)

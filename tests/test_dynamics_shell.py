@@ -226,8 +226,9 @@ def test_cli_simulate_tiny_config(tmp_path, capsys):
     results = json.loads((run / "results.json").read_text())
     # Backward Euler at 2 ms damps a 2 mm drop to rest: the check is that it lands and everything is written.
     assert max(step[0][2] for step in results["steps"]["contact_force_N"]) > 0.5 * MASS * G
-    for name in ("figures/trajectory.png", "figures/energies.png", "figures/contact_force.png", "frames/frame_0000.ply", "preview.gif"):
-        assert (run / name).is_file(), name
+    for name in ("figures/trajectory.png", "figures/energies.png", "figures/contact_force.png", "figures/max_deformation.png",
+                 "frames/frame_0000.ply", "preview.gif"):
+        assert (run / name).is_file() and (run / name).stat().st_size > 1_000, name  # written and holding data
     summary = json.loads((tmp_path / "out" / "scenario.json").read_text())
     assert summary["parameters"]["mesh_faces"] == 210  # the remesher's nearest to 200
     assert "results:" in capsys.readouterr().out

@@ -1,8 +1,9 @@
 """Writing a run: ``results.json`` (units in every field name), figures, and mesh frames.
 
 Layout of ``out_dir``: ``results.json``; ``figures/trajectory.png``, ``figures/energies.png``,
-``figures/contact_force.png``; for systems with faces, ``frames/frame_XXXX.ply`` or ``.glb`` (trimesh) and
-``preview.gif`` (matplotlib).
+``figures/contact_force.png``; for systems with faces, ``frames/frame_XXXX.ply`` or ``.glb`` (trimesh),
+``preview.gif`` (matplotlib: it follows the shell at equal scale, with the planes drawn) and, where it
+touches a plane, ``figures/max_deformation.png`` (its rest and most compressed cross-sections).
 """
 
 from __future__ import annotations
@@ -88,16 +89,75 @@ def _plots(trajectory: Trajectory, figures: Path) -> list[Path]:
     return written
 
 
+def _plane_levels(trajectory: Trajectory) -> np.ndarray:
+    """Each plane's offset along its normal [m]: the record keeps the smallest gap, so it is
+    min(x·n) − min gap (at step 0; the planes do not move)."""
+    nodes = trajectory["position_m"][0].reshape(-1, 3)
+    return np.array([(nodes @ n).min() - trajectory["min_gap_m"][0, p] for p, n in enumerate(trajectory.plane_normals)])
+
+
+def _tangents(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane of ``normal``."""
+    helper = np.eye(3)[np.argmin(np.abs(normal))]
+    first = np.cross(normal, helper)
+    first /= np.linalg.norm(first)
+    return first, np.cross(normal, first)
+
+
+def most_deformed_step(trajectory: Trajectory) -> tuple[int, int]:
+    """(step, plane) at which the shell is most compressed against a plane: its smallest extent [m]
+    along that plane's normal, over the steps where it touches the plane."""
+    positions = trajectory["position_m"].reshape(len(trajectory["time_s"]), -1, 3)
+    best, best_extent = (0, 0), np.inf
+    for p, n in enumerate(trajectory.plane_normals):
+        heights = positions @ n
+        extent = np.where(trajectory["min_gap_m"][:, p] <= trajectory.contact_distances_m[p],
+                          heights.max(axis=1) - heights.min(axis=1), np.inf)  # fmt: skip
+        if extent.min() < best_extent:
+            best, best_extent = (int(np.argmin(extent)), p), float(extent.min())
+    return best
+
+
+def _max_deformation_figure(trajectory: Trajectory, path: Path) -> Path:
+    """The rest shape and the most compressed one, a cross-section through the centre, side by
+    side at equal scale with the plane they press on."""
+    import matplotlib.pyplot as plt
+
+    step, p = most_deformed_step(trajectory)
+    normal, level = trajectory.plane_normals[p], _plane_levels(trajectory)[p]
+    along, across = _tangents(normal)
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    extents = []
+    for k, colour, label in ((0, "0.6", "free, placed on the plane"), (step, "tab:orange", "most deformed")):
+        nodes = trajectory["position_m"][k].reshape(-1, 3)
+        centre = nodes.mean(axis=0)
+        heights = nodes @ normal - (level if k else (nodes @ normal).min())
+        size = np.ptp(nodes @ along)
+        band = np.abs((nodes - centre) @ across) < 0.08 * size
+        extents.append(np.ptp(heights))
+        offset = 0.0 if k == 0 else 1.3 * size
+        ax.plot((nodes - centre)[band] @ along + offset, heights[band], ".", ms=2, color=colour,
+                label=f"{label}, t = {trajectory['time_s'][k]:.3f} s")  # fmt: skip
+    ax.axhline(0.0, color="k", lw=1.5, label=trajectory.plane_names[p])
+    ax.set(aspect="equal", xlabel="along the plane [m]", ylabel="height above the plane [m]",
+           title=f"height {1e3 * extents[0]:.1f} mm free, {1e3 * extents[1]:.1f} mm most deformed")
+    ax.legend(loc="upper center", fontsize=8, ncol=3, bbox_to_anchor=(0.5, -0.22))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str, preview_gif: bool = True) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import trimesh
-    from matplotlib.animation import FuncAnimation, PillowWriter
 
     positions = trajectory["position_m"]
     picks = np.unique(np.linspace(0, len(positions) - 1, min(max_frames, len(positions))).astype(int))
+    if len(trajectory.plane_names):  # the frame that shows the physics is always among them
+        picks = np.unique(np.append(picks[:-1] if len(picks) >= max_frames else picks, most_deformed_step(trajectory)[0]))
     frames = out / "frames"
     frames.mkdir(exist_ok=True)
     written = []
@@ -105,21 +165,43 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
         mesh = trimesh.Trimesh(positions[k].reshape(-1, 3), trajectory.faces, process=False)
         written.append(frames / f"frame_{j:04d}.{mesh_format}")
         mesh.export(written[-1])
+    if len(trajectory.plane_names):
+        written.append(_max_deformation_figure(trajectory, out / "figures" / "max_deformation.png"))
     if not preview_gif:
         return written
+    written.append(_preview(trajectory, picks, out / "preview.gif"))
+    return written
+
+
+def _preview(trajectory: Trajectory, picks: np.ndarray, path: Path) -> Path:
+    """An animation that follows the shell at equal scale, with the planes it may touch."""
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
     fig = plt.figure(figsize=(4, 4))
     ax = fig.add_subplot(projection="3d")
-    nodes = positions[picks].reshape(len(picks), -1, 3)
-    lo, hi = nodes.min(axis=(0, 1)), nodes.max(axis=(0, 1))
+    nodes = trajectory["position_m"][picks].reshape(len(picks), -1, 3)
+    half = 0.75 * np.ptp(nodes[0], axis=0).max()
+    levels = _plane_levels(trajectory) if len(trajectory.plane_names) else ()
 
     def draw(j):
         ax.clear()
-        ax.plot_trisurf(*nodes[j].T, triangles=trajectory.faces, color="tab:orange", alpha=0.8)
-        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(min(lo[2], 0.0), hi[2]), title=f"t = {trajectory['time_s'][picks[j]]:.3f} s")
+        centre = nodes[j].mean(axis=0)
+        for n, level in zip(trajectory.plane_normals, levels):
+            u, v = _tangents(n)
+            foot = centre - ((centre @ n) - level) * n
+            corners = np.array([foot + half * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+            ax.plot_trisurf(*corners.T, triangles=[[0, 1, 2], [0, 2, 3]], color="0.5", alpha=0.25)
+        ax.plot_trisurf(*nodes[j].T, triangles=trajectory.faces, color="tab:orange", alpha=0.85)
+        ax.set(xlim=(centre[0] - half, centre[0] + half), ylim=(centre[1] - half, centre[1] + half),
+               zlim=(centre[2] - half, centre[2] + half), title=f"t = {trajectory['time_s'][picks[j]]:.3f} s")  # fmt: skip
+        ax.set_box_aspect((1, 1, 1))
+        ax.locator_params(nbins=4)
+        ax.tick_params(labelsize=7)
 
-    FuncAnimation(fig, draw, frames=len(picks)).save(out / "preview.gif", writer=PillowWriter(fps=10))
+    FuncAnimation(fig, draw, frames=len(picks)).save(path, writer=PillowWriter(fps=10))
     plt.close(fig)
-    return written + [out / "preview.gif"]
+    return path
 
 
 def write_results(
