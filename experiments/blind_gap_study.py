@@ -17,6 +17,9 @@ Noise (as the bundled sessions, shelljax/data/README.md): recorded force = level
 count = round(1.33 τ^½ + N(0, 0.5)); manometer = P_g (1 + N(0, 1 %)); shape observables
 + N(0, 1 mm), 0.5 mm resolution.
 
+The studies are drawn first, one after the other from one stream; each diagnosis is then one work
+item (``shelljax.executor``), so ``--workers N`` or ``--cluster`` give the same results as a serial run.
+
 Run:  python experiments/blind_gap_study.py --studies 48 --out docs/bench/blind-gap-study.json
 """
 
@@ -31,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shelljax.executor import WorkItem, add_executor_arguments, executor_options, run_items
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
 from shelljax.physics import ShellProperties, scaling_wrinkle_count
 
@@ -156,61 +160,76 @@ def recovered_magnitude(report, effect, true_value):
                 truth=true_value)  # fmt: skip
 
 
+def diagnose_study(index, effect, paths, label) -> dict:
+    """One study's work item: the diagnosis of its files, scored against the label it never sees."""
+    from shelljax import NoConvergenceError
+    from shelljax.diagnose import diagnose
+
+    start = time.perf_counter()
+    try:
+        diag = diagnose(paths, progress=False)  # the diagnosis sees the files only
+    except NoConvergenceError as err:
+        return dict(study=index, effect=effect, truth=label["truth"], verdict="failed", error=str(err))
+    seconds = time.perf_counter() - start
+    report = diag.report
+    parameter = EFFECTS[effect][0]
+    true_value = label["truth"].get(parameter)
+    if parameter == "thickness_factor":  # the diagnosis reports h itself
+        true_value *= label["object"]["thickness"]
+    truth_p = np.asarray(label["object"]["pressures"])
+    before = report["baseline"]["estimates"]
+    after = report["winner"]["estimates_after"] if report["winner"] else before
+    true_e = label["object"]["young_modulus"]
+    return dict(study=index, effect=effect, truth=label["truth"], shape=label["shape"], verdict=report["verdict"],
+                seconds=seconds, shrink=report["shrink"], gap_before=report["gap_before"]["rms_standardized"],
+                gap_after=report["gap_after"]["rms_standardized"],
+                ranking=[(e["effect"], e["delta"], e["delta_se"]) for e in report["ranking"][:4]],
+                magnitude=recovered_magnitude(report, effect, true_value),
+                pressure_error_before=[100 * (b["value"] / t - 1) for b, t in zip(before["gauge_pressure"], truth_p)],
+                pressure_error_after=[100 * (a["value"] / t - 1) for a, t in zip(after["gauge_pressure"], truth_p)],
+                modulus_error_before=100 * (before["young_modulus"]["value"] / true_e - 1),
+                modulus_error_after=100 * (after["young_modulus"]["value"] / true_e - 1))  # fmt: skip
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--studies", type=int, default=48)
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--effects", nargs="+", default=list(EFFECTS))
+    add_executor_arguments(parser, resume=False)
     parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "blind-gap-study.json"))
     args = parser.parse_args()
     from shelljax import NoConvergenceError
-    from shelljax.diagnose import diagnose
 
     rng = np.random.default_rng(args.seed)
     names = [args.effects[i % len(args.effects)] for i in range(args.studies)]
     rng.shuffle(names)
-    results = []
     out = Path(args.out)
-    for i, effect in enumerate(names):
-        with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
+        # the studies are drawn here, one after the other from one stream, so that they are the
+        # same draws however many workers diagnose them
+        items = []
+        for i, effect in enumerate(names):
+            directory = Path(tmp) / f"study{i}"
+            directory.mkdir()
             for _ in range(MAX_REDRAWS):
                 try:
-                    paths, label = make_study(rng, effect, Path(tmp), with_shape=i % 4 != 0)
+                    paths, label = make_study(rng, effect, directory, with_shape=i % 4 != 0)
                     break
                 except NoConvergenceError as err:  # reality has no ball state there: draw another object
                     print(f"    redrawn: {str(err).splitlines()[0][:100]}", flush=True)
-            start = time.perf_counter()
-            try:
-                diag = diagnose(paths, progress=False)  # the diagnosis sees the files only
-            except NoConvergenceError as err:
-                results.append(dict(study=i, effect=effect, truth=label["truth"], verdict="failed", error=str(err)))
-                print(f"[{i + 1}/{len(names)}] {effect:>26s} -> FAILED: {str(err)[:120]}", flush=True)
-                continue
-            seconds = time.perf_counter() - start
-        report = diag.report
-        parameter = EFFECTS[effect][0]
-        true_value = label["truth"].get(parameter)
-        if parameter == "thickness_factor":  # the diagnosis reports h itself
-            true_value *= label["object"]["thickness"]
-        truth_p = np.asarray(label["object"]["pressures"])
-        before = report["baseline"]["estimates"]
-        after = report["winner"]["estimates_after"] if report["winner"] else before
-        true_e = label["object"]["young_modulus"]
-        row = dict(study=i, effect=effect, truth=label["truth"], shape=label["shape"], verdict=report["verdict"],
-                   seconds=seconds, shrink=report["shrink"], gap_before=report["gap_before"]["rms_standardized"],
-                   gap_after=report["gap_after"]["rms_standardized"],
-                   ranking=[(e["effect"], e["delta"], e["delta_se"]) for e in report["ranking"][:4]],
-                   magnitude=recovered_magnitude(report, effect, true_value),
-                   pressure_error_before=[100 * (b["value"] / t - 1) for b, t in zip(before["gauge_pressure"], truth_p)],
-                   pressure_error_after=[100 * (a["value"] / t - 1) for a, t in zip(after["gauge_pressure"], truth_p)],
-                   modulus_error_before=100 * (before["young_modulus"]["value"] / true_e - 1),
-                   modulus_error_after=100 * (after["young_modulus"]["value"] / true_e - 1))  # fmt: skip
-        results.append(row)
-        print(f"[{i + 1}/{len(names)}] {effect:>26s} -> {row['verdict']:<26s} shrink {row['shrink']:.2f}  {seconds:.0f} s",
-              flush=True)  # fmt: skip
-        summary = summarize(results)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"summary": summary, "studies": results}, indent=1, default=float))
+            items.append(WorkItem(f"study{i}", diagnose_study, (i, effect, [str(p) for p in paths], label)))
+        done = run_items(items, options=executor_options(args), progress=True, desc="studies")
+    results = [r.value if r.status == "done" else dict(study=i, effect=names[i], verdict="failed", error=r.error)
+               for i, r in enumerate(done)]  # fmt: skip
+    for row in results:
+        if row["verdict"] == "failed":
+            print(f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> FAILED: {row['error'][:120]}", flush=True)
+        else:
+            print(f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> {row['verdict']:<26s} "
+                  f"shrink {row['shrink']:.2f}  {row['seconds']:.0f} s", flush=True)  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"summary": summarize(results), "studies": results}, indent=1, default=float))
     print(table(summarize(results)))
 
 

@@ -4,17 +4,25 @@ sensor-calibrate, sensor-emulator (docs/sensing.md); the same text is the --help
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 
 from ._errors import ShelljaxError
+from .report import summary_text
 
 
 def _cmd_run(args) -> int:
+    from .executor import executor_options
     from .runner import run_experiment, summary_table
 
-    run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False,
-                             verbose=args.verbose)  # fmt: skip
+    given = args.workers is not None or args.cluster is not None or args.cache_dir is not None
+    try:
+        run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False,
+                                 verbose=args.verbose, executor=executor_options(args) if given else None,
+                                 resume=args.resume)  # fmt: skip
+    except KeyboardInterrupt:
+        return 130  # the runner said how to resume
     print(summary_table(json.loads((run_dir / "results.json").read_text())))
     print(f"results: {run_dir / 'results.json'}")
     return 0
@@ -40,12 +48,27 @@ def _cmd_estimate(args) -> int:
         wrinkle_law=args.wrinkle_law or "mechanics", nuisance=tuple(args.nuisance or ()), walkers=args.walkers,
         max_steps=args.max_steps, surrogate=not args.no_surrogate,
     )  # fmt: skip
-    result = run_estimator(args.method, session, options, backend_path=args.chain)
+    with _stage_bar(f"estimate: {args.method} on {session.source.name}", args):
+        result = run_estimator(args.method, session, options, backend_path=args.chain,
+                               progress=None if not args.quiet else False)  # fmt: skip
     out = {"session": str(session.source), "object": session.object_name, "method": args.method, **result.to_dict()}
     if args.method != "closed-form":
         out["forward_model"] = args.model
     _print_estimates(out, result.estimates, args.json)
     return 0
+
+
+@contextlib.contextmanager
+def _stage_bar(name: str, args):
+    """One command stage: a progress bar on stderr (unless ``--quiet``) that says what runs and
+    for how long, and with ``--verbose`` the stage's wall time and what JAX compiled in it."""
+    from tqdm.auto import tqdm
+
+    from .runner._compile_log import stage
+
+    with tqdm(total=1, desc=name, unit="stage", disable=args.quiet) as bar, stage(name, args.verbose):
+        yield
+        bar.update(1)
 
 
 def _print_estimates(out: dict, estimates: dict, as_json: bool) -> None:
@@ -66,8 +89,9 @@ def _estimate_with_rig(args) -> int:
         raise ShelljaxError("--rig works with --method fit or bayes through the axisym model, without --nuisance "
                             "(the rig holds the measuring chain). Fix: add --method fit")  # fmt: skip
     rig = load_rig(args.rig)
-    result = estimate_with_rig(args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law,
-                               seed=args.seed)  # fmt: skip
+    with _stage_bar(f"estimate: {args.method} through the rig", args):
+        result = estimate_with_rig(args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law,
+                                   seed=args.seed)  # fmt: skip
     out = {"session": result.sources[0] if len(result.sources) == 1 else list(result.sources), "method": args.method,
            "rig": str(args.rig), **result.to_dict()}  # fmt: skip
     _print_estimates(out, result.estimates, args.json)
@@ -122,9 +146,12 @@ def _cmd_diagnose(args) -> int:
         rig = load_rig(args.rig)
         check_compatible(rig, gas=gas, wrinkle_law=wrinkle_law, where="the diagnosis")
         measurement, gas, wrinkle_law = rig_measurement(rig), rig.gas, rig.wrinkle_law
-    result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=gas,
-                      wrinkle_law=wrinkle_law or "scaling", progress=not args.quiet and not args.json,
-                      measurement=measurement)  # fmt: skip
+    from .runner._compile_log import stage
+
+    with stage("diagnose", args.verbose):
+        result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=gas,
+                          wrinkle_law=wrinkle_law or "scaling", progress=not args.quiet and not args.json,
+                          measurement=measurement)  # fmt: skip
     if args.out is not None:
         written = write_diagnosis(result, args.out)
         if not args.json:
@@ -137,45 +164,11 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
-def summary_text(report: dict) -> str:
-    """A few lines a person reads: verdict, ranking, gap before and after, misfit groups."""
-    lines = [f"verdict: {report['verdict']}"]
-    lines.append(f"{'model':>26s} {'elpd_loo':>10s} {'± se':>7s} {'Δ vs baseline':>14s} {'± se':>7s}  parameters")
-    for e in report["ranking"]:
-        if e["status"] != "ok":
-            lines.append(f"{e['effect']:>26s}  FAILED: {e['message']}")
-            continue
-        params = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
-                           for k, v in e.get("parameters", {}).items())  # fmt: skip
-        lines.append(f"{e['effect']:>26s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
-                     f"{e['delta_se']:7.2f}  {params}")  # fmt: skip
-    lines.append(f"gap (held-out rms of standardized residuals): {report['gap_before']['rms_standardized']:.3g} before, "
-                 f"{report['gap_after']['rms_standardized']:.3g} after, shrink {report['shrink']:.3g}x")  # fmt: skip
-    for name, g in report["gap_before"]["by_observable"].items():
-        after = report["gap_after"]["by_observable"][name]
-        lines.append(f"  {name:>18s}: rms {g['rms']:.3g} -> {after['rms']:.3g} {g['unit']} "
-                     f"({g['rms_percent']:.3g} % -> {after['rms_percent']:.3g} % of the measured value)")  # fmt: skip
-    kept = report.get("not_excluded") or []
-    if len(kept) > 1:
-        lines.append(f"not excluded (within {report['decision']['win_nats']:g} nats / {report['decision']['win_se']:g} SE "
-                     f"of the best): {', '.join(k['effect'] for k in kept)}")  # fmt: skip
-        e = report["robust"]["young_modulus"]
-        lines.append(f"  E over them: {e['range95'][0]:.4g} … {e['range95'][1]:.4g} Pa (95 %), point values spread "
-                     f"{e['spread_percent']:.1f} %")  # fmt: skip
-        for s in report.get("separating", [])[:4]:
-            lines.append(f"  to separate {s['effect']}: {s['measurement']}")
-    if report.get("robust", {}).get("warning"):
-        lines.append(f"warning: {report['robust']['warning']}")
-    misfit = report["where"]["misfit_groups"]
-    lines.append("baseline misfit (p < {:g}): {}".format(report["where"]["misfit_threshold_p"], ", ".join(misfit) or "none"))
-    return "\n".join(lines)
-
-
 def _cmd_simulate(args) -> int:
     from .scenario import load_scenario, run_scenario
 
     scenario = load_scenario(args.config)
-    summary = run_scenario(scenario, args.out, session=args.session, progress=not args.quiet)
+    summary = run_scenario(scenario, args.out, session=args.session, progress=not args.quiet, verbose=args.verbose)
     p = summary["parameters"]
     print(f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
           f"{p['gas']} gas, {p['mesh_faces']} faces, contact damping c = {summary['contact_damping_N_s_per_m']:.4g} N·s/m")  # fmt: skip
@@ -219,7 +212,7 @@ def _register_diagnose(sub) -> None:
     diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
                           "which candidate effect explains it, how far the gap shrinks")
     diag.add_argument("sessions", nargs="+", help="session TOML files of one object (e.g. at several pressures)")
-    diag.add_argument("--out", default=None, help="directory for diagnosis.json and diagnosis.png (created)")
+    diag.add_argument("--out", default=None, help="directory for diagnosis.json, diagnosis.png and report.md (created)")
     diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
     diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
                       help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
@@ -233,6 +226,7 @@ def _register_diagnose(sub) -> None:
     diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
                       help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
     diag.add_argument("--quiet", action="store_true", help="no progress bar")
+    diag.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
     diag.set_defaults(func=_cmd_diagnose)
 
 
@@ -257,6 +251,20 @@ def _register_rig(sub) -> None:
     cal.set_defaults(func=_cmd_rig_calibrate)
 
 
+def _register_run(sub) -> None:
+    """``shelljax run``."""
+    from .executor import add_executor_arguments
+
+    run = sub.add_parser("run", help="run an experiment config into a fresh run directory")
+    run.add_argument("config", nargs="?", default=None,
+                     help="experiment config TOML, e.g. configs/paper.toml (not needed with --resume)")
+    run.add_argument("--out", default=None, help="parent directory of the run directory (default: the config's output_dir)")
+    run.add_argument("--quiet", action="store_true", help="no progress bars")
+    run.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it")
+    add_executor_arguments(run)
+    run.set_defaults(func=_cmd_run)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``shelljax`` command."""
     from . import __version__
@@ -265,13 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    run = sub.add_parser("run", help="run an experiment config into a fresh run directory")
-    run.add_argument("config", help="experiment config TOML, e.g. configs/paper.toml")
-    run.add_argument("--out", default=None, help="parent directory of the run directory (default: the config's output_dir)")
-    run.add_argument("--quiet", action="store_true", help="no progress bars")
-    run.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it")
-    run.set_defaults(func=_cmd_run)
-
+    _register_run(sub)
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")
     est.add_argument("session", nargs="+", help="session TOML file (with --rig: the sessions of one object, estimated at "
                      "once with a shared E and measuring chain)")
@@ -298,6 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--chain", default=None, help="bayes: HDF5 file for the chain (resumed if it exists)")
     est.add_argument("--no-surrogate", action="store_true",
                      help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
+    est.add_argument("--quiet", action="store_true", help="no progress bar")
+    est.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
     est.set_defaults(func=_cmd_estimate)
 
     _register_diagnose(sub)
@@ -307,6 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", default=None, help="output directory (default: the config's output_dir/name)")
     sim.add_argument("--session", default=None, help="take P_g and E from this session's estimate (overrides the config)")
     sim.add_argument("--quiet", action="store_true", help="no progress bars")
+    sim.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
     sim.set_defaults(func=_cmd_simulate)
 
     rep = sub.add_parser("replica", help="export a session's digital replica: mesh (glTF) + replica.json")

@@ -15,17 +15,20 @@ from pathlib import Path
 from ._toml import TomlReader, read_toml
 from .estimate import METHODS, EstimatorOptions
 from .estimate._forward import FORWARD_MODELS, WRINKLE_LAWS
+from .executor import ExecutorOptions
 from .paper import PAPER_KS
 
 GAS_MODELS = ("prescribed", "isothermal")
 NUISANCE = ("depth_offset", "force_gain")
-_TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs", "rig"}
+_TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs", "rig",
+             "executor"}
 ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
                    "bayes_walkers", "bayes_max_steps", "bayes_surrogate"}  # fmt: skip
 _CALIBRATION_KEYS = {"sessions", "k_s", "k_s_std"}
 _SESSION_KEYS = {"paths"}
 _OUTPUT_KEYS = {"figures"}
 _RIG_KEYS = {"path"}
+_EXECUTOR_KEYS = {"workers", "cluster", "cache_dir"}
 _DOC = "docs/configs.md"
 
 
@@ -43,7 +46,8 @@ class ExperimentConfig:
     (write PNGs); ``output_dir`` where run directories are created; ``estimator_options``: the
     [estimators] table and the config's ``seed`` as :class:`shelljax.estimate.EstimatorOptions`
     (its ``k_s`` is None: the runner sets the one it calibrates or is given); ``rig``: a rig file
-    (``shelljax rig calibrate``) that fit and bayes estimate through, or None.
+    (``shelljax rig calibrate``) that fit and bayes estimate through, or None; ``executor``: where
+    the sessions run (the [executor] table, docs/cluster.md; in-process without one).
     """
 
     source: Path
@@ -58,6 +62,7 @@ class ExperimentConfig:
     sessions: tuple[Path, ...]
     figures: bool
     rig: Path | None = None
+    executor: ExecutorOptions = dataclasses.field(default_factory=ExecutorOptions)
 
 
 def resolve_paths(path: Path, field: str, patterns) -> tuple[Path, ...]:
@@ -106,8 +111,23 @@ def load_config(path: str | Path) -> ExperimentConfig:
     return ExperimentConfig(
         source=path, name=name, description=str(data.get("description", "")), output_dir=Path(output_dir),
         methods=methods, estimator_options=options, sessions=sessions, figures=figures, **calibration,
-        rig=None if rig is None else rig[0],
+        rig=None if rig is None else rig[0], executor=executor_settings(path, reader.table(data, "executor", _EXECUTOR_KEYS) or {}),
     )  # fmt: skip
+
+
+def executor_settings(path: Path, table: dict) -> ExecutorOptions:
+    """The [executor] table (docs/cluster.md): ``workers`` (a local Dask cluster), or ``cluster``
+    (a scheduler's address), and ``cache_dir`` (relative to the config)."""
+    reader = TomlReader(path, doc="docs/cluster.md")
+    workers = reader.integer(table, "workers", "executor.", default=None, minimum=1)
+    cluster = None if "cluster" not in table else reader.typed(table, "cluster", str, "executor.",
+                                                                  fix='write cluster = "tcp://HOST:PORT"')  # fmt: skip
+    cache_dir = None if "cache_dir" not in table else path.parent / reader.typed(table, "cache_dir", str, "executor.")
+    if workers is not None and cluster is not None:
+        raise reader.fail("executor", "both workers and cluster are set", "keep one: a cluster's workers are its own")
+    if cluster is not None and "://" not in cluster:
+        raise reader.fail("executor.cluster", f"{cluster!r} is not a scheduler address", 'write cluster = "tcp://HOST:PORT"')
+    return ExecutorOptions(workers=workers, cluster=cluster, cache_dir=cache_dir)
 
 
 def rig_settings(path: Path, table: dict, estimators: dict) -> tuple[Path, dict] | None:

@@ -105,13 +105,19 @@ def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
                 ax.plot(row["manometer"] / scale, i, "x", color="C3", ms=8)
         ax.set_xlabel(label)
         ax.set_xscale("log")
+        # 1-2-5 ticks: a range within one decade (the pressures) still gets labelled ticks
+        ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
         ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.tick_params(axis="x", labelsize=8)
         ax.grid(alpha=0.3, which="both")
     axes[0].set_yticks(y, [r["label"] for r in rows], fontsize=7)
     axes[0].plot([], [], "x", color="C3", label="manometer")
-    axes[0].legend(fontsize=7, loc="best", title="95 % intervals", title_fontsize=7)
-    fig.tight_layout()
+    # below the axes, never over a session's intervals
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=7, frameon=False,
+               title="95 % intervals", title_fontsize=7)  # fmt: skip
+    fig.tight_layout(rect=(0, 0.5 / fig.get_figheight(), 1, 1))
     fig.savefig(path)
     plt.close(fig)
     return path
@@ -149,6 +155,29 @@ def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tup
     fig.savefig(trace_path)
     plt.close(fig)
     return [corner_path, trace_path]
+
+
+def _which_panel(ax, report: dict, chosen: str) -> None:
+    """The diagnosis's WHICH panel: each candidate's Δ elpd ± 2 SE and its margin to win."""
+    ranked = [e for e in report["ranking"] if e["effect"] != "baseline"]
+    y = np.arange(len(ranked))
+    for yi, e in zip(y, ranked):
+        if e["status"] != "ok":
+            ax.text(0, yi, "  fit failed", va="center", fontsize=7, color="C3")
+            continue
+        ax.errorbar(e["delta"], yi, xerr=2 * e["delta_se"], fmt="o", color="C2" if e["effect"] == chosen else "C0",
+                    capsize=3)  # fmt: skip
+        ax.plot(max(4.0, 2 * e["delta_se"]), yi, "|", color="C3", ms=10)
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_yticks(y, [e["effect"] for e in ranked], fontsize=7)
+    ok = [e for e in ranked if e["status"] == "ok"]
+    reach = max([abs(e["delta"]) + 2 * e["delta_se"] for e in ok] + [max(4.0, 2 * e["delta_se"]) for e in ok] + [1.0])
+    if reach > 50.0:  # symlog only where a candidate is far off; within it, plain ticks (symlog's are unreadable there)
+        ax.set_xscale("symlog", linthresh=5)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_ylim(-0.6, len(ranked) - 0.4)
+    ax.set_xlabel("Δ elpd_loo vs baseline [nats] (± 2 SE; red tick: margin to win)")
+    ax.set_title(f"WHICH: verdict = {report['verdict']}", fontsize=9)
 
 
 def plot_diagnosis(diagnosis, path: Path) -> Path:
@@ -199,21 +228,7 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     ax.set_title("WHERE: misfit by group", fontsize=9)
     ax.legend(fontsize=7)
 
-    ax = axes[1, 0]
-    ranked = [e for e in report["ranking"] if e["effect"] != "baseline"]
-    y = np.arange(len(ranked))
-    for yi, e in zip(y, ranked):
-        if e["status"] != "ok":
-            ax.text(0, yi, "  fit failed", va="center", fontsize=7, color="C3")
-            continue
-        ax.errorbar(e["delta"], yi, xerr=2 * e["delta_se"], fmt="o", color="C2" if e["effect"] == chosen else "C0",
-                    capsize=3)  # fmt: skip
-        ax.plot(max(4.0, 2 * e["delta_se"]), yi, "|", color="C3", ms=10)
-    ax.axvline(0, color="k", lw=0.8)
-    ax.set_yticks(y, [e["effect"] for e in ranked], fontsize=7)
-    ax.set_xscale("symlog", linthresh=5)
-    ax.set_xlabel("Δ elpd_loo vs baseline [nats] (± 2 SE; red tick: margin to win)")
-    ax.set_title(f"WHICH: verdict = {report['verdict']}", fontsize=9)
+    _which_panel(axes[1, 0], report, chosen)
 
     ax = axes[1, 1]
     bins = np.linspace(0, 1, 11)

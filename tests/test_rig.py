@@ -138,6 +138,22 @@ def test_calibration_sessions_without_a_manometer_are_refused():
         calibrate_rig([SESSIONS / "calib_pezzi_0900Pa.toml"], terms=("pad_tofu",), progress=False)
 
 
+def test_a_calibration_object_of_loosely_stated_radius_is_warned_about():
+    # on one object the rig's force gain and the object's R are one product: R's error becomes the gain's
+    import warnings
+
+    from shelljax.rig import RigWarning
+    from shelljax.rig._calibrate import _hint_radius
+
+    taped = [load_session(p) for p in sorted((SESSIONS / "rig").glob("calib_ball_*.toml"))]
+    assert taped and all(s.radius_std <= 0.01 * s.radius for s in taped)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _hint_radius(taped)
+    with pytest.warns(RigWarning, match=r"toy_2200Pa\.toml: field 'radius_std'.*±2\.0 %.*Fix: measure its circumference"):
+        _hint_radius([load_session(SESSIONS / "rig" / "toy_2200Pa.toml")])
+
+
 def test_pseudo_bma_plus_weights():
     rng = np.random.default_rng(0)
     same = rng.normal(size=20)

@@ -3,7 +3,8 @@
 One imperfect measuring chain — a Hertzian finger pad compressing 4 mm at 20 N, a 15 mm finger
 instead of the assumed 8 mm, and a force sensor reading 8 % low (true force = 1.08 × recorded) —
 measures a calibration ball at four pressures with a manometer, and two other objects at two
-pressures each without one. Reality, protocol and noise are experiments/rig_transfer_study.py's
+pressures each without one. The calibration ball's radius is measured with a tape (±0.3 %), the
+others' from their meshes (±2 %): docs/rig.md says why. Reality, protocol and noise are experiments/rig_transfer_study.py's
 (the axisymmetric engine at 201 elements, sealed isothermal gas); each session's notes give its
 truth. They feed `shelljax rig calibrate`, the README's example and notebooks/rig_calibration.ipynb.
 
@@ -22,10 +23,10 @@ write_object = load_experiment("rig_transfer_study").write_object
 
 RIG = {"pad": {"kind": "hertz", "compression_at_20N": 4e-3, "f0": 8.0}, "finger": {"radius": 15e-3},
        "sensor": {"kind": "gain", "gain": 1.08, "exponent": 1.0, "beta": 0.0}}  # fmt: skip
-OBJECTS = {  # name: radius [m], thickness [m], E [Pa], pressures [Pa], manometer
-    "calib_ball": (0.15, 1.0e-3, 2.0e6, (1000.0, 1300.0, 1650.0, 2000.0), True),
-    "toy": (0.09, 0.8e-3, 3.0e6, (2200.0, 3500.0), False),
-    "big_ball": (0.28, 1.5e-3, 1.5e6, (800.0, 1300.0), False),
+OBJECTS = {  # name: radius [m], its stated relative std [-], thickness [m], E [Pa], pressures [Pa], manometer
+    "calib_ball": (0.15, 0.003, 1.0e-3, 2.0e6, (1000.0, 1300.0, 1650.0, 2000.0), True),  # R by a tape round it
+    "toy": (0.09, 0.02, 0.8e-3, 3.0e6, (2200.0, 3500.0), False),  # R from a photogrammetry mesh
+    "big_ball": (0.28, 0.02, 1.5e-3, 1.5e6, (800.0, 1300.0), False),
 }
 
 
@@ -33,8 +34,8 @@ def main():
     out = bundled_data_dir() / "sessions" / "rig"
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(2046)
-    for name, (radius, thickness, young, pressures, manometer) in OBJECTS.items():
-        obj = dict(radius=radius, thickness=thickness, young_modulus=young)
+    for name, (radius, radius_std, thickness, young, pressures, manometer) in OBJECTS.items():
+        obj = dict(radius=radius, radius_std=radius_std, thickness=thickness, young_modulus=young)
         for path, pressure in zip(write_object(rng, obj, RIG, pressures, out, name, manometer), pressures):
             s = load_session(path)
             truth = (f"virtual session (tools/make_rig_sessions.py): truth P_g = {pressure:.1f} Pa, E = {young:.4g} Pa; "

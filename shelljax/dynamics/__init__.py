@@ -16,10 +16,10 @@ from ._contact import (
     ground,
 )
 from ._cor import DampingCalibration, Impact, calibrate_contact_damping, contact_diameter, measured_cor, mesh_edges
-from ._integrators import AbstractIntegrator, BackwardEuler, Newmark, Rayleigh
+from ._integrators import TRBDF2, AbstractIntegrator, BackwardEuler, Newmark, Rayleigh, Stage
 from ._minimise import AbstractMinimiser, DenseNewton, KeptMatrix, simplified_newton_loop, solve_step
 from ._output import write_results
-from ._potential import IncrementalPotential, incremental_potential
+from ._potential import IncrementalPotential, incremental_potential, stage_potential
 from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized_ball_stiffness
 from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
 from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation

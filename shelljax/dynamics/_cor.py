@@ -2,7 +2,11 @@
 and the 1-D solve that calibrates the contact damping to a measured COR.
 
 An impact on a plane is an interval where its closest contact point is nearer than the law's
-contact distance [m]; its start and end times are interpolated linearly between steps. Heights are
+contact distance [m]; its start and end times are interpolated linearly between steps. On a plane
+that gravity presses against, contacts separated by a flight in which the centre of mass stays
+below its height at the first one's onset are one impact (chatter: the shell's lowest vertices
+bouncing off the plane while the body is still coming down, as under TR-BDF2 at the first
+milliseconds of a drop). Heights are
 the centre of mass's [m] along the plane normal, measured from where it was at contact onset.
 A body with a mesh also reports its largest contact-patch diameter [m] (``contact_diameter``).
 For planes that gravity presses against, COR = √(bounce apex height / drop height); otherwise
@@ -89,6 +93,22 @@ def _max_contact_diameter(trajectory: Trajectory, edges, p: int, steps: range) -
     return max(diameters, default=0.0)
 
 
+def _merge_chatter(starts: list[int], ends: list[int], height: np.ndarray) -> tuple[list[int], list[int]]:
+    """Contact intervals (start and end steps) with chatter merged: a separation after which the
+    centre of mass's height [m] along the normal stays below its height just before the interval's
+    onset (the body was still coming down: its lowest points bounced off the plane, it did not)
+    joins the interval to the next one."""
+    merged = []
+    for k0 in starts:
+        later = [k for k in ends if k > k0]
+        k1 = later[0] if later else None
+        if merged and merged[-1][1] is not None and np.max(height[merged[-1][1] : k0 + 1]) < height[merged[-1][0] - 1]:
+            merged[-1][1] = k1
+        else:
+            merged.append([k0, k1])
+    return [k0 for k0, _ in merged], [k1 for _, k1 in merged if k1 is not None]
+
+
 def measured_cor(trajectory: Trajectory) -> tuple[Impact, ...]:
     """Every completed impact of ``trajectory`` on every plane, in time order (see module doc)."""
     t = trajectory["time_s"]
@@ -105,6 +125,8 @@ def measured_cor(trajectory: Trajectory) -> tuple[Impact, ...]:
         g_n = float(-(trajectory.gravity_m_per_s2 @ n))
         starts = [k for k in range(1, len(t)) if touching[k] and not touching[k - 1]]
         ends = [k for k in range(1, len(t)) if touching[k - 1] and not touching[k]]
+        if g_n > 0.0:
+            starts, ends = _merge_chatter(starts, ends, height)
         for i, k0 in enumerate(starts):
             later = [k for k in ends if k > k0]
             if not later:

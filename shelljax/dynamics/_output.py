@@ -2,37 +2,29 @@
 
 Layout of ``out_dir``: ``results.json``; ``figures/trajectory.png``, ``figures/energies.png``,
 ``figures/contact_force.png``; for systems with faces, ``frames/frame_XXXX.ply`` or ``.glb`` (trimesh),
-``preview.gif`` (matplotlib: it follows the shell at equal scale, with the planes drawn) and, where it
-touches a plane, ``figures/max_deformation.png`` (its rest and most compressed cross-sections).
+``preview.gif`` (matplotlib: it follows the shell at equal scale, with the planes drawn, faces coloured by
+membrane areal strain, time, contact force and gauge pressure written on it; the frames carry the same colours
+as vertex colours) and, where it touches a plane, ``figures/max_deformation.png`` (its rest and most compressed
+cross-sections) and ``figures/closeup.png`` (the state of the largest contact patch, zoomed on it, seen
+through the plane).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import InvalidInputError
+from .._files import atomic_write_text
+from . import _render
 from ._cor import Impact, measured_cor
 from ._run import Trajectory
 
 # Per-step fields left out of results.json: bulky (all positions) or solver internals.
 _NOT_IN_JSON = ("position_m", "residual_history_N")
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename, so readers never see half a file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def results_dict(trajectory: Trajectory, impacts: tuple[Impact, ...]) -> dict:
@@ -156,52 +148,34 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
 
     positions = trajectory["position_m"]
     picks = np.unique(np.linspace(0, len(positions) - 1, min(max_frames, len(positions))).astype(int))
-    if len(trajectory.plane_names):  # the frame that shows the physics is always among them
+    touches = len(trajectory.plane_names) > 0
+    if touches:  # the frame that shows the physics is always among them
         picks = np.unique(np.append(picks[:-1] if len(picks) >= max_frames else picks, most_deformed_step(trajectory)[0]))
+    nodes = positions.reshape(len(positions), -1, 3)
+    strain = _render.face_strain(nodes[picks], trajectory.faces, nodes[0])
+    limit = _render.strain_limit(strain)
+    levels = _plane_levels(trajectory) if touches else np.zeros(0)
     frames = out / "frames"
     frames.mkdir(exist_ok=True)
     written = []
     for j, k in enumerate(picks):
-        mesh = trimesh.Trimesh(positions[k].reshape(-1, 3), trajectory.faces, process=False)
+        # vertex colours (the faces' strain averaged, contact dark): PLY and glTF keep them (COLOR_0)
+        rgba = _render.frame_rgba(trajectory, k, strain[j], limit, levels)
+        colours = _render.vertex_rgba_uint8(rgba, trajectory.faces, nodes.shape[1])
+        mesh = trimesh.Trimesh(nodes[k], trajectory.faces, vertex_colors=colours, process=False)
         written.append(frames / f"frame_{j:04d}.{mesh_format}")
         mesh.export(written[-1])
-    if len(trajectory.plane_names):
+    if touches:
         written.append(_max_deformation_figure(trajectory, out / "figures" / "max_deformation.png"))
+        largest = _render.largest_contact_step(trajectory, levels)
+        if largest is not None:
+            step, plane = largest
+            written.append(_render.closeup(trajectory, step, plane, out / "figures" / "closeup.png",
+                                           _render.face_strain(nodes[step], trajectory.faces, nodes[0]), limit, levels))  # fmt: skip
     if not preview_gif:
         return written
-    written.append(_preview(trajectory, picks, out / "preview.gif"))
+    written.append(_render.preview(trajectory, picks, out / "preview.gif", strain, limit, levels))
     return written
-
-
-def _preview(trajectory: Trajectory, picks: np.ndarray, path: Path) -> Path:
-    """An animation that follows the shell at equal scale, with the planes it may touch."""
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
-
-    fig = plt.figure(figsize=(4, 4))
-    ax = fig.add_subplot(projection="3d")
-    nodes = trajectory["position_m"][picks].reshape(len(picks), -1, 3)
-    half = 0.75 * np.ptp(nodes[0], axis=0).max()
-    levels = _plane_levels(trajectory) if len(trajectory.plane_names) else ()
-
-    def draw(j):
-        ax.clear()
-        centre = nodes[j].mean(axis=0)
-        for n, level in zip(trajectory.plane_normals, levels):
-            u, v = _tangents(n)
-            foot = centre - ((centre @ n) - level) * n
-            corners = np.array([foot + half * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
-            ax.plot_trisurf(*corners.T, triangles=[[0, 1, 2], [0, 2, 3]], color="0.5", alpha=0.25)
-        ax.plot_trisurf(*nodes[j].T, triangles=trajectory.faces, color="tab:orange", alpha=0.85)
-        ax.set(xlim=(centre[0] - half, centre[0] + half), ylim=(centre[1] - half, centre[1] + half),
-               zlim=(centre[2] - half, centre[2] + half), title=f"t = {trajectory['time_s'][picks[j]]:.3f} s")  # fmt: skip
-        ax.set_box_aspect((1, 1, 1))
-        ax.locator_params(nbins=4)
-        ax.tick_params(labelsize=7)
-
-    FuncAnimation(fig, draw, frames=len(picks)).save(path, writer=PillowWriter(fps=10))
-    plt.close(fig)
-    return path
 
 
 def write_results(
@@ -218,7 +192,7 @@ def write_results(
     out = Path(out_dir)
     (out / "figures").mkdir(parents=True, exist_ok=True)
     impacts = measured_cor(trajectory)
-    _atomic_write_text(out / "results.json", json.dumps(results_dict(trajectory, impacts), indent=1))
+    atomic_write_text(out / "results.json", json.dumps(results_dict(trajectory, impacts), indent=1))
     written = [out / "results.json", *(_plots(trajectory, out / "figures") if figures else [])]
     if trajectory.faces is not None and max_frames > 0:
         written += _mesh_frames(trajectory, out, max_frames, mesh_format, preview_gif)

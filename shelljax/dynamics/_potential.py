@@ -11,6 +11,11 @@
 with pⱼ the contact points [m]. The lagged quantities (the contact points pⁿ, normal forces λⁿ [N]
 and damping weights ωⁿ [-] at the step's start) are arrays of this module, so gradients with
 respect to the previous state flow through them.
+
+For a scheme whose stage velocity is not (x − xₙ)/Δt (TR-BDF2's stages), ``x_prev`` and ``dt``
+are the stage's damping reference x_ref and Δt_d (``_integrators.Stage``): the dashpots, friction
+and Rayleigh terms above then read xₙ → x_ref, pⁿ → p(x_ref), Δt → Δt_d, and act on the stage's
+own velocity; λⁿ and ωⁿ stay lagged at the last computed state (feasible for barriers).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, Scalar
 
 from ..physics import friction_energy
-from ._integrators import AbstractIntegrator, Rayleigh
+from ._integrators import AbstractIntegrator, Rayleigh, Stage
 from ._system import AbstractDynamicSystem, DynamicState
 
 
@@ -163,26 +168,40 @@ def incremental_potential(
     dt: Scalar,
     rayleigh: Rayleigh | None = None,
 ) -> IncrementalPotential:
-    """The incremental potential of the step of Δt [s] from ``state`` under ``integrator``."""
-    dt = jnp.asarray(dt)
-    x = state.position
+    """The incremental potential of the step of Δt [s] from ``state`` under ``integrator`` (its
+    first stage, for a multi-stage scheme)."""
+    return stage_potential(system, integrator.stage(0, state, state, dt), state.position, rayleigh)
+
+
+def stage_potential(
+    system: AbstractDynamicSystem, stage: Stage, lagged_position: Float[Array, " n"], rayleigh: Rayleigh | None = None
+) -> IncrementalPotential:
+    """The incremental potential of one integrator ``stage``, its contact data lagged at
+    ``lagged_position`` [m] (the last computed state's positions: feasible for barriers).
+
+    ``dt`` and ``x_prev`` of the result are the stage's damping Δt_d [s] and reference x_ref [m]:
+    the dissipation potentials measure velocities as (x − x_ref)/Δt_d (one step of backward Euler:
+    Δt and xₙ), their anchors pⁿ are the contact points of x_ref.
+    """
+    dt = jnp.asarray(stage.damping_dt)
+    x = lagged_position
     free, prescribed = free_dofs(system, x.shape[0])
     points, forces, weights = lagged_contact(system, x)
     body = jnp.stack([system.body_damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes]) if system.planes else jnp.zeros((0,))
     mass = system.lumped_mass()
     return IncrementalPotential(
         system=system,
-        time=state.time + dt,
+        time=jnp.asarray(stage.time),
         dt=dt,
-        x_hat=integrator.predictor(state, dt),
-        inertia_weight=mass / (integrator.inertia_factor() * dt * dt),
-        x_prev=x,
-        points_prev=points,
+        x_hat=stage.x_hat,
+        inertia_weight=mass / stage.inertia_scale,
+        x_prev=stage.damping_reference,
+        points_prev=system.contact_points(stage.damping_reference),
         normal_force_prev=forces,
         damping_weight_prev=weights,
         body_damping_prev=body,
         rayleigh=rayleigh,
         free_dofs=free,
         prescribed_dofs=prescribed,
-        prescribed_values=jnp.asarray(system.prescribed_positions(state.time + dt), dtype=x.dtype).reshape(-1),
+        prescribed_values=jnp.asarray(system.prescribed_positions(stage.time), dtype=x.dtype).reshape(-1),
     )

@@ -1,8 +1,9 @@
 """Stepping, differentiable roll-outs and the run driver with its per-step record.
 
 * ``initial_state``: a state at rest or moving, with Newmark's a₀ = M⁻¹ F(x₀).
-* ``step``: one implicit step (pure, jit- and grad-able); ``rollout``: ``n_steps`` of them in a
-  ``lax.scan`` (differentiable end to end, each step implicitly).
+* ``step``: one implicit step (pure, jit- and grad-able; one minimisation per stage of the
+  integrator: two for TR-BDF2); ``rollout``: ``n_steps`` of them in a ``lax.scan``
+  (differentiable end to end, each stage implicitly).
 * ``simulate``: the driver, in jit-compiled chunks with a progress bar; it raises
   ``NoConvergenceError`` at the first step whose minimisation failed (no step is skipped).
 """
@@ -22,7 +23,7 @@ from .._errors import InvalidInputError, NoConvergenceError
 from ._contact import check_positive
 from ._integrators import AbstractIntegrator, Newmark, Rayleigh
 from ._minimise import AbstractMinimiser, DenseNewton, solve_step
-from ._potential import incremental_potential, lagged_contact
+from ._potential import incremental_potential, lagged_contact, stage_potential
 from ._system import ENERGY_KINDS, AbstractDynamicSystem, DynamicState
 
 
@@ -125,21 +126,39 @@ def step(
 
 
 def _step_kept(system, state, dt, integrator, minimiser, rayleigh, memory):
-    """:func:`step` with the minimiser's ``memory`` from the previous step: (state, record, memory)."""
-    potential = incremental_potential(system, integrator, state, dt, rayleigh)
-    # x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start. Where
-    # the acceleration staying aₙ gives a lower Φ_inc, Newton starts there instead (exact in free flight;
-    # an initial state far from equilibrium can have an aₙ that throws the nodes metres away).
-    predicted = potential.free(potential.x_hat)
-    start = jnp.where(potential.is_feasible(predicted), predicted, potential.free(state.position))
-    extrapolated = potential.free(potential.x_hat + integrator.inertia_factor() * potential.dt**2 * state.acceleration)
-    better = potential.is_feasible(extrapolated) & (potential.value(extrapolated) < potential.value(start))
-    start = jnp.where(better, extrapolated, start)
-    feasible = potential.is_feasible(start)
-    result = solve_step(potential, minimiser, jax.lax.stop_gradient(start), memory)
-    x_new = potential.full(result.value)
-    new_state = integrator.advance(state, x_new, potential.dt)
-    return new_state, observe(system, new_state, potential.plane_forces(x_new), result, feasible_start=feasible), result.state
+    """:func:`step` with the minimiser's ``memory`` from the previous step: (state, record, memory).
+
+    A multi-stage scheme minimises one incremental potential per stage, each from the state the
+    last one left, the minimiser's memory passed along; the record sums their Newton iterations
+    and matrices, is converged if every stage is, and keeps the residual history of the first
+    stage that failed (else the last's)."""
+    dt = jnp.asarray(dt)
+    current = state
+    converged, feasible, iterations, matrices, history = jnp.asarray(True), jnp.asarray(True), 0, 0, None
+    for k in range(integrator.num_stages()):
+        stage = integrator.stage(k, state, current, dt)
+        potential = stage_potential(system, stage, current.position, rayleigh)
+        # x̂ may cross a barrier; the previous positions (with the new prescribed ones) are a safe start. Where
+        # the acceleration staying aₙ gives a lower Φ_inc, Newton starts there instead (exact in free flight;
+        # an initial state far from equilibrium can have an aₙ that throws the nodes metres away).
+        predicted = potential.free(potential.x_hat)
+        start = jnp.where(potential.is_feasible(predicted), predicted, potential.free(current.position))
+        extrapolated = potential.free(potential.x_hat + stage.inertia_scale * current.acceleration)
+        better = potential.is_feasible(extrapolated) & (potential.value(extrapolated) < potential.value(start))
+        start = jnp.where(better, extrapolated, start)
+        feasible = feasible & potential.is_feasible(start)
+        result = solve_step(potential, minimiser, jax.lax.stop_gradient(start), memory)
+        memory = result.state
+        x_new = potential.full(result.value)
+        current = integrator.finish_stage(k, state, current, x_new, dt)
+        history = result.history if history is None else jnp.where(converged, result.history, history)
+        converged = converged & result.converged
+        iterations = iterations + result.iterations
+        matrices = matrices + result.stats["assemblies"]
+    record = observe(system, current, potential.plane_forces(x_new), result, feasible_start=feasible)
+    record = eqx.tree_at(lambda r: (r.converged, r.newton_iterations, r.newton_matrices, r.residual_history_N), record,
+                         (converged, jnp.asarray(iterations), jnp.asarray(matrices), history))  # fmt: skip
+    return current, record, memory
 
 
 def rollout(

@@ -40,6 +40,12 @@ class Estimate:
             unit=unit, method=method, note=note,
         )  # fmt: skip
 
+    @classmethod
+    def from_dict(cls, record: dict) -> "Estimate":
+        """The estimate :meth:`to_dict` wrote (JSON numbers read back exactly)."""
+        return cls(float(record["value"]), float(record["std"]), tuple(float(v) for v in record["ci95"]), record["unit"],
+                   record["method"], record.get("note", ""))  # fmt: skip
+
     def to_dict(self) -> dict:
         """JSON-ready dict: value, std, ci95 and unit, method (and note when present)."""
         out = {"value": self.value, "std": self.std, "ci95": list(self.ci95), "unit": self.unit,

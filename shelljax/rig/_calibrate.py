@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -50,6 +51,7 @@ ESTIMATOR_GASES = ("prescribed", "isothermal")  # the estimators' gas laws (the 
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
 BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
 MIN_WEIGHT = 1e-3  # a model below this weight is dropped from the rig (its weight goes to the others)
+PRECISE_RADIUS = 0.01  # [-] a calibration object's R stated less precisely than this is worth measuring again
 IDENTIFIED = 0.9  # a term is identified when the models holding it weigh ≥ 0.9, or ≤ 0.1
 
 
@@ -317,6 +319,7 @@ def calibrate_rig(
     if not sessions:
         raise InvalidInputError("no calibration sessions given. Fix: pass session TOML files with manometer readings")
     _check_sessions(sessions)
+    _hint_radius(sessions)
     levels = np.concatenate([s.force for s in sessions])
     force_ref = math.sqrt(float(np.min(levels)) * float(np.max(levels)))
     objects, noise = _objects(sessions, gas, force_ref, manometer_std)
@@ -327,6 +330,23 @@ def calibrate_rig(
     report(None)
     rig = _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force_ref)
     return dataclasses.replace(rig, name=name, manometer_std=manometer_std, failed=tuple(failed))
+
+
+class RigWarning(UserWarning):
+    """A rig is weaker than it could be, or one of its models could not be used for an estimate."""
+
+
+def _hint_radius(sessions) -> None:
+    """Warn when a calibration object's R is stated loosely: on one object the force gain g and R
+    enter as one product (F ∝ g R P_g w), so R's error becomes the rig's gain error, carried to
+    every later P_g (docs/rig.md, the transfer study)."""
+    loose = [s for s in sessions if s.radius_std > PRECISE_RADIUS * s.radius]
+    if loose:
+        worst = max(loose, key=lambda s: s.radius_std / s.radius)
+        warnings.warn(f"{worst.source}: field 'radius_std': the calibration object's radius is stated to "
+                      f"±{100 * worst.radius_std / worst.radius:.1f} %, and on one object the rig's force gain takes "
+                      "that error with it to every later P_g. Fix: measure its circumference with a tape (R to about "
+                      "±0.3 %) and state radius_std (docs/rig.md)", RigWarning, stacklevel=3)  # fmt: skip
 
 
 def check_terms_list(terms) -> tuple[str, ...]:

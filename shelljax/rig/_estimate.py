@@ -39,7 +39,7 @@ from ..diagnose._model import engine_inputs, log_prior, physical, predict, solve
 from ..estimate import Estimate
 from ..session import Session, load_session
 from ..diagnose._measurement import widened_grid
-from ._calibrate import Rig, fit_model
+from ._calibrate import Rig, RigWarning, fit_model
 
 ESTIMATE_GRID_SPAN = (0.7, 1.4)  # the engine's grid covers the true forces of every rig model, with room
 IMPORTANCE_DRAWS = 512  # exact engine solves in ``bayes``, shared among the rig models by weight
@@ -57,10 +57,6 @@ SEPARATING_MEASUREMENT = {
     "sensor_gain": "the force sensor checked against weights (shelljax sensor-calibrate)",
     "sensor_power": "the force sensor checked against weights across 5-20 N (shelljax sensor-calibrate)",
 }  # fmt: skip
-
-
-class RigWarning(UserWarning):
-    """A rig model could not be used for an estimate (its fit failed, or PSIS k̂ is high)."""
 
 
 @dataclasses.dataclass(frozen=True)

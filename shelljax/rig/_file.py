@@ -8,13 +8,12 @@ in the diagnosis's scaled coordinates, which are what an estimate reads back.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import tomli_w
 
+from .._files import atomic_write_text
 from .._toml import TomlReader, read_toml
 from ..diagnose._effects import LINEAR_SCALE, MIN_INDENTER_FRACTION, UNITS
 from ._calibrate import ESTIMATOR_GASES, Rig, RigModel
@@ -80,16 +79,7 @@ def write_rig(rig: Rig, path: str | Path) -> Path:
     path = Path(path)
     text = _HEADER + tomli_w.dumps(rig_document(rig))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        load_rig(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return atomic_write_text(path, text, check=load_rig)
 
 
 def _read_model(check: TomlReader, table: dict, i: int) -> RigModel:

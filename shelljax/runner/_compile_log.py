@@ -1,4 +1,5 @@
-"""What JAX traced and compiled during a stage of a run, and how long it took.
+"""What JAX traced and compiled during a stage of a run, and how long it took (``stage``: the
+commands' ``--verbose`` log).
 
 Listens to JAX's own monitoring events (``jax.monitoring``): the duration of each jaxpr trace, each
 lowering to StableHLO and each XLA backend compilation, and the persistent cache's hits. A
@@ -11,7 +12,9 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import sys
 import threading
+import time
 from collections.abc import Iterator
 
 import jax
@@ -91,3 +94,20 @@ def compile_log() -> Iterator[CompileLog]:
     finally:
         jax.monitoring.unregister_event_duration_listener(on_duration)
         jax.monitoring.unregister_event_listener(on_event)
+
+
+@contextlib.contextmanager
+def stage(name: str, verbose: bool, stages: list[dict] | None = None) -> Iterator[CompileLog]:
+    """Time a stage of a command and what JAX compiled in it (the ``--verbose`` log of ``shelljax
+    run``, ``simulate``, ``diagnose`` and ``estimate``): append its record to ``stages`` (if given)
+    and, with ``verbose``, write one line to stderr (above any progress bar)."""
+    from tqdm.auto import tqdm
+
+    start = time.perf_counter()
+    with compile_log() as log:
+        yield log
+    wall = time.perf_counter() - start
+    if stages is not None:
+        stages.append({"stage": name, "wall_seconds": wall, **log.to_dict()})
+    if verbose:
+        tqdm.write(f"{name}: {wall:.1f} s; {log.summary()}", file=sys.stderr)

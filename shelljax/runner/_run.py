@@ -1,38 +1,34 @@
-"""Run an experiment config into a fresh run directory: results.json + figures."""
+"""Run an experiment config into a fresh run directory: results.json, figures and report.md.
+
+Each session is one work item (``_session.estimate_session_item``) run by ``shelljax.executor``,
+in-process or on Dask workers; ``run.json`` in the run directory names the config (and its
+sha256) so that an interrupted run can be resumed.
+"""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import datetime as _dt
 import json
 import platform
 import shutil
 import sys
-import time
 import warnings
 from pathlib import Path
 
-import numpy as np
 from tqdm.auto import tqdm
 
 from .. import __version__
-from .._errors import ShelljaxError
+from .._errors import InvalidInputError
 from ..config import ExperimentConfig, load_config
-from ..estimate import (
-    ConvergenceWarning,
-    Estimate,
-    EstimatorOptions,
-    SurrogateWarning,
-    calibrate_ks,
-    options_forward_model,
-    paper_k_s,
-    run_estimator,
-)
-from ..rig import estimate_with_rig, load_rig
+from ..estimate import Estimate, EstimatorOptions, calibrate_ks, paper_k_s
+from ..executor import ExecutorOptions, WorkItem, read_item, run_items
+from ..report import write_run_report
+from ..rig import load_rig
 from ..session import Session, file_sha256, load_session
-from ._compile_log import compile_log
-from ._memory_mappings import release_compiled_programs_if_crowded
+from ._session import estimate_session_item, failed_entry, summary_row
+
+MANIFEST = "run.json"  # what an interrupted run needs to be resumed
 
 
 def _fresh_run_dir(config: ExperimentConfig, output_dir: Path | None) -> Path:
@@ -47,104 +43,8 @@ def _fresh_run_dir(config: ExperimentConfig, output_dir: Path | None) -> Path:
     return run_dir
 
 
-def _session_inputs(session: Session) -> dict:
-    inputs = {
-        "radius": {"value": session.radius, "std": session.radius_std, "unit": "m",
-                   "source": "mesh sphere fit" if session.mesh_path else "session file"},
-        "thickness": {"value": session.thickness, "std": session.thickness_std, "unit": "m"},
-        "poisson_ratio": {"value": session.poisson_ratio, "unit": "1"},
-        "n_samples": int(session.force.size),
-        "n_trials": int(session.trial_ids.size),
-        "force_levels": {"value": session.force_levels.tolist(), "unit": "N"},
-    }  # fmt: skip
-    if session.wrinkle_counts is not None:
-        inputs["wrinkle_counts"] = session.wrinkle_counts.tolist()
-    if session.manometer_gauge_pressure is not None:
-        inputs["manometer_gauge_pressure"] = {"value": session.manometer_gauge_pressure, "unit": "Pa"}
-    if session.mass is not None:
-        inputs["mass"] = {"value": session.mass, "unit": "kg"}
-    if session.fit_rms_residual is not None:
-        inputs["sphere_fit_rms_residual"] = {"value": session.fit_rms_residual, "unit": "m"}
-    return inputs
-
-
-def _block(result) -> dict:
-    """An estimator's record in results.json: its estimates by name, then everything else it reports."""
-    record = result.to_dict()
-    estimates = record.pop("estimates")
-    return {**estimates, **{key: value for key, value in record.items() if value is not None}}
-
-
 def _estimator_options(config: ExperimentConfig, k_s: Estimate) -> EstimatorOptions:
     return dataclasses.replace(config.estimator_options, k_s=k_s)
-
-
-def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_dir: Path, figures: bool):
-    """Sample the posterior into its record: chain file, caught warnings, figures."""
-    chains = run_dir / "chains"
-    chains.mkdir(exist_ok=True)
-    chain_path = chains / f"{session.source.stem}.h5"
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ConvergenceWarning)
-        warnings.simplefilter("always", SurrogateWarning)
-        post = run_estimator("bayes", session, options, model=model, fit=fit, backend_path=chain_path)
-    block = _block(post)
-    block["chain"] = str(chain_path.relative_to(run_dir))
-    if caught:
-        block["warning"] = str(caught[-1].message)
-        for w in caught:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    if figures:
-        from ..plots import plot_posterior  # matplotlib loads only when figures are asked for
-
-        paths = plot_posterior(post.samples, post.chain, post.names, session.source.stem, run_dir / "figures")
-        block["_figures"] = [str(p.relative_to(run_dir)) for p in paths]
-    return block, post
-
-
-@contextlib.contextmanager
-def _stage(name: str, stages: list[dict], verbose: bool):
-    """Time a stage of the run and what JAX compiled in it; append the record to ``stages``."""
-    start = time.perf_counter()
-    with compile_log() as log:
-        yield
-    wall = time.perf_counter() - start
-    stages.append({"stage": name, "wall_seconds": wall, **log.to_dict()})
-    if verbose:
-        tqdm.write(f"{name}: {wall:.1f} s; {log.summary()}", file=sys.stderr)
-
-
-def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                        stages: list[dict], verbose: bool, rig=None):  # fmt: skip
-    """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
-    result or None). bayes starts from the fit when it converged; each method is a timed stage.
-    With a ``rig`` (``shelljax.rig``), both go through it.
-
-    A failure is recorded in the block (``error``) and reported, not raised: one bad session must
-    not lose the others' results.
-    """
-    methods = [m for m in ("fit", "bayes") if m in config.methods]
-    model = options_forward_model(session, options) if methods and rig is None else None
-    out, fit = {}, None
-    for method in methods:
-        try:
-            with _stage(f"{session.source.name}: {method}", stages, verbose):
-                if rig is not None:
-                    result = estimate_with_rig(session, rig, method=method, seed=config.estimator_options.seed)
-                    out[method] = (_block(result), result)
-                elif method == "fit":
-                    fit = run_estimator("fit", session, options, model=model)
-                    out[method] = (_block(fit), fit)
-                else:
-                    out[method] = _bayes_block(session, options, model, fit, run_dir, config.figures)
-        except ShelljaxError as err:
-            warnings.warn(f"{method} failed on {session.source}: {err}", stacklevel=2)
-            out[method] = ({"error": f"{type(err).__name__}: {err}"}, None)
-    return out
-
-
-def _plotted(estimates: dict[str, Estimate | None]) -> dict:
-    return {"gauge_pressure": estimates.get("gauge_pressure"), "young_modulus": estimates.get("young_modulus")}
 
 
 def _calibration(config: ExperimentConfig, calibration_sessions: list[Session]):
@@ -171,42 +71,6 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
     }
 
 
-def _estimate_session_entry(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                            used_in_calibration: bool, held_out: list, stages: list[dict], verbose: bool,
-                            rig=None):  # fmt: skip
-    """Every configured estimator on one session: (results.json entry, summary-figure row)."""
-    entry = {"object": session.object_name, "session": str(session.source),
-             "used_in_calibration": used_in_calibration, "input_files": session.input_files,
-             "inputs": _session_inputs(session), "estimates": {}, "figures": []}  # fmt: skip
-    row = {"label": session.source.stem, "manometer": session.manometer_gauge_pressure, "estimates": {}}
-    closed = run_estimator("closed-form", session, options)
-    model_curves: dict[str, np.ndarray] = {}
-    if "closed-form" in config.methods:
-        entry["estimates"]["closed-form"] = _block(closed)
-        row["estimates"]["closed-form"] = _plotted(closed.estimates)
-        manometer = session.manometer_gauge_pressure
-        if manometer is not None and not used_in_calibration:
-            held_out.append((session.object_name, manometer, closed.pressure_slope.value, closed.pressure_slope.std))
-    for method, (block, result) in _simulation_methods(session, config, options, run_dir, stages, verbose, rig).items():
-        entry["estimates"][method] = block
-        if result is not None:
-            row["estimates"][method] = _plotted(result.estimates)
-            entry["figures"] += block.pop("_figures", [])
-            if method == "fit" and rig is None:
-                model_curves[f"{method}: {config.estimator_options.forward_model} model"] = result.predicted_depth
-    if session.manometer_gauge_pressure is not None:
-        for method, estimates in row["estimates"].items():
-            error = estimates["gauge_pressure"].value / session.manometer_gauge_pressure - 1.0
-            entry["estimates"][method]["gauge_pressure_relative_error_vs_manometer"] = error
-    if config.figures:
-        from ..plots import plot_force_depth  # matplotlib loads only when figures are asked for
-
-        fig = plot_force_depth(session, closed, run_dir / "figures" / f"force_depth_{session.source.stem}.png",
-                               model_curves=model_curves)  # fmt: skip
-        entry["figures"].append(str(fig.relative_to(run_dir)))
-    return entry, row
-
-
 def _calibration_record(calibration) -> dict:
     return {
         "k_s": calibration.k_s.to_dict(),
@@ -217,37 +81,59 @@ def _calibration_record(calibration) -> dict:
     }  # fmt: skip
 
 
-def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = None, progress: bool | None = None,
-                   verbose: bool = False) -> Path:  # fmt: skip
-    """Run the experiment config at ``config_path``; return the run directory.
+def _session_items(config: ExperimentConfig, sessions: list[Session], options: EstimatorOptions, run_dir: Path,
+                   calibration_files: set[str], verbose: bool) -> list[WorkItem]:  # fmt: skip
+    """One work item per session, keyed by its position and file name (unique in a run); its seeds
+    are the config's, in ``options``, as in a serial run."""
+    return [WorkItem(f"session{i:04d}-{s.source.stem}", estimate_session_item,
+                     (str(s.source), config, options, str(run_dir), str(s.source) in calibration_files, verbose))
+            for i, s in enumerate(sessions)]  # fmt: skip
 
-    Every session is loaded and validated before anything is written, so a bad input fails the run
-    without leaving a half-written directory. ``progress``: None shows a bar on a terminal only;
-    ``verbose``: print each stage's wall time and what JAX compiled in it (results.json has it always).
-    """
-    config = load_config(config_path)
-    disable = None if progress is None else not progress
-    calibration_sessions = [load_session(p) for p in config.calibration_sessions]
-    sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
-    calibration, k_s = _calibration(config, calibration_sessions)
-    options = _estimator_options(config, k_s)
-    rig = None if config.rig is None else load_rig(config.rig)
 
-    run_dir = _fresh_run_dir(config, None if output_dir is None else Path(output_dir))
-    shutil.copy2(config.source, run_dir / "config.toml")
+def _write_manifest(run_dir: Path, config: ExperimentConfig, items: list[WorkItem]) -> None:
+    manifest = {"config": str(Path(config.source).resolve()), "config_sha256": file_sha256(config.source),
+                "shelljax_version": __version__, "items": [item.key for item in items]}  # fmt: skip
+    (run_dir / MANIFEST).write_text(json.dumps(manifest, indent=1))
+
+
+def _resumed_config(run_dir: Path, config_path: str | Path | None) -> Path:
+    """The config of the interrupted run in ``run_dir``, checked unchanged since it started."""
+    manifest_path = run_dir / MANIFEST
+    if not manifest_path.exists():
+        raise InvalidInputError(f"--resume {run_dir}: no {MANIFEST} there, so it is not a run directory shelljax can "
+                                "resume. Fix: give the directory `shelljax run` printed, or start a fresh run")  # fmt: skip
+    manifest = json.loads(manifest_path.read_text())
+    original = Path(manifest["config"])
+    if config_path is not None and Path(config_path).resolve() != original:
+        raise InvalidInputError(f"--resume {run_dir}: that run is of {original}, not of {config_path}. Fix: leave the "
+                                "config out, or resume the run of this config")  # fmt: skip
+    if not original.exists() or file_sha256(original) != manifest["config_sha256"]:
+        raise InvalidInputError(f"--resume {run_dir}: its config {original} is gone or has changed since the run "
+                                "started, so its finished sessions no longer answer it. Fix: start a fresh run")  # fmt: skip
+    return original
+
+
+def _write_results(config: ExperimentConfig, k_s: Estimate, calibration, sessions: list[Session],
+                   calibration_files: set[str], done: list, executor: ExecutorOptions, run_dir: Path) -> None:
+    """results.json, the run's figures and report.md from the sessions' item results, in config order."""
     results = _results_header(config, k_s)
+    results["executor"] = executor.describe()
     if config.rig is not None:
         results["rig"] = {"path": str(config.rig), "sha256": file_sha256(config.rig)}
     summary_rows: list[dict] = []
     held_out: list[tuple[str, float, float, float]] = []
-    calibration_files = {str(s.source) for s in calibration_sessions}
     stages: list[dict] = []
-    for session in tqdm(sessions, desc="estimating", disable=disable):
-        entry, row = _estimate_session_entry(session, config, options, run_dir, str(session.source) in calibration_files,
-                                             held_out, stages, verbose=verbose, rig=rig)  # fmt: skip
-        summary_rows.append(row)
-        results["sessions"].append(entry)
-        release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate
+    for session, result in zip(sessions, done):
+        if result.status != "done":
+            warnings.warn(f"{session.source}: {result.error}", stacklevel=2)
+            results["sessions"].append(failed_entry(session, str(session.source) in calibration_files, result.error))
+            continue
+        results["sessions"].append(result.value["entry"])
+        summary_rows.append(summary_row(result.value["row"]))
+        held_out += [tuple(h) for h in result.value["held_out"]]
+        stages += result.value["stages"]
+    results["items"] = [{"key": r.key, "status": r.status, "seconds": r.seconds, "worker": r.worker,
+                         "resumed": r.resumed, **({"error": r.error} if r.error else {})} for r in done]  # fmt: skip
 
     if calibration is not None:
         results["calibration"] = _calibration_record(calibration)
@@ -263,6 +149,58 @@ def run_experiment(config_path: str | Path, *, output_dir: str | Path | None = N
     results["compilation"] = {"stages": stages, "unit": "s",
                               "total_seconds": sum(s["total_seconds"] for s in stages)}  # fmt: skip
     (run_dir / "results.json").write_text(json.dumps(results, indent=2))
+    write_run_report(results, run_dir, summary_table(results))
+
+
+def run_experiment(config_path: str | Path | None = None, *, output_dir: str | Path | None = None,
+                   progress: bool | None = None, verbose: bool = False, executor: ExecutorOptions | None = None,
+                   resume: str | Path | None = None) -> Path:  # fmt: skip
+    """Run the experiment config at ``config_path``; return the run directory.
+
+    Every session is loaded and validated before anything is written, so a bad input fails the run
+    without leaving a half-written directory. Each session is a work item (``shelljax.executor``):
+    ``executor`` says where they run (None: the config's [executor], else in-process), each finished
+    one is recorded in the run directory, and ``resume`` (a run directory) finishes an interrupted
+    run, skipping the sessions it finished. ``progress``: None shows a bar on a terminal only;
+    ``verbose``: print each stage's wall time and what JAX compiled in it (results.json has it always).
+
+    Raises:
+        InvalidInputError: a bad config, session or option; a run directory that cannot be resumed.
+        KeyboardInterrupt: after the sessions in flight are cancelled; the run directory is resumable.
+    """
+    if resume is not None:
+        config_path = _resumed_config(Path(resume), config_path)
+    elif config_path is None:
+        raise InvalidInputError("no experiment config given. Fix: shelljax run configs/paper.toml, or --resume RUN_DIR")
+    config = load_config(config_path)
+    executor = executor or config.executor
+    disable = None if progress is None else not progress
+    calibration_sessions = [load_session(p) for p in config.calibration_sessions]
+    sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
+    calibration, k_s = _calibration(config, calibration_sessions)
+    options = _estimator_options(config, k_s)
+    if config.rig is not None:
+        load_rig(config.rig)  # a bad rig file fails here, before anything is written
+
+    calibration_files = {str(s.source) for s in calibration_sessions}
+    if resume is None:
+        run_dir = _fresh_run_dir(config, None if output_dir is None else Path(output_dir))
+        shutil.copy2(config.source, run_dir / "config.toml")
+    else:
+        run_dir = Path(resume)
+    items = _session_items(config, sessions, options, run_dir, calibration_files, verbose)
+    if resume is None:
+        _write_manifest(run_dir, config, items)
+    try:
+        done = run_items(items, run_dir=run_dir, options=executor, resume=resume is not None,
+                         progress=progress, desc="estimating")  # fmt: skip
+    except KeyboardInterrupt:
+        finished = sum(read_item(run_dir, item.key) is not None for item in items)
+        tqdm.write(f"interrupted: {finished} of {len(items)} sessions finished in {run_dir}; finish the run with "
+                   f"`shelljax run --resume {run_dir}`", file=sys.stderr)  # fmt: skip
+        raise
+
+    _write_results(config, k_s, calibration, sessions, calibration_files, done, executor, run_dir)
     return run_dir
 
 
@@ -287,7 +225,7 @@ def summary_table(results: dict) -> str:
             continue
         manometer = entry["inputs"].get("manometer_gauge_pressure")
         row = [Path(entry["session"]).stem, f"{manometer['value'] / 1e3:.4g}" if manometer else ""]
-        blocks = [entry["estimates"].get(m, {}) for m in methods]
+        blocks = [entry["estimates"].get(m, {"error": entry["error"]} if "error" in entry else {}) for m in methods]
         row += [_cell(b, "gauge_pressure", 1e3) for b in blocks] + [_cell(b, "young_modulus", 1e6) for b in blocks]
         rows.append(row)
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]

@@ -32,6 +32,8 @@ _TABLES = {
     "estimators": ESTIMATOR_KEYS - {"methods"},  # object.estimate names the method
     "rig": {"path"},
 }  # fmt: skip
+#: ``integrator.scheme`` values: ``shelljax.dynamics`` Newmark(), BackwardEuler(), TRBDF2() (docs/dynamics.md).
+SCHEMES = ("newmark", "backward-euler", "tr-bdf2")
 _PLANE_KEYS = {"name", "point_m", "normal", "contact", "activation_distance_m", "barrier_stiffness_J_per_m2", "friction", "slip_tolerance_m"}
 _TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes"}
 
@@ -255,7 +257,7 @@ def load_scenario(path: str | Path) -> Scenario:
         radius=r.number(obj, "radius_m", "object.", default=None, positive=True),
         thickness=r.number(obj, "thickness_m", "object.", default=None, positive=True),
         poisson_ratio=r.number(obj, "poisson_ratio", "object.", default=None, positive=True),
-        scheme=r.choice(integ, "scheme", "integrator.", ("newmark", "backward-euler"), "newmark"), dt=dt, duration=duration,
+        scheme=r.choice(integ, "scheme", "integrator.", SCHEMES, "newmark", what="scheme"), dt=dt, duration=duration,
         step_tolerance=r.number(integ, "newton_step_tolerance_m", "integrator.", default=1e-10, positive=True),
         cor=cor, bracket=bracket, contact_damping=damping,
         calibration_height=r.number(diss, "calibration_height_m", "dissipation.", default=1.0, positive=True),

@@ -16,7 +16,10 @@ from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties
+from ..report import write_scenario_report
+from ..runner._compile_log import stage
 from ..session import load_session
+from . import _figures
 from ._load import Scenario
 
 @dataclasses.dataclass(frozen=True)
@@ -86,7 +89,7 @@ def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
 
 
 def _integrator(scenario: Scenario):
-    return d.Newmark() if scenario.scheme == "newmark" else d.BackwardEuler()
+    return {"newmark": d.Newmark, "backward-euler": d.BackwardEuler, "tr-bdf2": d.TRBDF2}[scenario.scheme]()
 
 
 def _rayleigh(scenario: Scenario):
@@ -207,8 +210,16 @@ def _swing(scenario: Scenario, system, out: Path, progress: bool) -> dict:
     schedule = np.stack([np.asarray(system.prescribed_positions(t)) for t in times])
     deviation = np.linalg.norm((positions - rigid).reshape(len(times), -1, 3), axis=2).max(axis=1)
     force = np.linalg.norm(trajectory["contact_force_N"], axis=2)
+    figures = []
+    if scenario.figures and trajectory.faces is not None:
+        steps = _figures.keyframe_steps(times, deviation)
+        swing = _figures.digest(trajectory, "swing")
+        swing.frames.update({int(k): positions[k].reshape(-1, 3) for k in steps})
+        _figures.keyframes_figure(swing, {int(k): rigid[k].reshape(-1, 3) for k in steps}, np.asarray(scenario.prescribed.axis_direction),
+                                  out / "keyframes.png")  # fmt: skip
+        figures.append("keyframes.png")
     return {
-        "directory": str(run_dir), "held_vertices": held.tolist(),
+        "directory": str(run_dir), "held_vertices": held.tolist(), "figures": figures,
         "held_error_m": float(np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))),
         "max_deviation_from_rigid_m": float(deviation.max()), "time_of_max_deviation_s": float(times[np.argmax(deviation)]),
         "peak_gas_pressure_Pa": float(np.max(trajectory["gas_pressure_Pa"])), "time_of_peak_pressure_s": float(times[np.argmax(trajectory["gas_pressure_Pa"])]),
@@ -224,13 +235,47 @@ def _first_contact(trajectory, plane: int) -> float | None:
     return float(trajectory["time_s"][near[0]]) if near.size else None
 
 
-def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, session: str | Path | None = None, progress: bool = True) -> dict:
+def _calibrate(scenario: Scenario, system, progress: bool) -> tuple[float, dict]:
+    """Contact damping c [N·s/m] at which a drop from ``calibration_height`` bounces with the
+    config's COR, and its record; one progress bar over the calibration drops."""
+    from tqdm.auto import tqdm
+
+    with tqdm(desc=f"calibrating the contact damping to COR {scenario.cor}", unit="drop", disable=not progress) as bar:
+        def cor(c):
+            value = calibration_cor(scenario, system, c)
+            bar.update(1)
+            bar.set_postfix_str(f"c = {c:.4g} N·s/m: COR {value:.4f}")
+            return value
+
+        cal = d.calibrate_contact_damping(cor, scenario.cor, scenario.bracket, rtol=1e-2)
+    return cal.damping, {"target_cor": scenario.cor, "damping_N_s_per_m": cal.damping, "cor": cal.cor,
+                         "evaluations": [list(e) for e in cal.evaluations]}  # fmt: skip
+
+
+def _scenario_figures(scenario: Scenario, out: Path, digests: list) -> list[str]:
+    """The scenario's own figures across its drops (``_figures``): their names in ``out``."""
+    written = []
+    if scenario.figures and digests and digests[0].faces is not None:
+        if _figures.max_deformation_figure(digests, out / "max_deformation.png") is not None:
+            written.append("max_deformation.png")
+        _figures.trajectory_figure(digests, out / "trajectory.png")
+        written.append("trajectory.png")
+    return written
+
+
+def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, session: str | Path | None = None, progress: bool = True,
+                 verbose: bool = False) -> dict:  # fmt: skip
     """Run every drop of ``scenario`` into ``out_dir`` (default: its output_dir/name); the summary it writes.
 
-    Writes ``scenario.json`` (parameters, calibration, every run's impacts) and per drop height a
+    Writes ``scenario.json`` (parameters, calibration, every run's impacts), ``report.md`` (the
+    summary with the figures inline), the scenario's figures (``max_deformation.png``: every drop's
+    most deformed cross-section; ``trajectory.png``; ``keyframes.png`` of a swing) and per drop height a
     directory ``h<H>m/`` with ``results.json``, figures, mesh frames and ``preview.gif``; a held
-    object (``[prescribed]``) runs once into ``swing/``.
+    object (``[prescribed]``) runs once into ``swing/``. ``progress``: a bar per stage on stderr;
+    ``verbose``: each stage's wall time and what JAX compiled in it, on stderr.
     """
+    from tqdm.auto import tqdm
+
     out = Path(out_dir) if out_dir is not None else scenario.output_dir / scenario.name
     obj = resolve_object(scenario, session)
     system = build_system(scenario, obj)
@@ -238,34 +283,42 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
         system = hold(scenario, system)
     _check_time_step(scenario, system)
     out.mkdir(parents=True, exist_ok=True)  # only once the config is accepted: a refused one leaves nothing
-    calibration = None
+    calibration, stages = None, []
     damping = scenario.contact_damping or 0.0
     if scenario.cor is not None:
-        def cor(c):
-            value = calibration_cor(scenario, system, c, progress=progress)
-            if progress:
-                print(f"  calibration: contact damping c = {c:.4g} N·s/m → COR {value:.4f} (target {scenario.cor})", flush=True)
-            return value
-
-        cal = d.calibrate_contact_damping(cor, scenario.cor, scenario.bracket, rtol=1e-2)
-        damping = cal.damping
-        calibration = {"target_cor": scenario.cor, "damping_N_s_per_m": cal.damping, "cor": cal.cor, "evaluations": [list(e) for e in cal.evaluations]}
+        with stage("calibration", verbose, stages):
+            damping, calibration = _calibrate(scenario, system, progress)
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])
-    runs = []
-    for h in scenario.drop_heights:
-        trajectory = _simulate(scenario, system, initial_state(scenario, system, h), scenario.duration, progress)
-        run_dir = out / f"h{h:.2f}m"
-        d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
-                        figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
-        runs.append({"drop_height_m": h, "directory": str(run_dir), "impacts": [m.to_dict() for m in d.measured_cor(trajectory)]})
-    if scenario.prescribed is not None:
-        runs.append(_swing(scenario, system, out, progress))
+    runs, digests = [], []
+    labels = [f"drop {h:.2f} m" for h in scenario.drop_heights] + (["swing"] if scenario.prescribed is not None else [])
+    with tqdm(total=len(labels), desc=f"simulating {scenario.name}", unit="run", disable=not progress) as bar:
+        for h, label in zip(scenario.drop_heights, labels):
+            bar.set_postfix_str(label)
+            with stage(label, verbose, stages):
+                trajectory = _simulate(scenario, system, initial_state(scenario, system, h), scenario.duration, progress)
+                run_dir = out / f"h{h:.2f}m"
+                d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
+                                figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
+            runs.append({"drop_height_m": h, "directory": str(run_dir), "impacts": [m.to_dict() for m in d.measured_cor(trajectory)]})
+            if trajectory.faces is not None:
+                digests.append(_figures.digest(trajectory, label))
+            bar.update(1)
+        if scenario.prescribed is not None:
+            bar.set_postfix_str("swing")
+            with stage("swing", verbose, stages):
+                runs.append(_swing(scenario, system, out, progress))
+            bar.update(1)
+    with stage("scenario figures", verbose, stages):
+        figures = _scenario_figures(scenario, out, digests)
     summary = {
         "scenario": str(scenario.source), "name": scenario.name, "object": obj.source,
         "parameters": {"gauge_pressure_Pa": obj.gauge_pressure, "youngs_modulus_Pa": obj.young_modulus, "poisson_ratio": obj.poisson_ratio,
                        "thickness_m": obj.shell.thickness, "mass_kg": float(np.sum(np.asarray(system.node_masses))), "gas": scenario.gas,
                        "mesh_faces": int(obj.shell.mesh.n_faces), "dt_s": scenario.dt, "scheme": scenario.scheme},
         "contact_damping_N_s_per_m": damping, "calibration": calibration, "runs": runs,
+        "figures": figures + [f for run in runs for f in run.get("figures", [])],
+        "compilation": {"stages": stages, "unit": "s", "total_seconds": sum(s["total_seconds"] for s in stages)},
     }  # fmt: skip
     (out / "scenario.json").write_text(json.dumps(summary, indent=1))
+    write_scenario_report(summary, out)
     return summary

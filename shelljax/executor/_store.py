@@ -1,0 +1,74 @@
+"""A run directory's item records: one JSON file per finished work item, written atomically.
+
+``<run_dir>/items/<key>.json`` holds :class:`ItemResult`'s fields. A file is written to a
+temporary name and renamed into place, so a run killed at any moment leaves whole records or none,
+and ``--resume`` trusts every file it finds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+from pathlib import Path
+
+from .._errors import InvalidInputError
+from .._files import atomic_write_text
+
+ITEMS_DIR = "items"
+STATUSES = ("done", "failed")
+
+
+@dataclasses.dataclass(frozen=True)
+class ItemResult:
+    """What one work item gave: ``key``; ``status`` "done" or "failed"; ``value`` (the item
+    function's JSON-ready return, None when failed); ``error`` ("Type: message", None when done);
+    ``seconds`` [s] of wall time on its worker; ``worker`` (its address, "local" in-process);
+    ``seed`` (the item's own, or None); ``resumed`` (read back from an earlier run)."""
+
+    key: str
+    status: str
+    value: object = None
+    error: str | None = None
+    seconds: float = 0.0
+    worker: str = "local"
+    seed: int | None = None
+    resumed: bool = False
+
+    def to_dict(self) -> dict:
+        """JSON-ready: every field but ``resumed``, ``seconds`` with its unit."""
+        return {"key": self.key, "status": self.status, "value": self.value, "error": self.error,
+                "seconds": self.seconds, "seconds_unit": "s", "worker": self.worker, "seed": self.seed}  # fmt: skip
+
+
+def item_path(run_dir: Path, key: str) -> Path:
+    """The record file of ``key`` under ``run_dir`` (the key made a safe file name)."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", key).strip("._") or "item"
+    return Path(run_dir) / ITEMS_DIR / f"{safe}.json"
+
+
+def write_item(run_dir: Path, result: ItemResult) -> Path:
+    """Write ``result``'s record atomically (temporary file, then rename); return its path."""
+    path = item_path(run_dir, result.key)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write_text(path, json.dumps(result.to_dict(), indent=1, allow_nan=True))
+
+
+def read_item(run_dir: Path, key: str) -> ItemResult | None:
+    """The finished record of ``key`` in ``run_dir``, or None when there is none (or it failed:
+    a failed item is run again on resume)."""
+    path = item_path(run_dir, key)
+    if not path.exists():
+        return None
+    try:
+        record = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise InvalidInputError(f"{path}: not a readable item record ({err}). Fix: delete it; --resume then reruns "
+                                "the item")  # fmt: skip
+    if record.get("key") != key or record.get("status") not in STATUSES:
+        raise InvalidInputError(f"{path}: field 'key' = {record.get('key')!r} / 'status' = {record.get('status')!r} "
+                                f"is not a record of item {key!r}. Fix: delete it; --resume then reruns the item")  # fmt: skip
+    if record["status"] != "done":
+        return None
+    return ItemResult(key=key, status="done", value=record.get("value"), seconds=float(record.get("seconds", 0.0)),
+                      worker=str(record.get("worker", "local")), seed=record.get("seed"), resumed=True)  # fmt: skip

@@ -1,0 +1,180 @@
+"""Compiled (Numba) penalty contact of the real-time runtime (float64, SI units): the planes
+(springs, dampers, regularised Coulomb friction and the centre-of-mass dashpot) and the moving
+sphere/capsule collider felt at barycentric contact points. ``contact_forces`` is the entry point
+(:mod:`._kernels` calls it once per force evaluation)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _closest_on_segment(px, py, pz, ax, ay, az, bx, by, bz):
+    dx, dy, dz = bx - ax, by - ay, bz - az
+    ll = dx * dx + dy * dy + dz * dz
+    t = 0.0
+    if ll > 0.0:
+        t = ((px - ax) * dx + (py - ay) * dy + (pz - az) * dz) / ll
+        t = min(1.0, max(0.0, t))
+    return ax + t * dx, ay + t * dy, az + t * dz
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact, c_contact, total_mass, force,
+                   plane_force, depth, energy):
+    """Plane p's penalty springs, dampers and friction and its centre-of-mass dashpot (see
+    ``contact_forces``), added to ``force`` and ``plane_force[p]``; ``depth[p]`` ← its deepest
+    penetration [m]. Returns ``energy`` [J] plus its springs' energy."""
+    nv = x.shape[0]
+    ox, oy, oz = planes[p, 0], planes[p, 1], planes[p, 2]
+    nx, ny, nz = planes[p, 3], planes[p, 4], planes[p, 5]
+    mu = planes[p, 6]
+    veps = planes[p, 7]
+    cbody = planes[p, 8]
+    touching_area = 0.0
+    for i in range(nv):
+        gap = (x[i, 0] - ox) * nx + (x[i, 1] - oy) * ny + (x[i, 2] - oz) * nz
+        if gap >= 0.0:
+            continue
+        d = -gap
+        depth[p] = max(depth[p], d)
+        touching_area += vertex_area[i]
+        vn = v[i, 0] * nx + v[i, 1] * ny + v[i, 2] * nz
+        fn = k_contact[i] * d - c_contact[i] * vn
+        energy += 0.5 * k_contact[i] * d * d
+        if fn <= 0.0:
+            continue
+        fx, fy, fz = fn * nx, fn * ny, fn * nz
+        if mu > 0.0:
+            tx = v[i, 0] - vn * nx
+            ty = v[i, 1] - vn * ny
+            tz = v[i, 2] - vn * nz
+            vt = math.sqrt(tx * tx + ty * ty + tz * tz)
+            if vt > 0.0:
+                ft = mu * fn * vt / math.sqrt(vt * vt + veps * veps)
+                ft = min(ft, mass[i] * vt / dt)  # one substep cannot reverse the slip
+                fx -= ft * tx / vt
+                fy -= ft * ty / vt
+                fz -= ft * tz / vt
+        force[i, 0] += fx
+        force[i, 1] += fy
+        force[i, 2] += fz
+        plane_force[p, 0] += fx
+        plane_force[p, 1] += fy
+        plane_force[p, 2] += fz
+    if cbody > 0.0 and touching_area > 0.0:
+        weight = min(1.0, touching_area / mean_area)
+        vcx = 0.0
+        vcy = 0.0
+        vcz = 0.0
+        for i in range(nv):
+            vcx += mass[i] * v[i, 0]
+            vcy += mass[i] * v[i, 1]
+            vcz += mass[i] * v[i, 2]
+        vcn = (vcx * nx + vcy * ny + vcz * nz) / total_mass
+        fb = -cbody * weight * vcn
+        for i in range(nv):
+            s = fb * mass[i] / total_mass
+            force[i, 0] += s * nx
+            force[i, 1] += s * ny
+            force[i, 2] += s * nz
+        plane_force[p, 0] += fb * nx
+        plane_force[p, 1] += fb * ny
+        plane_force[p, 2] += fb * nz
+    return energy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, veps, force, collider_force, depth,
+                      slot, energy):
+    """The moving capsule's springs and friction at the contact points (see ``contact_forces``),
+    added to ``force`` and ``collider_force``; ``depth[slot]`` ← the deepest penetration [m].
+    Returns ``energy`` [J] plus its springs' energy."""
+    radius = collider[6]
+    mu = collider[10]
+    # Contact points: the vertices, the edge midpoints and the face centroids (barycentric
+    # samples, so that a collider smaller than the mesh spacing cannot pass between vertices);
+    # each point's force goes to its vertices by its weights.
+    for q in range(sample_idx.shape[0]):
+        j0, j1, j2 = sample_idx[q, 0], sample_idx[q, 1], sample_idx[q, 2]
+        w0, w1, w2 = sample_w[q, 0], sample_w[q, 1], sample_w[q, 2]
+        px = w0 * x[j0, 0] + w1 * x[j1, 0] + w2 * x[j2, 0]
+        py = w0 * x[j0, 1] + w1 * x[j1, 1] + w2 * x[j2, 1]
+        pz = w0 * x[j0, 2] + w1 * x[j1, 2] + w2 * x[j2, 2]
+        cx, cy, cz = _closest_on_segment(px, py, pz, collider[0], collider[1], collider[2],
+                                         collider[3], collider[4], collider[5])
+        rx, ry, rz = px - cx, py - cy, pz - cz
+        dist = math.sqrt(rx * rx + ry * ry + rz * rz)
+        d = radius - dist
+        if d <= 0.0 or dist == 0.0:
+            continue
+        if d > depth[slot]:
+            depth[slot] = d
+        nx, ny, nz = rx / dist, ry / dist, rz / dist
+        wx = w0 * v[j0, 0] + w1 * v[j1, 0] + w2 * v[j2, 0] - collider[7]
+        wy = w0 * v[j0, 1] + w1 * v[j1, 1] + w2 * v[j2, 1] - collider[8]
+        wz = w0 * v[j0, 2] + w1 * v[j1, 2] + w2 * v[j2, 2] - collider[9]
+        vn = wx * nx + wy * ny + wz * nz
+        k = sample_k[q]
+        fn = k * d
+        energy += 0.5 * k * d * d
+        fx, fy, fz = fn * nx, fn * ny, fn * nz
+        if mu > 0.0:
+            tx, ty, tz = wx - vn * nx, wy - vn * ny, wz - vn * nz
+            vt = math.sqrt(tx * tx + ty * ty + tz * tz)
+            if vt > 0.0:
+                m_min = min(mass[j0], min(mass[j1], mass[j2]))
+                ft = min(mu * fn * vt / math.sqrt(vt * vt + veps * veps), m_min * vt / dt)
+                fx -= ft * tx / vt
+                fy -= ft * ty / vt
+                fz -= ft * tz / vt
+        force[j0, 0] += w0 * fx
+        force[j0, 1] += w0 * fy
+        force[j0, 2] += w0 * fz
+        force[j1, 0] += w1 * fx
+        force[j1, 1] += w1 * fy
+        force[j1, 2] += w1 * fz
+        force[j2, 0] += w2 * fx
+        force[j2, 1] += w2 * fy
+        force[j2, 2] += w2 * fz
+        collider_force[0] += fx
+        collider_force[1] += fy
+        collider_force[2] += fz
+    return energy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def contact_forces(x, v, mass, dt, planes, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx, sample_w, sample_k, force,
+                   plane_force, collider_force):
+    """Add penalty contact forces [N] to ``force``; return (energy [J], deepest penetration [m] per plane).
+
+    ``planes`` (P, 9): point (3) [m], unit normal (3), μ [-], slip velocity v_ε [m/s], body damping
+    c [N·s/m]. A vertex behind a plane (gap g < 0) feels k δ − c_v v_n (δ = −g, clamped ≥ 0) along
+    the normal with per-vertex stiffness ``k_contact`` (V,) [N/m] and damping ``c_contact`` (V,)
+    [N·s/m], and regularised Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one
+    substep of it cannot reverse v_t. The plane's c is the centre-of-mass dashpot of
+    :mod:`shelljax.dynamics._shell`: −c W (v_com·n) spread over the vertices by mass,
+    W = min(1, Σ_touching A_j / Ā). ``collider`` (11,): a, b (segment ends [m]; equal: a sphere),
+    radius [m], velocity (3) [m/s], μ [-]: a moving capsule, felt at the contact points
+    ``sample_idx`` (S, 3) int with barycentric weights ``sample_w`` (S, 3) (vertices, edge
+    midpoints, face centroids) through springs ``sample_k`` (S,) [N/m] and the same friction
+    (v_ε = 1 cm/s).
+    ``plane_force`` (P, 3) and ``collider_force`` (3,) ← the forces on the shell [N].
+    """
+    n_planes = planes.shape[0]
+    energy = 0.0
+    depth = np.zeros(n_planes + 1)
+    plane_force[:, :] = 0.0
+    collider_force[:] = 0.0
+    total_mass = mass.sum()
+    planes_veps = 1e-2
+    for p in range(n_planes):
+        energy = _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact, c_contact, total_mass,
+                                force, plane_force, depth, energy)
+    if collider[6] > 0.0:
+        energy = _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, planes_veps, force,
+                                   collider_force, depth, n_planes, energy)
+    return energy, depth

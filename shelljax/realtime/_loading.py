@@ -1,0 +1,191 @@
+"""Building a :class:`shelljax.realtime.RealtimeShell`: from a dynamics system, a shell3d shell
+(the JAX rest-shape solve, or the small-strain shrink without JAX), a sphere, a session or a
+replica directory (SI units); and :func:`rest_geometry`, shell3d's rest geometry in NumPy."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ..physics import GAS_LAWS, STANDARD_GRAVITY, ShellProperties
+from . import _kernels as K
+from ._checks import _check
+
+if TYPE_CHECKING:
+    from ._model import RealtimeShell
+
+
+class _Loading:
+    """The constructors of :class:`shelljax.realtime.RealtimeShell` (``cls(**arguments)``)."""
+
+    @classmethod
+    def from_system(cls, system, **options) -> RealtimeShell:
+        """The realtime twin of a :class:`shelljax.dynamics.ShellDynamicSystem` (its rest geometry,
+        E, ν, h, gas and reference volume, vertex masses, gravity, planes and ``inflated`` start)."""
+        params, geometry = system.params, system.geometry
+        gas = system.config.gas
+        kwargs = {
+            "stencil": np.asarray(geometry.stencil), "rest_metric": np.asarray(geometry.rest_metric),
+            "rest_curvature": np.asarray(geometry.rest_curvature), "rest_area": np.asarray(geometry.rest_area),
+            "vertex_area": np.asarray(geometry.vertex_area), "positions": np.asarray(system.inflated).reshape(-1, 3),
+            "masses": np.asarray(system.node_masses), "young_modulus": float(params.young_modulus),
+            "poisson_ratio": float(params.poisson_ratio), "thickness": float(params.thickness), "gas": gas,
+            "gauge_pressure": float(params.gauge_pressure),
+            "reference_volume": None if params.reference_volume is None else float(params.reference_volume),
+            "heat_capacity_ratio": float(system.config.heat_capacity_ratio),
+            "atmospheric_pressure": float(params.outside_pressure), "planes": tuple(system.planes),
+            "gravity": np.asarray(system.gravity),
+        }  # fmt: skip
+        kwargs.update(options)
+        return cls(**kwargs)
+
+    @classmethod
+    def from_shell(cls, shell, properties: ShellProperties, *, mass=None, wall_density=None, gas="adiabatic",
+                   planes=(), gravity=STANDARD_GRAVITY, rest_shape="solve", **options) -> RealtimeShell:
+        """From a :class:`shelljax.shell3d.Shell` (its mesh the inflated shape [m]) and a
+        ``physics.ShellProperties`` (P_g [Pa], E [Pa], h [m], ν [-]), the mass [kg] (or the wall
+        density [kg/m³]). ``rest_shape="solve"``: the rest shape, inflated state and masses exactly
+        as :func:`shelljax.dynamics.shell_system` (its JAX rest-shape solve: tens of seconds to
+        compile); ``"small-strain"``: the scan shrunk about its centroid by 1 + P R (1 − ν)/(2 E h)
+        (R = 3V/A; DESIGN.md), the scan itself the start (not exactly in equilibrium: call
+        :meth:`relax`), no JAX."""
+        from .. import dynamics as d
+
+        if not isinstance(properties, ShellProperties):
+            raise InvalidInputError(f"properties: expected a physics.ShellProperties; got {type(properties).__name__}.")
+        for name in ("gauge_pressure", "young_modulus", "thickness", "poisson_ratio"):
+            _check(f"properties.{name}", getattr(properties, name), positive=name not in ("gauge_pressure", "poisson_ratio"))
+        if rest_shape not in ("solve", "small-strain"):
+            raise InvalidInputError(f"rest_shape: expected 'solve' or 'small-strain'; got {rest_shape!r}.")
+        if rest_shape == "small-strain":
+            return cls._small_strain(shell, properties, mass=mass, wall_density=wall_density, gas=gas, planes=planes,
+                                     gravity=gravity, **options)  # fmt: skip
+        system = d.shell_system(shell, properties, gas=gas, mass=mass, wall_density=wall_density, planes=(),
+                                gravity=gravity)  # fmt: skip
+        return cls.from_system(system, planes=tuple(planes), **options)
+
+    @classmethod
+    def _small_strain(cls, shell, properties, *, mass, wall_density, gas, planes, gravity, **options):
+        scan = np.asarray(shell.mesh.vertices, dtype=float)
+        faces = np.asarray(shell.mesh.faces)
+        grad = np.zeros_like(scan)
+        volume = K.volume_and_gradient(np.ascontiguousarray(scan), np.ascontiguousarray(faces), grad)
+        e1, e2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
+        area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1).sum()
+        p, e, h, nu = (float(properties.gauge_pressure), float(properties.young_modulus), float(properties.thickness),
+                       float(properties.poisson_ratio))  # fmt: skip
+        strain = p * (3.0 * volume / area) * (1.0 - nu) / (2.0 * e * h)
+        centroid = scan.mean(axis=0)
+        rest = centroid + (scan - centroid) / (1.0 + strain)
+        metric, curvature, rest_area = rest_geometry(rest[shell.mesh.stencil])
+        vertex_area = np.zeros(len(scan))
+        np.add.at(vertex_area, faces, rest_area[:, None] / 3.0)
+        if (mass is None) == (wall_density is None):
+            raise InvalidInputError("mass: give either `mass` [kg] or `wall_density` [kg/m³] (exactly one).")
+        masses = (_check("mass [kg]", mass) * vertex_area / vertex_area.sum() if mass is not None
+                  else _check("wall_density [kg/m³]", wall_density) * h * vertex_area)  # fmt: skip
+        return cls(stencil=shell.mesh.stencil, rest_metric=metric, rest_curvature=curvature, rest_area=rest_area,
+                   vertex_area=vertex_area, positions=scan, masses=masses, young_modulus=e, poisson_ratio=nu,
+                   thickness=h, gas=gas, gauge_pressure=p, reference_volume=volume, planes=planes, gravity=gravity,
+                   **options)  # fmt: skip
+
+    @classmethod
+    def ball(cls, properties: ShellProperties, *, mass, n_faces=2000, gas="adiabatic", planes=(),
+             gravity=STANDARD_GRAVITY, pole_refinement=1.0, **options) -> RealtimeShell:
+        """A sphere of ``properties.radius`` R [m] remeshed with about ``n_faces`` faces (the rings
+        layout of :func:`shelljax.geometry.sphere_mesh`, uniform unless ``pole_refinement`` > 1)."""
+        from ..shell3d import Shell, ShellMesh
+
+        if not isinstance(properties, ShellProperties):
+            raise InvalidInputError(f"properties: expected a physics.ShellProperties; got {type(properties).__name__}.")
+        radius = _check("properties.radius [m]", properties.radius)
+        thickness = _check("properties.thickness [m]", properties.thickness)
+        _check("mass [kg]", mass)
+        n = int(_check("n_faces", n_faces))
+        if n < 20:
+            raise InvalidInputError(f"n_faces: need at least 20 faces; got {n_faces}.")
+        shell = Shell(mesh=ShellMesh.sphere(radius, n, pole_refinement=pole_refinement), thickness=thickness)
+        return cls.from_shell(shell, properties, mass=mass, gas=gas, planes=planes, gravity=gravity, **options)
+
+    @classmethod
+    def from_session(cls, session, properties: ShellProperties, *, n_faces=2000, gas="adiabatic", planes=(),
+                     mesh=None, **options) -> RealtimeShell:
+        """From a session (a path or a loaded ``Session``: its mass [kg], h [m], ν [-], radius R
+        [m] or mesh) and the estimates ``properties`` (P_g [Pa], E [Pa]; its h, ν, R where given
+        override the session's). ``mesh``: a mesh file to use instead of the session's (refined to
+        ``n_faces`` when it has fewer, as :func:`shelljax.dynamics.remeshed`)."""
+        from .. import dynamics as d
+        from .. import shell3d as s3
+        from ..session import load_session
+
+        s = load_session(session) if isinstance(session, (str, Path)) else session
+        if s.mass is None:
+            raise InvalidInputError(f"{s.source}: field 'mass' is missing. Fix: add `mass = <kg>` to the session.")
+        thickness = float(properties.thickness if properties.thickness is not None else s.thickness)
+        nu = float(properties.poisson_ratio if properties.poisson_ratio is not None else s.poisson_ratio)
+        full = ShellProperties(gauge_pressure=properties.gauge_pressure, young_modulus=properties.young_modulus,
+                               thickness=thickness, poisson_ratio=nu,
+                               radius=properties.radius if properties.radius is not None else s.radius)  # fmt: skip
+        mesh_path = mesh or getattr(s, "mesh_path", None)
+        if mesh_path is None:
+            return cls.ball(full, mass=s.mass, n_faces=n_faces, gas=gas, planes=planes, **options)
+        shell = s3.load(mesh_path, thickness)
+        if n_faces is not None and n_faces > shell.mesh.n_faces:
+            shell = d.remeshed(shell, n_faces)
+        return cls.from_shell(shell, full, mass=s.mass, gas=gas, planes=planes, **options)
+
+    @classmethod
+    def from_replica(cls, directory, *, planes=(), gravity=STANDARD_GRAVITY, rest_shape="solve",
+                     **options) -> RealtimeShell:
+        """From a ``shelljax replica`` output directory (``replica.json``: P_g [Pa], E [Pa], ν [-],
+        h [m], mass [kg], gas law; ``replica.glb``: the inflated mesh [m]), as
+        :func:`shelljax.replica.load_replica` reads it, with ``rest_shape`` as :meth:`from_shell`."""
+        import json
+
+        from .. import shell3d as s3
+
+        directory = Path(directory)
+        path = directory / "replica.json"
+        if not path.is_file():
+            raise InvalidInputError(f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`.")
+        replica = json.loads(path.read_text())
+        values = {}
+        for name in ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg"):
+            entry = replica.get(name)
+            if not isinstance(entry, dict) or entry.get("value") is None:
+                raise InvalidInputError(f"{path}: field '{name}.value' is missing. Fix: re-export the replica.")
+            values[name] = float(entry["value"])
+        if replica.get("gas") not in GAS_LAWS:
+            raise InvalidInputError(f"{path}: field 'gas' must be one of {GAS_LAWS}; got {replica.get('gas')!r}.")
+        shell = s3.load(directory / str(replica.get("mesh", "replica.glb")), values["thickness_m"])
+        properties = ShellProperties(gauge_pressure=values["gauge_pressure_Pa"], young_modulus=values["youngs_modulus_Pa"],
+                                     thickness=shell.thickness, poisson_ratio=values["poisson_ratio"])  # fmt: skip
+        return cls.from_shell(shell, properties, mass=values["mass_kg"], gas=replica["gas"], planes=planes,
+                              gravity=gravity, rest_shape=rest_shape, **options)  # fmt: skip
+
+
+def rest_geometry(stencils: np.ndarray):
+    """Rest metric ā (F, 2, 2) [m²], curvature b̄ (F, 2, 2) [m] and area (F,) [m²] of flap stencils
+    (F, 6, 3) [m]: :func:`shelljax.shell3d.rest_geometry` in NumPy (the same arithmetic)."""
+    p = np.asarray(stencils, dtype=float)
+    x0 = p[:, 0]
+    e1, e2 = p[:, 1] - x0, p[:, 2] - x0
+    a00, a01, a11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    normal = np.cross(e1, e2)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    d = p[:, 3:] - x0[:, None]
+    r1, r2 = np.einsum("fkc,fc->fk", d, e1), np.einsum("fkc,fc->fk", d, e2)
+    det = a00 * a11 - a01**2
+    u = (a11[:, None] * r1 - a01[:, None] * r2) / det[:, None]
+    v = (a00[:, None] * r2 - a01[:, None] * r1) / det[:, None]
+    w = np.einsum("fkc,fc->fk", d, normal)
+    phi0 = 1.0 - u - v
+    m = np.stack([phi0 * u, u * v, v * phi0], axis=2)
+    gamma = np.linalg.solve(m, w[..., None])[..., 0]
+    b01 = -gamma[:, 0] + gamma[:, 1] - gamma[:, 2]
+    metric = np.stack([np.stack([a00, a01], 1), np.stack([a01, a11], 1)], 1)
+    curvature = np.stack([np.stack([-2.0 * gamma[:, 0], b01], 1), np.stack([b01, -2.0 * gamma[:, 2]], 1)], 1)
+    return metric, curvature, 0.5 * np.sqrt(det)

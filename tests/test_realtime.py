@@ -1,0 +1,331 @@
+"""The real-time runtime (shelljax.realtime): compiled kernels against shell3d's JAX energies, the
+gas, conservation in free flight, a static ball on the ground, the stable Δt and the blow-up
+guard, and input errors. Meshes are small (≤ 500 faces) and built without the JAX rest-shape
+solve (``rest_shape="small-strain"``), so the module runs in well under a minute once Numba's
+cache holds the kernels (the first run compiles them: ≈ 30 s)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from shelljax import realtime as rt
+from shelljax._errors import InvalidInputError, NoConvergenceError, ShelljaxError
+from shelljax.physics import Plane, ShellProperties, isothermal_gauge_pressure
+from shelljax.realtime import _kernels as K
+from shelljax.shell3d import Shell, ShellMesh
+from shelljax.shell3d._energy import bending_energy, make_geometry, membrane_energy
+
+E, NU, H, P_G, R, MASS = 2.34e6, 0.4, 0.9e-3, 1300.0, 0.13, 0.8
+PROPS = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=H, poisson_ratio=NU, radius=R)
+
+
+def _ball(n_faces=300, **options):
+    shell = Shell(mesh=ShellMesh.sphere(R, n_faces, pole_refinement=1.0), thickness=H)
+    options.setdefault("mass", MASS)
+    return rt.RealtimeShell.from_shell(shell, PROPS, rest_shape="small-strain", **options)
+
+
+def _kernel_gradient(x, mesh, geo, bending):
+    inv = np.linalg.inv(np.asarray(geo.rest_metric))
+    rb = np.asarray(geo.rest_curvature)
+    alpha, beta = E * NU / (1 - NU**2), E / (2 * (1 + NU))
+    force = np.zeros_like(x)
+    e = K.elastic_forces_serial(
+        np.ascontiguousarray(x), np.asarray(mesh.stencil, dtype=np.int64),
+        np.ascontiguousarray(np.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], 1)),
+        np.ascontiguousarray(np.stack([rb[:, 0, 0], rb[:, 0, 1], rb[:, 1, 1]], 1)),
+        np.asarray(geo.rest_area), H, alpha, beta, bending, force,
+    )  # fmt: skip
+    return e, -force
+
+
+@pytest.fixture(scope="module")
+def deformed():
+    """A 300-face sphere mesh, a randomly perturbed rest shape and a random deformed state [m]."""
+    mesh = ShellMesh.sphere(R, 300, pole_refinement=1.0)
+    rng = np.random.default_rng(0)
+    rest = mesh.vertices * 0.97 + 1e-3 * rng.standard_normal(mesh.vertices.shape)
+    x = mesh.vertices * 1.02 + 4e-3 * rng.standard_normal(mesh.vertices.shape)
+    return mesh, make_geometry(mesh, rest), x
+
+
+def test_membrane_gradient_matches_jax_grad_of_shell3d(deformed):
+    mesh, geo, x = deformed
+
+    def energy(y):
+        per_face = jax.vmap(membrane_energy, in_axes=(0, 0, 0, None, None, None))(
+            y[geo.stencil], geo.rest_metric, geo.rest_area, H, E, NU)
+        return jnp.sum(per_face)
+
+    e_ref = float(energy(jnp.asarray(x)))
+    g_ref = np.asarray(jax.grad(energy)(jnp.asarray(x)))
+    e, g = _kernel_gradient(x, mesh, geo, False)
+    assert abs(e - e_ref) <= 1e-12 * abs(e_ref)
+    assert np.abs(g - g_ref).max() <= 1e-10 * np.abs(g_ref).max()  # measured 6e-16
+
+
+def test_bending_gradient_matches_jax_grad_of_shell3d(deformed):
+    """The kernel's bending is shell3d's own stencil energy (not a hinge substitute): the same
+    value and gradient on a random deformation."""
+    mesh, geo, x = deformed
+
+    def energy(y):
+        per_face = jax.vmap(bending_energy, in_axes=(0, 0, 0, 0, None, None, None))(
+            y[geo.stencil], geo.rest_metric, geo.rest_curvature, geo.rest_area, H, E, NU)
+        return jnp.sum(per_face)
+
+    e_ref = float(energy(jnp.asarray(x)))
+    g_ref = np.asarray(jax.grad(energy)(jnp.asarray(x)))
+    e_all, g_all = _kernel_gradient(x, mesh, geo, True)
+    e_mem, g_mem = _kernel_gradient(x, mesh, geo, False)
+    assert abs((e_all - e_mem) - e_ref) <= 1e-9 * abs(e_ref)
+    # The bending gradient is the difference of two kernels' results ~1e3 times larger: round-off 1e-13.
+    assert np.abs((g_all - g_mem) - g_ref).max() <= 1e-8 * np.abs(g_ref).max()
+
+
+def test_rest_geometry_matches_shell3d(deformed):
+    mesh, _geo, _ = deformed
+    from shelljax.realtime._model import rest_geometry
+
+    stencils = np.asarray(mesh.vertices)[mesh.stencil] * 0.97
+    metric, curvature, area = rest_geometry(stencils)
+    ref = make_geometry(mesh, np.asarray(mesh.vertices) * 0.97)
+    np.testing.assert_allclose(metric, ref.rest_metric, rtol=1e-12)
+    np.testing.assert_allclose(curvature, ref.rest_curvature, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(area, ref.rest_area, rtol=1e-12)
+
+
+def test_gas_volume_and_pressure_force_on_a_sphere():
+    ball = _ball(2000, gas="isothermal")
+    pressure, volume, force = ball.gas_state()
+    # The polyhedron's own volume exactly; the inscribed polyhedron is below 4/3 π R³ by
+    # O(edge²/R²) (measured 0.58 % at 1962 faces, edge/R = 0.12).
+    import trimesh
+
+    polyhedron = trimesh.Trimesh(ball.x, ball.faces, process=False)
+    assert volume == pytest.approx(float(polyhedron.volume), rel=1e-12)
+    assert volume == pytest.approx(4.0 / 3.0 * math.pi * R**3, rel=1e-2)
+    assert pressure == pytest.approx(P_G, rel=1e-12)  # at its reference volume
+    # Closed surface: the pressure forces sum to zero; each is radial, of size P × its area share.
+    assert np.abs(force.sum(axis=0)).max() <= 1e-12 * np.abs(force).sum()
+    radial = ball.x / np.linalg.norm(ball.x, axis=1)[:, None]
+    cos = np.sum(force * radial, axis=1) / np.linalg.norm(force, axis=1)
+    assert cos.min() > 0.999
+    # P ∂V/∂xᵢ = P Σ_{f ∋ i} A_f n_f / 3: a third of the vector area of the faces around vertex i.
+    area_vectors = 0.5 * np.cross(ball.x[ball.faces[:, 1]] - ball.x[ball.faces[:, 0]],
+                                  ball.x[ball.faces[:, 2]] - ball.x[ball.faces[:, 0]])
+    share = np.zeros_like(ball.x)
+    np.add.at(share, ball.faces, area_vectors[:, None, :] / 3.0)
+    np.testing.assert_allclose(force, P_G * share, atol=1e-12 * np.abs(force).max())
+    assert np.linalg.norm(force, axis=1).sum() == pytest.approx(P_G * 4 * math.pi * R**2, rel=1e-2)
+    # The sealed law away from V₀: Boyle's law.
+    x = ball.x * 0.99
+    p_iso, v_iso, _ = ball.gas_state(x)
+    assert p_iso == pytest.approx(float(isothermal_gauge_pressure(v_iso, ball.v_ref, P_G)), rel=1e-12)
+
+
+def test_free_flight_conserves_momentum_and_energy():
+    """No gravity, no planes; the shell starts off-equilibrium (the scan, not its inflated state),
+    spinning and translating. Internal forces sum to zero and carry no torque, so velocity Verlet
+    (kicks and drifts, each of which keeps L = Σ x × m v: a drift adds Σ Δt v × m v = 0, a kick
+    Δt/2 Σ x × F = 0) keeps the linear and angular momenta to round-off. Its energy is not
+    conserved step by step but stays within O(Δt²) of a modified energy that it does conserve:
+    |H − H₀| is checked below Δt max|Σ v·F|, the size of one substep's work (measured ≈ 0.1 of it),
+    and windowed means 1 s apart agree to 1e-3 of the energy (the issue's criterion: 0.5 %/s)."""
+    ball = _ball(300, gravity=0.0)
+    spin = np.cross([0.0, 0.0, 3.0], ball.x - ball.x.mean(0))
+    ball.set_state(ball.x, spin + np.array([0.5, 0.0, 0.2]))
+    m = ball.masses[:, None]
+    p0, l0 = (m * ball.v).sum(0), np.cross(ball.x, m * ball.v).sum(0)
+    total, power = [], []
+    for _ in range(60):
+        frame = ball.frame()
+        total.append(frame.energies_J["total"])
+        power.append(abs(float(np.sum(ball.v * ball.internal_forces(ball.x)))))
+    p1, l1 = (m * ball.v).sum(0), np.cross(ball.x, m * ball.v).sum(0)
+    assert np.abs(p1 - p0).max() <= 1e-12 * np.abs(p0).max()
+    assert np.abs(l1 - l0).max() <= 1e-10 * np.abs(l0).max()
+    total = np.array(total)
+    assert np.abs(total - total[0]).max() <= frame.dt_s * max(power)
+    assert abs(total[-10:].mean() - total[:10].mean()) < 1e-3 * abs(total[0])
+
+
+def test_ball_resting_on_the_ground_carries_its_weight():
+    """Relaxed onto the ground, the ball's contact force, averaged over a frame, equals its weight
+    up to the momentum change M Δv_com / T of that window (momentum balance); the ball is static
+    when that remainder is below 0.5 % of the weight."""
+    ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground")
+    ball = _ball(300, planes=[ground])
+    ball.drop(0.0)
+    ball.relax(0.6)
+    ball.relax(0.3)
+    weight = ball.total_mass * 9.80665
+    _, v0 = ball.com()
+    frames = [ball.frame() for _ in range(12)]
+    _, v1 = ball.com()
+    force = np.mean([f.plane_forces_N[0] for f in frames], axis=0)
+    duration = frames[-1].time_s
+    balance = ball.total_mass * (v1 - v0) / duration
+    np.testing.assert_allclose(force[2] - weight, balance[2], atol=1e-9 * weight)
+    assert abs(force[2] - weight) < 5e-3 * weight
+    assert abs(force[0]) + abs(force[1]) < 1e-6 * weight
+
+
+def test_stable_dt_bounded_at_it_and_blows_up_at_one_and_a_half():
+    """At the estimated Δt a 0.2 m drop with its impact stays bounded (energy within 1 % of the
+    start: velocity Verlet's O(Δt²) error; measured ≤ 0.4 %); at 1.5× Δt (1.35× the critical step
+    2/ω_max) the stiffest mode grows by |λ| ≈ 5 per substep and the guard raises BlowUpError."""
+    ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground")
+    ball = _ball(300, planes=[ground])
+    stable = ball.stable
+    assert stable.element_s <= stable.spectral_s  # the element bound is the safe one (measured 0.69 of it)
+    assert stable.dt_s == pytest.approx(stable.safety * stable.spectral_s)
+    start = ball.x.copy()
+    ball.drop(0.2)
+    frame_dt = 1.0 / 60.0
+    n = ball.substeps_for(frame_dt)
+    frames = [ball.frame(frame_dt) for _ in range(30)]  # falls 0.2 m, hits the ground, rebounds
+    assert max(np.abs(f.plane_forces_N[0, 2]) for f in frames) > ball.total_mass * 9.8
+    total = [f.energies_J["total"] for f in frames]
+    assert max(total) - total[0] < 1e-2 * abs(total[0])
+    ball.set_state(start)
+    ball.drop(0.2)
+    with pytest.raises(rt.BlowUpError) as err:
+        for _ in range(30):
+            ball.frame(frame_dt, substeps=max(1, math.floor(n / 1.5)))
+    assert isinstance(err.value, NoConvergenceError) and isinstance(err.value, ShelljaxError)
+    assert err.value.reason in ("not finite", "energy growth", "tunnelled")
+    assert "Fix" in str(err.value)
+
+
+def test_tunnelling_is_caught():
+    ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground")
+    ball = _ball(300, planes=[ground], contact_stiffness=1.0)  # a contact spring far too soft
+    ball.drop(0.01, velocity=(0.0, 0.0, -5.0))
+    with pytest.raises(rt.BlowUpError, match="tunnelled") as err:
+        for _ in range(30):
+            ball.frame()
+    assert err.value.reason == "tunnelled"
+
+
+def test_collider_pushes_the_shell_and_feels_the_reaction():
+    ball = _ball(300, gravity=0.0)
+    top = ball.x[:, 2].max()
+    ball.set_collider(rt.Collider.sphere((0.0, 0.0, top + 0.01 - 0.005), 0.01, velocity=(0.0, 0.0, -0.1)))
+    _, v0 = ball.com()
+    frame = ball.frame()
+    assert frame.collider_force_N[2] < 0.0  # the force on the shell: pushed down (the hand feels −F)
+    _, v1 = ball.com()
+    # No gravity, no planes: the collider's impulse is the shell's whole momentum change.
+    np.testing.assert_allclose(ball.total_mass * (v1 - v0), frame.collider_force_N * frame.time_s, rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "options, field",
+    [
+        ({"young_modulus": -1.0}, "young_modulus"),
+        ({"poisson_ratio": 0.7}, "poisson_ratio"),
+        ({"thickness": float("nan")}, "thickness"),
+        ({"gas": "polytropic"}, "gas"),
+        ({"mass": -0.1}, "mass"),
+        ({"safety": 0.0}, "safety"),
+        ({"contact_stiffness": -5.0}, "contact_stiffness"),
+        ({"planes": [type("P", (), {"point": [0, 0], "normal": [0, 0, 1]})()]}, "planes[0]"),
+    ],
+)
+def test_bad_inputs_name_the_field(options, field):
+    shell = Shell(mesh=ShellMesh.sphere(R, 200, pole_refinement=1.0), thickness=H)
+    props = {"gauge_pressure": P_G, "young_modulus": E, "thickness": H, "poisson_ratio": NU}
+    for key in ("young_modulus", "poisson_ratio", "thickness"):
+        if key in options:
+            props[key] = options.pop(key)
+    kwargs = {"mass": MASS, **options}
+    with pytest.raises(InvalidInputError) as err:
+        rt.RealtimeShell.from_shell(shell, ShellProperties(**props), rest_shape="small-strain", **kwargs)
+    message = str(err.value)
+    assert field in message and "\n" not in message
+
+
+def test_bad_frame_and_collider_inputs():
+    ball = _ball(200)
+    with pytest.raises(InvalidInputError, match="frame_dt"):
+        ball.frame(-1.0)
+    with pytest.raises(InvalidInputError, match="Collider.radius"):
+        ball.set_collider(rt.Collider.sphere((0, 0, 0), -0.01))
+    with pytest.raises(InvalidInputError, match="rest_shape"):
+        rt.RealtimeShell.from_shell(Shell(mesh=ShellMesh.sphere(R, 200), thickness=H), PROPS, mass=MASS, rest_shape="x")
+    with pytest.raises(InvalidInputError, match="replica.json"):
+        rt.RealtimeShell.from_replica("/nonexistent-replica-dir")
+
+
+def test_replica_round_trip(tmp_path):
+    from shelljax.replica import write_replica
+
+    shell = Shell(mesh=ShellMesh.sphere(R, 200, pole_refinement=1.0), thickness=H)
+    quantities = {"gauge_pressure_Pa": P_G, "youngs_modulus_Pa": E, "poisson_ratio": NU, "thickness_m": H,
+                  "mass_kg": MASS, "cor": None}  # fmt: skip
+    write_replica(tmp_path, shell, quantities, gas="adiabatic")
+    ball = rt.RealtimeShell.from_replica(tmp_path, rest_shape="small-strain")
+    assert ball.total_mass == pytest.approx(MASS)
+    assert ball.gas == "adiabatic" and ball.E == E and ball.h == H
+
+
+def test_from_session_takes_the_sessions_mass_thickness_and_radius():
+    from pathlib import Path
+
+    import shelljax
+
+    session = Path(shelljax.__file__).parent / "data" / "sessions" / "pezzi.toml"
+    estimates = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=None, poisson_ratio=None)
+    ball = rt.RealtimeShell.from_session(session, estimates, n_faces=200, rest_shape="small-strain")
+    assert ball.total_mass == pytest.approx(0.8) and ball.h == pytest.approx(0.9e-3) and ball.nu == pytest.approx(0.4)
+    assert np.ptp(ball.x[:, 2]) == pytest.approx(2 * 0.13, rel=1e-6)
+
+
+def test_parallel_kernel_equals_the_serial_one():
+    ball = _ball(300)
+    x = ball.x + 1e-3 * np.random.default_rng(1).standard_normal(ball.x.shape)
+    args = (ball.stencil, ball.rest_inv, ball.rest_b, ball.rest_area, ball.h, ball.alpha, ball.beta, True)
+    serial, parallel = np.zeros_like(x), np.zeros_like(x)
+    e_s = K.elastic_forces_serial(x, *args, serial, True)
+    e_p = K.elastic_forces_parallel(x, *args, parallel, ball._face_grad, ball._face_energy, ball._incidence_ptr,
+                                    ball._incidence, True)  # fmt: skip
+    assert e_p == pytest.approx(e_s, rel=1e-12)
+    np.testing.assert_allclose(parallel, serial, rtol=0, atol=1e-12 * np.abs(serial).max())
+
+
+def test_scenario_planes_are_accepted():
+    """The scenario's [[planes]] (configs/bounce.toml: the ground and the wall) as realtime planes."""
+    from pathlib import Path
+
+    from shelljax.scenario import load_scenario
+
+    scenario = load_scenario(Path(__file__).resolve().parents[1] / "configs" / "bounce.toml")
+    ball = _ball(200, planes=scenario.planes)
+    assert ball.plane_names == ("ground", "wall")
+    np.testing.assert_allclose(ball.planes[1, :6], [0.53, 0, 0, -1, 0, 0])
+    assert ball.planes[0, 6] == 0.5  # μ
+
+
+def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
+    """The collider's work on the shell is subtracted from the energy the guard watches."""
+    ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], friction=0.5, name="ground")
+    ball = _ball(300, planes=[ground], energy_growth=0.05)
+    ball.drop(0.0)
+    ball.relax(0.3)
+    top = ball.x[:, 2].max()
+    centre = np.array([0.0, 0.0, top + 0.04])
+    speed = 0.6  # m/s down, 12 frames: 0.12 m of travel, 0.08 m into the ball
+    # (a fist: a capsule thinner than the 300-face mesh's spacing slips between its contact points)
+    ball.set_collider(rt.Collider(a=tuple(centre), b=tuple(centre + [0.0, 0.0, 0.05]), radius=0.04,
+                                  velocity=(0.0, 0.0, -speed)))  # fmt: skip
+    for _ in range(12):
+        frame = ball.frame()
+    np.testing.assert_allclose(ball.collider[2], centre[2] - speed * frame.time_s, atol=1e-12)  # it moved
+    assert ball.collider_work > 0.0
+    assert frame.collider_force_N[2] < -1.0
