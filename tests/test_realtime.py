@@ -88,18 +88,6 @@ def test_bending_gradient_matches_jax_grad_of_shell3d(deformed):
     assert np.abs((g_all - g_mem) - g_ref).max() <= 1e-8 * np.abs(g_ref).max()
 
 
-def test_rest_geometry_matches_shell3d(deformed):
-    mesh, _geo, _ = deformed
-    from shelljax.realtime._model import rest_geometry
-
-    stencils = np.asarray(mesh.vertices)[mesh.stencil] * 0.97
-    metric, curvature, area = rest_geometry(stencils)
-    ref = make_geometry(mesh, np.asarray(mesh.vertices) * 0.97)
-    np.testing.assert_allclose(metric, ref.rest_metric, rtol=1e-12)
-    np.testing.assert_allclose(curvature, ref.rest_curvature, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(area, ref.rest_area, rtol=1e-12)
-
-
 def test_gas_volume_and_pressure_force_on_a_sphere():
     ball = _ball(2000, gas="isothermal")
     pressure, volume, force = ball.gas_state()

@@ -1,17 +1,20 @@
 """Building a :class:`shelljax.realtime.RealtimeShell`: from a dynamics system, a shell3d shell
-(the JAX rest-shape solve, or the small-strain shrink without JAX), a sphere, a session or a
-replica directory (SI units); and :func:`rest_geometry`, shell3d's rest geometry in NumPy."""
+(the engine's rest-shape solve, or its small-strain shrink with no solve to compile), a sphere, a
+session or a replica directory (SI units)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import jax.numpy as jnp
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..geometry import signed_volume
 from ..physics import GAS_LAWS, STANDARD_GRAVITY, ShellProperties
-from . import _kernels as K
+from ..shell3d import rest_geometry
+from ..shell3d._rest import membrane_strain
 from ._checks import _check
 
 if TYPE_CHECKING:
@@ -71,16 +74,13 @@ class _Loading:
     def _small_strain(cls, shell, properties, *, mass, wall_density, gas, planes, gravity, **options):
         scan = np.asarray(shell.mesh.vertices, dtype=float)
         faces = np.asarray(shell.mesh.faces)
-        grad = np.zeros_like(scan)
-        volume = K.volume_and_gradient(np.ascontiguousarray(scan), np.ascontiguousarray(faces), grad)
-        e1, e2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
-        area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1).sum()
         p, e, h, nu = (float(properties.gauge_pressure), float(properties.young_modulus), float(properties.thickness),
                        float(properties.poisson_ratio))  # fmt: skip
-        strain = p * (3.0 * volume / area) * (1.0 - nu) / (2.0 * e * h)
+        volume = signed_volume(scan, faces)
+        strain, _ = membrane_strain(scan, faces, properties)
         centroid = scan.mean(axis=0)
         rest = centroid + (scan - centroid) / (1.0 + strain)
-        metric, curvature, rest_area = rest_geometry(rest[shell.mesh.stencil])
+        metric, curvature, rest_area = (np.asarray(v) for v in rest_geometry(jnp.asarray(rest[shell.mesh.stencil])))
         vertex_area = np.zeros(len(scan))
         np.add.at(vertex_area, faces, rest_area[:, None] / 3.0)
         if (mass is None) == (wall_density is None):
@@ -165,27 +165,3 @@ class _Loading:
                                      thickness=shell.thickness, poisson_ratio=values["poisson_ratio"])  # fmt: skip
         return cls.from_shell(shell, properties, mass=values["mass_kg"], gas=replica["gas"], planes=planes,
                               gravity=gravity, rest_shape=rest_shape, **options)  # fmt: skip
-
-
-def rest_geometry(stencils: np.ndarray):
-    """Rest metric ā (F, 2, 2) [m²], curvature b̄ (F, 2, 2) [m] and area (F,) [m²] of flap stencils
-    (F, 6, 3) [m]: :func:`shelljax.shell3d.rest_geometry` in NumPy (the same arithmetic)."""
-    p = np.asarray(stencils, dtype=float)
-    x0 = p[:, 0]
-    e1, e2 = p[:, 1] - x0, p[:, 2] - x0
-    a00, a01, a11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    normal = np.cross(e1, e2)
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    d = p[:, 3:] - x0[:, None]
-    r1, r2 = np.einsum("fkc,fc->fk", d, e1), np.einsum("fkc,fc->fk", d, e2)
-    det = a00 * a11 - a01**2
-    u = (a11[:, None] * r1 - a01[:, None] * r2) / det[:, None]
-    v = (a00[:, None] * r2 - a01[:, None] * r1) / det[:, None]
-    w = np.einsum("fkc,fc->fk", d, normal)
-    phi0 = 1.0 - u - v
-    m = np.stack([phi0 * u, u * v, v * phi0], axis=2)
-    gamma = np.linalg.solve(m, w[..., None])[..., 0]
-    b01 = -gamma[:, 0] + gamma[:, 1] - gamma[:, 2]
-    metric = np.stack([np.stack([a00, a01], 1), np.stack([a01, a11], 1)], 1)
-    curvature = np.stack([np.stack([-2.0 * gamma[:, 0], b01], 1), np.stack([b01, -2.0 * gamma[:, 2]], 1)], 1)
-    return metric, curvature, 0.5 * np.sqrt(det)

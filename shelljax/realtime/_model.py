@@ -34,11 +34,10 @@ from ..physics import (
 from . import _kernels as K
 from ._checks import _check, _planes_array
 from ._errors import BlowUpError
-from ._loading import _Loading, rest_geometry
+from ._loading import _Loading
 from ._stable import BENDING_CONSTANT, CONTACT_FRACTION, StableStep, _StableTimeStep
 
-__all__ = ["BENDING_CONSTANT", "CONTACT_FRACTION", "SAFETY", "Collider", "Frame", "RealtimeShell", "StableStep",
-           "rest_geometry"]
+__all__ = ["BENDING_CONSTANT", "CONTACT_FRACTION", "SAFETY", "Collider", "Frame", "RealtimeShell", "StableStep"]
 
 #: Default safety factor on the stable Δt [-].
 SAFETY = 0.9

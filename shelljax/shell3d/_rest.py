@@ -31,7 +31,7 @@ from ._params import ShellParams
 from ._sparse import release_factorizations
 
 
-def _membrane_strain(scan, faces, params) -> tuple[float, float]:
+def membrane_strain(scan, faces, params) -> tuple[float, float]:
     """(small-strain membrane strain P R (1−ν) / (2 E h) [-] of the scan's equivalent sphere,
     R = 3V/A, the scan's area A [m²])."""
     edges1, edges2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
@@ -50,7 +50,7 @@ def solve_rest_shape(model, scan, params, *, atol: float, max_steps: int = 30):
     ``max_steps``: Newton iterations per pressure level.
     """
     scan = np.asarray(scan, dtype=np.float64)
-    strain, _ = _membrane_strain(scan, model.mesh.faces, params)
+    strain, _ = membrane_strain(scan, model.mesh.faces, params)
     centroid = scan.mean(axis=0)
     rest = centroid + (scan - centroid) / (1.0 + strain)
     q_scan = np.concatenate([scan.ravel(), np.zeros(3)])
@@ -121,7 +121,7 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     """
     scan = np.asarray(scan, dtype=np.float64)
     v_scan = signed_volume(scan, model.mesh.faces)
-    strain, area = _membrane_strain(scan, model.mesh.faces, params)
+    strain, area = membrane_strain(scan, model.mesh.faces, params)
     pressure = float(params.gauge_pressure)
     if pressure > 0:
         # A force residual δ per vertex moves the volume by ≈ 3 strain δ / (p A_v): bound δ so
