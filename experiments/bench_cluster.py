@@ -14,7 +14,13 @@ Three measurements, each serial (in-process) and on a ``LocalCluster`` of ``--wo
 From them, a scaling model T(N items, W workers) = start + first item + ⌈N/W⌉ (t_item + overhead),
 and its prediction for 1000 objects on 100 workers. Prints a table, writes JSON.
 
+``--case paper`` measures the issue's own criterion instead: ``shelljax run configs/paper.toml``
+serially and with ``--workers``, each a fresh process as a user runs it, ``--repeats`` times
+alternating (the first serial run also fills the persistent caches), results.json values compared,
+and the load average [-] before and after each run recorded (the machine may be shared).
+
 Run:  python experiments/bench_cluster.py --workers 2 --out docs/bench/cluster-cpu-2core.json
+      python experiments/bench_cluster.py --case paper --repeats 2 --out docs/bench/cluster-paper-cpu-2core.json
 """
 
 from __future__ import annotations
@@ -133,16 +139,75 @@ def diagnosis_items(directory: Path, n_studies: int, seed: int) -> list[WorkItem
     return items
 
 
+def paper_run(config: Path, workers: int | None, out: Path) -> tuple[float, dict]:
+    """``shelljax run CONFIG [--workers N]`` in a fresh process, as a user types it: (wall time [s], results.json)."""
+    import os
+    import subprocess
+
+    command = [sys.executable, "-m", "shelljax.cli", "run", str(config), "--out", str(out), "--quiet"]
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}  # this checkout's shelljax
+    start = time.perf_counter()
+    subprocess.run(command + ([] if workers is None else ["--workers", str(workers)]), check=True, cwd=root, env=env,
+                   stdout=subprocess.DEVNULL)  # fmt: skip
+    seconds = time.perf_counter() - start
+    (run_dir,) = out.iterdir()
+    return seconds, json.loads((run_dir / "results.json").read_text())
+
+
+def paper(workers: int, repeats: int, tmp: Path) -> dict:
+    """``shelljax run configs/paper.toml`` serially and on ``workers``, alternating ``repeats`` times."""
+    import os
+
+    config = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
+    runs, reference = [], None
+    for k in range(repeats):
+        for n in (None, workers):
+            load_before = os.getloadavg()[0]
+            seconds, results = paper_run(config, n, tmp / f"paper{k}-{n or 0}")
+            values = _values(results["sessions"])
+            reference = reference or values
+            stages = results["compilation"]["stages"]
+            runs.append({"workers": n, "seconds": seconds, "load_average_before": load_before,
+                         "load_average_after": os.getloadavg()[0], "values_compared": len(values),
+                         "values_identical_to_first_serial": values == reference,
+                         "items_seconds": [item["seconds"] for item in results["items"]],
+                         "compile_seconds": results["compilation"]["total_seconds"],
+                         "trace_seconds": sum(s["trace_seconds"] for s in stages),
+                         "programs_compiled": sum(s["programs_compiled"] for s in stages),
+                         "persistent_cache_hits": sum(s["persistent_cache_hits"] for s in stages)})  # fmt: skip
+            print(json.dumps(runs[-1]), flush=True)
+    serial = [r["seconds"] for r in runs if r["workers"] is None]
+    cluster = [r["seconds"] for r in runs if r["workers"] is not None]
+    return {"config": str(config), "sessions": len(results["sessions"]), "runs": runs,
+            "serial_seconds_best": min(serial), "cluster_seconds_best": min(cluster),
+            "speedup_best_of_each": min(serial) / min(cluster),
+            "values_identical": all(r["values_identical_to_first_serial"] for r in runs)}  # fmt: skip
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--case", choices=["catalogue-diagnosis", "paper"], default="catalogue-diagnosis")
+    parser.add_argument("--repeats", type=int, default=2, help="--case paper: serial/cluster pairs")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--sessions", type=int, default=32)
     parser.add_argument("--studies", type=int, default=8)
     parser.add_argument("--noop-items", type=int, default=200)
     parser.add_argument("--seed", type=int, default=49)
     parser.add_argument("--skip", nargs="*", default=[], choices=["catalogue", "diagnosis"])
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "cluster-cpu-2core.json"))
+    parser.add_argument("--out", default=None, help="JSON to write (default: docs/bench/cluster-cpu-2core.json, "
+                        "or cluster-paper-cpu-2core.json for --case paper)")
     args = parser.parse_args()
+    bench = Path(__file__).resolve().parents[1] / "docs" / "bench"
+    args.out = args.out or str(bench / ("cluster-paper-cpu-2core.json" if args.case == "paper" else "cluster-cpu-2core.json"))
+    if args.case == "paper":
+        with tempfile.TemporaryDirectory() as tmp:
+            report = {"machine": platform.platform(), "cpus": len(__import__("os").sched_getaffinity(0)),
+                      "workers": args.workers, "unit": "s", "paper": paper(args.workers, args.repeats, Path(tmp))}  # fmt: skip
+        print(json.dumps({k: v for k, v in report["paper"].items() if k != "runs"}, indent=1))
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(report, indent=1))
+        return 0
     cluster = ExecutorOptions(workers=args.workers)
     report = {"machine": platform.platform(), "workers": args.workers, "unit": "s"}
     rows = []

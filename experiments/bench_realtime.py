@@ -7,7 +7,8 @@ substeps per 60 Hz frame, wall-clock and CPU µs per substep, and the real-time 
 slowest 1 %: RT factor = frame Δt / p99 frame wall time). Then the kernel technology: Numba's
 membrane + bending (+ gas) force evaluation against ``jax.jit`` of ``jax.grad`` of shell3d's
 energies on the same ~2000-face mesh, per call and amortised inside a jitted loop of substeps.
-Writes ``--json`` (default docs/bench/realtime-cpu-2core.json).
+Then the cost per frame [µs] of a ``--display-faces`` display mesh embedded on the 2k-face ball
+(``RealtimeShell.embed``). Writes ``--json`` (default docs/bench/realtime-cpu-2core.json).
 
     python3 experiments/bench_realtime.py [--faces 500 1000 2000 4000] [--duration 2.0]
 
@@ -27,11 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+ROOT = Path(__file__).resolve().parents[1]
+
 from shelljax import realtime as rt
+from shelljax.geometry import sphere_mesh
 from shelljax.physics import Plane, ShellProperties
 from shelljax.shell3d import Shell, ShellMesh
 
-ROOT = Path(__file__).resolve().parents[1]
 PEZZI = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 0.9e-3, "poisson_ratio": 0.4, "radius": 0.13}
 MASS = 0.8
 FRAME = 1.0 / 60.0
@@ -87,6 +90,36 @@ def bounce_row(n_faces, duration, parallel=False):
         "frames": int(walls.size), "max_contact_force_N": float(forces.max()), "parallel": parallel,
         "final_com_m": shell.com()[0].tolist(),
     }  # fmt: skip
+
+
+def embedding_row(n_faces=2000, display_faces=20000, duration=0.5):
+    """A ``display_faces`` sphere mesh embedded on the ``n_faces`` simulated ball: its build time
+    [s] and its cost per frame [µs] (placing the display vertices from the simulated ones), beside
+    the frame's own cost, during the bounce."""
+    shell = ball(n_faces)
+    shell.drop(0.3)
+    shell.relax(0.05)
+    fine, fine_faces = sphere_mesh(PEZZI["radius"], display_faces)
+    fine = fine + (shell.com()[0] - fine.mean(axis=0))
+    t = time.perf_counter()
+    display = shell.embed(fine, fine_faces)
+    build_s = time.perf_counter() - t
+    out = np.empty((display.n_vertices, 3))
+    display.positions(shell.x, out)  # compile / load the kernel
+    shell.drop(0.3, velocity=(3.0, 0.0, 0.0), centre_xy=(0.0, 0.0))
+    frames, places = [], []
+    for _ in range(round(duration / FRAME)):
+        w = time.perf_counter()
+        shell.frame(FRAME)
+        frames.append(time.perf_counter() - w)
+        w = time.perf_counter()
+        display.positions(shell.x, out)
+        places.append(time.perf_counter() - w)
+    return {"faces": int(shell.faces.shape[0]), "display_faces": len(fine_faces),
+            "display_vertices": int(display.n_vertices), "build_s": build_s,
+            "max_offset_m": float(display.offset_m.max()),
+            "us_per_frame_median": float(np.median(places) * 1e6), "us_per_frame_p99": float(np.percentile(places, 99) * 1e6),
+            "frame_us_median": float(np.median(frames) * 1e6)}  # fmt: skip
 
 
 def median_time(fn, repeats=7, number=20):
@@ -237,6 +270,7 @@ def main():
     parser.add_argument("--parallel", action="store_true", help="Numba's threaded kernel (prange over faces)")
     parser.add_argument("--skip-jax", action="store_true")
     parser.add_argument("--skip-hammer", action="store_true")
+    parser.add_argument("--display-faces", type=int, default=20000, help="display mesh embedded on 2k faces (0: skip)")
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "bench" / "realtime-cpu-2core.json")
     args = parser.parse_args()
     load = os.getloadavg()
@@ -255,6 +289,11 @@ def main():
               "frame_s": FRAME, "scenario": "configs/bounce.toml's ball (R 0.13 m, h 0.9 mm, E 2.34 MPa, P_g 1300 Pa, "
               "0.8 kg, adiabatic) launched at 3 m/s, 0.3 m up, at the wall then the ground; Numba serial kernels",
               "bounce": rows}  # fmt: skip
+    if args.display_faces:
+        e = result["embedding"] = embedding_row(display_faces=args.display_faces)
+        print(f"\ndisplay mesh: {e['display_faces']} faces ({e['display_vertices']} vertices) on {e['faces']}: "
+              f"build {e['build_s']:.2f} s, {e['us_per_frame_median']:.0f} µs per frame (p99 {e['us_per_frame_p99']:.0f}) "
+              f"beside the frame's {e['frame_us_median']:.0f} µs; offsets up to {e['max_offset_m'] * 1e3:.2f} mm")  # fmt: skip
     if not args.skip_jax:
         result["kernels"] = kernel_comparison()
         k = result["kernels"]

@@ -310,11 +310,13 @@ def summarize(rigs, methods):
             if not ok:
                 continue
             entry = dict(n=len(ok), failed=failed, median_abs_p_error=float(np.median([abs(o["p_error"]) for o in ok])),
-                         p_coverage=float(np.mean([o["p_covered"] for o in ok])))  # fmt: skip
+                         p_coverage=float(np.mean([o["p_covered"] for o in ok])),
+                         p_coverage_ci95=_coverage_interval([o["p_covered"] for o in ok]))  # fmt: skip
             with_e = [o for o in ok if "e_error" in o]
             if with_e:
                 entry.update(median_abs_e_error=float(np.median([abs(o["e_error"]) for o in with_e])),
-                             e_coverage=float(np.mean([o["e_covered"] for o in with_e])))  # fmt: skip
+                             e_coverage=float(np.mean([o["e_covered"] for o in with_e])),
+                             e_coverage_ci95=_coverage_interval([o["e_covered"] for o in with_e]))  # fmt: skip
             entry["median_seconds"] = float(np.median([o["seconds"] for o in ok]))
             out[m] = entry
         return out
@@ -324,8 +326,42 @@ def summarize(rigs, methods):
                "clean": stats([r for rig in rigs if not rig["families"] for r in rig["sessions"]])}  # fmt: skip
     for family in FAMILIES:
         summary[f"with_{family}"] = stats([r for rig in rigs if family in rig["families"] for r in rig["sessions"]])
+    clean = [rig for rig in rigs if not rig["families"]]
+    if {"fit", "fit+rig"} <= set(methods) and clean:
+        summary["clean_fit+rig_minus_fit"] = _median_difference(clean, "fit+rig", "fit")
     summary["median_calibration_seconds"] = float(np.median([r["calibration_seconds"] for r in rigs]))
     return summary
+
+
+def _coverage_interval(covered) -> list[float]:
+    """Clopper-Pearson 95 % interval [-] of a coverage from its sessions' covered flags."""
+    from scipy.stats import binomtest
+
+    interval = binomtest(int(sum(covered)), len(covered)).proportion_ci(0.95)
+    return [float(interval.low), float(interval.high)]
+
+
+def _median_difference(rigs, method, baseline, draws: int = 2000) -> dict:
+    """Median |error| of ``method`` minus ``baseline``'s [percentage points], P_g and E, with a 95 %
+    bootstrap interval over test objects (an object's sessions share its R and h errors, so
+    objects, not sessions, are the independent draws)."""
+    objects = {}
+    for rig in rigs:
+        for row in rig["sessions"]:
+            objects.setdefault((str(rig["rig"]), row["radius"]), []).append(row["results"])
+    groups = [rows for rows in objects.values()
+              if all(m in r and "failed" not in r[m] for r in rows for m in (method, baseline))]  # fmt: skip
+    rng = np.random.default_rng(0)
+    out = {"objects": len(groups), "unit": "percentage points"}
+    for key in ("p", "e"):
+        def difference(picked):
+            rows = [r for g in picked for r in g]
+            return float(np.median([abs(r[method][f"{key}_error"]) for r in rows])
+                         - np.median([abs(r[baseline][f"{key}_error"]) for r in rows]))  # fmt: skip
+        samples = [difference([groups[i] for i in rng.integers(0, len(groups), len(groups))]) for _ in range(draws)]
+        out[key] = {"difference": difference(groups), "ci95": [float(np.percentile(samples, 2.5)),
+                                                                float(np.percentile(samples, 97.5))]}  # fmt: skip
+    return out
 
 
 def table(summary, methods) -> str:
@@ -337,6 +373,11 @@ def table(summary, methods) -> str:
         for m, s in summary.get(group, {}).items():
             lines.append(f"{group:>14s} {m:>29s} {s['n']:4d} {s['median_abs_p_error']:12.1f}% {100 * s['p_coverage']:7.0f}% "
                          f"{s.get('median_abs_e_error', float('nan')):11.1f}% {100 * s.get('e_coverage', float('nan')):7.0f}%")  # fmt: skip
+    if "clean_fit+rig_minus_fit" in summary:
+        d = summary["clean_fit+rig_minus_fit"]
+        lines.append(f"clean rigs, fit+rig minus fit ({d['objects']} objects, bootstrap 95 %): "
+                     + ", ".join(f"{name} {d[k]['difference']:+.1f} ({d[k]['ci95'][0]:+.1f} … {d[k]['ci95'][1]:+.1f}) points"
+                                 for k, name in (("p", "|P_g err|"), ("e", "|E err|"))))  # fmt: skip
     return "\n".join(lines)
 
 
@@ -355,9 +396,17 @@ def main():
                         help="relative std of the calibration ball's R, as measured and as its sessions state "
                              "(default: the mesh's 2 %%; a tape round the equator: about 0.3 %%)")
     add_executor_arguments(parser, resume=False)
+    parser.add_argument("--run-dir", default=None,
+                        help="write each finished rig's record here and skip the rigs already recorded (a killed "
+                             "study resumes where it stopped)")
+    parser.add_argument("--combine", nargs="+", default=None, metavar="JSON",
+                        help="summarise the rigs of earlier studies' JSON outputs together (other seeds) into --out; "
+                             "runs nothing")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json"))
     args = parser.parse_args()
     warnings.simplefilter("ignore")
+    if args.combine:
+        return combine(args.combine, Path(args.out), args.methods)
     rng = np.random.default_rng(args.seed)
     # a stream of its own, so the rigs, objects and noise are the same draws with or without it
     geometry_rng = None if args.exact_geometry else np.random.default_rng([args.seed, 1])
@@ -374,7 +423,8 @@ def main():
             worlds.append(dict(truth=truth, calibration=[str(p) for p in calibration], tests=tests))
         items = [WorkItem(f"rig{i}", evaluate_rig, (i, world, args.methods, args.bayes_every, args.manometer_std))
                  for i, world in enumerate(worlds)]  # fmt: skip
-        results = run_items(items, options=executor_options(args), progress=True, desc="rigs")
+        results = run_items(items, run_dir=args.run_dir, resume=args.run_dir is not None,
+                            options=executor_options(args), progress=True, desc="rigs")  # fmt: skip
     failed = [r for r in results if r.status != "done"]
     for r in failed:
         print(f"{r.key} failed: {r.error}", flush=True)
@@ -383,9 +433,23 @@ def main():
         print(f"rig {rig['rig']} {rig['truth']} -> {[m['terms'] for m in rig['selected'][:3]]}", flush=True)
     summary = summarize(rigs, args.methods)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"summary": summary, "rigs": rigs, "failed": [r.to_dict() for r in failed]}, indent=1,
-                              default=float))  # fmt: skip
-    print(table(summarize(rigs, args.methods), args.methods))
+    out.write_text(json.dumps({"summary": summary, "seed": args.seed, "rigs": rigs,
+                               "failed": [r.to_dict() for r in failed]}, indent=1, default=float))  # fmt: skip
+    print(table(summary, args.methods))
+    return 0
+
+
+def combine(paths, out: Path, methods) -> int:
+    """One summary over the rigs of several studies' JSON outputs (each rig keyed by its study's file
+    name); ``out`` holds the summary and the studies' paths, not their rigs again."""
+    rigs = []
+    for path in paths:
+        study = json.loads(Path(path).read_text())
+        rigs += [{**rig, "rig": f"{Path(path).stem}/{rig['rig']}"} for rig in study["rigs"]]
+    present = [m for m in methods if any(m in r["results"] for rig in rigs for r in rig["sessions"])]
+    summary = summarize(rigs, present)
+    out.write_text(json.dumps({"summary": summary, "studies": [str(p) for p in paths]}, indent=1, default=float))
+    print(table(summary, present))
     return 0
 
 

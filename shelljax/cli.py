@@ -1,4 +1,4 @@
-"""Command line: shelljax run, estimate, diagnose, simulate, replica, rig, validate, and the sensor commands acquire,
+"""Command line: shelljax run, estimate, diagnose, simulate, replica, play, rig, validate, and the sensor commands acquire,
 sensor-calibrate, sensor-emulator (docs/sensing.md); the same text is the --help description."""
 
 from __future__ import annotations
@@ -138,14 +138,17 @@ def _cmd_rig_calibrate(args) -> int:
 def _cmd_diagnose(args) -> int:
     from .diagnose import diagnose
     from .report import jsonable, write_diagnosis
+    from .runner import diagnosis_baseline
 
-    measurement, gas, wrinkle_law = None, args.gas, args.wrinkle_law
-    if args.rig is not None:
-        from .rig import check_compatible, load_rig, rig_measurement
-
-        rig = load_rig(args.rig)
-        check_compatible(rig, gas=gas, wrinkle_law=wrinkle_law, where="the diagnosis")
-        measurement, gas, wrinkle_law = rig_measurement(rig), rig.gas, rig.wrinkle_law
+    if args.study:
+        return _diagnose_studies(args)
+    if not args.sessions:
+        raise ShelljaxError("no sessions given. Fix: shelljax diagnose S1.toml S2.toml ... (one object), or --study DIR "
+                            "--study DIR ... --out DIR (many studies)")  # fmt: skip
+    if args.workers is not None or args.cluster is not None or args.resume is not None:
+        raise ShelljaxError("--workers/--cluster/--resume run many studies (--study), and one study is one piece of work. "
+                            "Fix: give each study as --study DIR_OR_PATTERN, or leave them out")  # fmt: skip
+    measurement, gas, wrinkle_law = diagnosis_baseline(args.rig, args.gas, args.wrinkle_law)
     from .runner._compile_log import stage
 
     with stage("diagnose", args.verbose):
@@ -164,10 +167,52 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
+def _diagnose_studies(args) -> int:
+    """``shelljax diagnose --study A --study B ... --out DIR``: one work item per study."""
+    from .executor import executor_options
+    from .runner import diagnose_studies, diagnoses_table, study_groups
+
+    if args.sessions:
+        raise ShelljaxError(f"session files ({args.sessions[0]} ...) and --study both given. Fix: give one study as "
+                            "session files, or every study as --study")  # fmt: skip
+    out = _resumed_out(args)
+    if out is None:
+        raise ShelljaxError("--study needs --out DIR: each study's diagnosis is written to DIR/<study>/. Fix: add --out DIR")
+    try:
+        summary = diagnose_studies(study_groups(args.study), out, effects=args.effects, baseline=args.baseline,
+                                   gas=args.gas, wrinkle_law=args.wrinkle_law, rig=args.rig, executor=executor_options(args),
+                                   progress=None if not args.quiet else False, resume=args.resume is not None)  # fmt: skip
+    except KeyboardInterrupt:
+        return 130  # the finished studies' diagnoses and records stay in --out
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+    else:
+        print(diagnoses_table(summary))
+        print(f"results: {out}/diagnoses.json")
+    return 0
+
+
+def _resumed_out(args):
+    """The output directory of many studies or a sweep: --out, or the --resume directory it continues."""
+    from pathlib import Path
+
+    if args.resume is not None and args.out is not None and Path(args.resume).resolve() != Path(args.out).resolve():
+        raise ShelljaxError(f"--resume {args.resume} and --out {args.out} name two directories. Fix: give --resume alone "
+                            "(it continues in that directory)")  # fmt: skip
+    return args.resume if args.resume is not None else args.out
+
+
 def _cmd_simulate(args) -> int:
+    from .executor import executor_options
     from .scenario import load_scenario, run_scenario
 
     scenario = load_scenario(args.config)
+    if scenario.sweep is not None:
+        return _simulate_sweep(scenario, args, executor_options(args))
+    if args.workers is not None or args.cluster is not None or args.resume is not None:
+        raise ShelljaxError(f"--workers/--cluster/--resume run the values of a [sweep] table, and {args.config} has none. "
+                            "Fix: add [sweep] parameter = \"...\" and values = [...] (docs/cluster.md), or leave them out")  # fmt: skip
     summary = run_scenario(scenario, args.out, session=args.session, progress=not args.quiet, verbose=args.verbose)
     p = summary["parameters"]
     print(f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
@@ -182,6 +227,22 @@ def _cmd_simulate(args) -> int:
                   f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm, "
                   f"contact diameter {1e3 * m['max_contact_diameter_m']:.1f} mm")  # fmt: skip
         print(f"  results: {run['directory']}/results.json")
+    return 0
+
+
+def _simulate_sweep(scenario, args, executor) -> int:
+    from pathlib import Path
+
+    from .scenario import run_sweep, sweep_table
+
+    out = _resumed_out(args)
+    try:
+        summary = run_sweep(scenario, out, session=args.session, executor=executor, progress=not args.quiet,
+                            resume=args.resume is not None)  # fmt: skip
+    except KeyboardInterrupt:
+        return 130  # the finished values' records stay in the output directory: --resume DIR runs the rest
+    print(sweep_table(summary))
+    print(f"results: {Path(out) if out else scenario.output_dir / scenario.name}/sweep.json")
     return 0
 
 
@@ -207,11 +268,59 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+def _cmd_play(args) -> int:
+    from .viewer import play_headless, play_live, play_scene, require_viser
+
+    if args.headless and args.script is None:
+        raise ShelljaxError("--headless replays a script. Fix: add --script configs/interaction.toml")
+    if (args.record or args.records) and not args.headless:
+        raise ShelljaxError("--record and --records write a headless replay. Fix: add --headless (and --script)")
+    if not args.headless:
+        require_viser()  # before the object loads: say at once what is missing
+    scene = play_scene(args.source, args.script, mesh_faces=args.mesh_faces, gas=args.gas)
+    if not args.headless:
+        return play_live(scene, host=args.host, port=args.port)
+    result = play_headless(scene, record=args.record, records_json=args.records)
+    s = result.summary()
+    print(f"{scene.label}\n  {s['frames']} frames, {s['simulated_s']:.2f} s: peak gauge pressure {s['peak_gauge_pressure_Pa']:.0f} Pa, "
+          f"peak hand force {s['peak_collider_force_N']:.2f} N, "
+          + ", ".join(f"peak {n} force {f:.1f} N" for n, f in s["peak_plane_force_N"].items())
+          + f"; real-time factor {s['real_time_factor_median']:.1f} (median), {s['real_time_factor_p01']:.1f} (1st percentile)")  # fmt: skip
+    for path in (args.record, args.records):
+        if path is not None:
+            print(f"written: {path}")
+    return 0
+
+
+def _register_play(sub) -> None:
+    """``shelljax play``."""
+    play = sub.add_parser("play", help="move a replica or session in real time: live 3D view in the browser (viser), "
+                          "or --headless replay of an interaction script into a GIF (docs/realtime.md#viewer)")
+    play.add_argument("source", help="a `shelljax replica` directory (its P_g, E, mesh) or a session TOML (P_g and E by "
+                      "the closed form, seconds; e.g. bundled:sessions/pezzi.toml); the rest shape is the small-strain shrink "
+                      "of the mesh, relaxed on the ground (no 30 s JAX rest-shape solve): it starts in seconds")
+    play.add_argument("--script", default=None, help="interaction script TOML (planes, hand, timed drop/poke/throw/wait "
+                      "actions), e.g. configs/interaction.toml")
+    play.add_argument("--headless", action="store_true", help="no browser: replay --script and print its peaks")
+    play.add_argument("--record", default=None, help="with --headless: write the replay as a GIF here")
+    play.add_argument("--records", default=None, help="with --headless: write the per-frame records as JSON here")
+    play.add_argument("--mesh-faces", type=int, default=None, help="triangles of a session's sphere (default: the script's, 500)")
+    play.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic",
+                      help="gas law of a session's shell (a replica keeps its own)")
+    play.add_argument("--host", default="127.0.0.1", help="address the live viewer listens on")
+    play.add_argument("--port", type=int, default=8080, help="port of the live viewer")
+    play.set_defaults(func=_cmd_play)
+
+
 def _register_diagnose(sub) -> None:
     """``shelljax diagnose``."""
     diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
                           "which candidate effect explains it, how far the gap shrinks")
-    diag.add_argument("sessions", nargs="+", help="session TOML files of one object (e.g. at several pressures)")
+    diag.add_argument("sessions", nargs="*", help="session TOML files of one object (e.g. at several pressures)")
+    diag.add_argument("--study", action="append", default=None, metavar="DIR_OR_PATTERN",
+                      help="many studies instead (repeat it): a directory of one object's session files, or a pattern "
+                      "such as 'dir/ball_*.toml' ('bundled:' for the package's); one work item per study, written to "
+                      "--out/<study>/ and summed up in --out/diagnoses.json (docs/cluster.md)")
     diag.add_argument("--out", default=None, help="directory for diagnosis.json, diagnosis.png and report.md (created)")
     diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
     diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
@@ -227,6 +336,9 @@ def _register_diagnose(sub) -> None:
                       help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
     diag.add_argument("--quiet", action="store_true", help="no progress bar")
     diag.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
+    from .executor import add_executor_arguments
+
+    add_executor_arguments(diag)  # the studies of --study (docs/cluster.md); --resume: the --out of an interrupted one
     diag.set_defaults(func=_cmd_diagnose)
 
 
@@ -312,6 +424,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--session", default=None, help="take P_g and E from this session's estimate (overrides the config)")
     sim.add_argument("--quiet", action="store_true", help="no progress bars")
     sim.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
+    from .executor import add_executor_arguments
+
+    add_executor_arguments(sim)  # the values of a [sweep] table (docs/cluster.md); --resume: the --out of an interrupted one
     sim.set_defaults(func=_cmd_simulate)
 
     rep = sub.add_parser("replica", help="export a session's digital replica: mesh (glTF) + replica.json")
@@ -328,6 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.set_defaults(func=_cmd_replica)
 
     _register_rig(sub)
+    _register_play(sub)
 
     val = sub.add_parser("validate", help="check session files and report what they contain")
     val.add_argument("sessions", nargs="+")

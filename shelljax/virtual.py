@@ -19,6 +19,8 @@ Two stages (SI units throughout):
    (:func:`shelljax.physics.scaling_wrinkle_count`) with N(0, ``COUNT_NOISE``) reading noise,
    rounded. The 3D meshes affordable here do not resolve the wrinkles to a converged count
    (docs/estimators.md), so the count comes from the same law the closed form inverts (limitation).
+   :func:`write_sessions` writes such sessions to files in bulk, one work item per session with its
+   own seed (``shelljax.executor``: in-process or on Dask workers, the same files either way).
 """
 
 from __future__ import annotations
@@ -268,19 +270,58 @@ def noise_free_session(curve: dict, *, name: str = ""):
     return _session(curve, level, depth, counts, name=name, notes="no noise")
 
 
-def draw_sessions(curves: list[dict], *, realisations: int = 2, base_seed: int = 2026) -> list[tuple[dict, object]]:
-    """Test sessions: every curve × ``NOISE_LEVELS`` × ``realisations``; list of (truth, Session)."""
-    out = []
+def _draws(curves: list[dict], realisations: int, base_seed: int):
+    """(curve, truth) of every test session: each curve × ``NOISE_LEVELS`` × ``realisations``."""
     for i, c in enumerate(curves):
         k = c.get("set", i)  # seeds and names follow the parameter set, not the list position
         for j, sigma in enumerate(NOISE_LEVELS):
             for r in range(realisations):
                 seed = base_seed + 1000 * k + 100 * j + r
                 name = f"set{k}_noise{sigma * 1e3:.1f}mm_r{r}"
-                truth = {"set": k, "depth_noise": sigma, "realisation": r, "seed": seed, "name": name,
-                         "gauge_pressure": c["gauge_pressure"], "young_modulus": c["young_modulus"]}  # fmt: skip
-                out.append((truth, draw_session(c, sigma, seed, name=name)))
-    return out
+                yield c, {"set": k, "depth_noise": sigma, "realisation": r, "seed": seed, "name": name,
+                          "gauge_pressure": c["gauge_pressure"], "young_modulus": c["young_modulus"]}  # fmt: skip
+
+
+def draw_sessions(curves: list[dict], *, realisations: int = 2, base_seed: int = 2026) -> list[tuple[dict, object]]:
+    """Test sessions: every curve × ``NOISE_LEVELS`` × ``realisations``; list of (truth, Session)."""
+    return [(truth, draw_session(c, truth["depth_noise"], truth["seed"], name=truth["name"]))
+            for c, truth in _draws(curves, realisations, base_seed)]  # fmt: skip
+
+
+def write_drawn_session(curve: dict, truth: dict, path: str, *, seed: int) -> dict:
+    """The work item of one session: drawn from ``curve`` with ``seed`` (:func:`draw_session`) and
+    written to ``path`` (a session TOML); returns ``truth`` with the file's path (JSON, SI)."""
+    from .session import write_session
+
+    s = draw_session(curve, truth["depth_noise"], seed, name=truth["name"])
+    write_session(path, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
+                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
+                  wrinkle_counts=s.wrinkle_counts.astype(int), poisson_ratio=s.poisson_ratio, notes=s.notes)  # fmt: skip
+    return {**truth, "path": str(path), "units": {"gauge_pressure": "Pa", "young_modulus": "Pa", "depth_noise": "m"}}
+
+
+def write_sessions(curves: list[dict], out_dir: str | Path, *, realisations: int = 2, base_seed: int = 2026,
+                   executor=None, progress: bool | None = None) -> list[dict]:  # fmt: skip
+    """Write :func:`draw_sessions`' sessions (the same seeds and names) to ``out_dir/<name>.toml``,
+    one work item each (``shelljax.executor``; ``executor``: an ``ExecutorOptions``, None for
+    in-process), with ``out_dir/items/`` holding each finished one's record and
+    ``out_dir/sessions.json`` the index: per session its truth, path and status (a failed one with
+    its error). Returns the index's entries."""
+    from ._files import atomic_write_text
+    from .executor import WorkItem, run_items
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    draws = list(_draws(curves, realisations, base_seed))
+    items = [WorkItem(truth["name"], write_drawn_session, (c, truth, str(out / f"{truth['name']}.toml")), seed=truth["seed"])
+             for c, truth in draws]  # fmt: skip
+    results = run_items(items, run_dir=out, options=executor, progress=progress, desc="drawing sessions")
+    index = [{**truth, "status": r.status, **({"path": r.value["path"]} if r.status == "done" else {"error": r.error})}
+             for (_, truth), r in zip(draws, results)]  # fmt: skip
+    atomic_write_text(out / "sessions.json", json.dumps({"description": "virtual sessions drawn from shelljax.virtual's curves "
+                                                          "(SI: gauge_pressure, young_modulus [Pa], depth_noise [m])",
+                                                          "sessions": index}, indent=1))  # fmt: skip
+    return index
 
 
 def draw_calibration_sessions(curves: list[dict], *, base_seed: int = 7000) -> list:

@@ -26,6 +26,7 @@ LAYERS = {  # rank: a module may import ranks ≤ its own
     "axisym": 2, "shell3d": 2, "_parallel": 2,
     "estimate": 3, "diagnose": 3, "rig": 3, "virtual": 3, "dynamics": 3, "realtime": 3,
     "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4, "scenario": 4, "replica": 4, "object_estimate": 4,
+    "viewer": 4,
 }  # fmt: skip
 DATA_LAYER = ("session", "geometry", "sensing")
 MAX_FILE_LINES = 600

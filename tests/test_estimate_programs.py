@@ -121,3 +121,12 @@ def test_a_cache_that_cannot_be_written_costs_a_warning_not_the_result(tmp_path,
     with pytest.warns(UserWarning, match="cannot keep the traced program"):
         out = _programs.persistent_jit(_energy, static_argnames=("power",))(_Spring(jnp.ones(3), "single"), jnp.ones(3), power=2)
     assert float(out[0]) == pytest.approx(3.0, rel=1e-15)
+
+
+def test_compiler_options_the_installed_xla_does_not_know_are_dropped(kept, tmp_path):
+    # jaxlib releases add and remove XLA flags (0.11 dropped xla_cpu_use_fusion_emitters): an
+    # unknown flag in a program's options would fail its every compile, so only known ones are kept
+    options = {"xla_backend_optimization_level": 1, "xla_flag_no_jaxlib_has": True}
+    assert _programs._known_options(options) == {"xla_backend_optimization_level": 1}
+    double = _programs.persistent_jit(lambda x: 2.0 * x, cpu_compiler_options=options)
+    assert float(double(jnp.asarray(1.5))) == 3.0

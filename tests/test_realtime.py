@@ -317,3 +317,112 @@ def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
     np.testing.assert_allclose(ball.collider[2], centre[2] - speed * frame.time_s, atol=1e-12)  # it moved
     assert ball.collider_work > 0.0
     assert frame.collider_force_N[2] < -1.0
+
+
+def _rotation(seed):
+    """A random proper rotation (3, 3) [-] (QR of a Gaussian matrix, sign-fixed)."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def test_display_embedding_follows_rigid_motion_and_inflation():
+    """A 3000-face display sphere on a 300-face simulation sphere: reproduced at the state it was
+    built on; a rigid motion of the simulation mesh moves it rigidly, a uniform scaling about any
+    point scales it (both exact in exact arithmetic: the offsets live in each face's own frame
+    and are measured in its length √A; 1e-12 m is round-off on 0.1 m coordinates)."""
+    from shelljax.geometry import sphere_mesh
+
+    coarse, coarse_faces = sphere_mesh(R, 300)
+    fine, fine_faces = sphere_mesh(R, 3000)
+    fine = fine @ _rotation(3).T  # not aligned with the coarse rings
+    display = rt.DisplayEmbedding(coarse, coarse_faces, fine, fine_faces)
+    assert np.abs(display.positions(coarse) - fine).max() <= 1e-15
+    # Each display vertex's closest point is no farther than the nearest simulation vertex, and the
+    # inscribed polyhedron lies within the sagitta edge²/(8R) (+ slack for the longest edges) of the sphere.
+    nearest_vertex = np.min(np.linalg.norm(fine[:, None, :] - coarse[None, :, :], axis=2), axis=1)
+    assert np.all(display.offset_m <= nearest_vertex + 1e-15)
+    edge = np.linalg.norm(coarse[coarse_faces[:, 0]] - coarse[coarse_faces[:, 1]], axis=1).max()
+    assert display.offset_m.max() <= 2.0 * edge**2 / (8.0 * R)
+    assert np.all(display.bary >= -1e-12) and np.allclose(display.bary.sum(axis=1), 1.0, atol=1e-12)
+    rot, shift = _rotation(4), np.array([0.3, -1.2, 0.7])
+    np.testing.assert_allclose(display.positions(coarse @ rot.T + shift), fine @ rot.T + shift, rtol=0, atol=1e-12)
+    centre, scale = np.array([0.05, 0.02, -0.4]), 1.37
+    np.testing.assert_allclose(display.positions(centre + scale * (coarse - centre)), centre + scale * (fine - centre),
+                               rtol=0, atol=1e-12)  # fmt: skip
+
+
+def test_display_embedding_rides_on_a_bouncing_ball():
+    """The display mesh of a dropped 300-face ball stays on it through the impact: its centroid
+    tracks the simulated centre of mass (within 2 mm, a sixth of the coarse edge), and it reaches
+    no lower than the simulated surface less the build-time offsets."""
+    from shelljax.geometry import sphere_mesh
+
+    ball = _ball(300, planes=[Plane([0, 0, 0], [0, 0, 1], friction=0.5, name="ground")])
+    ball.drop(0.05)
+    fine, _ = sphere_mesh(R, 3000)
+    fine = fine + (ball.com()[0] - fine.mean(axis=0))
+    display = ball.embed(fine)
+    for _ in range(10):
+        ball.frame(1 / 60)
+    shown = display.positions(ball.x)
+    assert np.linalg.norm(shown.mean(axis=0) - ball.com()[0]) < 2e-3
+    # No lower than the simulated surface, less the offsets (outward: the fine sphere is outside the
+    # inscribed coarse one) stretched by at most 2× in the impact.
+    assert shown[:, 2].min() >= ball.x[:, 2].min() - 2.0 * display.offset_m.max()
+    with pytest.raises(InvalidInputError, match="simulation_faces"):
+        rt.DisplayEmbedding(ball.x, ball.faces + ball.x.shape[0], fine)
+
+
+def test_impact_peaks_are_taken_below_the_vertex_chatter():
+    """experiments/verify_realtime.py's impact analysis on a synthetic record: a half-sine contact
+    force F₀ sin(πt/T) modulated by a 375 Hz chatter of ±80 % (the vertices' bounces; 3 periods
+    in the 8 ms window, which the moving average removes to O(w/T)² of it). The peak over the
+    window is the half-sine's own average at its centre, F₀ (2T/(πw)) sin(πw/(2T)) (closed form);
+    the COR and contact time come from the COM speeds and the 2 ms-smoothed force."""
+    from _scripts import load_script
+
+    verify = load_script("experiments", "verify_realtime")
+    dt, T, w, f0 = 1e-5, 0.06, 8e-3, 150.0
+    t = np.arange(0.0, 0.2, dt)
+    on = (t >= 0.05) & (t <= 0.05 + T)
+    pulse = np.where(on, f0 * np.sin(np.pi * (t - 0.05) / T), 0.0)
+    force = pulse * (1.0 + 0.8 * np.sin(2 * np.pi * 375.0 * (t - 0.05)))
+    # The COM: 2 m/s down before, 1.6 m/s up after (COR 0.8), linear in between (its shape is not used).
+    speed = np.where(t < 0.05, -2.0, np.where(t > 0.05 + T, 1.6, -2.0 + 3.6 * (t - 0.05) / T))
+    height = 0.1 + np.cumsum(speed) * dt
+    m = verify.impact(t, height, speed, force, 1000.0 + pulse, rest_height=0.1, peak_window=w)
+    expected = f0 * (2 * T / (np.pi * w)) * np.sin(np.pi * w / (2 * T))
+    assert m["peak_force_N"] == pytest.approx(expected, rel=2e-3)  # the discrete window: ±1 sample of 800
+    assert m["peak_force_raw_N"] > 1.5 * f0  # the chatter is in the raw signal
+    assert m["peak_gauge_pressure_Pa"] == pytest.approx(1000.0 + expected, rel=2e-3)
+    assert m["cor"] == pytest.approx(0.8, abs=0.02)  # threshold crossings at 2 % of the peak: within ±2 ms of the ends
+    assert m["contact_time_s"] == pytest.approx(T, abs=4e-3)
+
+
+@pytest.mark.slow
+def test_static_poke_matches_the_quasi_static_engine():
+    """An 8 mm sphere 20 mm into the 478-face ball on the ground (no gravity, isothermal gas):
+    the realtime ball relaxed under the collider at the engine's solved indenter height carries
+    the force of shell3d.Indentation's quasi-static solve within the issue's 2 % (the same mesh,
+    rest shape and gas; what differs is the contact: penalty at vertices, edge midpoints and
+    centroids against the engine's barrier at vertices)."""
+    from _scripts import load_script
+
+    verify = load_script("experiments", "verify_realtime")
+    p = verify.poke(500)
+    assert p["realtime_force_N"] == pytest.approx(p["reference_force_N"], rel=0.02)
+
+
+def test_contact_forces_at_rest_equal_the_springs():
+    """``contact_forces()`` reads the forces without stepping: the state is unchanged, and the
+    ground's push is Σ k_i δ_i over the vertices behind it (the penalty law, by hand)."""
+    ball = _ball(300, planes=[Plane([0, 0, 0], [0, 0, 1], name="ground")])
+    ball.drop(0.0)
+    ball.x[:, 2] -= 1e-3  # 1 mm into the ground
+    x, v, t = ball.x.copy(), ball.v.copy(), ball.time
+    planes, collider = ball.contact_forces()
+    depth = np.maximum(-ball.x[:, 2], 0.0)
+    assert planes[0, 2] == pytest.approx(float(np.sum(ball.k_contact * depth)), rel=1e-12)
+    assert np.all(collider == 0.0)
+    assert np.array_equal(ball.x, x) and np.array_equal(ball.v, v) and ball.time == t

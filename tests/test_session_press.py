@@ -87,6 +87,9 @@ def test_press_samples_from_csv_beside_the_toml(tmp_path):
     np.testing.assert_array_equal(p.trial, [1, 1, 2, 2])
     np.testing.assert_allclose(p.force, [5.0, 10.0, 5.0, 10.0])
     np.testing.assert_allclose(p.depth, [-0.05e-3, 0.8e-3, 0.0, 0.9e-3])
+    # the press's sha256 (what a rig file records of it) covers its samples: an edited CSV changes it
+    (tmp_path / "press.csv").write_text("trial,force,depth\n1,5,-0.05\n1,10,0.8\n2,5,0.0\n2,10,0.95\n")
+    assert load_rigid_press(tmp_path / "p.toml").sha256 != p.sha256
 
 
 def test_write_rigid_press_round_trips_exactly_in_si(tmp_path):

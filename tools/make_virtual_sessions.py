@@ -4,9 +4,14 @@ Each parameter set of ``shelljax.virtual.PARAMETER_SETS`` runs in a child proces
 watchdog; a child whose XLA run wedged is restarted and resumes from its per-level checkpoint in
 /tmp. Finished sets are appended to ``--out`` as they are solved, so an interrupted run keeps them.
 
+With ``--sessions DIR`` it draws the noisy test sessions of those curves into session files
+instead (``shelljax.virtual.write_sessions``: one work item per session with its own seed, on
+``--workers N`` or ``--cluster`` as well as in-process, the same files either way).
+
 Usage::
 
     python tools/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600]
+    python tools/make_virtual_sessions.py --sessions virtual-sessions/ [--realisations 4] [--workers 2]
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from pathlib import Path
 from experiment_scripts import load_experiment
 
 from shelljax import virtual
+from shelljax.executor import add_executor_arguments, executor_options
 
 long_runs = load_experiment("long_runs")
 
@@ -35,10 +41,25 @@ def _parse(argv=None):
     ap.add_argument("--watchdog", type=float, default=600.0,
                     help="seconds without a solved level before a child is restarted (raise it for fine meshes)")
     ap.add_argument("--child", action="store_true", help="(internal) solve the given sets in this process")
+    ap.add_argument("--sessions", type=Path, default=None, metavar="DIR",
+                    help="draw the noisy test sessions of the curves in --out into session files in DIR")
+    ap.add_argument("--realisations", type=int, default=2, help="--sessions: noise draws per curve and noise level")
+    ap.add_argument("--base-seed", type=int, default=2026, help="--sessions: seed of the first draw (each has its own)")
+    add_executor_arguments(ap, resume=False)
     args = ap.parse_args(argv)
-    if not args.curves:
-        ap.error("nothing to do: pass --curves")
+    if not args.curves and args.sessions is None:
+        ap.error("nothing to do: pass --curves or --sessions DIR")
     return args
+
+
+def _write_sessions(args) -> None:
+    """Draw every test session of the curves in ``args.out`` into ``args.sessions``, one work item each."""
+    index = virtual.write_sessions(virtual.load_curves(args.out), args.sessions, realisations=args.realisations,
+                                   base_seed=args.base_seed, executor=executor_options(args), progress=True)  # fmt: skip
+    failed = [entry for entry in index if entry["status"] != "done"]
+    print(f"{len(index) - len(failed)} sessions written to {args.sessions} (index: {args.sessions / 'sessions.json'})")
+    for entry in failed:
+        print(f"  {entry['name']}: FAILED ({entry['error']})")
 
 
 def _solve_sets(args, sets) -> None:
@@ -73,6 +94,9 @@ def main(argv=None):
     # Synchronous dispatch: XLA:CPU wedged long runs (docs/shell3d.md, *XLA:CPU hangs*).
     jax.config.update("jax_cpu_enable_async_dispatch", False)
     args = _parse(argv)
+    if args.sessions is not None:
+        _write_sessions(args)
+        return
     sets = [int(s) for s in args.sets.split(",")] if args.sets else range(len(virtual.PARAMETER_SETS))
     if args.child:
         _solve_sets(args, sets)

@@ -121,11 +121,26 @@ def persistent_jit(fn: Callable, *, static_argnames: tuple[str, ...] = (), cpu_c
         if program is None:
             # the backend is asked only now: importing shelljax does not start JAX
             on_cpu = jax.export.default_export_platform() == "cpu"
-            options = dict(cpu_compiler_options or {}) if on_cpu else {}
+            options = _known_options(cpu_compiler_options or {}) if on_cpu else {}
             program = _LOADED[key] = _load_or_export(fn, static_argnames, key, args, static, options)
         return program(*jax.tree_util.tree_leaves(args))
 
     return call
+
+
+def _known_options(options: dict) -> dict:
+    """``options`` less those the installed XLA does not know (flags come and go between jaxlib
+    releases; an unknown one fails every compile that names it)."""
+    return {name: value for name, value in options.items() if _option_known(name, value)}
+
+
+@functools.cache
+def _option_known(name: str, value) -> bool:
+    try:
+        jax.jit(lambda x: x, compiler_options={name: value}).lower(0.0).compile()
+    except Exception:  # XLA's error for an unknown flag has no type of its own
+        return False
+    return True
 
 
 def _load_or_export(fn: Callable, static_argnames: tuple[str, ...], key: str, args: tuple, static: dict,

@@ -111,7 +111,8 @@ def _check_keys(items: Sequence[WorkItem]) -> None:
 @contextlib.contextmanager
 def dask_client(options: ExecutorOptions):
     """A ``distributed.Client`` for ``options`` (a new LocalCluster, or the given scheduler),
-    closed on exit; the workers share ``options.cache_dir`` when given."""
+    closed on exit; the workers keep every program they compile in their persistent cache
+    (``options.cache_dir`` when given, shared by them)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -134,8 +135,7 @@ def dask_client(options: ExecutorOptions):
                                dashboard_address=None, silence_logs=logging.CRITICAL)  # fmt: skip
         client = Client(cluster)
     try:
-        if options.cache_dir is not None:
-            client.register_plugin(CompilationCache(str(Path(options.cache_dir).resolve())))
+        client.register_plugin(CompilationCache(None if options.cache_dir is None else str(Path(options.cache_dir).resolve())))
         yield client
     finally:
         client.close()

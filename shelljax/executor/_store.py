@@ -16,6 +16,7 @@ from .._errors import InvalidInputError
 from .._files import atomic_write_text
 
 ITEMS_DIR = "items"
+INPUTS = "inputs.json"  # what a run's items were made of, so that a resumed run can be checked against it
 STATUSES = ("done", "failed")
 
 
@@ -72,3 +73,27 @@ def read_item(run_dir: Path, key: str) -> ItemResult | None:
         return None
     return ItemResult(key=key, status="done", value=record.get("value"), seconds=float(record.get("seconds", 0.0)),
                       worker=str(record.get("worker", "local")), seed=record.get("seed"), resumed=True)  # fmt: skip
+
+
+def check_inputs(run_dir: Path, inputs: dict, *, resume: bool, what: str) -> None:
+    """Record ``inputs`` (JSON: what the items are made of) in ``run_dir``; on ``resume``, refuse a
+    run directory whose recorded inputs differ, since its finished items answer those.
+
+    Raises:
+        InvalidInputError: resuming a directory without a record, or one made of other inputs.
+    """
+    path = Path(run_dir) / INPUTS
+    inputs = json.loads(json.dumps(inputs))  # as it reads back: lists, not tuples
+    if not resume:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, json.dumps(inputs, indent=1))
+        return
+    if not path.exists():
+        raise InvalidInputError(f"--resume {run_dir}: no {INPUTS} there, so it is not a {what} shelljax can resume. "
+                                f"Fix: give the --out directory of the interrupted {what}, or start a fresh one")  # fmt: skip
+    recorded = json.loads(path.read_text())
+    changed = sorted(k for k in set(recorded) | set(inputs) if recorded.get(k) != inputs.get(k))
+    if changed:
+        raise InvalidInputError(f"--resume {run_dir}: that {what} was started with other {', '.join(changed)}, so its "
+                                f"finished items answer those. Fix: resume it as it was started, or start a fresh one "
+                                "in another --out")  # fmt: skip

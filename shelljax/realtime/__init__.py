@@ -11,10 +11,13 @@ Quick start::
     ball = rt.RealtimeShell.ball(props, mass=0.8, n_faces=2000, planes=[Plane([0, 0, 0], [0, 0, 1])])
     ball.drop(0.5)
     frame = ball.frame(1 / 60)      # substeps at the stable Δt; raises rt.BlowUpError if unstable
+    scan = ball.embed(fine_vertices)  # a finer display mesh carried by the simulated one
+    shown = scan.positions(ball.x)    # (N, 3) [m], each frame
 """
 
+from ._embedding import DisplayEmbedding
 from ._errors import BlowUpError
-from ._model import Collider, Frame, RealtimeShell
+from ._model import SAFETY, Collider, Frame, RealtimeShell
 from ._stable import StableStep
 
-__all__ = ["BlowUpError", "Collider", "Frame", "RealtimeShell", "StableStep"]
+__all__ = ["SAFETY", "BlowUpError", "Collider", "DisplayEmbedding", "Frame", "RealtimeShell", "StableStep"]

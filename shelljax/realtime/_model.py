@@ -33,6 +33,7 @@ from ..physics import (
 )
 from . import _kernels as K
 from ._checks import _check, _planes_array
+from ._embedding import DisplayEmbedding
 from ._errors import BlowUpError
 from ._loading import _Loading
 from ._stable import BENDING_CONSTANT, CONTACT_FRACTION, StableStep, _StableTimeStep
@@ -331,6 +332,12 @@ class RealtimeShell(_Loading, _StableTimeStep):
         x += (h - gap.min()) * row[3:6]
         self.set_state(x, np.asarray(velocity, dtype=float))
 
+    def embed(self, vertices, faces=None) -> DisplayEmbedding:
+        """A finer display mesh (``vertices`` (N, 3) [m] in the shell's current frame, e.g. the
+        scan at the inflated state; optional ``faces`` (M, 3)) embedded on this simulation mesh at
+        its current positions: ``.positions(shell.x)`` places it each frame (:class:`DisplayEmbedding`)."""
+        return DisplayEmbedding(self.x, self.faces, vertices, faces)
+
     def set_collider(self, collider: Collider | None) -> None:
         """Place (or remove, None) the moving collider for the next frames; it then moves with its
         velocity (``self.collider`` holds its current segment ends [m])."""
@@ -367,6 +374,12 @@ class RealtimeShell(_Loading, _StableTimeStep):
         if self.collider[6] > 0.0:  # the collider's work on the shell [J]: its force on it × its velocity
             self.collider_work += float(self._collider_force @ self.collider[7:10]) * done * dt
         return int(status), int(done)
+
+    def contact_forces(self) -> tuple[np.ndarray, np.ndarray]:
+        """The contact forces on the shell now, without stepping: per plane (P, 3) [N] and the
+        collider's (3,) [N] (e.g. a static reading after :meth:`relax`)."""
+        self.advance(0, self.stable.dt_s)  # zero substeps: the forces at the current state only
+        return self._plane_force.copy(), self._collider_force.copy()
 
     def relax(self, duration: float, rate: float | None = None) -> float:
         """Settle the shell towards rest (gravity and contacts as set) for ``duration`` [s] of

@@ -43,7 +43,7 @@ from ..diagnose._measurement import widened_grid, with_measurement
 from ..diagnose._study import object_unknowns
 from ..diagnose._model import WRINKLE_LAWS, physical
 from ..paper import PAPER_INDENTER_RADIUS
-from ..session import RigidPress, Session, file_sha256, load_rigid_press, load_session
+from ..session import RigidPress, Session, files_sha256, load_rigid_press, load_session
 from ._press import PressFit, fit_press, press_data
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
@@ -388,7 +388,7 @@ def _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force
                                weight=float(weight)))  # fmt: skip
     inclusion = {t: float(sum(m.weight for m in models if t in m.terms)) for t in RIG_TERMS}
     not_identified = tuple(t for t, p in inclusion.items() if 1 - IDENTIFIED < p < IDENTIFIED)
-    calibration = tuple({"path": str(s.source), "sha256": file_sha256(Path(s.source)), "object": s.object_name,
+    calibration = tuple({"path": str(s.source), "sha256": files_sha256(s.input_files), "object": s.object_name,
                          "manometer_gauge_pressure": float(s.manometer_gauge_pressure)} for s in sessions)  # fmt: skip
     calibration += tuple({"path": str(p.source), "sha256": p.sha256, "object": p.object_name, "kind": "rigid_press"}
                          for p in presses)  # fmt: skip

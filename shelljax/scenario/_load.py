@@ -4,7 +4,8 @@ A scenario names the object (a session, with P_g and E from one of its estimator
 directly), the integrator, the dissipation (a measured COR that the contact damping is calibrated
 to, or the damping itself), the planes, optionally held vertices and their rotation schedule
 (``[prescribed]``: the hammer's swing, run once), the initial states (one run per drop height) and
-the outputs. Every refusal names the file, the field, the value and the fix.
+the outputs; optionally a ``[sweep]`` over one of ``SWEEP_PARAMETERS`` (one whole scenario per
+value, ``_sweep``). Every refusal names the file, the field, the value and the fix.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._errors import InvalidInputError
 from .._toml import TomlReader, read_toml
 from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
 from ..estimate import METHODS, EstimatorOptions
@@ -35,7 +37,21 @@ _TABLES = {
 #: ``integrator.scheme`` values: ``shelljax.dynamics`` Newmark(), BackwardEuler(), TRBDF2() (docs/dynamics.md).
 SCHEMES = ("newmark", "backward-euler", "tr-bdf2")
 _PLANE_KEYS = {"name", "point_m", "normal", "contact", "activation_distance_m", "barrier_stiffness_J_per_m2", "friction", "slip_tolerance_m"}
-_TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes"}
+_TOP_KEYS = {"name", "description", "output_dir", *_TABLES, "planes", "sweep"}
+#: ``[sweep] parameter`` values: the scalar fields a sweep may vary, one whole scenario per value
+#: (a drop height becomes that scenario's only one).
+SWEEP_PARAMETERS = ("object.gauge_pressure_Pa", "object.youngs_modulus_Pa", "object.mass_kg", "object.thickness_m",
+                    "object.mesh_faces", "dissipation.cor", "dissipation.contact_damping_N_s_per_m", "integrator.dt_s",
+                    "initial.drop_heights_m")  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepSpec:
+    """The ``[sweep]`` table: ``parameter`` (one of ``SWEEP_PARAMETERS``, "table.key", in that
+    field's SI unit) and its ``values``, one scenario run per value."""
+
+    parameter: str
+    values: tuple[float, ...]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,6 +121,7 @@ class Scenario:
     preview_gif: bool
     prescribed: PrescribedSpec | None = None
     rig: Path | None = None  # fit and bayes estimate through this rig (shelljax.rig)
+    sweep: SweepSpec | None = None  # one scenario per value (scenario._sweep); None: this one scenario
 
 
 def _table(reader: TomlReader, data: dict, name: str) -> dict:
@@ -209,13 +226,57 @@ def _dissipation(r: TomlReader, diss: dict):
     return cor, damping, bracket
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario TOML; InvalidInputError names the file, field, value and fix."""
+def _swept(data: dict, parameter: str, value: float) -> dict:
+    """``data`` without its [sweep] table and with ``parameter`` ("table.key") set to ``value``."""
+    table, key = parameter.split(".")
+    field = [value] if parameter == "initial.drop_heights_m" else (int(value) if key == "mesh_faces" else value)
+    if key == "contact_damping_N_s_per_m":  # the swept damping replaces a calibration to a COR
+        data = {**data, table: {k: v for k, v in data.get(table, {}).items() if k != "cor"}}
+    if key == "cor":
+        data = {**data, table: {k: v for k, v in data.get(table, {}).items() if k != "contact_damping_N_s_per_m"}}
+    return {**{k: v for k, v in data.items() if k != "sweep"}, table: {**data.get(table, {}), key: field}}
+
+
+def _sweep(r: TomlReader, data: dict) -> SweepSpec | None:
+    """The validated ``[sweep]`` table, each value checked as its own scenario; None without one."""
+    if "sweep" not in data:
+        return None
+    table = r.table(data, "sweep", {"parameter", "values"})
+    parameter = r.choice(table, "parameter", "sweep.", SWEEP_PARAMETERS, what="sweep parameter")
+    values = table.get("values")
+    if (not isinstance(values, list) or not values
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)):  # fmt: skip
+        raise r.fail("sweep.values", "expected a non-empty list of finite numbers", "write e.g. values = [0.5, 1.0, 1.5]", value=values)
+    if len(set(values)) != len(values):
+        raise r.fail("sweep.values", "a value is repeated", "list each value once", value=values)
+    if parameter == "initial.drop_heights_m" and "prescribed" in data:
+        raise r.fail("sweep.parameter", "a held object ([prescribed]) is not dropped", "sweep another parameter", value=parameter)
+    for value in values:
+        _validated(r.path, _swept(data, parameter, float(value)), r)
+    return SweepSpec(parameter=parameter, values=tuple(float(v) for v in values))
+
+
+def load_scenario(path: str | Path, *, value: float | None = None) -> Scenario:
+    """Read and validate a scenario TOML; InvalidInputError names the file, field, value and fix.
+
+    ``value``: the scenario of one value of its ``[sweep]`` (the parameter set to it, no sweep left).
+    """
     path = Path(path)
     data = read_toml(path, "scenario config", fix_missing="give the path of a TOML file, e.g. configs/drop.toml",
                      fix_syntax="correct the syntax at that line")  # fmt: skip
     r = TomlReader(path, doc="docs/dynamics.md")
     r.no_unknown_keys(data, _TOP_KEYS)
+    sweep = _sweep(r, data)
+    if value is None:
+        return dataclasses.replace(_validated(path, data, r), sweep=sweep)
+    if sweep is None:
+        raise InvalidInputError(f"{path}: a sweep value ({value}) was asked for but the config has no [sweep] table. "
+                                "Fix: add [sweep] parameter = \"...\" and values = [...]")  # fmt: skip
+    return _validated(path, _swept(data, sweep.parameter, float(value)), r)
+
+
+def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
+    """The :class:`Scenario` of a parsed config (its [sweep] table, if any, left to :func:`_sweep`)."""
     obj, integ, diss, init, outs = (_table(r, data, t) for t in ("object", "integrator", "dissipation", "initial", "outputs"))
     prescribed = _prescribed(r, _table(r, data, "prescribed")) if "prescribed" in data else None
     direct = [k for k in ("gauge_pressure_Pa", "youngs_modulus_Pa") if k in obj]

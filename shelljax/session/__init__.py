@@ -2,6 +2,7 @@
 
 from ._bundled import bundled_sessions
 from ._load import SCHEMA_VERSION, file_sha256, load_session
+from ._reader import files_sha256
 from ._press import load_rigid_press, session_kind
 from ._schema import SHAPE_OBSERVABLES, RigidPress, Session
 from ._units import FORCE_UNITS, LENGTH_UNITS, MASS_UNITS, PRESSURE_UNITS

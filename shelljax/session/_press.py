@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ._load import _TOP_KEYS, _read_header, _read_indentation_samples, _read_kind, _read_toml, _Reader, file_sha256
+from ._reader import files_sha256
 from ._schema import RigidPress
 
 _PRESS_TOP_KEYS = {"schema_version", "kind", "object", "notes", "rig", "indentation"}
@@ -51,7 +52,8 @@ def load_rigid_press(path: str | Path) -> RigidPress:
     _reject_session_keys(reader, data)
     reader.no_unknown_keys(data, _PRESS_TOP_KEYS)
     header = _read_header(reader, data)  # with no session-only keys left, only the version, object and notes
-    trial, force, depth, _, where = _read_indentation_samples(reader, data, {}, positive_depth=False)
+    input_files = {str(path): file_sha256(path)}
+    trial, force, depth, _, where = _read_indentation_samples(reader, data, input_files, positive_depth=False)
     largest = int(np.argmax(np.abs(depth)))
     if abs(depth[largest]) > _PRESS_MAX_DEPTH:
         raise reader.fail(
@@ -61,7 +63,7 @@ def load_rigid_press(path: str | Path) -> RigidPress:
         )  # fmt: skip
     return RigidPress(
         source=path, object_name=header["object_name"], notes=header["notes"], trial=trial, force=force,
-        depth=depth, sha256=file_sha256(path), rig_name=header["rig_name"],
+        depth=depth, sha256=files_sha256(input_files), rig_name=header["rig_name"],
     )  # fmt: skip
 
 

@@ -17,6 +17,15 @@ def file_sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def files_sha256(paths) -> str:
+    """Hex sha256 of the files' bytes one after the other (a session's TOML, then the data files it
+    reads): for one file, its own sha256."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(Path(path).read_bytes())
+    return digest.hexdigest()
+
+
 class _Reader(TomlReader):
     """The TOML reader with the session format's units; arrays come back as float64 NumPy arrays."""
 
