@@ -135,6 +135,23 @@ def test_virtual_sessions_written_on_the_cluster_are_the_serial_draws(tmp_path, 
     assert [e["seed"] for e in index] == [t["seed"] for t, _ in drawn]
 
 
+@pytest.mark.slow
+def test_curve_sets_are_work_items_merged_in_order_and_a_rerun_skips_the_solved(tmp_path):
+    import subprocess
+
+    # one set on a 150-face sphere: about 50 s of 3D solves, the cheapest that runs the real tool
+    out = tmp_path / "curves.json"
+    command = [sys.executable, str(Path(__file__).resolve().parents[1] / "tools" / "make_virtual_sessions.py"),
+               "--curves", "--sets", "0", "--n-triangles", "150", "--out", str(out)]  # fmt: skip
+    first = subprocess.run(command, capture_output=True, text=True, check=True)
+    assert "set0: solved" in first.stdout
+    curves = json.loads(out.read_text())["curves"]
+    assert [c["set"] for c in curves] == [0] and curves[0]["gauge_pressure"] == virtual.PARAMETER_SETS[0][0]
+    assert json.loads(item_path(Path(f"{out}.parts"), "set0").read_text())["status"] == "done"
+    again = subprocess.run(command, capture_output=True, text=True, check=True)  # resumed from the record: no solve
+    assert "set0: solved" in again.stdout and json.loads(out.read_text())["curves"] == curves
+
+
 # --- diagnose over many studies -----------------------------------------------------------------
 FAILING, CALLS = ["yoga"], []  # which studies the fake diagnosis fails; which it was called on
 

@@ -1,8 +1,10 @@
 """Solve the noise-free 3D curves of the virtual balls (``shelljax.virtual``) into curves.json.
 
-Each parameter set of ``shelljax.virtual.PARAMETER_SETS`` runs in a child process under a
-watchdog; a child whose XLA run wedged is restarted and resumes from its per-level checkpoint in
-/tmp. Finished sets are appended to ``--out`` as they are solved, so an interrupted run keeps them.
+Each parameter set of ``shelljax.virtual.PARAMETER_SETS`` is one work item (``shelljax.executor``:
+in-process, or on ``--workers N`` / ``--cluster``), solved in a child process under a watchdog; a
+child whose XLA run wedged is restarted and resumes from its per-level checkpoint in /tmp. Each
+finished set is kept in ``<out>.parts/`` (its curve and its item record) and merged into ``--out``
+in set order, so an interrupted run keeps the sets it finished and a rerun skips them.
 
 With ``--sessions DIR`` it draws the noisy test sessions of those curves into session files
 instead (``shelljax.virtual.write_sessions``: one work item per session with its own seed, on
@@ -10,7 +12,7 @@ instead (``shelljax.virtual.write_sessions``: one work item per session with its
 
 Usage::
 
-    python tools/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600]
+    python tools/make_virtual_sessions.py --curves [--n-triangles 12000] [--sets 0,1,2] [--watchdog 600] [--workers 2]
     python tools/make_virtual_sessions.py --sessions virtual-sessions/ [--realisations 4] [--workers 2]
 """
 
@@ -41,6 +43,7 @@ def _parse(argv=None):
     ap.add_argument("--watchdog", type=float, default=600.0,
                     help="seconds without a solved level before a child is restarted (raise it for fine meshes)")
     ap.add_argument("--child", action="store_true", help="(internal) solve the given sets in this process")
+    ap.add_argument("--one-set", action="store_true", help="(internal) one set's work item: its watched child, restarted")
     ap.add_argument("--sessions", type=Path, default=None, metavar="DIR",
                     help="draw the noisy test sessions of the curves in --out into session files in DIR")
     ap.add_argument("--realisations", type=int, default=2, help="--sessions: noise draws per curve and noise level")
@@ -101,11 +104,51 @@ def main(argv=None):
     if args.child:
         _solve_sets(args, sets)
         return
-    for i in sets:
-        cmd = [sys.executable, __file__, "--curves", "--child", "--sets", str(i), "--out", str(args.out),
-               "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
-               "--watchdog", str(args.watchdog)]  # fmt: skip
-        long_runs.run_with_restarts(cmd, args.restarts, f"set {i}")
+    if args.one_set:
+        (i,) = sets
+        long_runs.run_with_restarts(_command(args, i, args.out, "--child"), args.restarts, f"set {i}")
+        return
+    _solve_on_executor(args, sets)
+
+
+def _command(args, index: int, out: Path, mode: str) -> list[str]:
+    """This tool on set ``index`` alone, into ``out``, as ``mode`` (--child or --one-set)."""
+    return [sys.executable, str(Path(__file__).resolve()), "--curves", mode, "--sets", str(index), "--out", str(out),
+            "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
+            "--watchdog", str(args.watchdog), "--restarts", str(args.restarts)]  # fmt: skip
+
+
+def solve_set(command: list[str], part: str) -> dict:
+    """The work item of one set: run ``command`` (the tool on that set, ``--one-set``) and return
+    the curve it wrote to ``part`` (JSON, SI; raises when the set was not solved)."""
+    import subprocess
+
+    subprocess.run(command, check=False)
+    curves = json.loads(Path(part).read_text())["curves"] if Path(part).exists() else []
+    if not curves:
+        raise RuntimeError(f"{part}: the set was not solved (its child's output above says why)")
+    return curves[0]
+
+
+def _solve_on_executor(args, sets) -> None:
+    """Every set a work item; the finished ones merged into ``args.out`` in set order."""
+    from shelljax.executor import WorkItem, run_items
+
+    parts = args.out.with_name(args.out.name + ".parts")
+    parts.mkdir(parents=True, exist_ok=True)
+    items = [WorkItem(f"set{i}", solve_set, (_command(args, i, parts / f"set{i}.json", "--one-set"), str(parts / f"set{i}.json")))
+             for i in sets]  # fmt: skip
+    results = run_items(items, run_dir=parts, resume=True, options=executor_options(args), progress=True,
+                        desc="curve sets")  # fmt: skip
+    data = json.loads(args.out.read_text()) if args.out.exists() else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
+    key = ("gauge_pressure", "young_modulus", "thickness", "n_faces")
+    have = {tuple(c[k] for k in key) for c in data["curves"]}
+    data["curves"] += [r.value for r in results if r.status == "done" and tuple(r.value[k] for k in key) not in have]
+    data["curves"].sort(key=lambda c: c.get("set", -1))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(data, indent=1))
+    for r in results:
+        print(f"{r.key}: {'solved' if r.status == 'done' else 'FAILED (' + str(r.error) + ')'}", flush=True)
 
 
 if __name__ == "__main__":
