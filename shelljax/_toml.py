@@ -147,6 +147,23 @@ class TomlReader:
                             value=value)  # fmt: skip
         return tuple(float(v) for v in value)
 
+    def direction(self, table: Mapping, key: str, prefix: str = "", *, fix: str, default: Any = REQUIRED) -> tuple[float, ...]:
+        """A nonzero list of 3 numbers, as floats, as given (a normal or an axis; not normalised);
+        ``fix`` says which way it should point."""
+        vector = self.vector(table, key, prefix, 3, default=default)
+        if not any(vector):
+            raise self.fail(prefix + key, "must be nonzero", fix, value=list(vector))
+        return vector
+
+    def entry(self, entry: Any, array: str, index: int, allowed: Collection[str]) -> str:
+        """Check that item ``index`` of the array of tables ``array`` is a table with only ``allowed``
+        keys; return its fields' prefix, ``"<array>[<index>]."``."""
+        if not isinstance(entry, dict):
+            raise self.fail(f"{array}[{index}]", "expected a table", f"write it as [[{array}]]", value=entry)
+        prefix = f"{array}[{index}]."
+        self.no_unknown_keys(entry, allowed, prefix)
+        return prefix
+
     def array(self, table: Mapping, key: str, prefix: str = "") -> list[float]:
         """A non-empty list of numbers (any value, NaN included: the caller checks what it needs)."""
         field = prefix + key

@@ -14,8 +14,6 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
-
 from .._errors import InvalidInputError
 from .._toml import TomlReader, read_toml
 from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
@@ -145,14 +143,9 @@ def _session_path(reader: TomlReader, value, field: str = "object.session", exam
 
 
 def _plane(reader: TomlReader, i: int, table) -> PlaneSpec:
-    prefix = f"planes[{i}]."
-    if not isinstance(table, dict):
-        raise reader.fail(f"planes[{i}]", "expected a table", "write it as [[planes]]", value=table)
-    reader.no_unknown_keys(table, _PLANE_KEYS, prefix)
+    prefix = reader.entry(table, "planes", i, _PLANE_KEYS)
     reader.choice(table, "contact", prefix, ("barrier",), "barrier")
-    normal = reader.vector(table, "normal", prefix, 3)
-    if np.linalg.norm(normal) == 0.0:
-        raise reader.fail(prefix + "normal", "must be nonzero", "give the unit normal pointing to the free side", value=list(normal))
+    normal = reader.direction(table, "normal", prefix, fix="give the unit normal pointing to the free side")
     return PlaneSpec(
         name=str(table.get("name", f"plane{i}")), point=reader.vector(table, "point_m", prefix, 3), normal=normal,
         activation_distance=reader.number(table, "activation_distance_m", prefix, default=1e-3, positive=True),
@@ -180,9 +173,7 @@ def _prescribed(r: TomlReader, table: dict) -> PrescribedSpec:
         select = tuple(select)
     elif select != "lowest":
         raise r.fail(p + "select", "unknown selection", 'use "lowest" (with within_m) or a list of vertex indices', value=select)
-    direction = r.vector(table, "axis_direction", p, 3)
-    if np.linalg.norm(direction) == 0.0:
-        raise r.fail(p + "axis_direction", "must be nonzero", "give the rotation axis, e.g. [0.0, 1.0, 0.0]", value=list(direction))
+    direction = r.direction(table, "axis_direction", p, fix="give the rotation axis, e.g. [0.0, 1.0, 0.0]")
     times = _numbers(r, table, "times_s", p, "[0.0, 0.5, 0.8, 1.5]")
     if times[0] < 0.0 or any(b <= a for a, b in zip(times, times[1:])):
         raise r.fail(p + "times_s", "times must start at ≥ 0 s and increase strictly", "write e.g. [0.0, 0.5, 0.8, 1.5]", value=list(times))

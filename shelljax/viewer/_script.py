@@ -108,14 +108,8 @@ class InteractionScript:
 
 
 def _plane(r: TomlReader, i: int, table) -> ScriptPlane:
-    prefix = f"planes[{i}]."
-    if not isinstance(table, dict):
-        raise r.fail(f"planes[{i}]", "expected a table", "write it as [[planes]]", value=table)
-    r.no_unknown_keys(table, _PLANE_KEYS, prefix)
-    normal = r.vector(table, "normal", prefix, 3)
-    if np.linalg.norm(normal) == 0.0:
-        raise r.fail(prefix + "normal", "must be nonzero", "give the normal pointing to the free side, e.g. [0, 0, 1]",
-                     value=list(normal))  # fmt: skip
+    prefix = r.entry(table, "planes", i, _PLANE_KEYS)
+    normal = r.direction(table, "normal", prefix, fix="give the normal pointing to the free side, e.g. [0, 0, 1]")
     name = table.get("name", f"plane{i}")
     if not isinstance(name, str):
         raise r.fail(prefix + "name", "expected a string", 'write e.g. name = "ground"', value=name)
@@ -138,11 +132,9 @@ def _hand(r: TomlReader, data: dict) -> Hand:
 
 
 def _unit(r: TomlReader, table: dict, key: str, prefix: str) -> tuple[float, float, float]:
-    value = np.asarray(r.vector(table, key, prefix, 3, default=[0.0, 0.0, -1.0]))
-    norm = float(np.linalg.norm(value))
-    if norm == 0.0:
-        raise r.fail(prefix + key, "must be nonzero", "give the direction the hand moves in, e.g. [0, 0, -1]", value=value.tolist())
-    return tuple(float(c) for c in value / norm)
+    value = np.asarray(r.direction(table, key, prefix, fix="give the direction the hand moves in, e.g. [0, 0, -1]",
+                                   default=[0.0, 0.0, -1.0]))  # fmt: skip
+    return tuple(float(c) for c in value / np.linalg.norm(value))
 
 
 def _action(r: TomlReader, i: int, table) -> Action:
