@@ -426,3 +426,22 @@ def test_contact_forces_at_rest_equal_the_springs():
     assert planes[0, 2] == pytest.approx(float(np.sum(ball.k_contact * depth)), rel=1e-12)
     assert np.all(collider == 0.0)
     assert np.array_equal(ball.x, x) and np.array_equal(ball.v, v) and ball.time == t
+
+
+def test_sliding_contact_feels_the_regularised_coulomb_law():
+    """A ball pressed 1 mm into a μ = 0.5 ground and sliding at 0.3 m/s: the ground's tangential
+    force is −Σ min(μ k_i δ_i v/√(v² + v_ε²), m_i v/Δt) over the touching vertices (by hand), and
+    pushes against the slip; the normal push is unchanged by it."""
+    ball = _ball(300, planes=[Plane([0, 0, 0], [0, 0, 1], friction=0.5, name="ground")])
+    ball.drop(0.0)
+    ball.x[:, 2] -= 1e-3
+    ball.v[:] = (0.3, 0.0, 0.0)
+    planes, _ = ball.contact_forces()
+    depth = np.maximum(-ball.x[:, 2], 0.0)
+    slip = 0.3
+    coulomb = 0.5 * ball.k_contact * depth * slip / np.hypot(slip, ball.slip_velocity)
+    expected = -np.sum(np.where(depth > 0.0, np.minimum(coulomb, ball.masses * slip / ball.stable.dt_s), 0.0))
+    assert expected < 0.0
+    assert planes[0, 0] == pytest.approx(expected, rel=1e-12)  # the same sums in another order
+    assert planes[0, 1] == pytest.approx(0.0, abs=1e-12)
+    assert planes[0, 2] == pytest.approx(float(np.sum(ball.k_contact * depth)), rel=1e-12)

@@ -23,6 +23,18 @@ def _closest_on_segment(px, py, pz, ax, ay, az, bx, by, bz):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _friction(tx, ty, tz, fn, mu, veps, mass, dt):
+    """Regularised Coulomb friction [N] against the slip velocity (tx, ty, tz) [m/s] under the
+    normal force ``fn`` [N]: −μ f_n t/√(|t|² + v_ε²), capped at ``mass`` |t|/Δt ([kg]: the least
+    mass it moves) so that one substep cannot reverse the slip."""
+    vt = math.sqrt(tx * tx + ty * ty + tz * tz)
+    if mu <= 0.0 or vt == 0.0:
+        return 0.0, 0.0, 0.0
+    ft = min(mu * fn * vt / math.sqrt(vt * vt + veps * veps), mass * vt / dt)
+    return -ft * tx / vt, -ft * ty / vt, -ft * tz / vt
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact, c_contact, total_mass, force,
                    plane_force, depth, energy):
     """Plane p's penalty springs, dampers and friction and its centre-of-mass dashpot (see
@@ -47,18 +59,8 @@ def _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact,
         energy += 0.5 * k_contact[i] * d * d
         if fn <= 0.0:
             continue
-        fx, fy, fz = fn * nx, fn * ny, fn * nz
-        if mu > 0.0:
-            tx = v[i, 0] - vn * nx
-            ty = v[i, 1] - vn * ny
-            tz = v[i, 2] - vn * nz
-            vt = math.sqrt(tx * tx + ty * ty + tz * tz)
-            if vt > 0.0:
-                ft = mu * fn * vt / math.sqrt(vt * vt + veps * veps)
-                ft = min(ft, mass[i] * vt / dt)  # one substep cannot reverse the slip
-                fx -= ft * tx / vt
-                fy -= ft * ty / vt
-                fz -= ft * tz / vt
+        gx, gy, gz = _friction(v[i, 0] - vn * nx, v[i, 1] - vn * ny, v[i, 2] - vn * nz, fn, mu, veps, mass[i], dt)
+        fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
         force[i, 0] += fx
         force[i, 1] += fy
         force[i, 2] += fz
@@ -121,16 +123,9 @@ def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, 
         k = sample_k[q]
         fn = k * d
         energy += 0.5 * k * d * d
-        fx, fy, fz = fn * nx, fn * ny, fn * nz
-        if mu > 0.0:
-            tx, ty, tz = wx - vn * nx, wy - vn * ny, wz - vn * nz
-            vt = math.sqrt(tx * tx + ty * ty + tz * tz)
-            if vt > 0.0:
-                m_min = min(mass[j0], min(mass[j1], mass[j2]))
-                ft = min(mu * fn * vt / math.sqrt(vt * vt + veps * veps), m_min * vt / dt)
-                fx -= ft * tx / vt
-                fy -= ft * ty / vt
-                fz -= ft * tz / vt
+        gx, gy, gz = _friction(wx - vn * nx, wy - vn * ny, wz - vn * nz, fn, mu, veps,
+                               min(mass[j0], min(mass[j1], mass[j2])), dt)  # fmt: skip
+        fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
         force[j0, 0] += w0 * fx
         force[j0, 1] += w0 * fy
         force[j0, 2] += w0 * fz
