@@ -31,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 from shelljax import realtime as rt
+from shelljax.dynamics import BarrierContact
 from shelljax.geometry import sphere_mesh
 from shelljax.physics import Plane, ShellProperties
 from shelljax.shell3d import Shell, ShellMesh
@@ -40,16 +41,18 @@ MASS = 0.8
 FRAME = 1.0 / 60.0
 
 
-def planes():
-    """configs/bounce.toml's ground and wall (friction 0.5), with a contact dashpot c = 5 N·s/m."""
-    return [Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], friction=0.5, damping=5.0, name="ground"),
-            Plane([0.53, 0.0, 0.0], [-1.0, 0.0, 0.0], friction=0.5, damping=5.0, name="wall")]  # fmt: skip
+def planes(contact="barrier"):
+    """configs/bounce.toml's ground and wall (friction 0.5; its barrier ĝ = 1 mm, κ = 1e3 J/m², or
+    ``contact="spring"``: the runtime's spring behind the plane), with a contact dashpot c = 5 N·s/m."""
+    law = BarrierContact(1e-3, 1e3) if contact == "barrier" else None
+    return [Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], law, friction=0.5, damping=5.0, name="ground"),
+            Plane([0.53, 0.0, 0.0], [-1.0, 0.0, 0.0], law, friction=0.5, damping=5.0, name="wall")]  # fmt: skip
 
 
-def ball(n_faces, **options):
+def ball(n_faces, contact="barrier", **options):
     shell = Shell(mesh=ShellMesh.sphere(PEZZI["radius"], n_faces, pole_refinement=1.0), thickness=PEZZI["thickness"])
     return rt.RealtimeShell.from_shell(shell, ShellProperties(**PEZZI), mass=MASS, gas="adiabatic",
-                                       rest_shape="small-strain", planes=planes(), **options)  # fmt: skip
+                                       rest_shape="small-strain", planes=planes(contact), **options)  # fmt: skip
 
 
 def run_frames(shell, duration):
@@ -66,9 +69,9 @@ def run_frames(shell, duration):
     return np.array(walls), np.array(cpus), np.array(steps), np.array(forces)
 
 
-def bounce_row(n_faces, duration, parallel=False):
+def bounce_row(n_faces, duration, parallel=False, contact="barrier"):
     t = time.perf_counter()
-    shell = ball(n_faces, parallel=parallel)
+    shell = ball(n_faces, contact, parallel=parallel)
     load_s = time.perf_counter() - t
     shell.drop(0.3)
     shell.relax(0.05)  # the small-strain start settles to its inflated shape (in the air)
@@ -268,6 +271,8 @@ def main():
     parser.add_argument("--faces", type=int, nargs="+", default=[500, 1000, 2000, 4000])
     parser.add_argument("--duration", type=float, default=2.0, help="simulated seconds per mesh [s]")
     parser.add_argument("--parallel", action="store_true", help="Numba's threaded kernel (prange over faces)")
+    parser.add_argument("--contact", choices=("barrier", "spring"), default="barrier",
+                        help="the planes' law: configs/bounce.toml's barrier (default) or the runtime's plain spring")
     parser.add_argument("--skip-jax", action="store_true")
     parser.add_argument("--skip-hammer", action="store_true")
     parser.add_argument("--display-faces", type=int, default=20000, help="display mesh embedded on 2k faces (0: skip)")
@@ -278,7 +283,7 @@ def main():
     print(f"{'faces':>6} {'dt_elem ms':>10} {'dt ms':>7} {'sub/fr':>6} {'us/sub wall':>11} {'us/sub cpu':>10} "
           f"{'RT med':>7} {'RT p99':>7} {'RTcpu med':>9} {'RTcpu p99':>9}")  # fmt: skip
     for n in args.faces:
-        r = bounce_row(n, args.duration, args.parallel)
+        r = bounce_row(n, args.duration, args.parallel, args.contact)
         rows.append(r)
         print(f"{r['faces']:>6} {r['element_dt_s'] * 1e3:>10.4f} {r['stable_dt_s'] * 1e3:>7.4f} {r['substeps_per_frame']:>6} "
               f"{r['us_per_substep_wall_median']:>11.1f} {r['us_per_substep_cpu_median']:>10.1f} "
@@ -288,6 +293,7 @@ def main():
                           "note": "shared machine, loaded by other jobs: wall times noisy; CPU (process) time beside them"},
               "frame_s": FRAME, "scenario": "configs/bounce.toml's ball (R 0.13 m, h 0.9 mm, E 2.34 MPa, P_g 1300 Pa, "
               "0.8 kg, adiabatic) launched at 3 m/s, 0.3 m up, at the wall then the ground; Numba serial kernels",
+              "contact": args.contact,
               "bounce": rows}  # fmt: skip
     if args.display_faces:
         e = result["embedding"] = embedding_row(display_faces=args.display_faces)

@@ -61,6 +61,9 @@ F_REF = math.sqrt(FORCE_LEVELS[0] * FORCE_LEVELS[-1])  # [N]
 FAMILIES = ("pad", "finger", "sensor", "depth")
 METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s", "fit+rig, object")
 CALIBRATION_WEIGHTS = "fit+rig, calibration weights"  # the same fits, mixed by the rig's weights alone
+TRUE_FAMILIES = "fit+rig, model of the true families"  # the rig model whose families are the truth's, where selected
+TERM_FAMILY = {"pad_linear": "pad", "pad_hertz": "pad", "pad_power": "pad", "finger_radius": "finger",
+               "depth_offset": "depth", "sensor_gain": "sensor", "sensor_power": "sensor"}  # fmt: skip
 
 
 def draw_rig(rng, n_imperfections: int) -> dict:
@@ -301,31 +304,67 @@ def evaluate_rig(index, world, methods, bayes_every: int, manometer_std: float) 
                 not_identified=list(rig.not_identified), sessions=rows)  # fmt: skip
 
 
+def _with_true_families(rig) -> dict:
+    """``rig`` with each session's results gaining ``TRUE_FAMILIES``: the estimates of the selected rig
+    model whose term families are exactly the rig's true ones (none where selection kept no such
+    model). Its 95 % interval is the model's own, value × exp(±1.96 × relative std)."""
+    truth = set(rig["families"])
+    sessions = []
+    for row in rig["sessions"]:
+        models = [m for m in row["results"].get("rig_models", [])
+                  if m.get("status") == "ok" and {TERM_FAMILY[t] for t in m["terms"]} == truth]  # fmt: skip
+        results = dict(row["results"])
+        if models:
+            est = models[0]["estimates"]
+            pairs = {name: (est[name]["value"], (est[name]["value"] * math.exp(-1.96 * est[name]["relative_std"]),
+                                                 est[name]["value"] * math.exp(1.96 * est[name]["relative_std"])))
+                     for name in ("gauge_pressure", "young_modulus")}  # fmt: skip
+            results[TRUE_FAMILIES] = {**_errors(pairs, row["pressure"], row["young_modulus"]), "seconds": 0.0}
+        sessions.append({**row, "results": results})
+    return {**rig, "sessions": sessions}
+
+
+def _median_interval(rigs, method, key, draws: int = 2000) -> list[float]:
+    """95 % bootstrap interval [%] of the median |error| of ``method`` over rigs: a rig's sessions share
+    its calibration (and an object's sessions its R and h), so rigs are the independent draws."""
+    per_rig = [np.array([abs(r["results"][method][f"{key}_error"]) for r in rig["sessions"]
+                         if method in r["results"] and f"{key}_error" in r["results"][method]]) for rig in rigs]  # fmt: skip
+    per_rig = [errors for errors in per_rig if errors.size]
+    rng = np.random.default_rng(0)
+    samples = [np.median(np.concatenate([per_rig[i] for i in rng.integers(0, len(per_rig), len(per_rig))]))
+               for _ in range(draws)]  # fmt: skip
+    return [float(np.percentile(samples, 2.5)), float(np.percentile(samples, 97.5))]
+
+
 def summarize(rigs, methods):
-    def stats(rows):
+    rigs = [_with_true_families(rig) for rig in rigs]
+
+    def stats(group):
+        rows = [r for rig in group for r in rig["sessions"]]
         out = {}
-        for m in [*methods, CALIBRATION_WEIGHTS]:
+        for m in [*methods, CALIBRATION_WEIGHTS, TRUE_FAMILIES]:
             ok = [r["results"][m] for r in rows if m in r["results"] and "failed" not in r["results"][m]]
             failed = sum(1 for r in rows if m in r["results"] and "failed" in r["results"][m])
             if not ok:
                 continue
             entry = dict(n=len(ok), failed=failed, median_abs_p_error=float(np.median([abs(o["p_error"]) for o in ok])),
+                         median_abs_p_error_ci95=_median_interval(group, m, "p"),
                          p_coverage=float(np.mean([o["p_covered"] for o in ok])),
                          p_coverage_ci95=_coverage_interval([o["p_covered"] for o in ok]))  # fmt: skip
             with_e = [o for o in ok if "e_error" in o]
             if with_e:
                 entry.update(median_abs_e_error=float(np.median([abs(o["e_error"]) for o in with_e])),
+                             median_abs_e_error_ci95=_median_interval(group, m, "e"),
                              e_coverage=float(np.mean([o["e_covered"] for o in with_e])),
                              e_coverage_ci95=_coverage_interval([o["e_covered"] for o in with_e]))  # fmt: skip
             entry["median_seconds"] = float(np.median([o["seconds"] for o in ok]))
             out[m] = entry
         return out
 
-    rows = [r for rig in rigs for r in rig["sessions"]]
-    summary = {"rigs": len(rigs), "test_sessions": len(rows), "all": stats(rows),
-               "clean": stats([r for rig in rigs if not rig["families"] for r in rig["sessions"]])}  # fmt: skip
+    summary = {"rigs": len(rigs), "test_sessions": sum(len(rig["sessions"]) for rig in rigs), "all": stats(rigs),
+               "clean": stats([rig for rig in rigs if not rig["families"]])}  # fmt: skip
     for family in FAMILIES:
-        summary[f"with_{family}"] = stats([r for rig in rigs if family in rig["families"] for r in rig["sessions"]])
+        summary[f"with_{family}"] = stats([rig for rig in rigs if family in rig["families"]])
     clean = [rig for rig in rigs if not rig["families"]]
     if {"fit", "fit+rig"} <= set(methods) and clean:
         summary["clean_fit+rig_minus_fit"] = _median_difference(clean, "fit+rig", "fit")
@@ -367,12 +406,15 @@ def _median_difference(rigs, method, baseline, draws: int = 2000) -> dict:
 def table(summary, methods) -> str:
     lines = [f"{summary['rigs']} rigs, {summary['test_sessions']} test sessions; median calibration "
              f"{summary['median_calibration_seconds']:.0f} s",
-             f"{'group':>14s} {'method':>29s} {'n':>4s} {'|P_g err| med':>13s} {'P cov95':>8s} {'|E err| med':>12s} "
-             f"{'E cov95':>8s}"]  # fmt: skip
+             f"{'group':>14s} {'method':>36s} {'n':>4s} {'|P_g err| med (95 % over rigs)':>30s} {'P cov95':>8s} "
+             f"{'|E err| med (95 % over rigs)':>28s} {'E cov95':>8s}"]  # fmt: skip
     for group in ("all", "clean") + tuple(f"with_{f}" for f in FAMILIES):
         for m, s in summary.get(group, {}).items():
-            lines.append(f"{group:>14s} {m:>29s} {s['n']:4d} {s['median_abs_p_error']:12.1f}% {100 * s['p_coverage']:7.0f}% "
-                         f"{s.get('median_abs_e_error', float('nan')):11.1f}% {100 * s.get('e_coverage', float('nan')):7.0f}%")  # fmt: skip
+            p_lo, p_hi = s["median_abs_p_error_ci95"]
+            e_lo, e_hi = s.get("median_abs_e_error_ci95", (float("nan"),) * 2)
+            lines.append(f"{group:>14s} {m:>36s} {s['n']:4d} {s['median_abs_p_error']:10.1f}% ({p_lo:4.1f} … {p_hi:4.1f} %) "
+                         f"{100 * s['p_coverage']:7.0f}% {s.get('median_abs_e_error', float('nan')):8.1f}% "
+                         f"({e_lo:4.1f} … {e_hi:4.1f} %) {100 * s.get('e_coverage', float('nan')):7.0f}%")  # fmt: skip
     if "clean_fit+rig_minus_fit" in summary:
         d = summary["clean_fit+rig_minus_fit"]
         lines.append(f"clean rigs, fit+rig minus fit ({d['objects']} objects, bootstrap 95 %): "

@@ -21,8 +21,20 @@ def _check(name: str, value, *, positive=True, allow_none=False) -> float:
     return v
 
 
+def _barrier(plane) -> tuple[float, float]:
+    """(ĝ [m], κ [J/m²]) of a plane's IPC log barrier (a ``dynamics.BarrierContact`` law or a scenario
+    PlaneSpec's), or (0, 0) for a plane without one (the runtime's penalty spring from g = 0)."""
+    law = getattr(plane, "law", None)
+    if law is not None and hasattr(law, "activation_distance") and hasattr(law, "stiffness"):
+        return float(np.asarray(law.activation_distance)), float(np.asarray(law.stiffness))
+    if hasattr(plane, "activation_distance") and hasattr(plane, "barrier_stiffness"):
+        return float(plane.activation_distance), float(plane.barrier_stiffness)
+    return 0.0, 0.0
+
+
 def _planes_array(planes, slip_velocity: float) -> tuple[np.ndarray, tuple[str, ...]]:
-    """(P, 9) rows point, normal, μ, v_ε, c from physics.Plane objects or scenario PlaneSpecs."""
+    """(P, 11) rows point, normal, μ, v_ε, c, barrier ĝ [m], κ [J/m²] (0, 0: none) from physics.Plane
+    objects or scenario PlaneSpecs."""
     rows, names = [], []
     for i, p in enumerate(planes):
         point = np.asarray(p.point, dtype=float).reshape(-1)
@@ -33,6 +45,9 @@ def _planes_array(planes, slip_velocity: float) -> tuple[np.ndarray, tuple[str, 
                                     f"got point {point.tolist()}, normal {normal.tolist()}.")
         mu = _check(f"planes[{i}] ({name!r}).friction", np.asarray(getattr(p, "friction", 0.0)), positive=False)
         damping = _check(f"planes[{i}] ({name!r}).damping [N·s/m]", np.asarray(getattr(p, "damping", 0.0)), positive=False)
-        rows.append([*point, *(normal / np.linalg.norm(normal)), mu, slip_velocity, damping])
+        reach, kappa = _barrier(p)
+        _check(f"planes[{i}] ({name!r}) barrier activation distance ĝ [m]", reach, positive=False)
+        _check(f"planes[{i}] ({name!r}) barrier stiffness κ [J/m²]", kappa, positive=reach > 0.0)
+        rows.append([*point, *(normal / np.linalg.norm(normal)), mu, slip_velocity, damping, reach, kappa])
         names.append(name)
-    return np.asarray(rows, dtype=float).reshape(-1, 9), tuple(names)
+    return np.asarray(rows, dtype=float).reshape(-1, 11), tuple(names)

@@ -1,7 +1,8 @@
 """Compiled (Numba) penalty contact of the real-time runtime (float64, SI units): the planes
-(springs, dampers, regularised Coulomb friction and the centre-of-mass dashpot) and the moving
-sphere/capsule collider felt at barycentric contact points. ``contact_forces`` is the entry point
-(:mod:`._kernels` calls it once per force evaluation)."""
+(the reference's barrier or a spring, dampers, regularised Coulomb friction and the centre-of-mass
+dashpot) and the moving sphere/capsule collider felt at barycentric contact points.
+``contact_forces`` is the entry point (:mod:`._kernels` calls it once per force evaluation);
+``plane_clamps`` sets up the plane law per vertex."""
 
 from __future__ import annotations
 
@@ -34,29 +35,93 @@ def _friction(tx, ty, tz, fn, mu, veps, mass, dt):
     return -ft * tx / vt, -ft * ty / vt, -ft * tz / vt
 
 
+# half the spring: clamped at k_i itself, hard impacts outran the stable Δt (docs/realtime.md, *The model*)
+BARRIER_CLAMP_FRACTION = 0.5
+
+
+def _barrier_stiffness(s, kappa):
+    """d²/dg² [N/m] of the IPC barrier −κ (g − ĝ)² ln(g/ĝ) at s = g/ĝ ∈ (0, 1] (it does not depend on
+    ĝ); it falls monotonically from +∞ at s → 0 to 0 at s = 1."""
+    return kappa * (-2.0 * np.log(s) - 4.0 * (s - 1.0) / s + (s - 1.0) ** 2 / s**2)
+
+
+def plane_clamps(planes, k_contact) -> np.ndarray:
+    """(P, V, 3) per plane and vertex: the clamp gap g_c [m], the barrier's force [N] and energy [J]
+    there. A plane with a barrier (ĝ, κ) pushes a vertex at gap g by the reference's barrier force
+    −d/dg[−κ (g − ĝ)² ln(g/ĝ)] for g_c ≤ g < ĝ and continues it linearly with the vertex's contact
+    stiffness k_i [N/m] below g_c, where the barrier's stiffness reaches ``BARRIER_CLAMP_FRACTION``
+    k_i: the reference's force law wherever it is that soft, and never stiffer than the stable Δt
+    allows. A plane without a barrier has g_c = 0 and no force at g_c: the spring k_i δ behind it."""
+    clamps = np.zeros((planes.shape[0], k_contact.shape[0], 3))
+    for p, (reach, kappa) in enumerate(planes[:, 9:11]):
+        if reach <= 0.0:
+            continue
+        lo, hi = np.full(k_contact.shape, 1e-12), np.ones(k_contact.shape)
+        for _ in range(80):  # bisection on s = g_c/ĝ: the barrier's stiffness is monotonic in s
+            mid = 0.5 * (lo + hi)
+            softer = _barrier_stiffness(mid, kappa) < BARRIER_CLAMP_FRACTION * k_contact
+            hi = np.where(softer, mid, hi)
+            lo = np.where(softer, lo, mid)
+        s = hi
+        clamps[p, :, 0] = s * reach
+        clamps[p, :, 1] = kappa * reach * (2.0 * (s - 1.0) * np.log(s) + (s - 1.0) ** 2 / s)
+        clamps[p, :, 2] = -kappa * reach**2 * (s - 1.0) ** 2 * np.log(s)
+    return clamps
+
+
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact, c_contact, total_mass, force,
+def _plane_law(gap, k, reach, kappa, clamp):
+    """(normal force [N], energy [J]) of a vertex at ``gap`` [m] < max(ĝ, 0) from a plane: the barrier
+    of reach ĝ = ``reach`` [m] and stiffness ``kappa`` [J/m²] above the clamp gap, its linear
+    continuation with stiffness ``k`` [N/m] below (``clamp``: g_c, force and energy there; see
+    ``plane_clamps``)."""
+    if gap < clamp[0]:
+        d = clamp[0] - gap
+        return clamp[1] + k * d, clamp[2] + clamp[1] * d + 0.5 * k * d * d
+    s = gap / reach
+    return kappa * reach * (2.0 * (s - 1.0) * math.log(s) + (s - 1.0) ** 2 / s), \
+        -kappa * reach * reach * (s - 1.0) ** 2 * math.log(s)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def planes_energy(x, planes, clamps, k_contact):
+    """The planes' contact energy [J] at positions x (V, 3) [m] (see ``plane_clamps``)."""
+    energy = 0.0
+    for p in range(planes.shape[0]):
+        reach = max(planes[p, 9], 0.0)
+        for i in range(x.shape[0]):
+            gap = (x[i, 0] - planes[p, 0]) * planes[p, 3] + (x[i, 1] - planes[p, 1]) * planes[p, 4] \
+                + (x[i, 2] - planes[p, 2]) * planes[p, 5]
+            if gap < reach:
+                energy += _plane_law(gap, k_contact[i], planes[p, 9], planes[p, 10], clamps[p, i])[1]
+    return energy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _plane_contact(x, v, mass, dt, planes, clamps, p, vertex_area, mean_area, k_contact, c_contact, total_mass, force,
                    plane_force, depth, energy):
-    """Plane p's penalty springs, dampers and friction and its centre-of-mass dashpot (see
+    """Plane p's contact law, dampers and friction and its centre-of-mass dashpot (see
     ``contact_forces``), added to ``force`` and ``plane_force[p]``; ``depth[p]`` ← its deepest
-    penetration [m]. Returns ``energy`` [J] plus its springs' energy."""
+    penetration [m]. Returns ``energy`` [J] plus its contact energy."""
     nv = x.shape[0]
     ox, oy, oz = planes[p, 0], planes[p, 1], planes[p, 2]
     nx, ny, nz = planes[p, 3], planes[p, 4], planes[p, 5]
     mu = planes[p, 6]
     veps = planes[p, 7]
     cbody = planes[p, 8]
+    reach = max(planes[p, 9], 0.0)
     touching_area = 0.0
     for i in range(nv):
         gap = (x[i, 0] - ox) * nx + (x[i, 1] - oy) * ny + (x[i, 2] - oz) * nz
-        if gap >= 0.0:
+        if gap >= reach:
             continue
-        d = -gap
-        depth[p] = max(depth[p], d)
-        touching_area += vertex_area[i]
+        depth[p] = max(depth[p], -gap)
+        # the reference's lagged weight of a barrier contact, (1 − g/ĝ)², 1 behind the plane
+        touching_area += vertex_area[i] * (1.0 if gap <= 0.0 else (1.0 - gap / reach) ** 2)
         vn = v[i, 0] * nx + v[i, 1] * ny + v[i, 2] * nz
-        fn = k_contact[i] * d - c_contact[i] * vn
-        energy += 0.5 * k_contact[i] * d * d
+        fn, e = _plane_law(gap, k_contact[i], planes[p, 9], planes[p, 10], clamps[p, i])
+        fn -= c_contact[i] * vn
+        energy += e
         if fn <= 0.0:
             continue
         gx, gy, gz = _friction(v[i, 0] - vn * nx, v[i, 1] - vn * ny, v[i, 2] - vn * nz, fn, mu, veps, mass[i], dt)
@@ -142,18 +207,21 @@ def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def contact_forces(x, v, mass, dt, planes, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx, sample_w, sample_k, force,
-                   plane_force, collider_force):
-    """Add penalty contact forces [N] to ``force``; return (energy [J], deepest penetration [m] per plane).
+def contact_forces(x, v, mass, dt, planes, clamps, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx, sample_w,
+                   sample_k, force, plane_force, collider_force):
+    """Add contact forces [N] to ``force``; return (energy [J], deepest penetration [m] per plane).
 
-    ``planes`` (P, 9): point (3) [m], unit normal (3), μ [-], slip velocity v_ε [m/s], body damping
-    c [N·s/m]. A vertex behind a plane (gap g < 0) feels k δ − c_v v_n (δ = −g, clamped ≥ 0) along
-    the normal with per-vertex stiffness ``k_contact`` (V,) [N/m] and damping ``c_contact`` (V,)
-    [N·s/m], and regularised Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one
+    ``planes`` (P, 11): point (3) [m], unit normal (3), μ [-], slip velocity v_ε [m/s], body damping
+    c [N·s/m], barrier reach ĝ [m] and stiffness κ [J/m²] (0, 0: a spring behind the plane);
+    ``clamps`` (P, V, 3) from ``plane_clamps``. A vertex at gap g < max(ĝ, 0) feels the plane's law
+    f(g) (the barrier, or its linear continuation with per-vertex stiffness ``k_contact`` (V,)
+    [N/m]; without a barrier k δ, δ = −g) less c_v v_n (clamped ≥ 0) along the normal, ``c_contact``
+    (V,) [N·s/m], and regularised Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one
     substep of it cannot reverse v_t. The plane's c is the centre-of-mass dashpot of
     :mod:`shelljax.dynamics._shell`: −c W (v_com·n) spread over the vertices by mass,
-    W = min(1, Σ_touching A_j / Ā). ``collider`` (11,): a, b (segment ends [m]; equal: a sphere),
-    radius [m], velocity (3) [m/s], μ [-]: a moving capsule, felt at the contact points
+    W = min(1, Σ_j w_j A_j / Ā), w_j = (1 − g_j/ĝ)² within the barrier's reach, 1 behind the plane.
+    ``collider`` (11,): a, b (segment ends [m]; equal: a sphere), radius [m], velocity (3) [m/s],
+    μ [-]: a moving capsule, felt at the contact points
     ``sample_idx`` (S, 3) int with barycentric weights ``sample_w`` (S, 3) (vertices, edge
     midpoints, face centroids) through springs ``sample_k`` (S,) [N/m] and the same friction
     (v_ε = 1 cm/s).
@@ -167,8 +235,8 @@ def contact_forces(x, v, mass, dt, planes, vertex_area, mean_area, k_contact, c_
     total_mass = mass.sum()
     planes_veps = 1e-2
     for p in range(n_planes):
-        energy = _plane_contact(x, v, mass, dt, planes, p, vertex_area, mean_area, k_contact, c_contact, total_mass,
-                                force, plane_force, depth, energy)
+        energy = _plane_contact(x, v, mass, dt, planes, clamps, p, vertex_area, mean_area, k_contact, c_contact,
+                                total_mass, force, plane_force, depth, energy)
     if collider[6] > 0.0:
         energy = _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, planes_veps, force,
                                    collider_force, depth, n_planes, energy)

@@ -372,8 +372,8 @@ def kinetic_energy(v, mass):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending,
-                 gas_law, p_gauge, v_ref, p_atm, gamma, planes, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx, sample_w, sample_k,
-                 parallel, face_grad, face_energy, incidence_ptr, incidence, force, vgrad, plane_force, collider_force,
+                 gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx,
+                 sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr, incidence, force, vgrad, plane_force, collider_force,
                  out):
     """``force`` (V, 3) [N] ← elastic + gas + gravity + contact at (x, v); ``out`` as in ``advance``."""
     if parallel:
@@ -392,7 +392,7 @@ def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest
         force[i, 2] += pres * vgrad[i, 2] + mass[i] * gravity[2]
         if not (math.isfinite(force[i, 0]) and math.isfinite(force[i, 1]) and math.isfinite(force[i, 2])):
             finite = False
-    e_con, depth = contact_forces(x, v, mass, dt, planes, vertex_area, mean_area, k_contact, c_contact,
+    e_con, depth = contact_forces(x, v, mass, dt, planes, clamps, vertex_area, mean_area, k_contact, c_contact,
                                   collider, sample_idx, sample_w, sample_k, force, plane_force, collider_force)
     n_planes = planes.shape[0]
     dmax = 0.0
@@ -412,7 +412,7 @@ def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-            with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, vertex_area, mean_area, k_contact,
+            with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area, k_contact,
             c_contact, collider, sample_idx, sample_w, sample_k, tunnel_depth, parallel, face_grad, face_energy, incidence_ptr, incidence,
             force, vgrad, plane_force, collider_force, out, velocity_decay):
     """``n_steps`` velocity-Verlet substeps of Δt = ``dt`` [s] in place on x, v (V, 3) [m], [m/s]:
@@ -433,7 +433,7 @@ def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, 
     pf_sum = np.zeros((n_planes, 3))
     cf_sum = np.zeros(3)
     status = _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-                          with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, vertex_area, mean_area,
+                          with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area,
                           k_contact, c_contact, collider, sample_idx, sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr, incidence,
                           force, vgrad, plane_force, collider_force, out)
     if status != OK:
@@ -454,7 +454,7 @@ def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, 
             collider[c] += dt * collider[7 + c]
             collider[3 + c] += dt * collider[7 + c]
         status = _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-                              with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, vertex_area, mean_area,
+                              with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area,
                               k_contact, c_contact, collider, sample_idx, sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr,
                               incidence, force, vgrad, plane_force, collider_force, out)
         pf_sum += plane_force

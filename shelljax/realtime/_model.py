@@ -33,6 +33,7 @@ from ..physics import (
 )
 from . import _kernels as K
 from ._checks import _check, _planes_array
+from ._contact import plane_clamps, planes_energy
 from ._embedding import DisplayEmbedding
 from ._errors import BlowUpError
 from ._loading import _Loading
@@ -235,6 +236,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
             self.k_contact = np.full(self.x.shape[0], _check("contact_stiffness [N/m]", contact_stiffness))
         zeta = _check("contact_damping_ratio [-]", contact_damping_ratio, positive=False)
         self.c_contact = 2.0 * zeta * np.sqrt(self.k_contact * self.masses)
+        self._clamps = plane_clamps(self.planes, self.k_contact)
         self.stable = self.stable_dt_estimate()
 
     def _collider_samples(self) -> None:
@@ -287,10 +289,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         vol = K.volume_and_gradient(self.x, self.faces, grad)
         _, e_gas = K.gas_pressure_energy(vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma)
         e_grav = float(-np.sum(self.masses * (self.x @ self.gravity)))
-        e_con = 0.0
-        for row in self.planes:
-            gap = (self.x - row[:3]) @ row[3:6]
-            e_con += float(np.sum(0.5 * self.k_contact * np.minimum(gap, 0.0) ** 2))
+        e_con = float(planes_energy(self.x, self.planes, self._clamps, self.k_contact))
         out = {"kinetic": float(K.kinetic_energy(self.v, self.masses)), "elastic": float(e_el), "gas": float(e_gas),
                "gravity": e_grav, "contact": e_con}  # fmt: skip
         out["total"] = sum(out.values())
@@ -347,6 +346,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         """Replace the planes (``physics.Plane``s or scenario plane specs, as the constructor's
         ``planes``; () for none) for the next frames; the contact springs are kept."""
         self.planes, self.plane_names = _planes_array(planes, self.slip_velocity)
+        self._clamps = plane_clamps(self.planes, self.k_contact)
         self._plane_force = np.zeros((self.planes.shape[0], 3))
 
     # ------------------------------------------------------------------ stepping
@@ -364,7 +364,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         status, done = K.advance(
             self.x, self.v, int(n_substeps), float(dt), self.masses, self.gravity, self.stencil, self.faces,
             self.rest_inv, self.rest_b, self.rest_area, self.h, self.alpha, self.beta, self.with_bending,
-            K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma, self.planes, self.vertex_area,
+            K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma, self.planes, self._clamps, self.vertex_area,
             self.mean_area, self.k_contact, self.c_contact, self.collider, self._sample_idx, self._sample_w,
             self._sample_k, self.tunnel_depth, self.parallel,
             self._face_grad, self._face_energy, self._incidence_ptr, self._incidence, self._force,

@@ -27,8 +27,8 @@ class Replay:
     ``com_velocity_m_per_s`` (N, 3); ``real_time_factor`` (N,) [-] simulated / wall time of the
     frame; ``hand_m`` (N, 3) the hand's centre (NaN where it is off); ``holding`` (N,) bool;
     ``action`` (N,) what was under way; ``shapes_m`` (K, V, 3) the positions at frames
-    ``shape_frames`` (K,) (for the GIF); ``faces`` (F, 3); ``plane_names``; ``planes`` (P, 9) as the runtime packs them (point [m], unit
-    normal, μ, v_ε [m/s], c [N·s/m]); ``blow_up``: the
+    ``shape_frames`` (K,) (for the GIF); ``faces`` (F, 3); ``plane_names``; ``planes`` (P, 11) as the runtime packs them (point [m], unit
+    normal, μ, v_ε [m/s], c [N·s/m], barrier ĝ [m], κ [J/m²]); ``blow_up``: the
     error's message, or None."""
 
     time_s: np.ndarray
