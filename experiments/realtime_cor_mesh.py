@@ -41,7 +41,9 @@ def drop_cor(faces: int, height: float, safety: float = SAFETY) -> dict:
     """COR [-], impact speed [m/s], contact time [s] and compression [m] of one zero-damping drop
     from ``height`` [m] (lowest point above the ground, from rest) on a ``faces``-face ball; a
     drop that blows up is run again at half the ``safety``."""
-    from verify_realtime import impact  # a sibling script: experiments/ is on the path when run as a script
+    from verify_realtime import (
+        impact,  # a sibling script: experiments/ is on the path when run as a script
+    )
 
     shell = Shell(mesh=ShellMesh.sphere(PEZZI["radius"], faces, pole_refinement=1.0), thickness=PEZZI["thickness"])
     ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], BarrierContact(1e-3, 1e3), name="ground")

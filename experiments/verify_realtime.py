@@ -3,7 +3,7 @@
 The same ball (configs/drop.toml's Pezzi ball: R 0.13 m, h 0.9 mm, ν 0.4, E 2.34 MPa, P_g 1300 Pa,
 0.8 kg, adiabatic gas; the rest shape, inflated state and masses of ``dynamics.shell_system``,
 which ``RealtimeShell.from_system`` copies) in the issue's cases, once with ``dynamics.simulate``
-(``--integrator``, default TRBDF2, at ``--dt`` 0.125 ms and ``--coarse-dt`` 0.25 ms for its own
+(``--integrator``, default TRBDF2, at ``--dt`` 62.5 µs and ``--coarse-dt`` 125 µs for its own
 Δt-convergence; barrier contact ĝ = 1 mm, κ = 1e3 J/m², as the configs) and with
 ``shelljax.realtime`` (velocity Verlet at its stable Δt; the same barrier on the planes, continued
 linearly by the contact springs where it gets stiffer than they; and at Δt/4 and with 4× stiffer
@@ -24,7 +24,7 @@ COM's travel past that height; peak force and peak gauge pressure of the signals
 ``--peak-cutoff`` (60 Hz, zero phase: the breathing mode at 150 Hz and the vertices' chatter
 above 360 Hz are what neither engine converges; docs/realtime.md).
 
-The reference runs are slow (1.5–8 min each on 2 shared cores): each is cached under ``--cache``
+The reference runs are slow (2.5–7 min each on 2 shared cores): each is cached under ``--cache``
 (runs/.cache/realtime-fidelity by default, git-ignored) keyed by its case, mesh, scheme and Δt,
 and ``--reference-only`` fills the cache (run it in the background with nohup). Without it, the
 script runs the realtime side (seconds), reads the cached references, and prints the table with
@@ -135,7 +135,7 @@ def planes_for(case, damping, friction, barrier=True, slip_tolerance=1e-4):
     """The case's planes (``physics.Plane``): the ground, and for ``wall`` the wall [m]; the
     reference's friction smooths slips below ``slip_tolerance`` [m] a step."""
     law = d.BarrierContact(1e-3, 1e3) if barrier else None
-    kw = dict(friction=friction, slip_tolerance=slip_tolerance, damping=damping)
+    kw = {"friction": friction, "slip_tolerance": slip_tolerance, "damping": damping}
     out = [Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], law, **kw, name="ground")]
     if "wall_gap_m" in CASES[case]:
         x_wall = RADIUS + CASES[case]["wall_gap_m"]  # the ball's centre starts at x = 0
@@ -373,13 +373,36 @@ def poke_row(args, result):
     return row(p["reference_force_N"], p["realtime_force_N"], "rel", 0.02)
 
 
+def reference_convergence(args):
+    """The reference's COR, contact time, compression and 60 Hz peaks per case at each of
+    ``args.convergence``'s steps, and their spread [%] (max − min over the mean)."""
+    keys = ("cor", "contact_time_s", "max_compression_m", "peak_force_N", "peak_gauge_pressure_Pa")
+    out = {"integrator": args.integrator, "slip_velocity_m_per_s": args.slip_velocity, "steps_s": args.convergence,
+           "cases": {}}  # fmt: skip
+    print(f"{'case, impact':<22} {'quantity':<24} " + " ".join(f"{dt * 1e3:>9.4g} ms" for dt in args.convergence) + "  spread")
+    for case in args.cases:
+        system = build_system(args.faces, case, args.damping, args.friction)
+        runs = {dt: reference_run(case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity,
+                                  args.cache) for dt in args.convergence}  # fmt: skip
+        impacts = {dt: case_impacts(case, r, system, args.peak_cutoff) for dt, r in runs.items() if "failed" not in r}
+        out["cases"][case] = {f"{dt:g}": m for dt, m in impacts.items()}
+        for plane in next(iter(impacts.values()), {}):
+            for key in keys:
+                values = np.array([impacts[dt][plane][key] for dt in impacts])
+                spread = float(np.ptp(values) / abs(values.mean()))
+                out["cases"][case][f"{plane} {key} spread"] = spread
+                print(f"{case + ', ' + plane:<22} {key:<24} " + " ".join(f"{v:>12.5g}" for v in values) + f"  {100 * spread:5.2f} %")
+    args.convergence_json.write_text(json.dumps(out, indent=1))
+    print(f"wrote {args.convergence_json}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--faces", type=int, default=2000)
     parser.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
     parser.add_argument("--integrator", default="TRBDF2", help="a shelljax.dynamics integrator class name")
-    parser.add_argument("--dt", type=float, default=1.25e-4, help="the reference's time step [s]")
-    parser.add_argument("--coarse-dt", type=float, default=2.5e-4,
+    parser.add_argument("--dt", type=float, default=6.25e-5, help="the reference's time step [s]")
+    parser.add_argument("--coarse-dt", type=float, default=1.25e-4,
                         help="a coarser reference step [s], for the reference's own Δt-convergence (0: none)")
     parser.add_argument("--damping", type=float, default=0.0, help="contact dashpot c [N·s/m]")
     parser.add_argument("--friction", type=float, default=0.5)
@@ -397,6 +420,10 @@ def main():
     parser.add_argument("--reference-only", action="store_true", help="only fill the reference cache (slow)")
     parser.add_argument("--poke-only", action="store_true", help="only the static poke, into the existing --json")
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "bench" / "realtime-fidelity.json")
+    parser.add_argument("--convergence", type=float, nargs="+", default=None, metavar="DT",
+                        help="only the reference's own convergence over these steps [s] (e.g. 1e-3 5e-4 2.5e-4, "
+                             "#48 part 1), into --convergence-json; runs the references that are not cached")
+    parser.add_argument("--convergence-json", type=Path, default=ROOT / "docs" / "bench" / "reference-convergence.json")
     args = parser.parse_args()
     steps = [args.dt] + ([args.coarse_dt] if args.coarse_dt else [])
 
@@ -411,6 +438,9 @@ def main():
         if args.poke:
             print(f"{time.strftime('%H:%M:%S')} poke reference {poke(args.faces, cache=args.cache)}", flush=True)
         return
+
+    if args.convergence:
+        return reference_convergence(args)
 
     if args.poke_only:
         result = json.loads(args.json.read_text())

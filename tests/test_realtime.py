@@ -16,7 +16,12 @@ import pytest
 from shelljax import realtime as rt
 from shelljax._errors import InvalidInputError, NoConvergenceError, ShelljaxError
 from shelljax.dynamics import BarrierContact
-from shelljax.physics import Plane, ShellProperties, barrier_energy, isothermal_gauge_pressure
+from shelljax.physics import (
+    Plane,
+    ShellProperties,
+    barrier_energy,
+    isothermal_gauge_pressure,
+)
 from shelljax.realtime import _contact as rt_contact
 from shelljax.realtime import _kernels as K
 from shelljax.shell3d import Shell, ShellMesh

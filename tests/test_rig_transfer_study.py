@@ -17,7 +17,7 @@ def _model(terms, p_ratio, e_ratio, weight, truth_p, truth_e, std=0.05):
 
 
 def _rig(index, families, sessions):
-    return {"rig": index, "truth": dict.fromkeys(families, {}), "families": sorted(families), "calibration_seconds": 1.0,
+    return {"rig": index, "truth": {family: {} for family in families}, "families": sorted(families), "calibration_seconds": 1.0,
             "selected": [], "not_identified": [], "sessions": sessions}  # fmt: skip
 
 
