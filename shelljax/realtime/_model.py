@@ -85,7 +85,8 @@ class Frame:
     ``wall_s`` [s] its wall-clock cost, ``plane_forces_N`` (P, 3) and ``collider_force_N`` (3,)
     [N] (on the shell, averaged over the frame's substeps), ``gauge_pressure_Pa``, ``volume_m3``,
     ``energies_J`` (kinetic, elastic, gas, gravity, contact, total) and the centre of mass
-    ``com_m`` (3,) [m] and its velocity ``com_velocity_m_per_s`` (3,)."""
+    ``com_m`` (3,) [m] and its velocity ``com_velocity_m_per_s`` (3,); ``refinements``: how many times
+    the frame was redone at half its substep after a blow-up (0: none)."""
 
     time_s: float
     substeps: int
@@ -98,6 +99,7 @@ class Frame:
     energies_J: dict
     com_m: np.ndarray
     com_velocity_m_per_s: np.ndarray
+    refinements: int = 0
 
 
 class RealtimeShell(_Loading, _StableTimeStep):
@@ -122,14 +124,17 @@ class RealtimeShell(_Loading, _StableTimeStep):
     Δt, ``bending`` (False: membrane only), ``parallel`` (Numba threads over faces),
     ``tunnel_depth`` [m] (a vertex deeper behind a plane is a blow-up; default half the mean edge),
     ``energy_growth`` [-] (the guard's bound on the growth of the total energy, as a fraction of
-    the energy scale m g L + kinetic + elastic, L the object's size).
+    the energy scale m g L + kinetic + elastic, L the object's size), ``max_refinements`` (a frame
+    that trips the guard is redone from its start at half the substep, up to this many times,
+    before :class:`BlowUpError` is raised: a hard impact can stiffen the shell past the stable Δt
+    estimated at rest; 0: raise at once).
     """
 
     def __init__(self, *, stencil, rest_metric, rest_curvature, rest_area, vertex_area, positions, masses,
                  young_modulus, poisson_ratio, thickness, gas="adiabatic", gauge_pressure, reference_volume=None,
                  heat_capacity_ratio=AIR_HEAT_CAPACITY_RATIO, atmospheric_pressure=ATMOSPHERIC_PRESSURE, planes=(),
                  gravity=STANDARD_GRAVITY, contact_stiffness=None, contact_damping_ratio=0.0, slip_velocity=1e-2,
-                 safety=SAFETY, bending=True, parallel=False, tunnel_depth=None, energy_growth=0.5,
+                 safety=SAFETY, bending=True, parallel=False, tunnel_depth=None, energy_growth=0.5, max_refinements=3,
                  velocities=None, dt_method="spectral"):  # fmt: skip
         self._set_material(gas, young_modulus, poisson_ratio, thickness, gauge_pressure, heat_capacity_ratio,
                            atmospheric_pressure, safety)  # fmt: skip
@@ -140,6 +145,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         self.with_bending = bool(bending)
         self.parallel = bool(parallel)
         self.energy_growth = _check("energy_growth [-]", energy_growth)
+        if isinstance(max_refinements, bool) or not isinstance(max_refinements, (int, np.integer)) or max_refinements < 0:
+            raise InvalidInputError(f"max_refinements: expected an integer ≥ 0 (0: no redone frames); got {max_refinements!r}.")
+        self.max_refinements = int(max_refinements)
         self._set_gas_and_sizes(reference_volume, tunnel_depth)
         self._allocate_buffers()
         self._set_contact_and_dt(contact_stiffness, contact_damping_ratio, dt_method)
@@ -404,36 +412,53 @@ class RealtimeShell(_Loading, _StableTimeStep):
 
     def frame(self, frame_dt: float = 1.0 / 60.0, substeps: int | None = None) -> Frame:
         """Advance one frame of ``frame_dt`` [s] in ``substeps`` equal substeps (default
-        :meth:`substeps_for`); raises :class:`BlowUpError` if the guard trips."""
+        :meth:`substeps_for`). A frame that trips the guard is redone from its start with twice the
+        substeps, up to ``max_refinements`` times (``Frame.refinements`` says how often); then
+        :class:`BlowUpError` is raised."""
         frame_dt = _check("frame_dt [s]", frame_dt)
         n = self.substeps_for(frame_dt) if substeps is None else int(_check("substeps", substeps))
-        dt = frame_dt / n
         if self._energy_start is None:
             self._energy_start = self.energies()["total"]
             self._energy_scale = self._scale()
+        saved = (self.x.copy(), self.v.copy(), self.collider.copy(), self.time, self.collider_work)
         start = _time.perf_counter()
-        status, done = self.advance(n, dt)
+        for refinements in range(self.max_refinements + 1):
+            if refinements:
+                x, v, collider, self.time, self.collider_work = saved
+                self.x[:], self.v[:], self.collider[:] = x, v, collider
+            substeps_done = n * 2**refinements
+            dt = frame_dt / substeps_done
+            status, done = self.advance(substeps_done, dt)
+            energies = self.energies() if status == K.OK else None  # at the frame's end: x and v of one instant
+            error = self._blow_up(status, dt, energies)
+            if error is None:
+                break
+        if error is not None:
+            raise error
         wall = _time.perf_counter() - start
+        com, vcom = self.com()
+        pressure, volume, _ = self.gas_state()
+        return Frame(self.time, done, dt, wall, self._plane_force.copy(), self._collider_force.copy(), pressure,
+                     volume, energies, com, vcom, refinements)  # fmt: skip
+
+    def _blow_up(self, status: int, dt: float, energies: dict | None) -> BlowUpError | None:
+        """The guard's verdict on the frame just stepped at ``dt`` [s]: a :class:`BlowUpError` to
+        raise (a failed substep, or the total energy grown past its bound), or None."""
         o = self._out
         if status != K.OK:
             reason = "not finite" if status == K.NOT_FINITE else "tunnelled"
             detail = ("a force or the volume became NaN/inf" if status == K.NOT_FINITE else
                       f"a vertex is {o[6]:.3g} m behind a plane (tunnel depth {self.tunnel_depth:.3g} m)")
-            raise BlowUpError(f"realtime step blew up at t = {self.time:.6g} s ({reason}: {detail}) with Δt = {dt:.3g} s. "
-                              f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s, or lower the contact stiffness.",
-                              reason=reason, time_s=self.time, dt_s=dt)  # fmt: skip
-        energies = self.energies()  # at the frame's end: x and v of the same instant
-        kin = energies["kinetic"]
+            return BlowUpError(f"realtime step blew up at t = {self.time:.6g} s ({reason}: {detail}) with Δt = {dt:.3g} s. "
+                               f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s, or lower the contact stiffness.",
+                               reason=reason, time_s=self.time, dt_s=dt)  # fmt: skip
         growth = energies["total"] - self._energy_start - self.collider_work
-        if not math.isfinite(kin) or growth > self.energy_growth * self._energy_scale:
-            raise BlowUpError(f"realtime step blew up at t = {self.time:.6g} s (energy growth: the total energy rose by "
-                              f"{growth:.3g} J, past the bound {self.energy_growth * self._energy_scale:.3g} J) with Δt = {dt:.3g} s. "
-                              f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s.",
-                              reason="energy growth", time_s=self.time, dt_s=dt)  # fmt: skip
-        com, vcom = self.com()
-        pressure, volume, _ = self.gas_state()
-        return Frame(self.time, done, dt, wall, self._plane_force.copy(), self._collider_force.copy(), pressure,
-                     volume, energies, com, vcom)  # fmt: skip
+        if not math.isfinite(energies["kinetic"]) or growth > self.energy_growth * self._energy_scale:
+            return BlowUpError(f"realtime step blew up at t = {self.time:.6g} s (energy growth: the total energy rose by "
+                               f"{growth:.3g} J, past the bound {self.energy_growth * self._energy_scale:.3g} J) with Δt = {dt:.3g} s. "
+                               f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s.",
+                               reason="energy growth", time_s=self.time, dt_s=dt)  # fmt: skip
+        return None
 
     def run(self, duration: float, frame_dt: float = 1.0 / 60.0, substeps: int | None = None) -> dict:
         """Frames over ``duration`` [s]: a dict of per-frame arrays (time_s, wall_s, com_m, ...)."""
