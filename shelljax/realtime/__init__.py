@@ -1,6 +1,7 @@
 """Real-time runtime: explicit symplectic stepping of the 3D shell's physics with compiled
-(Numba) per-element kernels, penalty contact against planes and a moving collider, an automatic
-stable Δt and a blow-up guard (SI units). See docs/realtime.md.
+(Numba) per-element kernels, contact against planes (the reference's barrier, continued by a
+spring) and a moving collider, an automatic stable Δt and a blow-up guard (SI units). See
+docs/realtime.md.
 
 Quick start::
 

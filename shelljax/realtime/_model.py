@@ -291,7 +291,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         return f + self.gas_state(x)[2]
 
     def energies(self) -> dict:
-        """Kinetic, elastic, gas, gravity and penalty-contact energies and their total [J] now."""
+        """Kinetic, elastic, gas, gravity and plane-contact energies and their total [J] now."""
         e_el, _ = self.elastic_forces()
         grad = np.zeros_like(self.x)
         vol = K.volume_and_gradient(self.x, self.faces, grad)
