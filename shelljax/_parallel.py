@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import jax
-import jax.numpy as jnp
+import numpy as np
 
 
 def cpu_workers() -> int:
@@ -26,26 +26,29 @@ def cpu_workers() -> int:
         return os.cpu_count() or 1
 
 
-def map_batch(fn: Callable, batch, workers: int | None = None):
-    """``fn(batch)`` computed as ``workers`` equal slices of the leading axis, one per thread.
+def map_batch(fn: Callable, batch, workers: int | None = None, rows_per_call: int | None = None):
+    """``fn(batch)`` computed slice by slice of the leading axis, the slices spread over ``workers`` threads.
 
     ``fn`` must treat the rows of ``batch`` (an array, leading axis = batch) independently and
-    return a pytree of arrays with the same leading axis. The batch is padded with copies of
-    its last row to a multiple of ``workers`` so that every slice has one shape (one
-    compilation), and the padding is dropped from the result.
+    return a pytree of arrays with the same leading axis. The slices have ``rows_per_call`` rows
+    (default: one slice per worker), the batch padded with copies of its last row to a multiple
+    of that, so every call has one shape (one compilation, whatever the batch's size); the
+    padding is dropped from the result. Slices and result are host (NumPy) arrays: slicing on
+    the host compiles nothing.
     """
-    batch = jnp.asarray(batch)
+    batch = np.asarray(batch)
     size = batch.shape[0]
-    workers = min(cpu_workers() if workers is None else int(workers), size)
-    if workers <= 1:
-        return fn(batch)
-    per = -(-size // workers)
-    pad = per * workers - size
-    padded = jnp.concatenate([batch, jnp.repeat(batch[-1:], pad, axis=0)])
-    slices = [padded[i * per : (i + 1) * per] for i in range(workers)]
-    with ThreadPoolExecutor(workers) as pool:
-        parts = list(pool.map(lambda s: jax.block_until_ready(fn(s)), slices))
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *parts)
+    workers = max(min(cpu_workers() if workers is None else int(workers), size), 1)
+    per = -(-size // workers) if rows_per_call is None else int(rows_per_call)
+    calls = -(-size // per)
+    padded = np.concatenate([batch, np.repeat(batch[-1:], calls * per - size, axis=0)])
+    slices = [padded[i * per : (i + 1) * per] for i in range(calls)]
+    if len(slices) == 1:
+        parts = [fn(slices[0])]
+    else:
+        with ThreadPoolExecutor(min(workers, calls)) as pool:
+            parts = list(pool.map(lambda s: jax.block_until_ready(fn(s)), slices))
+    return jax.tree_util.tree_map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:size], *parts)
 
 
 __all__ = ["cpu_workers", "map_batch"]

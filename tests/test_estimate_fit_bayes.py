@@ -200,3 +200,69 @@ def test_every_estimator_answers_in_one_protocol():
         assert record["estimates"]["gauge_pressure"]["unit"] == "Pa"
     with pytest.raises(InvalidInputError, match="unknown estimator"):
         run_estimator("magic", s, options)
+
+
+def test_padded_log_posterior_is_the_posterior_of_the_session():
+    # An independent computation (NumPy and SciPy) of the documented posterior, on a session whose
+    # 21 samples and 3 counts are padded to 32 and 8, with the thickness fitted and the radius not.
+    from scipy.stats import norm
+
+    from shelljax.estimate import build_problem, padded_problem
+
+    s = synthetic(depth_noise=1e-3, seed=7, radius_std=0.0)
+    problem = build_problem(s, MODEL, start_pressure=1250.0, start_modulus=2.0e6, nuisance=("depth_offset",))
+    padded, columns, _ = padded_problem(problem)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        u = np.zeros(7)
+        u[columns] = 0.05 * rng.standard_normal(columns.size)
+        u[-1] = math.log(8e-4)
+        pressure, modulus = 1250.0 * math.exp(u[0]), 2.0e6 * math.exp(u[1])
+        thickness, offset, noise = TRUTH["thickness"] * math.exp(u[2]), 1e-3 * u[4], math.exp(u[-1])
+        pred = MODEL(pressure, modulus, thickness, TRUTH["radius"], jnp.asarray(s.force))
+        depth = np.asarray(pred.depth) + offset
+        n = float(pred.wrinkle_count)
+        expected = (np.sum(norm.logpdf(s.depth, depth, noise)) + 0.5 * s.depth.size * math.log(2 * math.pi)
+                    + np.sum(np.log(norm.cdf(s.wrinkle_counts + 0.5 - n) - norm.cdf(s.wrinkle_counts - 0.5 - n)))
+                    - 0.5 * ((thickness - s.thickness) / s.thickness_std) ** 2)
+        log_p, converged = padded.log_posterior(jnp.asarray(u))
+        # the same sums in another order: round-off only
+        assert bool(converged) and float(log_p) == pytest.approx(expected, rel=1e-10, abs=1e-8)
+    outside = np.zeros(7)
+    outside[-1] = math.log(1e-6)  # σ_w below its prior's 10 µm
+    assert float(padded.log_posterior(jnp.asarray(outside))[0]) == -np.inf
+
+
+def test_stretch_moves_keep_unsampled_coordinates_and_sample_a_gaussian():
+    # The scaling-law posterior in (log P_g, log E, log σ_w) with the rest fixed; the padded
+    # coordinates must stay exactly 0, and the chain's moments match emcee's own sampler run on
+    # the same log posterior (two independent samplers of one density).
+    import emcee
+    import jax
+
+    from shelljax.estimate import build_problem, padded_problem
+    from shelljax.estimate._ensemble import stretch_block
+
+    s = synthetic(depth_noise=1e-3, seed=8, radius_std=0.0, thickness_std=0.0)
+    problem = build_problem(s, MODEL, start_pressure=1300.0, start_modulus=2.34e6)
+    padded, columns, _ = padded_problem(problem)
+    free = np.zeros(7, bool)
+    free[[*columns, 6]] = True
+    rng = np.random.default_rng(1)
+    walkers = np.zeros((16, 7))
+    walkers[:, free] = 1e-3 * rng.standard_normal((16, 3)) + [0.0, 0.0, math.log(problem.depth_noise)]
+    chains = []
+    for block in range(8):
+        out = stretch_block(padded, walkers, block, free, 500, 500)
+        walkers = np.asarray(out["chain"])[-1]
+        chains.append(np.asarray(out["chain"]))
+    chain = np.concatenate(chains)[1000:]
+    assert np.all(chain[:, :, ~free] == 0.0)
+    log_prob = jax.jit(jax.vmap(lambda v: padded.log_posterior(jnp.zeros(7).at[free].set(v))[0]))
+    reference = emcee.EnsembleSampler(16, 3, lambda c: np.asarray(log_prob(jnp.asarray(c))), vectorize=True)
+    reference.run_mcmc(chain[-1][:, free], 3000, progress=False)
+    ours, theirs = chain[:, :, free].reshape(-1, 3), reference.get_chain(discard=500, flat=True)
+    # ~1000 effective samples each: means agree to a few Monte-Carlo standard errors (0.1 σ),
+    # standard deviations to 15 %
+    assert np.all(np.abs(ours.mean(0) - theirs.mean(0)) < 0.15 * theirs.std(0))
+    np.testing.assert_allclose(ours.std(0), theirs.std(0), rtol=0.15)

@@ -1,4 +1,4 @@
-"""Traced programs kept across processes (shelljax/estimate/_programs.py) and the shipped fit program."""
+"""Traced programs kept across processes (shelljax/_programs.py) and the shipped fit program."""
 
 import warnings
 from pathlib import Path
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from shelljax.estimate import _programs
+from shelljax import _programs
 from shelljax.config import load_config
 from shelljax.estimate import options_forward_model
 from shelljax.estimate._fit import _solve

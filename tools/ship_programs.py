@@ -1,15 +1,16 @@
-"""Export the default experiment's traced fit program into the package (``shelljax/data/programs/``).
+"""Export the default experiment's traced programs into the package (``shelljax/data/programs/``).
 
-A fit's program is kept across processes by its key (package sources, jax and jaxlib versions, the
-arguments' structure; ``shelljax/estimate/_programs.py``). Shipping the one ``shelljax run
+A fit's or posterior's program is kept across processes by its key (package sources, jax and jaxlib versions, the
+arguments' structure; ``shelljax/_programs.py``). Shipping the one ``shelljax run
 configs/paper.toml`` uses lets a new user's first fit skip its tracing: only XLA compiles.
 Any change to the package's sources changes the key, so run this after every such change
 (``tests/test_estimate_programs.py`` fails until you do)::
 
     python tools/ship_programs.py [--config configs/paper.toml]
 
-It fits every calibration and estimation session of the config (one program serves all of a
-structure), then replaces the shipped programs with the ones those fits exported.
+It fits every calibration and estimation session of the config and, where the config runs
+bayes, samples the posterior of its estimation sessions (one program serves all of a structure),
+then replaces the shipped programs with the ones those runs exported.
 """
 
 from __future__ import annotations
@@ -49,7 +50,10 @@ def main() -> None:
     shipped.mkdir(parents=True)
     try:
         for path in (*config.calibration_sessions, *config.sessions):
-            run_estimator("fit", load_session(path), options)
+            session = load_session(path)
+            fit = run_estimator("fit", session, options)
+            if "bayes" in config.methods and path in config.sessions:
+                run_estimator("bayes", session, options, fit=fit, progress=False)
             print(f"fitted {path.name}", flush=True)
         exported = sorted((cache / "programs").glob("*.jaxexport"))
         if not exported:

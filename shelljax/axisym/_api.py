@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 
 import equinox as eqx
 import jax
@@ -12,7 +11,8 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ._hilbert import hilbert_order
-from .._parallel import map_batch
+from .._parallel import cpu_workers, map_batch
+from .._programs import persistent_jit
 from ..paper import PAPER_FORCES
 from ..physics import ShellProperties
 from ._model import CurvePhysics, Setup, _shell, curve_single
@@ -85,21 +85,22 @@ def _walk_coordinates(params: Float[Array, "b 4"]) -> Float[Array, "b 4"]:
     return jnp.column_stack([jnp.log(params[:, :3]), params[:, 3]])
 
 
-@functools.partial(jax.jit, static_argnums=(0, 3))
-def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
+def _curves(params, forces, physics: CurvePhysics, cold, *, setup: Setup, chunk: int):
     b = params.shape[0]
     if b == 1:  # one curve: its Newton loops need no batching, which costs tracing and compiling
-        one = _one(setup, params[0], forces, jax.tree_util.tree_map(lambda v: v[0], physics))[0]
+        one = _one(setup, params[0], forces[0], jax.tree_util.tree_map(lambda v: v[0], physics))[0]
         return jax.tree_util.tree_map(lambda v: v[None], one)
     if chunk <= 0 or b <= chunk:
-        return jax.vmap(lambda th, ph: _one(setup, th, forces, ph))(params, physics)[0]
+        return jax.vmap(lambda th, f, ph: _one(setup, th, f, ph))(params, forces, physics)[0]
     # `chunk` lanes, vmapped, each walking its own stretch of the batch's Hilbert ordering, one
     # curve after the other (lax.scan): the inflation and every level of a curve start from the
     # lowest-energy of the usual start, the lane's last converged state there and that state
     # extrapolated to the new parameters (``curve_single``'s nearby_guesses). A vmapped
     # while_loop runs until its slowest member converges: few lanes waste little. The physics
-    # rows travel with their parameter rows but stay out of the walk's coordinates: a guess
-    # from a neighbour with other physics is only a worse guess (the lowest energy one wins).
+    # rows and force rows travel with their parameter rows but stay out of the walk's
+    # coordinates: a guess from a neighbour with other physics or forces is only a worse guess
+    # (the lowest energy one wins). ``cold`` (traced, so the same program) drops every guess:
+    # each curve starts from the usual start, for curves a neighbour's guess led astray.
     coords = jax.lax.stop_gradient(_walk_coordinates(params))  # they only order and guess
     order = hilbert_order(coords)
     steps = -(-b // chunk)
@@ -117,12 +118,12 @@ def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
         # along each step, the slope unchanged across it). The unextrapolated state stays a
         # guess, for the levels where the extrapolation lands far off.
         states, anchors, slopes = walk
-        thetas, here, physics_rows = step_in
+        thetas, here, force_rows, physics_rows = step_in
         delta = here[:, None, :] - anchors
         predicted = states + jnp.einsum("lkyc,lkc->lky", slopes, delta)
-        guesses = jnp.stack([states, predicted], axis=2)
+        guesses = jnp.where(cold, jnp.nan, jnp.stack([states, predicted], axis=2))
         fields, (solved, inflation_residual) = jax.vmap(
-            lambda theta, ph, nearby: _one(setup, theta, forces, ph, nearby))(thetas, physics_rows, guesses)
+            lambda theta, f, ph, nearby: _one(setup, theta, f, ph, nearby))(thetas, force_rows, physics_rows, guesses)
         solved = jax.lax.stop_gradient(solved)  # the walk only guesses: no derivative through it
         inflated = (inflation_residual <= setup.atol)[:, None]
         good = jnp.concatenate([inflated, fields["converged"]], axis=1)[..., None]
@@ -134,14 +135,19 @@ def _batched(setup: Setup, params, forces, chunk: int, physics: CurvePhysics):
         anchors = jnp.where(good, here[:, None, :], anchors)
         return (states, anchors, slopes), fields
 
-    n_levels, n_unknowns = 1 + forces.shape[0], 2 * len(setup.theta()) + 1
+    n_levels, n_unknowns = 1 + forces.shape[1], 2 * len(setup.theta()) + 1
     start = (jnp.full((chunk, n_levels, n_unknowns), jnp.nan), jnp.zeros((chunk, n_levels, 4)),
              jnp.zeros((chunk, n_levels, n_unknowns, 4)))
     walked_physics = jax.tree_util.tree_map(lanes, physics)
-    _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords), walked_physics))
+    _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords), lanes(forces), walked_physics))
     unwalk = jnp.zeros(b, order.dtype).at[order].set(jnp.arange(b, dtype=order.dtype))
     return jax.tree_util.tree_map(
         lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
+
+
+_batched = jax.jit(_curves, static_argnames=("setup", "chunk"))
+# the checked API's calls, made outside any trace: their traced programs are kept across processes
+_batched_kept = persistent_jit(_curves, static_argnames=("setup", "chunk"))
 
 
 def _rows(properties: ShellProperties) -> Float[Array, "b 4"]:
@@ -152,26 +158,34 @@ def _rows(properties: ShellProperties) -> Float[Array, "b 4"]:
 
 
 def indentation_curves_raw(properties: ShellProperties, forces, setup: Setup, chunk: int = 0,
-                           physics: CurvePhysics | None = None) -> CurveResult:
+                           physics: CurvePhysics | None = None, cold=False) -> CurveResult:
     """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
 
     ``properties``: :class:`shelljax.physics.ShellProperties` whose P_g [Pa], E [Pa], h [m], ν [-]
     have shape (batch,) (scalars: one curve; its radius, if set, is ``setup.radius``); ``forces``
-    (k,) [N]. ``physics``: per-curve traced effects (:class:`CurvePhysics`, fields () or (batch,);
+    (k,) [N], or (batch, k): each curve's own. ``physics``: per-curve traced effects (:class:`CurvePhysics`, fields () or (batch,);
     None: the default physics, the Setup's); with or without it the same program runs, and curves
     are differentiable in its values as in ``properties``.
     ``chunk`` > 0 solves a batch larger than ``chunk`` in that many vmapped lanes, each walking
     a stretch of the batch ordered along a Hilbert curve and starting every curve from its
     predecessor's equilibria (fewer Newton iterations on dense batches, docs/axisym.md); 0 vmaps
     the whole batch at once, every curve from scratch. The results agree to the Newton tolerance
-    either way. Differentiable in ``properties`` (implicit differentiation of every equilibrium).
+    either way; ``cold`` (a traced flag, the same program) starts every walked curve from the
+    usual start instead. Differentiable in ``properties`` (implicit differentiation of every
+    equilibrium).
     """
+    return _curve_result(properties, forces, setup, chunk, physics, cold, _batched)
+
+
+def _curve_result(properties, forces, setup, chunk, physics, cold, program) -> CurveResult:
     _shell(properties, setup, "indentation_curves_raw")  # a ShellProperties, of the Setup's radius if it has one
     params = _rows(properties)
     physics = (CurvePhysics() if physics is None else physics).resolved(setup, params.shape[0])
     # a batch that fits in one chunk is solved unwalked: one program whatever the chunk it asked for
     chunk = int(chunk) if params.shape[0] > int(chunk) > 0 else 0
-    return CurveResult(**_batched(setup, params, jnp.asarray(forces, jnp.float64), chunk, physics))
+    forces = jnp.asarray(forces, jnp.float64)
+    forces = jnp.broadcast_to(forces, (params.shape[0], forces.shape[-1]))
+    return CurveResult(**program(params, forces, physics, jnp.asarray(cold), setup=setup, chunk=chunk))
 
 
 _FIELDS = ("gauge_pressure", "young_modulus", "thickness", "poisson_ratio")
@@ -213,10 +227,11 @@ def _check(properties, forces, radius):
     if radius is None:
         raise InvalidInputError("indentation_curves: no radius. Fix: set properties.radius or pass radius= [m]")
     f = np.asarray(forces, dtype=float)
-    if f.ndim != 1 or f.size == 0 or np.any(f <= 0) or np.any(np.diff(f) <= 0):
+    if f.ndim not in (1, 2) or f.size == 0 or f.ndim == 2 and f.shape[0] != p.shape[0] or np.any(f <= 0) \
+            or np.any(np.diff(f, axis=-1) <= 0):
         raise InvalidInputError(
-            f"indentation_curves: forces must be a 1-D increasing array of positive values [N]; "
-            f"got {forces!r}."
+            f"indentation_curves: forces must be an increasing array of positive values [N], (k,) or one row "
+            f"per curve ({p.shape[0]}, k); got {forces!r}."
         )
     if not (np.isfinite(radius) and radius > 0):
         raise InvalidInputError(f"indentation_curves: radius must be > 0 [m]; got {radius!r}.")
@@ -252,26 +267,33 @@ def _check_physics(physics: CurvePhysics, batch: int, setup: Setup) -> np.ndarra
     return np.stack(columns, axis=1)
 
 
-def _retry_from_cold_starts(res: CurveResult, rows, solve, workers) -> CurveResult:
-    """The curves a walked batch lost, solved again each from its own cold start: a neighbour's
-    equilibrium can lead Newton astray where the cold start converges."""
+def _retry_from_cold_starts(res: CurveResult, rows, solve, workers, rows_per_call) -> CurveResult:
+    """The curves a walked batch lost, solved again each from its own cold start (the same
+    program, slices of ``rows_per_call`` rows): a neighbour's equilibrium can lead Newton astray
+    where the cold start converges."""
     failed = np.flatnonzero(~np.asarray(res.converged).all(axis=1))
     if failed.size == 0:
         return res
-    again = map_batch(solve, rows[failed], workers)
-    return jax.tree_util.tree_map(lambda whole, part: jnp.asarray(whole).at[failed].set(part), res, again)
+    again = map_batch(solve, rows[failed], workers, rows_per_call)
+
+    def retried(whole, part):
+        whole = np.array(whole)
+        whole[failed] = part
+        return whole
+
+    return jax.tree_util.tree_map(retried, res, again)
 
 
 def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radius: float | None = None,
                        raise_on_failure: bool = True,
                        chunk: int = 8, workers: int | None = None, physics: CurvePhysics | None = None,
-                       **setup_kwargs) -> CurveResult:
+                       rows_per_call: int | None = None, **setup_kwargs) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``properties``: :class:`shelljax.physics.ShellProperties` of fields () or (batch,): P_g [Pa],
     E [Pa], h [m], ν [-], and the inflated radius R [m] (one for the batch) unless ``radius`` [m]
     gives it; ``forces`` [N]: increasing positive forces (default: the paper's 5–20 N in 2.5 N
-    steps). Further keywords go to :class:`Setup` (``n_elements``, ``grading``, ``gas`` =
+    steps), (k,) or each curve's own (batch, k). Further keywords go to :class:`Setup` (``n_elements``, ``grading``, ``gas`` =
     "prescribed" | "isothermal" | "adiabatic" | "polytropic", ``relax``, ``indenter_radius`` [m],
     ``contact_stiffness`` [N/m³], ``atol`` [N], ...). ``physics``: per-curve effects
     (:class:`CurvePhysics`, fields () or (batch,); None: the Setup's defaults).
@@ -281,23 +303,28 @@ def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radi
     per host thread, each solving its share of the batch curve after curve from the previous
     curve's equilibria (:func:`indentation_curves_raw`; docs/axisym.md, *Benchmark*). ``workers``:
     host threads the batch is split over (default: every CPU core on the CPU backend, 1 on a
-    GPU; see :func:`map_batch`). For use inside jit/vmap/grad call
-    :func:`indentation_curves_raw`.
+    GPU; see :func:`map_batch`); ``rows_per_call``: curves per compiled call (default: the batch
+    split evenly over the workers; fixed, one program serves batches of every size). For use
+    inside jit/vmap/grad call :func:`indentation_curves_raw`.
     """
     p, f, radius = _check(properties, forces, radius)
     setup = Setup(radius=float(radius), **setup_kwargs)  # raises InvalidInputError on a bad field
     columns = _check_physics((CurvePhysics() if physics is None else physics).resolved(setup), p.shape[0], setup)
 
-    def solve(rows, lanes=chunk):
-        # the physics columns travel with their params through map_batch's split
-        shell = ShellProperties(**{name: rows[:, j] for j, name in enumerate(_FIELDS)})
-        return indentation_curves_raw(shell, f, setup, lanes,
-                                      CurvePhysics(**{name: rows[:, 4 + j] for j, name in enumerate(_PHYSICS_BOUNDS)}))
+    physics_end = 4 + len(_PHYSICS_BOUNDS)
 
-    rows = np.concatenate([p, columns], axis=1)
-    res = map_batch(solve, rows, workers)
+    def solve(rows, cold=False):
+        # the physics and force columns travel with their params through map_batch's split
+        shell = ShellProperties(**{name: rows[:, j] for j, name in enumerate(_FIELDS)})
+        physics_rows = CurvePhysics(**{name: rows[:, 4 + j] for j, name in enumerate(_PHYSICS_BOUNDS)})
+        return _curve_result(shell, rows[:, physics_end:], setup, chunk, physics_rows, cold, _batched_kept)
+
+    rows = np.concatenate([p, columns, np.broadcast_to(f, (p.shape[0], f.shape[-1]))], axis=1)
+    workers = cpu_workers() if workers is None else workers
+    per_call = -(-rows.shape[0] // max(min(workers, rows.shape[0]), 1)) if rows_per_call is None else rows_per_call
+    res = map_batch(solve, rows, workers, per_call)
     if chunk > 0:
-        res = _retry_from_cold_starts(res, rows, lambda r: solve(r, 0), workers)
+        res = _retry_from_cold_starts(res, rows, lambda r: solve(r, True), workers, per_call)
     if raise_on_failure:
         conv = np.asarray(res.converged)
         if not conv.all():
@@ -305,7 +332,7 @@ def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radi
             b, k = bad[0]
             if float(res.wall_gap[b, k]) <= p[b, 2]:
                 raise NoConvergenceError(
-                    f"axisymmetric curve: at force {f[k]} N the indenter pushed the top wall onto the "
+                    f"axisymmetric curve: at force {float(res.force[b, k])} N the indenter pushed the top wall onto the "
                     f"bottom wall of curve {b} (P_g, E, h, ν) = {p[b].tolist()} "
                     f"(top pole {float(res.wall_gap[b, k]):.3g} m "
                     "above the bottom pole, thickness h larger); self-contact is not modelled, so this "
@@ -315,7 +342,7 @@ def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radi
                 )
             raise NoConvergenceError(
                 f"axisymmetric Newton did not converge for {len(bad)} (batch, force) entries; "
-                f"first: curve {b} (P_g, E, h, ν) = {p[b].tolist()}, force {f[k]} N. Try more elements "
+                f"first: curve {b} (P_g, E, h, ν) = {p[b].tolist()}, force {float(res.force[b, k])} N. Try more elements "
                 "(n_elements), a larger max_steps, or a different ramp.",
                 history=np.asarray(res.residual[b]).tolist(),
             )

@@ -4,7 +4,7 @@ Each estimator returns a result with ``estimates`` (name → :class:`Estimate`) 
 :func:`run_estimator` runs any of them by name.
 """
 
-from ._bayes import ConvergenceWarning, LogPosterior, PosteriorResult, SurrogateWarning, sample_posterior
+from ._bayes import ConvergenceWarning, PosteriorResult, SurrogateWarning, compile_posterior_ahead, sample_posterior
 from ._closed_form import (
     ClosedFormResult,
     KsCalibration,
@@ -20,6 +20,14 @@ from ._closed_form import (
 from ._dispatch import METHODS, EstimatorOptions, EstimatorResult, options_forward_model, run_estimator
 from ._fit import FitResult, fit_session, solve_least_squares
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel, forward_model_for
-from ._problem import FAILED_RESIDUAL, InverseProblem, build_problem, count_log_likelihood, depth_noise_from_scatter
+from ._problem import (
+    FAILED_RESIDUAL,
+    InverseProblem,
+    PaddedProblem,
+    build_problem,
+    count_log_likelihood,
+    depth_noise_from_scatter,
+    padded_problem,
+)
 from ._result import Estimate
 from ._surrogate import SurrogateForwardModel, build_surrogate, surrogate_error

@@ -1,14 +1,15 @@
 """Posterior of P_g and E by MCMC (emcee's affine-invariant ensemble) through a forward model.
 
-The log posterior (priors and likelihoods: see ``_problem.py``) is jit-compiled and vmapped over
-the walkers (emcee's ``vectorize=True``), and the depth noise σ_w is sampled as an extra unknown.
-Sampling runs in chunks; after each, the integrated autocorrelation time τ of every parameter is
-estimated and sampling stops once the chain is longer than ``autocorr_factor`` (50) τ and τ
-changed by less than ``tau_tolerance`` (5 %) since the last check (emcee's documentation uses
-100 τ and 1 %; 50 τ already bounds the Monte-Carlo error of τ to ~10 %), and never before
-``min_steps`` (1000): on shorter chains τ itself is underestimated. Otherwise a warning says the
-chain has not converged. Chains can live in an HDF5 file (emcee's HDFBackend layout, written 250
-steps at a time) and a later call with the same file resumes them. Forward solves that fail map to log p = −∞ and are counted.
+The walkers move by emcee's stretch move, compiled as one loop per block of steps (``_ensemble``),
+and the depth noise σ_w is sampled as an extra unknown. Sampling runs in blocks; after each, emcee
+estimates the integrated autocorrelation time τ of every parameter, and sampling stops once the
+chain is longer than ``autocorr_factor`` (50) τ and τ changed by less than ``tau_tolerance``
+(5 %) since the last check (emcee's documentation uses 100 τ and 1 %; 50 τ already bounds the
+Monte-Carlo error of τ to ~10 %), and never before ``min_steps`` (1000): on shorter chains τ
+itself is underestimated. Otherwise a warning says the chain has not converged. The chain is kept
+by an emcee backend, in memory or in an HDF5 file (emcee's HDFBackend layout, written a block at a
+time) that a later call with the same file resumes. Forward solves that fail map to log p = −∞ and
+are counted.
 
 The sampler starts from a least-squares fit (:class:`FitResult`): its inverse problem, and, with
 the surrogate, its optimum and Laplace covariance.
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 import warnings
 from pathlib import Path
 
@@ -29,11 +31,19 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError
-from .._parallel import map_batch
+from ._ensemble import stretch_block
 from ._fit import FitResult
 from ._forward import AxisymForwardModel
-from ._problem import InverseProblem
-from ._surrogate import DEFAULT_NODES, SURROGATE_AXES, build_surrogate, surrogate_error
+from ..session import Session
+from ._problem import ALL_NAMES, PaddedProblem, build_problem, padded_problem
+from ._surrogate import (
+    DEFAULT_NODES,
+    SURROGATE_AXES,
+    build_surrogate,
+    engine_predictions,
+    surrogate_error,
+    surrogate_from_values,
+)
 from ._result import Estimate
 
 _UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
@@ -98,43 +108,16 @@ class PosteriorResult:
 
 
 @jax.jit
-def _batched_log_posterior(problem: InverseProblem, coords):
-    return jax.vmap(problem.log_posterior)(coords)
-
-
-@jax.jit
-def _batched_physical(problem: InverseProblem, u):
+def _batched_physical(problem: PaddedProblem, u):
     return jax.vmap(problem.physical)(u)
 
 
-class LogPosterior:
-    """emcee's vectorized log-probability: a jit(vmap) of the problem's log posterior.
-
-    The compiled function is module-level and takes the problem as an argument, so a second
-    session of the same shape reuses the compilation. For the engine model the walkers are split
-    over the CPU cores (``shelljax._parallel``); cheap models (surrogate, scaling law) stay on one
-    thread, where a thread pool would cost more than it saves.
-    """
-
-    def __init__(self, problem: InverseProblem):
-        self.problem = problem
-        self.failed_forward = 0
-        self.evaluations = 0
-        self.workers = None if isinstance(problem.model, AxisymForwardModel) else 1
-
-    def __call__(self, coords: np.ndarray) -> np.ndarray:
-        """log p [-] of each row of ``coords``: (walkers, unknowns + 1) scaled unknowns and log σ_w."""
-        log_p, converged = map_batch(lambda c: _batched_log_posterior(self.problem, c), coords, self.workers)
-        self.failed_forward += int(np.sum(~np.asarray(converged)))
-        self.evaluations += coords.shape[0]
-        return np.asarray(log_p)
-
-
-def _physical_samples(problem: InverseProblem, flat: np.ndarray) -> dict[str, np.ndarray]:
-    phys = _batched_physical(problem, jnp.asarray(flat[:, :-1]))
-    out = {name: np.asarray(phys[name]) for name in problem.names}
-    out["depth_noise"] = np.exp(flat[:, -1])
-    return out
+def _physical(problem: PaddedProblem, columns: np.ndarray, u: np.ndarray) -> dict[str, np.ndarray]:
+    """Physical values (SI) by name of every parameter of ``u`` (samples, unknowns), whose
+    unknowns sit at ``columns`` of the padded u (the fixed ones at their measured values)."""
+    padded_u = np.zeros((u.shape[0], len(ALL_NAMES)))
+    padded_u[:, columns] = u
+    return {name: np.asarray(value) for name, value in _batched_physical(problem, jnp.asarray(padded_u)).items()}
 
 
 def _surrogate_around_fit(fit: FitResult, nodes, progress):
@@ -148,7 +131,8 @@ def _surrogate_around_fit(fit: FitResult, nodes, progress):
     # check points: Laplace draws, pulled into the box
     rng = np.random.default_rng(0)
     draws = rng.multivariate_normal(fit.u, fit.covariance, size=SURROGATE_CHECKS)
-    phys = _batched_physical(problem, jnp.asarray(draws))
+    padded, columns, _ = padded_problem(problem)
+    phys = _physical(padded, columns, draws)
     points = np.stack([np.asarray(phys[name]) for name in SURROGATE_AXES], axis=1)
     points = np.exp(np.clip(np.log(points), np.asarray(built.log_lower), np.asarray(built.log_upper)))
     error = surrogate_error(built, model, points, np.asarray(problem.force))
@@ -171,64 +155,14 @@ def _surrogate_around_fit(fit: FitResult, nodes, progress):
     return built, report
 
 
-class _BlockHDFBackend(emcee.backends.HDFBackend):
-    """emcee's HDF5 chain file, written a block of ``block`` steps at a time: emcee's backend opens
-    the file at every step, which costs more than the step itself. Whatever reads the file (τ
-    checks, the summary, a resumed run) writes the pending steps first. The posterior has no blobs."""
-
-    def __init__(self, *args, block: int = 250, **kwargs):
-        super().__init__(*args, **kwargs)
-        self._block, self._pending, self._random_state = block, [], None
-
-    def save_step(self, state, accepted):
-        self._pending.append((np.array(state.coords), np.array(state.log_prob), np.asarray(accepted, dtype=float)))
-        self._random_state = state.random_state
-        if len(self._pending) >= self._block:
-            self.flush()
-
-    def flush(self) -> None:
-        """Write the pending steps, as emcee's ``save_step`` would one by one."""
-        if not self._pending:
-            return
-        pending, self._pending = self._pending, []
-        with self.open("a") as f:
-            group = f[self.name]
-            start = int(group.attrs["iteration"])
-            stop = start + len(pending)
-            group["chain"][start:stop] = np.stack([p[0] for p in pending])
-            group["log_prob"][start:stop] = np.stack([p[1] for p in pending])
-            group["accepted"][:] += np.sum([p[2] for p in pending], axis=0)
-            for i, value in enumerate(self._random_state):
-                group.attrs[f"random_state_{i}"] = value
-            group.attrs["iteration"] = stop
-
-    def grow(self, ngrow, blobs):
-        self.flush()
-        super().grow(ngrow, blobs)
-
-    def get_value(self, name, flat=False, thin=1, discard=0):
-        self.flush()
-        return super().get_value(name, flat=flat, thin=thin, discard=discard)
-
-    @property
-    def iteration(self):
-        self.flush()
-        return super().iteration
-
-    @property
-    def accepted(self):
-        self.flush()
-        return super().accepted
-
-    @property
-    def random_state(self):
-        self.flush()
-        return super().random_state
-
-
 def _open_backend(backend_path, source: Path, n_walkers: int, ndim: int):
-    """emcee's HDF5 backend at ``backend_path`` (written in blocks), reset unless it holds a chain of this shape."""
-    backend = _BlockHDFBackend(str(backend_path), name=f"shelljax-{source.stem}")
+    """emcee's backend: in memory (``backend_path`` None), else its HDF5 file, reset unless it
+    holds a chain of this shape."""
+    if backend_path is None:
+        backend = emcee.backends.Backend()
+        backend.reset(n_walkers, ndim)
+        return backend
+    backend = emcee.backends.HDFBackend(str(backend_path), name=f"shelljax-{source.stem}")
     if Path(backend_path).is_file() and backend.initialized and backend.iteration > 0:
         if backend.shape != (n_walkers, ndim):
             raise InvalidInputError(
@@ -240,17 +174,26 @@ def _open_backend(backend_path, source: Path, n_walkers: int, ndim: int):
     return backend
 
 
-def _fresh_walkers(log_prob: LogPosterior, u_start: np.ndarray, n_walkers: int, rng, source: Path):
-    """A small ball around ``u_start`` and the scatter-based σ_w, checked to have p > 0."""
-    problem = log_prob.problem
-    center = np.concatenate([u_start, [math.log(problem.depth_noise)]])
-    initial = center + 1e-3 * rng.standard_normal((n_walkers, center.size))
-    if not np.all(np.isfinite(log_prob(initial))):
-        raise InvalidInputError(
-            f"{source}: the posterior is zero at the closed-form start; the forward "
-            f"model {type(problem.model).__name__} fails there or the data are outside the priors"
-        )
-    return initial
+def _append(backend, chain: np.ndarray, log_prob: np.ndarray, accepted: np.ndarray, random_state) -> None:
+    """A block of steps (steps, walkers, …) added to emcee's ``backend`` as that many of its
+    ``save_step`` calls would add them (the HDF5 file is opened once, not at every step)."""
+    start, steps = backend.iteration, chain.shape[0]
+    backend.grow(steps, None)
+    if isinstance(backend, emcee.backends.HDFBackend):
+        with backend.open("a") as f:
+            group = f[backend.name]
+            group["chain"][start : start + steps] = chain
+            group["log_prob"][start : start + steps] = log_prob
+            group["accepted"][:] += accepted.sum(axis=0)
+            for i, value in enumerate(random_state):
+                group.attrs[f"random_state_{i}"] = value
+            group.attrs["iteration"] = start + steps
+    else:
+        backend.chain[start : start + steps] = chain
+        backend.log_prob[start : start + steps] = log_prob
+        backend.accepted += accepted.sum(axis=0)
+        backend.random_state = random_state
+        backend.iteration = start + steps
 
 
 @dataclasses.dataclass(frozen=True)
@@ -266,19 +209,66 @@ class ChainOptions:
     min_steps: int = 1000
 
 
-def _run_until_converged(sampler, state, chain: ChainOptions, source: Path, progress) -> tuple[bool, int]:
-    """Sample in chunks until the autocorrelation criterion holds or ``max_steps``: (converged, steps)."""
-    tau_old = np.full(sampler.ndim, np.inf)
+class _Ensemble:
+    """The walkers of a padded problem, stepped a block at a time into emcee's ``backend``.
+
+    ``columns``: where the problem's unknowns and log σ_w sit in the padded (u, log σ_w); the
+    backend holds those columns only. ``random``: the stream the blocks' seeds are drawn from,
+    kept in the backend as emcee keeps its sampler's; ``length``: steps of the compiled block.
+    """
+
+    def __init__(self, problem: PaddedProblem, columns: np.ndarray, backend, random: np.random.RandomState, length: int):
+        self.problem, self.columns, self.backend, self.random, self.length = problem, columns, backend, random, length
+        self.free = np.zeros(len(ALL_NAMES) + 1, bool)
+        self.free[columns] = True
+        self.failed_forward = 0
+
+    def padded(self, coords: np.ndarray) -> np.ndarray:
+        out = np.zeros((coords.shape[0], self.free.size))
+        out[:, self.columns] = coords
+        return out
+
+    def log_prob(self, coords: np.ndarray) -> np.ndarray:
+        """log p [-] of each walker of ``coords`` (walkers, unknowns + 1)."""
+        # the sampling program itself, for no steps: no second program to compile
+        return np.asarray(stretch_block(self.problem, self.padded(coords), 0, self.free, 0, self.length)["initial_log_prob"])
+
+    def run(self, coords: np.ndarray, steps: int) -> np.ndarray:
+        """``steps`` (≤ ``length``) steps from ``coords`` into the backend; the last walkers."""
+        seed = int(self.random.randint(2**31))
+        out = stretch_block(self.problem, self.padded(coords), seed, self.free, steps, self.length)
+        chain = np.asarray(out["chain"])[:steps][:, :, self.columns]
+        log_prob, accepted = np.asarray(out["log_prob"])[:steps], np.asarray(out["accepted"])[:steps]
+        _append(self.backend, chain, log_prob, accepted, self.random.get_state())
+        self.failed_forward += int(out["failed_forward"])
+        return chain[-1]
+
+
+def _fresh_walkers(ensemble: _Ensemble, center: np.ndarray, n_walkers: int, rng, source: Path, model_name: str):
+    """A small ball around ``center`` (unknowns and log σ_w), checked to have p > 0."""
+    initial = center + 1e-3 * rng.standard_normal((n_walkers, center.size))
+    if not np.all(np.isfinite(ensemble.log_prob(initial))):
+        raise InvalidInputError(
+            f"{source}: the posterior is zero at the closed-form start; the forward "
+            f"model {model_name} fails there or the data are outside the priors"
+        )
+    return initial
+
+
+def _run_until_converged(ensemble: _Ensemble, coords, chain: ChainOptions, source: Path, progress) -> tuple[bool, int]:
+    """Sample in blocks until the autocorrelation criterion holds or ``max_steps``: (converged, steps)."""
+    backend = ensemble.backend
+    tau_old = np.full(backend.shape[1], np.inf)
     converged = False
-    done = sampler.iteration
+    done = backend.iteration
     disable = None if progress is None else not progress
     with tqdm(total=chain.max_steps, initial=done, desc=f"bayes {source.stem}", disable=disable) as bar:
         while done < chain.max_steps:
             step = min(chain.check_every, chain.max_steps - done)
-            state = sampler.run_mcmc(state, step, progress=False)
-            done = sampler.iteration
+            coords = ensemble.run(coords, step)
+            done = backend.iteration
             bar.update(step)
-            tau = sampler.get_autocorr_time(tol=0)
+            tau = backend.get_autocorr_time(tol=0)
             converged = bool(done >= chain.min_steps and np.all(chain.autocorr_factor * tau < done)
                              and np.all(np.abs(tau_old - tau) < chain.tau_tolerance * tau))  # fmt: skip
             bar.set_postfix(tau=f"{np.max(tau):.0f}")
@@ -286,7 +276,7 @@ def _run_until_converged(sampler, state, chain: ChainOptions, source: Path, prog
                 break
             tau_old = tau
     if not converged:
-        tau = sampler.get_autocorr_time(tol=0)
+        tau = backend.get_autocorr_time(tol=0)
         warnings.warn(
             f"{source}: MCMC stopped at {done} steps before convergence (max τ = {np.max(tau):.0f} steps "
             f"needs > {chain.autocorr_factor * np.max(tau):.0f} steps and τ stable within {chain.tau_tolerance:.0%}); "
@@ -296,17 +286,17 @@ def _run_until_converged(sampler, state, chain: ChainOptions, source: Path, prog
     return converged, done
 
 
-def _summarise(sampler, problem: InverseProblem, log_prob: LogPosterior, converged: bool, done: int,
+def _summarise(ensemble: _Ensemble, names: tuple[str, ...], model_name: str, converged: bool, done: int,
                surrogate_info) -> PosteriorResult:  # fmt: skip
     """The posterior's estimates after burn-in (2 max τ) and thinning (½ min τ)."""
-    tau = sampler.get_autocorr_time(tol=0)
-    n_walkers = sampler.nwalkers
+    backend = ensemble.backend
+    tau = backend.get_autocorr_time(tol=0)
+    n_walkers = backend.shape[0]
     burn = int(min(2 * np.max(tau), done // 2))
     thin = max(1, int(0.5 * np.min(tau)))
-    flat = sampler.get_chain(discard=burn, thin=thin, flat=True)
-    samples = _physical_samples(problem, flat)
-    names = (*problem.names, "depth_noise")
-    method = f"bayes: emcee ({n_walkers} walkers, {done} steps) through {type(problem.model).__name__}, posterior median"
+    flat = backend.get_chain(discard=burn, thin=thin, flat=True)
+    samples = {**_physical(ensemble.problem, ensemble.columns[:-1], flat[:, :-1]), "depth_noise": np.exp(flat[:, -1])}
+    method = f"bayes: emcee ({n_walkers} walkers, {done} steps) through {model_name}, posterior median"
     estimates, intervals68 = {}, {}
     for name in names:
         x = samples[name]
@@ -317,8 +307,8 @@ def _summarise(sampler, problem: InverseProblem, log_prob: LogPosterior, converg
         estimates=estimates, intervals68=intervals68, samples=samples,
         autocorr_time=dict(zip(names, map(float, tau))), n_steps=int(done),
         effective_samples=float(n_walkers * (done - burn) / np.max(tau)), converged=converged,
-        failed_forward=log_prob.failed_forward, acceptance_fraction=float(np.mean(sampler.acceptance_fraction)),
-        chain=sampler.get_chain(), names=names, surrogate=surrogate_info,
+        failed_forward=ensemble.failed_forward, acceptance_fraction=float(np.mean(backend.accepted / done)),
+        chain=backend.get_chain(), names=names, surrogate=surrogate_info,
     )  # fmt: skip
 
 
@@ -363,16 +353,63 @@ def sample_posterior(
     ndim = problem.ndim + 1  # + log σ_w
     if n_walkers < 2 * ndim:
         raise InvalidInputError(f"n_walkers = {n_walkers} is too few for {ndim} unknowns. Fix: use at least {2 * ndim}")
-    log_prob = LogPosterior(problem)
-    backend = None if backend_path is None else _open_backend(backend_path, source, n_walkers, ndim)
+    padded, columns, _ = padded_problem(problem)
+    backend = _open_backend(backend_path, source, n_walkers, ndim)
     rng = np.random.default_rng(seed)
-    if backend is None or backend.iteration == 0:
-        initial = _fresh_walkers(log_prob, u_start, n_walkers, rng, source)
+    model_name = type(problem.model).__name__
+    if backend.iteration == 0:
+        random = np.random.RandomState(int(rng.integers(2**31)))
+        ensemble = _Ensemble(padded, np.append(columns, len(ALL_NAMES)), backend, random, chain.check_every)
+        center = np.append(u_start, math.log(problem.depth_noise))
+        initial = _fresh_walkers(ensemble, center, n_walkers, rng, source, model_name)
     else:
-        initial = backend.get_last_sample()
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
-    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    converged, done = _run_until_converged(sampler, initial, chain, source, progress)
-    if backend is not None:
-        backend.flush()
-    return _summarise(sampler, problem, log_prob, converged, done, surrogate_info)
+        random = np.random.RandomState()
+        random.set_state(backend.random_state)
+        ensemble = _Ensemble(padded, np.append(columns, len(ALL_NAMES)), backend, random, chain.check_every)
+        initial = backend.get_last_sample().coords
+    converged, done = _run_until_converged(ensemble, initial, chain, source, progress)
+    return _summarise(ensemble, (*problem.names, "depth_noise"), model_name, converged, done, surrogate_info)
+
+
+_COMPILED_AHEAD: set = set()
+
+
+def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_walkers: int = 32, check_every: int = 250,
+                            nuisance: tuple[str, ...] = (),
+                            surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES) -> threading.Thread | None:
+    """Compile, on a background thread, the programs a surrogate posterior of ``session`` through
+    ``model`` will run (the engine's curves and the sampler), while its fit compiles on this one.
+
+    XLA compiles a program on one core; started before the fit, the two compile at once. The
+    thread solves the engine at one point and evaluates a placeholder surrogate's posterior,
+    which is what compiles them; the programs a structure needs are compiled once per process.
+    None when there is nothing to compile ahead. Best effort: an error on the thread is dropped,
+    since the same programs run, and raise, on the caller's thread.
+    """
+    if not isinstance(model, AxisymForwardModel) or session.wrinkle_counts is None:
+        return None
+    structure = (model.setup, model.wrinkle_law, model.n_grid, n_walkers, check_every, nuisance, surrogate_nodes,
+                 session.force.size, len(session.wrinkle_counts))
+    if structure in _COMPILED_AHEAD:
+        return None
+    _COMPILED_AHEAD.add(structure)
+
+    def compile_programs():
+        try:
+            start = np.array([[1e3, 1e6, session.thickness, session.radius]])
+            engine_predictions(model, start, np.asarray(session.force), workers=1)
+            log_center = np.log(start[0])
+            placeholder = surrogate_from_values(np.zeros((*surrogate_nodes, model.n_grid + 1)), log_center - 1.0,
+                                                log_center + 1.0, np.linspace(model.force_min, model.force_max, model.n_grid),
+                                                model.poisson_ratio, model.wrinkle_law, surrogate_nodes)
+            problem = build_problem(session, placeholder, start_pressure=1e3, start_modulus=1e6, nuisance=nuisance)
+            padded, columns, _ = padded_problem(problem)
+            free = np.zeros(len(ALL_NAMES) + 1, bool)
+            free[np.append(columns, len(ALL_NAMES))] = True
+            stretch_block(padded, np.zeros((n_walkers, free.size)), 0, free, 0, check_every)
+        except Exception:  # noqa: BLE001 (the caller's thread runs the same programs and raises)
+            pass
+
+    thread = threading.Thread(target=compile_programs, name="shelljax-compile-ahead", daemon=True)
+    thread.start()
+    return thread

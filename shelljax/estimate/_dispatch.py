@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .._errors import InvalidInputError
 from ..session import Session
-from ._bayes import PosteriorResult, sample_posterior
+from ._bayes import PosteriorResult, compile_posterior_ahead, sample_posterior
 from ._closed_form import ClosedFormResult, estimate_session
 from ._fit import FitResult, fit_session
 from ._forward import AbstractForwardModel, forward_model_for
@@ -72,6 +72,8 @@ def run_estimator(
         model = options_forward_model(session, options) if model is None else model
         if method == "fit":
             return fit_session(session, model, nuisance=options.nuisance)
+        if options.surrogate:
+            compile_posterior_ahead(session, model, n_walkers=options.walkers, nuisance=options.nuisance)
         fit = fit_session(session, model, nuisance=options.nuisance, raise_on_failure=False)
     return sample_posterior(fit, n_walkers=options.walkers, max_steps=options.max_steps, backend_path=backend_path,
                             seed=options.seed, surrogate=options.surrogate, progress=progress)  # fmt: skip

@@ -17,7 +17,7 @@ import numpy as np
 import optimistix as optx
 
 from .._errors import NoConvergenceError
-from ._programs import persistent_jit
+from .._programs import persistent_jit
 from ..session import Session
 from ._closed_form import estimate_session
 from ._forward import AbstractForwardModel

@@ -144,21 +144,37 @@ class AxisymForwardModel(AbstractForwardModel):
                                contact_stiffness=jnp.asarray(measured.penalty_to_engine(self.contact_stiffness), jnp.float64))  # fmt: skip
         return Similarity.between(radius, self.setup.radius), physics
 
-    def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
-        from ..axisym import indentation_curves_raw
-
+    def engine_inputs(self, gauge_pressure, young_modulus, thickness, radius):
+        """(the shell at the engine's scale, its curve's forces there (n_grid,) [N], its
+        ``CurvePhysics``) of a ball of P_g [Pa], E [Pa], h [m], radius R [m]: the engine's curve
+        for these is the model's, by similarity (:meth:`prediction` maps it back)."""
         similarity, physics = self.engine_frame(radius)
         grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
         shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=young_modulus,
-                                thickness=similarity.length_to_engine(thickness),
-                                poisson_ratio=self.poisson_ratio)  # fmt: skip
-        curve = indentation_curves_raw(shell, similarity.force_to_engine(grid), self.setup, physics=physics)
-        depth = jnp.interp(forces, grid, similarity.length_from_engine(curve.w0[0]))
+                                thickness=similarity.length_to_engine(thickness), poisson_ratio=self.poisson_ratio)
+        return shell, similarity.force_to_engine(grid), physics
+
+    def prediction(self, engine_depth, engine_count, converged, gauge_pressure, young_modulus, thickness, radius,
+                   forces) -> Prediction:
+        """The prediction at ``forces`` [N] from the engine's curve of :meth:`engine_inputs`:
+        its depths (n_grid,) [m] at the engine's scale, its count [-] at the top force and
+        whether it converged."""
+        grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
+        depth = jnp.interp(forces, grid, Similarity.between(radius, self.setup.radius).length_from_engine(engine_depth))
         if self.wrinkle_law == "mechanics":
-            count = curve.wrinkle_count[0, -1]
+            count = engine_count
         else:
             count = ScalingLawModel(self.poisson_ratio)(gauge_pressure, young_modulus, thickness, radius, forces).wrinkle_count
-        return Prediction(depth=depth, wrinkle_count=count, converged=jnp.all(curve.converged[0]))
+        return Prediction(depth=depth, wrinkle_count=count, converged=converged)
+
+    def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
+        from ..axisym import indentation_curves_raw
+
+        shell, engine_forces, physics = self.engine_inputs(gauge_pressure, young_modulus, thickness, radius)
+        curve = indentation_curves_raw(shell, engine_forces, self.setup, physics=physics)
+        converged = jnp.all(curve.converged[0])
+        return self.prediction(curve.w0[0], curve.wrinkle_count[0, -1], converged, gauge_pressure, young_modulus,
+                               thickness, radius, forces)
 
 
 FORWARD_MODELS = ("axisym", "scaling")

@@ -146,26 +146,6 @@ class InverseProblem(eqx.Module):
         """Whether the forward model converged at ``u`` with finite predictions."""
         return self.residuals_and_prediction(u)[1][2]
 
-    def log_posterior(self, u_and_noise: Float[Array, " d1"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
-        """Log posterior (up to a constant) of (u, log σ_w); returns (log p, forward converged)."""
-        u, log_noise = u_and_noise[:-1], u_and_noise[-1]
-        p = self.physical(u)
-        in_bounds = (
-            (p["gauge_pressure"] > PRESSURE_BOUNDS[0]) & (p["gauge_pressure"] < PRESSURE_BOUNDS[1])
-            & (p["young_modulus"] > MODULUS_BOUNDS[0]) & (p["young_modulus"] < MODULUS_BOUNDS[1])
-            & (log_noise > math.log(DEPTH_NOISE_BOUNDS[0])) & (log_noise < math.log(DEPTH_NOISE_BOUNDS[1]))
-            & (jnp.abs(p["depth_offset"]) < OFFSET_BOUND) & (p["thickness"] > 0) & (p["radius"] > 0)
-        )  # fmt: skip
-        depth, count, converged = self.predict(u)
-        noise = jnp.exp(log_noise)
-        log_like = -0.5 * jnp.sum(((depth - self.depth) / noise) ** 2) - self.depth.size * log_noise
-        log_like += jnp.sum(count_log_likelihood(self.counts, count))
-        # uniform priors in log P, log E, log σ_w are log-uniform in the physical values
-        log_prior = -0.5 * sum((r**2 for r in self._prior_residuals(u)), jnp.zeros(()))
-        lp = log_like + log_prior
-        ok = in_bounds & converged & jnp.isfinite(lp)
-        return jnp.where(ok, lp, -jnp.inf), converged
-
 
 def build_problem(
     session: Session,
@@ -276,6 +256,33 @@ class PaddedProblem(eqx.Module):
 
     def forward_ok(self, u) -> Bool[Array, ""]:
         return self.residuals_and_prediction(u)[1][2]
+
+    def log_posterior(self, u_and_noise: Float[Array, " 7"]) -> tuple[Float[Array, ""], Bool[Array, ""]]:
+        """Log posterior [-] (up to a constant) of (u, log σ_w) and whether the forward model
+        converged: Gaussian depths of standard deviation σ_w [m], the integer counts'
+        :func:`count_log_likelihood`, the normal priors of the fitted thickness, radius and gain,
+        log-uniform P_g, E and σ_w within their bounds (−∞ outside them or where the forward
+        model failed). Padded samples and counts and fixed unknowns contribute nothing."""
+        u, log_noise = u_and_noise[:-1], u_and_noise[-1]
+        p = self.physical(u)
+        in_bounds = (
+            (p["gauge_pressure"] > PRESSURE_BOUNDS[0]) & (p["gauge_pressure"] < PRESSURE_BOUNDS[1])
+            & (p["young_modulus"] > MODULUS_BOUNDS[0]) & (p["young_modulus"] < MODULUS_BOUNDS[1])
+            & (log_noise > math.log(DEPTH_NOISE_BOUNDS[0])) & (log_noise < math.log(DEPTH_NOISE_BOUNDS[1]))
+            & (jnp.abs(p["depth_offset"]) < OFFSET_BOUND)
+        )
+        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
+        depth_misfit = jnp.where(self.sample_mask, (pred.depth + p["depth_offset"] - self.depth) * jnp.exp(-log_noise), 0.0)
+        log_like = -0.5 * jnp.sum(depth_misfit**2) - jnp.sum(self.sample_mask, dtype=log_noise.dtype) * log_noise
+        log_like += jnp.sum(jnp.where(self.count_mask, count_log_likelihood(self.counts, pred.wrinkle_count), 0.0))
+        on = dict(zip(ALL_NAMES, self.free))
+        std = {"thickness": self.thickness_std, "radius": self.radius_std, "force_gain": GAIN_STD}
+        mean = {"thickness": self.thickness, "radius": self.radius, "force_gain": 1.0}
+        # uniform priors in log P, log E, log σ_w are log-uniform in the physical values
+        log_prior = sum(jnp.where(on[n], -0.5 * ((p[n] - mean[n]) / jnp.where(on[n], std[n], 1.0)) ** 2, 0.0) for n in _PRIORS)
+        log_p = log_like + log_prior
+        ok = in_bounds & pred.converged & jnp.isfinite(log_p)
+        return jnp.where(ok, log_p, -jnp.inf), pred.converged
 
 
 def _pad(values, quantum: int, fill: float):

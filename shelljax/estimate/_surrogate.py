@@ -14,7 +14,6 @@ Laplace standard deviations) that the truncation is far in the tails.
 
 from __future__ import annotations
 
-import math
 
 import equinox as eqx
 import jax
@@ -24,7 +23,6 @@ from jaxtyping import Array, Float
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ..physics import ShellProperties, Similarity
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel
 
 SURROGATE_AXES = ("gauge_pressure", "young_modulus", "thickness", "radius")
@@ -103,18 +101,54 @@ def node_axes(center: dict[str, float], half_width: dict[str, float], nodes=DEFA
 
 
 def surrogate_from_values(values: np.ndarray, lower, upper, force_grid, poisson_ratio: float,
-                          wrinkle_law: str = "mechanics") -> SurrogateForwardModel:  # fmt: skip
-    """The interpolant of ``values`` (n_P, n_E, n_h, n_R, k + 1) given at the ``node_axes``."""
+                          wrinkle_law: str = "mechanics", nodes: tuple[int, ...] | None = None) -> SurrogateForwardModel:
+    """The interpolant of ``values`` (n_P, n_E, n_h, n_R, k + 1) given at the ``node_axes``.
+
+    ``nodes``: the series' lengths per axis (default: the values'); an axis held fixed (one
+    node) gets zero coefficients beyond its first, the same interpolant, so that every box of
+    ``nodes`` samples in one compiled program.
+    """
+    coefficients = _values_to_coefficients(np.asarray(values))
+    if nodes is not None:
+        coefficients = np.pad(coefficients, [(0, n - c) for n, c in zip(nodes, coefficients.shape)] + [(0, 0)])
     return SurrogateForwardModel(
         poisson_ratio=poisson_ratio, force_grid=jnp.asarray(force_grid), log_lower=jnp.asarray(lower),
-        log_upper=jnp.asarray(upper), coefficients=jnp.asarray(_values_to_coefficients(np.asarray(values))),
-        wrinkle_law=wrinkle_law,
-    )  # fmt: skip
+        log_upper=jnp.asarray(upper), coefficients=jnp.asarray(coefficients), wrinkle_law=wrinkle_law,
+    )
+
+
+ROWS_PER_CALL = 128  # engine curves per compiled call: one program for every box, check and retry
+
+
+@jax.jit
+def _engine_inputs(model: AxisymForwardModel, points):
+    return jax.vmap(model.engine_inputs)(points[:, 0], points[:, 1], points[:, 2], points[:, 3])
+
+
+@jax.jit
+def _predictions(model: AxisymForwardModel, depth, count, converged, points, forces):
+    columns = (points[:, 0], points[:, 1], points[:, 2], points[:, 3])
+    return jax.vmap(model.prediction, in_axes=(0, 0, 0, 0, 0, 0, 0, None))(depth, count, converged, *columns, forces)
+
+
+def engine_predictions(model: AxisymForwardModel, points: np.ndarray, forces, workers: int | None = None) -> Prediction:
+    """``model``'s predictions at ``points`` (m, 4) of physical (P_g [Pa], E [Pa], h [m], R [m]),
+    at ``forces`` (k,) [N]: the model's own call for each point, its engine curves solved as one
+    batch (``ROWS_PER_CALL`` curves a compiled call over ``workers`` host threads). Fields (m, …)."""
+    from ..axisym import indentation_curves
+
+    points = jnp.asarray(points, jnp.float64)
+    shell, engine_forces, physics = _engine_inputs(model, points)
+    setup_fields = {f: getattr(model.setup, f) for f in model.setup.__dataclass_fields__ if f != "radius"}
+    curves = indentation_curves(shell, engine_forces, radius=model.setup.radius, raise_on_failure=False, workers=workers,
+                                physics=physics, rows_per_call=ROWS_PER_CALL, **setup_fields)
+    converged = np.all(curves.converged, axis=1)
+    return _predictions(model, curves.w0, curves.wrinkle_count[:, -1], converged, points, jnp.asarray(forces, jnp.float64))
 
 
 def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_width: dict[str, float],
                     nodes: tuple[int, int, int, int] = DEFAULT_NODES, workers: int | None = None,
-                    progress: bool | None = None) -> SurrogateForwardModel:  # fmt: skip
+                    progress: bool | None = None) -> SurrogateForwardModel:
     """Solve ``model``'s engine on the Chebyshev nodes of a box and return the interpolant.
 
     ``center``/``half_width``: see :func:`node_axes`; ``workers``: host threads of the batched
@@ -122,8 +156,6 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
     Raises NoConvergenceError if the engine fails at a node (the box reaches parameters the
     engine cannot solve: narrow it, or sample the exact model).
     """
-    from ..axisym import indentation_curves
-
     if not isinstance(model, AxisymForwardModel):
         raise InvalidInputError(
             f"a surrogate is built for the axisymmetric engine model, not {type(model).__name__}. "
@@ -134,27 +166,24 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
     grid = np.asarray(jnp.linspace(model.force_min, model.force_max, model.n_grid))
     values = np.empty(counts + [model.n_grid + 1])
     mesh = np.stack(np.meshgrid(*axes[:3], indexing="ij"), axis=-1).reshape(-1, 3)
-    setup_fields = {f: getattr(model.setup, f) for f in model.setup.__dataclass_fields__ if f != "radius"}
     bar = tqdm(axes[3], desc=f"surrogate ({int(np.prod(counts))} curves)",
                disable=None if progress is None else not progress)
+    # one radius a batch: the engine's walk through a batch starts each curve from a neighbour's
+    # equilibrium, which is closest at the same radius
     for r_index, log_radius in enumerate(bar):
-        similarity, physics = model.engine_frame(math.exp(log_radius))
-        similarity = Similarity(scale=float(similarity.scale))
-        shell = ShellProperties(gauge_pressure=np.exp(mesh[:, 0]), young_modulus=np.exp(mesh[:, 1]),
-                                thickness=similarity.length_to_engine(np.exp(mesh[:, 2])), poisson_ratio=model.poisson_ratio)
-        curves = indentation_curves(shell, similarity.force_to_engine(grid), radius=model.setup.radius, raise_on_failure=False,
-                                    workers=workers, physics=physics, **setup_fields)  # fmt: skip
-        converged = np.asarray(curves.converged).all(axis=1)
+        points = np.exp(np.column_stack([mesh, np.full(len(mesh), log_radius)]))
+        pred = engine_predictions(model, points, grid, workers)
+        converged = np.asarray(pred.converged)
         if not converged.all():
-            bad = np.exp(mesh[np.argmin(converged)])
+            bad = points[np.argmin(converged)]
             raise NoConvergenceError(
                 f"surrogate: the engine did not converge at P_g = {bad[0]:.4g} Pa, E = {bad[1]:.4g} Pa, "
-                f"h = {bad[2]:.4g} m, R = {math.exp(log_radius):.4g} m ({int((~converged).sum())} of "
+                f"h = {bad[2]:.4g} m, R = {bad[3]:.4g} m ({int((~converged).sum())} of "
                 f"{converged.size} nodes). Fix: narrow the box or sample the exact model (surrogate=False)"
             )
-        block = np.concatenate([similarity.length_from_engine(np.asarray(curves.w0)), np.asarray(curves.wrinkle_count)[:, -1:]], axis=1)
+        block = np.concatenate([np.asarray(pred.depth), np.asarray(pred.wrinkle_count)[:, None]], axis=1)
         values[:, :, :, r_index, :] = block.reshape(counts[0], counts[1], counts[2], -1)
-    return surrogate_from_values(values, lower, upper, grid, model.poisson_ratio, model.wrinkle_law)
+    return surrogate_from_values(values, lower, upper, grid, model.poisson_ratio, model.wrinkle_law, nodes)
 
 
 @jax.jit
@@ -164,14 +193,15 @@ def _evaluate(model: AbstractForwardModel, points, forces):
 
 
 def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel, points: np.ndarray,
-                    forces: np.ndarray) -> dict[str, float]:  # fmt: skip
+                    forces: np.ndarray) -> dict[str, float]:
     """Largest |surrogate − engine| over ``points`` (m, 4) of physical (P_g, E, h, R).
 
-    Returns ``depth`` [m] (at ``forces`` [N]) and ``wrinkle_count`` [-]. The engine is evaluated
-    through the engine model's own call (the fit's code path), vmapped over the points.
+    Returns ``depth`` [m] (at ``forces`` [N]) and ``wrinkle_count`` [-]. The engine's side is
+    :func:`engine_predictions`: the engine model's own mapping, its curves solved by the
+    surrogate's own compiled program.
     """
-    points, forces = jnp.asarray(points), jnp.asarray(forces)
-    exact, approx = _evaluate(model, points, forces), _evaluate(surrogate, points, forces)
+    exact = engine_predictions(model, np.asarray(points), forces)
+    approx = _evaluate(surrogate, jnp.asarray(points), jnp.asarray(forces))
     if not bool(jnp.all(exact.converged)):
         raise NoConvergenceError("surrogate check: the engine failed at a check point inside the box")
     return {
@@ -180,4 +210,4 @@ def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel,
     }
 
 
-__all__ = ["SurrogateForwardModel", "build_surrogate", "node_axes", "surrogate_error", "surrogate_from_values"]
+__all__ = ["SurrogateForwardModel", "build_surrogate", "engine_predictions", "node_axes", "surrogate_error", "surrogate_from_values"]

@@ -18,6 +18,7 @@ from ..estimate import (
     Estimate,
     EstimatorOptions,
     SurrogateWarning,
+    compile_posterior_ahead,
     options_forward_model,
     run_estimator,
 )
@@ -94,6 +95,8 @@ def _simulation_methods(session: Session, config: ExperimentConfig, options: Est
     """
     methods = [m for m in ("fit", "bayes") if m in config.methods]
     model = options_forward_model(session, options) if methods and rig is None else None
+    if "bayes" in methods and model is not None and options.surrogate:
+        compile_posterior_ahead(session, model, n_walkers=options.walkers, nuisance=options.nuisance)
     out, fit = {}, None
     for method in methods:
         try:

@@ -29,6 +29,7 @@ import hashlib
 import os
 import sys
 import tempfile
+import threading
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -37,9 +38,9 @@ import jax
 import jaxlib
 import numpy as np
 
-# shelljax/, not estimate/: every source of the package shapes the key, and the shipped programs
+# every source of the package shapes the key, and the shipped programs
 # are the package's data (pyproject's package-data)
-PACKAGE_DIR = Path(__file__).resolve().parents[1]
+PACKAGE_DIR = Path(__file__).resolve().parent
 SHIPPED_DIR = PACKAGE_DIR / "data" / "programs"
 SUFFIX = ".jaxexport"
 # jaxlib's CPU linear-algebra kernels the fit calls (QR for Levenberg–Marquardt's damped step);
@@ -117,15 +118,32 @@ def persistent_jit(fn: Callable, *, static_argnames: tuple[str, ...] = (), cpu_c
     @functools.wraps(fn)
     def call(*args, **static):
         key = program_key(fn.__qualname__, args, static)
+        leaves = jax.tree_util.tree_leaves(args)
         program = _LOADED.get(key)
         if program is None:
-            # the backend is asked only now: importing shelljax does not start JAX
-            on_cpu = jax.export.default_export_platform() == "cpu"
-            options = _known_options(cpu_compiler_options or {}) if on_cpu else {}
-            program = _LOADED[key] = _load_or_export(fn, static_argnames, key, args, static, options)
-        return program(*jax.tree_util.tree_leaves(args))
+            # one thread traces and compiles a program; another that asks for it meanwhile waits
+            # for that, instead of compiling it a second time (map_batch's threads, a compile ahead)
+            with _lock(key):
+                program = _LOADED.get(key)
+                if program is None:
+                    # the backend is asked only now: importing shelljax does not start JAX
+                    on_cpu = jax.export.default_export_platform() == "cpu"
+                    options = _known_options(cpu_compiler_options or {}) if on_cpu else {}
+                    program = _load_or_export(fn, key, args, static, options)
+                    program.lower(*leaves).compile()  # kept by jit for the calls to come
+                    _LOADED[key] = program
+        return program(*leaves)
 
     return call
+
+
+_LOCKS: dict[str, threading.Lock] = {}
+_LOCKS_LOCK = threading.Lock()
+
+
+def _lock(key: str) -> threading.Lock:
+    with _LOCKS_LOCK:
+        return _LOCKS.setdefault(key, threading.Lock())
 
 
 def _known_options(options: dict) -> dict:
@@ -143,8 +161,7 @@ def _option_known(name: str, value) -> bool:
     return True
 
 
-def _load_or_export(fn: Callable, static_argnames: tuple[str, ...], key: str, args: tuple, static: dict,
-                    options: dict) -> Callable:  # fmt: skip
+def _load_or_export(fn: Callable, key: str, args: tuple, static: dict, options: dict) -> Callable:
     leaves, treedef = jax.tree_util.tree_flatten(args)
     exported = _read(key)
     if exported is None:
@@ -157,8 +174,7 @@ def _load_or_export(fn: Callable, static_argnames: tuple[str, ...], key: str, ar
             exported = jax.export.export(jax.jit(flat), platforms=[jax.export.default_export_platform()],
                                          disabled_checks=unchecked)(*leaves)  # fmt: skip
         except Exception:  # not exportable: the plain trace raises the function's own errors
-            plain = jax.jit(fn, static_argnames=static_argnames, compiler_options=options)
-            return lambda *flat_leaves: plain(*jax.tree_util.tree_unflatten(treedef, flat_leaves), **static)
+            return jax.jit(flat, compiler_options=options)
         _write(key, exported)
 
     @functools.wraps(fn)  # the compile log and JAX's own messages name the program after fn
