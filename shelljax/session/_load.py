@@ -14,7 +14,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..paper import DEFAULT_POISSON_RATIO
-from ._ranges import RANGES, convert_unit, implausible, likely_unit
+from ._ranges import check_forwards, check_plausible, check_plausible_samples, check_spread, implausible
 from ._reader import _read_toml, _Reader, file_sha256
 from ._schema import SHAPE_OBSERVABLES, Session
 
@@ -32,9 +32,6 @@ _CSV_COLUMNS = ("trial", "force", "depth")
 _SHAPE_KEYS = {"length_unit", "force_unit", "shape_csv", "trial", "force", *SHAPE_OBSERVABLES}
 _SHAPE_COLUMNS = ("trial", "force", *SHAPE_OBSERVABLES)
 MIN_FORCE_LEVELS = 3
-# Within a trial the depth follows the force; a step against it beyond this fraction of the
-# deeper of the two depths is not reading noise (a ruler read to ~5 %) but a wrong sample.
-BACKWARDS_TOLERANCE = 0.1
 # The `kind` key: absent means an indentation session, the only kind before presses existed.
 SESSION_KINDS = ("indentation", "rigid_press")
 
@@ -62,32 +59,6 @@ def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: list[
 def _unit_name(table: dict, key: str, default: str) -> str:
     """The unit ``key`` names (already checked by ``_Reader.unit``), or ``default``."""
     return table.get(key, default)
-
-
-def _check_plausible(reader: _Reader, name: str, field: str, written: float, unit: str, unit_key: str,
-                     where: str = "") -> None:
-    """Refuse ``written`` (in ``unit``, set by ``unit_key``) outside the plausible range of ``name``
-    (``_ranges.RANGES``), naming the value as written and the unit that would make it plausible."""
-    problem = implausible(name, written, unit)
-    if problem is None:
-        return
-    likely = likely_unit(name, written)
-    if likely is not None and likely != unit:
-        quantity = RANGES[name].quantity
-        fix = (f"if {written:g} is in {likely}, set {unit_key} = \"{likely}\" (or write "
-               f"{convert_unit(written, quantity, likely, unit):g} {unit}); else re-measure it")
-    else:
-        fix = f"check the value and {unit_key}, then re-measure it"
-    raise reader.fail(field, where + problem, fix, value=written)
-
-
-def _check_plausible_samples(reader: _Reader, name: str, field: str, written: np.ndarray, unit: str, unit_key: str,
-                             where: list[str]) -> None:
-    """``_check_plausible`` on every sample, naming the first one outside the range (NaN: not
-    measured, skipped)."""
-    for i, value in enumerate(written):
-        if math.isfinite(value) and implausible(name, float(value), unit) is not None:
-            _check_plausible(reader, name, f"{field}[{i}]", float(value), unit, unit_key, where[i])
 
 
 def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
@@ -208,12 +179,12 @@ def _read_header(reader: _Reader, data: dict) -> dict:
     mass = reader.number(data, "mass", default=None, positive=True)
     if mass is not None:
         scale = reader.unit(data, "mass_unit", "mass", "kg")
-        _check_plausible(reader, "mass", "mass", mass, _unit_name(data, "mass_unit", "kg"), "mass_unit")
+        check_plausible(reader, "mass", "mass", mass, _unit_name(data, "mass_unit", "kg"), "mass_unit")
         mass *= scale
     manometer = reader.number(data, "manometer_gauge_pressure", default=None, positive=True)
     if manometer is not None:
         scale = reader.unit(data, "pressure_unit", "pressure", "Pa")
-        _check_plausible(reader, "pressure", "manometer_gauge_pressure", manometer, _unit_name(data, "pressure_unit", "Pa"),
+        check_plausible(reader, "pressure", "manometer_gauge_pressure", manometer, _unit_name(data, "pressure_unit", "Pa"),
                          "pressure_unit")
         manometer *= scale
     rig_name = data.get("rig")
@@ -229,22 +200,12 @@ def _read_wall(reader: _Reader, data: dict) -> tuple[float, float]:
     wall_scale = reader.unit(wall, "thickness_unit", "length", "m", "wall.")
     unit = _unit_name(wall, "thickness_unit", "m")
     thickness = reader.number(wall, "thickness", "wall.", positive=True)
-    _check_plausible(reader, "thickness", "wall.thickness", thickness, unit, "thickness_unit")
+    check_plausible(reader, "thickness", "wall.thickness", thickness, unit, "thickness_unit")
     thickness_std = reader.number(wall, "thickness_std", "wall.")
     if thickness_std < 0:
         raise reader.fail("wall.thickness_std", f"value {thickness_std} is negative", "write a standard deviation >= 0")
-    _check_spread(reader, "wall.thickness_std", thickness_std, thickness, unit, "thickness", "thickness_unit")
+    check_spread(reader, "wall.thickness_std", thickness_std, thickness, unit, "thickness", "thickness_unit")
     return thickness * wall_scale, thickness_std * wall_scale
-
-
-def _check_spread(reader: _Reader, field: str, std: float, value: float, unit: str, of: str, unit_key: str) -> None:
-    """A standard deviation as large as its value is a unit or digit mistake: refuse it."""
-    if std >= value:
-        raise reader.fail(
-            field, f"{std:g} {unit} is not smaller than the {of} {value:g} {unit}",
-            f"write the standard deviation in the same unit ({unit_key} applies to both), e.g. 5 % of the {of}",
-            value=std,
-        )  # fmt: skip
 
 
 def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
@@ -265,9 +226,9 @@ def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
                 "enclosed_volume": mesh_volume}  # fmt: skip
     unit = _unit_name(geometry, "length_unit", "m")
     radius = reader.number(geometry, "radius", "geometry.", positive=True)
-    _check_plausible(reader, "radius", "geometry.radius", radius, unit, "length_unit")
+    check_plausible(reader, "radius", "geometry.radius", radius, unit, "length_unit")
     radius_std = reader.number(geometry, "radius_std", "geometry.", default=None, nonnegative=True) or 0.0
-    _check_spread(reader, "geometry.radius_std", radius_std, radius, unit, "radius", "length_unit")
+    check_spread(reader, "geometry.radius_std", radius_std, radius, unit, "radius", "length_unit")
     return {"radius": float(radius * length_scale), "radius_std": float(radius_std * length_scale)}
 
 
@@ -315,7 +276,7 @@ def _read_indentation_samples(reader: _Reader, data: dict, input_files: dict, *,
     trial, force, depth, where = _indentation_arrays(reader, indentation, input_files)
     _check_samples(reader, "indentation.force", force, where)
     _check_samples(reader, "indentation.depth", depth, where, positive=positive_depth)
-    _check_plausible_samples(reader, "force", "indentation.force", force, _unit_name(indentation, "force_unit", "N"),
+    check_plausible_samples(reader, "force", "indentation.force", force, _unit_name(indentation, "force_unit", "N"),
                              "force_unit", where)
     trial = _trial_ids(reader, "indentation.trial", trial)
     return trial, force * force_scale, depth * depth_scale, depth_scale, where
@@ -336,31 +297,9 @@ def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: d
             "depths look like millimetres written as metres: set depth_unit = \"mm\"",
         )  # fmt: skip
     unit = _unit_name(data["indentation"], "depth_unit", "m")
-    _check_plausible_samples(reader, "depth", "indentation.depth", depth / depth_scale, unit, "depth_unit", where)
-    _check_forwards(reader, trial, force, depth / depth_scale, unit, where)
+    check_plausible_samples(reader, "depth", "indentation.depth", depth / depth_scale, unit, "depth_unit", where)
+    check_forwards(reader, trial, force, depth / depth_scale, unit, where)
     return trial, force, depth, depth_scale
-
-
-def _check_forwards(reader: _Reader, trial: np.ndarray, force: np.ndarray, written: np.ndarray, unit: str,
-                    where: list[str]) -> None:
-    """Within a trial the depth (``written``, in ``unit``) follows the force [N] from sample to
-    sample, as written: a step against it by more than ``BACKWARDS_TOLERANCE`` of the deeper depth
-    is refused, naming both samples. Where the force falls and the depth with it (a new sweep in
-    the same trial), nothing is wrong."""
-    for t in np.unique(trial):
-        samples = np.flatnonzero(trial == t)
-        for before, i in zip(samples[:-1], samples[1:]):
-            rise, deepen = force[i] - force[before], written[i] - written[before]
-            if rise * deepen < 0 and abs(deepen) > BACKWARDS_TOLERANCE * max(written[i], written[before]):
-                raise reader.fail(
-                    f"indentation.depth[{i}]",
-                    f"{where[i]}trial {t} runs backwards: {written[i]:g} {unit} at {force[i]:g} N after "
-                    f"{written[before]:g} {unit} at {force[before]:g} N (sample {before}); the depth "
-                    "follows the force within a trial",
-                    "re-measure or delete that sample (the whole row); if the trial holds several sweeps, give "
-                    "each its own trial id",
-                    value=float(written[i]),
-                )  # fmt: skip
 
 
 def _read_wrinkles(reader: _Reader, data: dict, trial: np.ndarray, depth_scale: float):
@@ -374,7 +313,7 @@ def _read_wrinkles(reader: _Reader, data: dict, trial: np.ndarray, depth_scale: 
     if "onset_depth" in wrinkles:
         onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
         _check_samples(reader, "wrinkles.onset_depth", onset_depth, [""] * onset_depth.size)
-        _check_plausible_samples(reader, "depth", "wrinkles.onset_depth", onset_depth,
+        check_plausible_samples(reader, "depth", "wrinkles.onset_depth", onset_depth,
                                  _unit_name(data["indentation"], "depth_unit", "m"), "depth_unit in [indentation]",
                                  [""] * onset_depth.size)
         onset_depth = onset_depth * depth_scale
@@ -551,7 +490,7 @@ def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], tria
         else:
             kind, unit, unit_key = "shape_length", units[0], "length_unit in [shape]"
         checked = measured & ~((values == 0) & zero_ok)  # a sunken depth of 0: no dimple yet
-        _check_plausible_samples(reader, kind, field, np.where(checked, values, np.nan), unit, unit_key, where)
+        check_plausible_samples(reader, kind, field, np.where(checked, values, np.nan), unit, unit_key, where)
     unmeasured = np.flatnonzero(~np.any([columns[k][1] for k in columns if k in SHAPE_OBSERVABLES], axis=0))
     if unmeasured.size:
         i = unmeasured[0]
@@ -582,7 +521,7 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     fit_radius = reader.number(geometry, "fit_radius", "geometry.", default=None, positive=True)
     unit_name = _unit_name(geometry, "length_unit", "m")
     if fit_radius is not None:
-        _check_plausible(reader, "fit_radius", "geometry.fit_radius", fit_radius, unit_name, "length_unit")
+        check_plausible(reader, "fit_radius", "geometry.fit_radius", fit_radius, unit_name, "length_unit")
         fit_radius *= length_scale
     try:
         mesh = geo.load_mesh(mesh_path, length_unit=unit_name)
