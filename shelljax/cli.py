@@ -7,8 +7,14 @@ import argparse
 import contextlib
 import json
 import sys
+from pathlib import Path
 
-from ._errors import ShelljaxError
+from ._arguments import OneLineParser, real, whole
+from ._errors import InvalidInputError, ShelljaxError
+from ._files import check_output_dir, check_output_file
+from ._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, METHODS, MIN_MAX_STEPS, MIN_WALKERS, WRINKLE_LAWS
+from .physics import GAS_LAWS
+from .replica import MESH_FACES
 from .report import summary_text
 
 
@@ -37,17 +43,18 @@ def _cmd_estimate(args) -> int:
     if len(args.session) > 1:
         raise ShelljaxError(f"{len(args.session)} sessions given: without --rig, estimate one session at a time. Fix: "
                             "pass one session, or several sessions of one object with --rig rig.toml")  # fmt: skip
+    if args.chain is not None:
+        check_output_file(args.chain, "--chain", example="chain.h5")
     session = load_session(args.session[0])
     k_s = None
     if args.method == "closed-form" and args.k_s is not None:
-        if args.k_s <= 0 or args.k_s_std < 0:
-            raise ShelljaxError(f"--k-s {args.k_s} / --k-s-std {args.k_s_std}: k_s must be > 0 and its std >= 0")
         k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
     options = EstimatorOptions(
-        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model, gas=args.gas or "prescribed",
-        wrinkle_law=args.wrinkle_law or "mechanics", nuisance=tuple(args.nuisance or ()), walkers=args.walkers,
-        max_steps=args.max_steps, surrogate=not args.no_surrogate,
-    )  # fmt: skip
+        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model,
+        gas=args.gas or DEFAULT_OPTIONS.gas, wrinkle_law=args.wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
+        nuisance=tuple(args.nuisance or ()), walkers=args.walkers, max_steps=args.max_steps,
+        surrogate=not args.no_surrogate,
+    )
     with _stage_bar(f"estimate: {args.method} on {session.source.name}", args):
         result = run_estimator(args.method, session, options, backend_path=args.chain,
                                progress=None if not args.quiet else False)  # fmt: skip
@@ -66,18 +73,25 @@ def _stage_bar(name: str, args):
 
     from .runner._compile_log import stage
 
-    with tqdm(total=1, desc=name, unit="stage", disable=args.quiet) as bar, stage(name, args.verbose):
+    # shown after a second: an input refused at once leaves its one-line error alone on stderr
+    with tqdm(total=1, desc=name, unit="stage", disable=args.quiet, delay=1.0) as bar, stage(name, args.verbose):
         yield
         bar.update(1)
 
 
-def _print_estimates(out: dict, estimates: dict, as_json: bool) -> None:
+def _print_estimates(out: dict, estimates: dict, as_json: bool, sources: tuple[str, ...] = ()) -> None:
+    """The estimates as JSON, or one line each; with several ``sources``, a per-session quantity
+    (``gauge_pressure[i]``) is named by its session file's stem."""
+    import re
+
     if as_json:
         json.dump(out, sys.stdout, indent=2)
         print()
         return
     for name, est in estimates.items():
         unit = "" if est.unit == "1" else f" {est.unit}"
+        if len(sources) > 1:
+            name = re.sub(r"\[(\d+)\]", lambda m: f"[{Path(sources[int(m.group(1))]).stem}]", name)
         print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
               f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip
 
@@ -94,7 +108,7 @@ def _estimate_with_rig(args) -> int:
                                    seed=args.seed)  # fmt: skip
     out = {"session": result.sources[0] if len(result.sources) == 1 else list(result.sources), "method": args.method,
            "rig": str(args.rig), **result.to_dict()}  # fmt: skip
-    _print_estimates(out, result.estimates, args.json)
+    _print_estimates(out, result.estimates, args.json, tuple(result.sources))
     if not args.json:
         for m in result.models:
             share = f"{100 * m['weight']:.0f} %"
@@ -114,6 +128,7 @@ def _cmd_rig_calibrate(args) -> int:
     from .rig import calibrate_rig, physical_parameter, write_rig
     from .session import session_kind
 
+    check_output_file(args.out, "--out", example="rig.toml")  # before the fit: a refused path costs nothing
     kinds = [session_kind(path) for path in args.sessions]
     presses = [p for p, kind in zip(args.sessions, kinds) if kind == "rigid_press"]
     sessions = [p for p, kind in zip(args.sessions, kinds) if kind != "rigid_press"]
@@ -148,12 +163,14 @@ def _cmd_diagnose(args) -> int:
     if args.workers is not None or args.cluster is not None or args.resume is not None:
         raise ShelljaxError("--workers/--cluster/--resume run many studies (--study), and one study is one piece of work. "
                             "Fix: give each study as --study DIR_OR_PATTERN, or leave them out")  # fmt: skip
+    if args.out is not None:
+        check_output_dir(args.out, "--out")
     measurement, gas, wrinkle_law = diagnosis_baseline(args.rig, args.gas, args.wrinkle_law)
     from .runner._compile_log import stage
 
     with stage("diagnose", args.verbose):
         result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=gas,
-                          wrinkle_law=wrinkle_law or "scaling", progress=not args.quiet and not args.json,
+                          wrinkle_law=wrinkle_law or DEFAULT_OPTIONS.wrinkle_law, progress=not args.quiet and not args.json,
                           measurement=measurement)  # fmt: skip
     if args.out is not None:
         written = write_diagnosis(result, args.out)
@@ -269,7 +286,7 @@ def _cmd_validate(args) -> int:
 
 
 def _cmd_play(args) -> int:
-    from .viewer import play_headless, play_live, play_scene, require_viser
+    from .viewer import check_replay_outputs, play_headless, play_live, play_scene, require_viser
 
     if args.headless and args.script is None:
         raise ShelljaxError("--headless replays a script. Fix: add --script configs/interaction.toml")
@@ -277,6 +294,7 @@ def _cmd_play(args) -> int:
         raise ShelljaxError("--record and --records write a headless replay. Fix: add --headless (and --script)")
     if not args.headless:
         require_viser()  # before the object loads: say at once what is missing
+    check_replay_outputs(args.record, args.records)
     scene = play_scene(args.source, args.script, mesh_faces=args.mesh_faces, gas=args.gas)
     if not args.headless:
         return play_live(scene, host=args.host, port=args.port)
@@ -302,13 +320,15 @@ def _register_play(sub) -> None:
     play.add_argument("--script", default=None, help="interaction script TOML (planes, hand, timed drop/poke/throw/wait "
                       "actions), e.g. configs/interaction.toml")
     play.add_argument("--headless", action="store_true", help="no browser: replay --script and print its peaks")
-    play.add_argument("--record", default=None, help="with --headless: write the replay as a GIF here")
+    play.add_argument("--record", default=None, help="with --headless: write the replay as a GIF here (a .gif file; "
+                      "missing folders are created)")
     play.add_argument("--records", default=None, help="with --headless: write the per-frame records as JSON here")
-    play.add_argument("--mesh-faces", type=int, default=None, help="triangles of a session's sphere (default: the script's, 500)")
-    play.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic",
+    play.add_argument("--mesh-faces", type=whole(*MESH_FACES), default=None,
+                      help="triangles of a session's sphere [count] (default: the script's, 500)")
+    play.add_argument("--gas", choices=GAS_LAWS, default="adiabatic",
                       help="gas law of a session's shell (a replica keeps its own)")
     play.add_argument("--host", default="127.0.0.1", help="address the live viewer listens on")
-    play.add_argument("--port", type=int, default=8080, help="port of the live viewer")
+    play.add_argument("--port", type=whole(1, 65535), default=8080, help="TCP port of the live viewer")
     play.set_defaults(func=_cmd_play)
 
 
@@ -325,11 +345,11 @@ def _register_diagnose(sub) -> None:
     diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
     diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
                       help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
-    diag.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default=None,
-                      help="gas law of the baseline (default: the baseline's)")
-    diag.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
-                      help="wrinkle count: n = 1.33 tau^1/2 (scaling, the default, as configs/paper.toml) or the engine's "
-                      "(mechanics)")
+    diag.add_argument("--gas", choices=GAS_LAWS, default=None,
+                      help="gas law of the baseline (default: the baseline's; with --rig, the rig's)")
+    diag.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
+                      help=f"wrinkle count: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
+                      f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)")
     diag.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: its measuring chain is the "
                       "baseline, and its gas and wrinkle law the model's")
     diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
@@ -349,16 +369,16 @@ def _register_rig(sub) -> None:
     cal = rig_sub.add_parser("calibrate", help="fit and select the rig's terms on sessions with manometer readings")
     cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects, "
                      "and optionally rigid-surface press sessions (kind = \"rigid_press\", docs/session-format.md)")
-    cal.add_argument("--out", required=True, help="rig TOML file to write")
-    cal.add_argument("--gas", choices=["prescribed", "isothermal"], default="isothermal",
+    cal.add_argument("--out", required=True, help="rig TOML file to write (checked before the fit; folders created)")
+    cal.add_argument("--gas", choices=ESTIMATOR_GASES, default=DEFAULT_OPTIONS.gas,
                      help="gas law of the forward model (every estimate through the rig uses it; a poke is slow, so a "
                      "sealed object's gas is isothermal)")
-    cal.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default="scaling",
+    cal.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=DEFAULT_OPTIONS.wrinkle_law,
                      help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)")
     cal.add_argument("--terms", nargs="+", default=None, metavar="TERM",
                      help="candidate terms (default: all of shelljax.rig.RIG_TERMS)")
-    cal.add_argument("--manometer-std", type=float, default=0.02,
-                     help="the manometer readings' relative standard deviation (default 0.02: 2 %%)")
+    cal.add_argument("--manometer-std", type=real(0.0, 1.0, low_open=True), default=0.02,
+                     help="the manometer readings' relative standard deviation [-] (0.02: 2 %%)")
     cal.add_argument("--quiet", action="store_true", help="no progress bar")
     cal.set_defaults(func=_cmd_rig_calibrate)
 
@@ -377,38 +397,35 @@ def _register_run(sub) -> None:
     run.set_defaults(func=_cmd_run)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argparse parser of the ``shelljax`` command."""
-    from . import __version__
-
-    parser = argparse.ArgumentParser(prog="shelljax", description=__doc__.partition(";")[0] + ".")
-    parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    _register_run(sub)
+def _register_estimate(sub) -> None:
+    """``shelljax estimate``: its defaults are ``shelljax.estimate.DEFAULT_OPTIONS``."""
+    d = DEFAULT_OPTIONS
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")
     est.add_argument("session", nargs="+", help="session TOML file (with --rig: the sessions of one object, estimated at "
                      "once with a shared E and measuring chain)")
-    est.add_argument("--method", choices=["closed-form", "fit", "bayes"], default="closed-form",
+    est.add_argument("--method", choices=METHODS, default="closed-form",
                      help="closed-form: the paper's Procedures 2-3; fit: least squares through a shell model; "
                      "bayes: MCMC posterior through a shell model")
     est.add_argument("--json", action="store_true", help="print JSON on stdout")
-    est.add_argument("--k-s", type=float, default=None, help="k_s [-] (default: the paper's 0.64)")
-    est.add_argument("--k-s-std", type=float, default=0.0, help="standard deviation of --k-s [-]")
-    est.add_argument("--bootstrap", type=int, default=2000, help="bootstrap resamples (0 disables)")
-    est.add_argument("--seed", type=int, default=0)
-    est.add_argument("--model", choices=["axisym", "scaling"], default="axisym",
-                     help="forward model of fit/bayes (default: the axisymmetric shell engine)")
-    est.add_argument("--gas", choices=["prescribed", "isothermal"], default=None,
-                     help="gas model of the axisym engine (default: prescribed; with --rig, the rig's)")
-    est.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
-                     help="wrinkle count of the axisym model: the engine's (mechanics, the default) or n = 1.33 tau^1/2 "
-                     "(scaling); with --rig, the rig's")
+    est.add_argument("--k-s", type=real(0.0, 10.0, low_open=True), default=None,
+                     help="closed form: k_s [-] (default: the paper's 0.64)")
+    est.add_argument("--k-s-std", type=real(0.0), default=0.0, help="closed form: standard deviation of --k-s [-]")
+    est.add_argument("--bootstrap", type=whole(0, hint=" (0 disables)"), default=d.bootstrap_samples,
+                     help="closed form: bootstrap resamples [count] (0 disables)")
+    est.add_argument("--seed", type=whole(0), default=d.seed, help="random seed of the bootstrap and the MCMC")
+    est.add_argument("--model", choices=["axisym", "scaling"], default=d.forward_model,
+                     help="forward model of fit/bayes: the axisymmetric shell engine, or the scaling law")
+    est.add_argument("--gas", choices=ESTIMATOR_GASES, default=None,
+                     help=f"gas model of the axisym engine (default: {d.gas}, a sealed ball poked slowly; with --rig, "
+                     "the rig's)")
+    est.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
+                     help=f"wrinkle count of the axisym model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) "
+                     f"(default: {d.wrinkle_law}; with --rig, the rig's)")
     est.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through the calibrated "
                      "measuring chain (fit or bayes)")
     est.add_argument("--nuisance", nargs="*", choices=["depth_offset", "force_gain"], help="extra fitted parameters")
-    est.add_argument("--walkers", type=int, default=32, help="bayes: emcee walkers")
-    est.add_argument("--max-steps", type=int, default=20_000, help="bayes: most MCMC steps")
+    est.add_argument("--walkers", type=whole(MIN_WALKERS), default=d.walkers, help="bayes: emcee walkers [count]")
+    est.add_argument("--max-steps", type=whole(MIN_MAX_STEPS), default=d.max_steps, help="bayes: most MCMC steps [count]")
     est.add_argument("--chain", default=None, help="bayes: HDF5 file for the chain (resumed if it exists)")
     est.add_argument("--no-surrogate", action="store_true",
                      help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
@@ -416,7 +433,10 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
     est.set_defaults(func=_cmd_estimate)
 
-    _register_diagnose(sub)
+
+def _register_simulate(sub) -> None:
+    """``shelljax simulate``."""
+    from .executor import add_executor_arguments
 
     sim = sub.add_parser("simulate", help="run a dynamic scenario config (drop, bounce) into --out")
     sim.add_argument("config", help="scenario config TOML, e.g. configs/drop.toml")
@@ -424,29 +444,43 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--session", default=None, help="take P_g and E from this session's estimate (overrides the config)")
     sim.add_argument("--quiet", action="store_true", help="no progress bars")
     sim.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
-    from .executor import add_executor_arguments
-
     add_executor_arguments(sim)  # the values of a [sweep] table (docs/cluster.md); --resume: the --out of an interrupted one
     sim.set_defaults(func=_cmd_simulate)
 
+
+def _register_replica(sub) -> None:
+    """``shelljax replica``."""
     rep = sub.add_parser("replica", help="export a session's digital replica: mesh (glTF) + replica.json")
     rep.add_argument("session", help="session TOML file")
-    rep.add_argument("--out", required=True, help="output directory (created)")
-    rep.add_argument("--method", choices=["closed-form", "fit", "bayes"], default="fit", help="estimator of P_g and E")
-    rep.add_argument("--gas", choices=["prescribed", "isothermal", "adiabatic"], default="adiabatic")
-    rep.add_argument("--cor", type=float, default=None, help="measured coefficient of restitution [-], if known")
-    rep.add_argument("--mesh-faces", type=int, default=2000, help="triangles of a sphere replica (sessions without a mesh)")
-    rep.add_argument("--wrinkle-law", choices=["mechanics", "scaling"], default=None,
-                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling, the default, as configs/paper.toml) or the "
-                     "engine's (mechanics)")
+    rep.add_argument("--out", required=True, help="output directory (created; checked before the estimate)")
+    rep.add_argument("--method", choices=METHODS, default="fit", help="estimator of P_g and E")
+    rep.add_argument("--gas", choices=GAS_LAWS, default="adiabatic",
+                     help="gas law of the replica's dynamics (its impacts are fast); the estimate's is "
+                     f"{DEFAULT_OPTIONS.gas} unless prescribed")
+    rep.add_argument("--cor", type=real(0.0, 1.0, low_open=True), default=None,
+                     help="measured coefficient of restitution [-], if known")
+    rep.add_argument("--mesh-faces", type=whole(*MESH_FACES), default=2000,
+                     help="triangles of a sphere replica [count] (sessions without a mesh)")
+    rep.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
+                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
+                     f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)")
     rep.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through it (fit, bayes)")
     rep.set_defaults(func=_cmd_replica)
 
-    _register_rig(sub)
-    _register_play(sub)
 
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser of the ``shelljax`` command: every subcommand's --help shows its
+    defaults and units, and every usage error is one line (``shelljax._arguments``)."""
+    from . import __version__
+
+    parser = OneLineParser(prog="shelljax", description=__doc__.partition(";")[0] + ".")
+    parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for register in (_register_run, _register_estimate, _register_diagnose, _register_simulate, _register_replica,
+                     _register_rig, _register_play):
+        register(sub)
     val = sub.add_parser("validate", help="check session files and report what they contain")
-    val.add_argument("sessions", nargs="+")
+    val.add_argument("sessions", nargs="+", help="session TOML files (indentation sessions or rigid-surface presses)")
     val.set_defaults(func=_cmd_validate)
 
     from .sensing import _cli as sensing_cli
@@ -456,16 +490,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``shelljax`` console script; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    """Entry point of the ``shelljax`` console script; returns the exit code: 2, with one line on
+    stderr naming the option or field and a fix, for every input it refuses."""
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except ShelljaxError as err:
-        print(f"shelljax: error: {err}", file=sys.stderr)
+        print(f"shelljax: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early
         sys.stderr.close()
         return 0
+
+
+def _one_line(err: ShelljaxError) -> str:
+    """An input error on one line (a solver's error keeps its residual history on the lines after it)."""
+    return " ".join(str(err).split()) if isinstance(err, InvalidInputError) else str(err)
 
 
 if __name__ == "__main__":

@@ -12,14 +12,13 @@ import glob
 from importlib import resources
 from pathlib import Path
 
+from ._options import (DEFAULT_OPTIONS, ESTIMATOR_GASES, FORWARD_MODELS, METHODS, MIN_MAX_STEPS, MIN_WALKERS, NUISANCE,
+                       WRINKLE_LAWS, EstimatorOptions)
 from ._toml import TomlReader, read_toml
-from .estimate import METHODS, EstimatorOptions
-from .estimate._forward import FORWARD_MODELS, WRINKLE_LAWS
 from .executor import ExecutorOptions
 from .paper import PAPER_KS
 
-GAS_MODELS = ("prescribed", "isothermal")
-NUISANCE = ("depth_offset", "force_gain")
+GAS_MODELS = ESTIMATOR_GASES
 _TOP_KEYS = {"name", "description", "output_dir", "seed", "estimators", "calibration", "sessions", "outputs", "rig",
              "executor"}
 ESTIMATOR_KEYS = {"methods", "bootstrap_samples", "through_origin", "forward_model", "gas", "wrinkle_law", "nuisance",
@@ -156,10 +155,12 @@ def rig_settings(path: Path, table: dict, estimators: dict) -> tuple[Path, dict]
     return rig_path, options
 
 
-def estimator_settings(path: Path, estimators: dict, *, gas: str = "prescribed",
+def estimator_settings(path: Path, estimators: dict, *, gas: str = DEFAULT_OPTIONS.gas,
                        seed: int = 0) -> tuple[tuple[str, ...], EstimatorOptions]:  # fmt: skip
     """(methods, options) of the [estimators] table, checked (``gas``: its default; ``seed``: the
-    options' seed). The options' ``k_s`` is None: whoever runs the closed form sets it."""
+    options' seed); what the table leaves out is ``shelljax.estimate.DEFAULT_OPTIONS``'. The
+    options' ``k_s`` is None: whoever runs the closed form sets it."""
+    d = DEFAULT_OPTIONS
     reader = TomlReader(path, doc=_DOC)
     p = "estimators."
     methods = estimators.get("methods", ["closed-form"])
@@ -169,16 +170,19 @@ def estimator_settings(path: Path, estimators: dict, *, gas: str = "prescribed",
         if m not in METHODS:
             raise reader.fail(p + "methods", f"unknown method {m!r}", f"available: {', '.join(METHODS)}")
     options = EstimatorOptions(  # keyword order is the order of the checks
-        bootstrap_samples=reader.integer(estimators, "bootstrap_samples", p, default=2000, fix="e.g. 2000 (0 disables)"),
-        through_origin=reader.flag(estimators, "through_origin", p, default=False),
+        bootstrap_samples=reader.integer(estimators, "bootstrap_samples", p, default=d.bootstrap_samples,
+                                         fix=f"e.g. {d.bootstrap_samples} (0 disables)"),
+        through_origin=reader.flag(estimators, "through_origin", p, default=d.through_origin),
         seed=seed,
-        forward_model=reader.choice(estimators, "forward_model", p, FORWARD_MODELS, "axisym", what="model"),
+        forward_model=reader.choice(estimators, "forward_model", p, FORWARD_MODELS, d.forward_model, what="model"),
         gas=reader.choice(estimators, "gas", p, GAS_MODELS, gas, what="gas model"),
-        wrinkle_law=reader.choice(estimators, "wrinkle_law", p, WRINKLE_LAWS, "mechanics", what="wrinkle law"),
-        nuisance=_nuisance(reader, estimators.get("nuisance", [])),
-        walkers=reader.integer(estimators, "bayes_walkers", p, default=32, minimum=8, fix="e.g. 32"),
-        max_steps=reader.integer(estimators, "bayes_max_steps", p, default=20_000, minimum=100, fix="e.g. 20000"),
-        surrogate=reader.flag(estimators, "bayes_surrogate", p, default=True),
+        wrinkle_law=reader.choice(estimators, "wrinkle_law", p, WRINKLE_LAWS, d.wrinkle_law, what="wrinkle law"),
+        nuisance=_nuisance(reader, estimators.get("nuisance", list(d.nuisance))),
+        walkers=reader.integer(estimators, "bayes_walkers", p, default=d.walkers, minimum=MIN_WALKERS,
+                               fix=f"e.g. {d.walkers}"),
+        max_steps=reader.integer(estimators, "bayes_max_steps", p, default=d.max_steps, minimum=MIN_MAX_STEPS,
+                                 fix=f"e.g. {d.max_steps}"),
+        surrogate=reader.flag(estimators, "bayes_surrogate", p, default=d.surrogate),
     )  # fmt: skip
     return tuple(methods), options
 

@@ -15,9 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InvalidInputError
+from ._files import atomic_write_text, check_output_dir, read_json
 
 REPLICA_VERSION = 1
 _QUANTITIES = ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg", "cor")
+#: What to do about a replica file that cannot be read.
+REEXPORT = "export the replica again with `shelljax replica SESSION --out DIR`"
+#: Triangles of a sphere replica: the sphere builder needs 20; beyond a million, no simulator loads it.
+MESH_FACES = (20, 1_000_000)
 
 
 def _quantity(value, std=None) -> dict:
@@ -32,7 +37,7 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
     """
     import trimesh
 
-    out = Path(out_dir)
+    out = check_output_dir(out_dir, "--out")
     out.mkdir(parents=True, exist_ok=True)
     mesh_path = out / "replica.glb"
     trimesh.Trimesh(shell.mesh.vertices, shell.mesh.faces, process=False).export(mesh_path)
@@ -40,7 +45,7 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
     for name in _QUANTITIES:
         q = quantities.get(name)
         body[name] = _quantity(*q) if isinstance(q, tuple) else _quantity(q)
-    (out / "replica.json").write_text(json.dumps(body, indent=1))
+    atomic_write_text(out / "replica.json", json.dumps(body, indent=1))
     return [mesh_path, out / "replica.json"]
 
 
@@ -54,6 +59,7 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
     "scaling"), and with a sealed isothermal gas unless the replica's ``gas`` is "prescribed" (a poke
     is slow: no heat is kept in); with a ``rig`` file, through that rig and its forward model."""
     from . import shell3d as s3
+    from .estimate import DEFAULT_OPTIONS
     from .object_estimate import estimated_parameters
     from .session import load_session
 
@@ -62,12 +68,16 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
         raise InvalidInputError(f"{session.source}: field 'mass' is missing. Fix: add `mass = <kg>` to the session")
     if cor is not None and not 0.0 < cor <= 1.0:
         raise InvalidInputError(f"--cor {cor}: a COR is in (0, 1]. Fix: measure it as √(bounce height / drop height)")
-    estimator_gas = "prescribed" if gas == "prescribed" else "isothermal"
+    if getattr(session, "mesh_path", None) is None and not MESH_FACES[0] <= mesh_faces <= MESH_FACES[1]:
+        raise InvalidInputError(f"--mesh-faces {mesh_faces}: a sphere replica has {MESH_FACES[0]}-{MESH_FACES[1]} "
+                                "triangles. Fix: e.g. --mesh-faces 2000")
+    check_output_dir(out_dir, "--out")  # before the estimate: a refused path costs no fit
+    estimator_gas = "prescribed" if gas == "prescribed" else DEFAULT_OPTIONS.gas
     if rig is not None:
         from .rig import load_rig
 
         estimator_gas, wrinkle_law = load_rig(rig).gas, wrinkle_law or load_rig(rig).wrinkle_law
-    wrinkle_law = wrinkle_law or "scaling"
+    wrinkle_law = wrinkle_law or DEFAULT_OPTIONS.wrinkle_law
     p_g, e, stats = estimated_parameters(session, method, {"gas": estimator_gas, "wrinkle_law": wrinkle_law}, rig)
     mesh_path = getattr(session, "mesh_path", None)
     shell = s3.load(mesh_path, session.thickness) if mesh_path else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
@@ -91,7 +101,9 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
     path = directory / "replica.json"
     if not path.is_file():
         raise InvalidInputError(f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`")
-    replica = json.loads(path.read_text())
+    replica = read_json(path, "replica file", fix=REEXPORT)
+    if not isinstance(replica, dict):
+        raise InvalidInputError(f"{path}: not a replica file (a JSON {type(replica).__name__}). Fix: {REEXPORT}")
     for name in _QUANTITIES[:-1]:
         if replica.get(name, {}).get("value") is None:
             raise InvalidInputError(f"{path}: field '{name}.value' is missing. Fix: re-export the replica")

@@ -21,7 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "shelljax"
 LAYERS = {  # rank: a module may import ranks ≤ its own
-    "paper": 0, "_errors": 0, "_toml": 0, "_files": 0,
+    "paper": 0, "_errors": 0, "_toml": 0, "_files": 0, "_arguments": 0, "_options": 0,
     "physics": 1, "_solution": 1, "session": 1, "geometry": 1, "sensing": 1, "executor": 1,
     "axisym": 2, "shell3d": 2, "_parallel": 2, "_programs": 2,
     "estimate": 3, "diagnose": 3, "rig": 3, "virtual": 3, "dynamics": 3, "realtime": 3,

@@ -209,7 +209,7 @@ def test_config_carries_the_forward_model_options(tmp_path):
     assert (options.gas, options.wrinkle_law, options.surrogate) == ("isothermal", "scaling", False)
     path.write_text('[estimators]\nmethods = ["fit"]\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')
     defaults = load_config(path).estimator_options
-    assert (defaults.gas, defaults.wrinkle_law, defaults.surrogate) == ("prescribed", "mechanics", True)
+    assert (defaults.gas, defaults.wrinkle_law, defaults.surrogate) == ("isothermal", "scaling", True)  # DEFAULT_OPTIONS
 
 
 def test_version_and_plain_text_help(capsys):

@@ -95,7 +95,7 @@ def test_trials_from_csv_beside_the_toml(tmp_path):
         ({"colour": "red"}, r"field 'colour': unknown key"),
         ({"wall__thicknes": 1.0}, r"field 'wall.thicknes': unknown key"),
         ({"indentation__depth_unit": "inch"}, r"unknown length unit 'inch'"),
-        ({"wall__thickness_unit": "m"}, r"wall.thickness'.*if you wrote millimetres"),
+        ({"wall__thickness_unit": "m"}, r"wall.thickness'.*0.9 m is implausibly large.*thickness_unit = \"mm\""),
         ({"indentation__trial": [1, 2]}, r"arrays differ in length"),
         ({"poisson_ratio": 0.7}, r"poisson_ratio'.*outside"),
     ],
@@ -105,6 +105,65 @@ def test_bad_input_is_named(tmp_path, changes, pattern):
     with pytest.raises(InvalidInputError, match=pattern) as info:
         load_session(path)
     assert str(path) in str(info.value) and "Fix:" in str(info.value)
+
+
+_DEPTH = BASE["indentation"]["depth"]
+
+
+@pytest.mark.parametrize(
+    "changes, pattern",
+    [
+        # the issue's wall 1000x too thin: 0.0009 written in mm, meant in m
+        ({"wall__thickness": 0.0009, "wall__thickness_std": 0.00005},
+         r"wall.thickness' = 0.0009: 0.0009 mm is implausibly small for a wall thickness \(0.05–10 mm\).*thickness_unit = \"m\""),
+        ({"wall__thickness": 2.0, "wall__thickness_std": 0.1, "wall__thickness_unit": "um"},
+         r"wall.thickness' = 2.0: 2 um is implausibly small for a wall thickness.*thickness_unit = \"mm\""),
+        ({"wall__thickness_std": 1.5}, r"wall.thickness_std' = 1.5: 1.5 mm is not smaller than the thickness 0.9 mm"),
+        ({"geometry__radius": 13000.0}, r"geometry.radius' = 13000.0: 13000 mm is implausibly large for a radius.*length_unit"),
+        ({"geometry__radius": 5.0, "geometry__radius_std": 0.1, "indentation__depth": [d / 20 for d in _DEPTH]},
+         r"geometry.radius' = 5.0: 5 mm is implausibly small for a radius of curvature \(0.01–2 m\)"),
+        ({"indentation__force": [f * 1000 for f in FORCES * 2]},
+         r"indentation.force\[0\]' = 5000.0: 5000 N is implausibly large for a finger's force.*force_unit = \"mN\""),
+        ({"indentation__depth": [d / 1000 for d in _DEPTH]},
+         r"indentation.depth\[0\]' = 0.015: 0.015 mm is implausibly small for an indentation depth.*depth_unit = \"m\""),
+        ({"manometer_gauge_pressure": 130.0, "pressure_unit": "kPa"},
+         r"manometer_gauge_pressure' = 130.0: 130 kPa is implausibly large for an inflated object's gauge pressure"),
+        ({"mass": 800.0}, r"mass' = 800.0: 800 kg is implausibly large.*mass_unit = \"g\""),
+        # one depth of trial 1 changed from 45 to 12 mm: it runs backwards while the force rises
+        ({"indentation__depth": _DEPTH[:4] + [12.0] + _DEPTH[5:]},
+         r"indentation.depth\[4\]' = 12.0: trial 1 runs backwards: 12 mm at 15 N after 37.5 mm at 12.5 N \(sample 3\)"),
+    ],
+)
+def test_implausible_values_are_refused_with_the_unit_written(tmp_path, changes, pattern):
+    path = write(tmp_path, variant(**changes))
+    with pytest.raises(InvalidInputError, match=pattern) as info:
+        load_session(path)
+    message = str(info.value)
+    assert str(path) in message and "Fix:" in message and "\n" not in message
+
+
+def test_a_backwards_depth_in_a_csv_names_its_line_and_a_fix(tmp_path):
+    rows = "".join(f"1,{f},{f * 3}\n" for f in FORCES).replace("1,17.5,52.5", "1,17.5,12")
+    (tmp_path / "t.csv").write_text("trial,force,depth\n" + rows)
+    path = write(tmp_path, variant(indentation={"depth_unit": "mm", "trials_csv": "t.csv"}, wrinkles={"counts": [8]}))
+    with pytest.raises(InvalidInputError, match=r"indentation.depth\[5\]' = 12.0: \(in t.csv, line 7\) trial 1 runs backwards"
+                       r".*Fix: re-measure or delete that sample"):
+        load_session(path)
+
+
+def test_a_new_sweep_within_one_trial_is_not_a_backwards_depth(tmp_path):
+    # trial defaults to 1: two sweeps 5 -> 20 N in one trial, the force falls back between them
+    doc = variant(indentation__trial=_DELETE, wrinkles__counts=[8])
+    assert load_session(write(tmp_path, doc)).trial_ids.tolist() == [1]
+
+
+def test_every_bundled_session_loads():
+    from shelljax.session import bundled_sessions, load_rigid_press, session_kind
+
+    paths = bundled_sessions("**/*.toml")
+    assert len(paths) >= 26
+    for path in paths:
+        (load_rigid_press if session_kind(path) == "rigid_press" else load_session)(path)
 
 
 def test_bad_csv_row_names_line(tmp_path):
@@ -118,7 +177,7 @@ def test_csv_nan_is_rejected_not_dropped(tmp_path):
     rows = "".join(f"1,{f},{f * 3}\n" for f in FORCES) + "1,20,nan\n"
     (tmp_path / "t.csv").write_text("trial,force,depth\n" + rows)
     path = write(tmp_path, variant(indentation={"depth_unit": "mm", "trials_csv": "t.csv"}, wrinkles={"counts": [8]}))
-    with pytest.raises(InvalidInputError, match=r"indentation.depth\[7\]'.*\(in t.csv\).*not finite"):
+    with pytest.raises(InvalidInputError, match=r"indentation.depth\[7\]'.*\(in t.csv, line 9\).*not finite"):
         load_session(path)
 
 

@@ -171,7 +171,7 @@ def test_bad_press_is_named(tmp_path, changes, pattern):
 def test_press_csv_nan_depth_names_the_csv(tmp_path):
     (tmp_path / "press.csv").write_text("trial,force,depth\n1,5,0.8\n1,10,nan\n")
     path = write(tmp_path, press_variant(indentation={"depth_unit": "mm", "trials_csv": "press.csv"}))
-    with pytest.raises(InvalidInputError, match=r"'indentation.depth\[1\]'.*\(in press.csv\) value nan is not finite"):
+    with pytest.raises(InvalidInputError, match=r"'indentation.depth\[1\]'.*\(in press.csv, line 3\) value nan is not finite"):
         load_rigid_press(path)
 
 

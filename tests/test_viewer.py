@@ -108,6 +108,22 @@ def test_the_gif_is_written_with_one_frame_per_kept_shape(scene, tmp_path):
         assert gif.n_frames == 5
 
 
+def test_a_replay_records_into_folders_that_do_not_exist_yet(scene, tmp_path):
+    s = _with(scene, A("drop", 0.0, height=0.02), duration=0.1)
+    gif, records = tmp_path / "new" / "gifs" / "r.gif", tmp_path / "new" / "r.json"
+    viewer.play_headless(s, record=gif, records_json=records, dpi=30)  # checked first, folders made after the replay
+    assert gif.is_file() and records.is_file()
+
+
+def test_a_replay_into_a_path_it_cannot_write_is_refused_before_it_runs(scene, tmp_path, monkeypatch):
+    monkeypatch.setattr(viewer._play, "replay", lambda *a, **k: pytest.fail("replayed before the paths were checked"))
+    (tmp_path / "taken").mkdir()
+    for record, records, option in ((tmp_path / "taken", None, "--record"), (tmp_path / "r.png", None, "--record"),
+                                    (None, tmp_path / "taken", "--records")):
+        with pytest.raises(InvalidInputError, match=f"{option} .*Fix:"):
+            viewer.play_headless(scene, record=record, records_json=records)
+
+
 # ---------------------------------------------------------------------------------- blow-ups
 def test_a_blow_up_is_raised_named_with_the_frames_before_it(tmp_path):
     soft = viewer.Scene.settle(_ball(contact_stiffness=200.0), viewer.InteractionScript(duration=1.0), "soft")

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import stats
 
 from .._errors import InvalidInputError, NoConvergenceError
+from ..estimate import DEFAULT_OPTIONS
 from ..physics import GAS_EXPONENTS
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
@@ -322,7 +323,7 @@ def diagnose(
     effects: Sequence[str] | None = None,
     baseline: str = "estimator",
     gas: str | None = None,
-    wrinkle_law: str = "scaling",
+    wrinkle_law: str = DEFAULT_OPTIONS.wrinkle_law,
     progress: Callable[[str], None] | bool = True,
     measurement: MeasurementPrior | None = None,
 ) -> Diagnosis:

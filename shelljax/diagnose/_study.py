@@ -92,13 +92,13 @@ class Study:
         return len(self.units)
 
 
-def _check_one_object(sessions: Sequence[Session]) -> None:
+def _check_one_object(sessions: Sequence[Session], command: str) -> None:
     names = {s.object_name for s in sessions}
     if len(names) > 1:
         listing = "; ".join(f"{s.source}: '{s.object_name}'" for s in sessions)
         raise InvalidInputError(
-            f"the sessions are of different objects ({listing}). Fix: diagnose one object at a time "
-            "(E, h and the effects are shared by all sessions of a study)"
+            f"the sessions are of different objects ({listing}). Fix: {command} one object at a time "
+            "(the sessions given together share one E, wall and measuring chain)"
         )
     for field in ("thickness", "poisson_ratio"):
         values = [getattr(s, field) for s in sessions]
@@ -219,17 +219,18 @@ def object_unknowns(study: Study) -> tuple[str, ...]:
 
 
 def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None, *,
-                min_trials: int = MIN_TRIALS) -> Study:
+                min_trials: int = MIN_TRIALS, command: str = "diagnose") -> Study:
     """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`).
 
     ``noise`` = (τ_t [m], (a [m²], b [-])) fixes the depth noise model instead of estimating it
     from the replicates (e.g. a study's noise reused for a subset of its trials, or a rig's);
-    ``min_trials``: fewest trials accepted (ranking needs trials to leave out; an estimate does not).
+    ``min_trials``: fewest trials accepted (ranking needs trials to leave out; an estimate does not);
+    ``command``: what the user ran, for the fix of sessions of several objects.
     """
     sessions = tuple(sessions)
     if not sessions:
         raise InvalidInputError("no sessions given. Fix: pass the session TOML files of one object")
-    _check_one_object(sessions)
+    _check_one_object(sessions, command)
     units, unit_of = [], {}
     for si, s in enumerate(sessions):
         for t in s.trial_ids:

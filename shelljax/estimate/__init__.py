@@ -17,7 +17,7 @@ from ._closed_form import (
     pressure_slope,
     regress_force_on_depth,
 )
-from ._dispatch import METHODS, EstimatorOptions, EstimatorResult, options_forward_model, run_estimator
+from ._dispatch import DEFAULT_OPTIONS, METHODS, EstimatorOptions, EstimatorResult, options_forward_model, run_estimator
 from ._fit import FitResult, fit_session, solve_least_squares
 from ._forward import AbstractForwardModel, AxisymForwardModel, Prediction, ScalingLawModel, forward_model_for
 from ._problem import (

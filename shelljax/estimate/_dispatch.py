@@ -2,42 +2,17 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 from .._errors import InvalidInputError
+from .._options import DEFAULT_OPTIONS, METHODS, EstimatorOptions  # noqa: F401 - re-exported
 from ..session import Session
 from ._bayes import PosteriorResult, compile_posterior_ahead, sample_posterior
 from ._closed_form import ClosedFormResult, estimate_session
 from ._fit import FitResult, fit_session
 from ._forward import AbstractForwardModel, forward_model_for
-from ._result import Estimate
 
-METHODS = ("closed-form", "fit", "bayes")
 EstimatorResult = ClosedFormResult | FitResult | PosteriorResult
-
-
-@dataclasses.dataclass(frozen=True)
-class EstimatorOptions:
-    """Settings of :func:`run_estimator`; each estimator reads the ones it needs.
-
-    closed form: ``k_s`` [-] (None: :func:`paper_k_s`), ``through_origin``,
-    ``bootstrap_samples``, ``seed``. fit and bayes: ``forward_model`` ("axisym" or "scaling"),
-    and for "axisym" its ``gas`` and ``wrinkle_law``; ``nuisance`` parameters. bayes: ``walkers``,
-    ``max_steps``, ``seed``, ``surrogate``.
-    """
-
-    k_s: Estimate | None = None
-    through_origin: bool = False
-    bootstrap_samples: int = 2000
-    seed: int = 0
-    forward_model: str = "axisym"
-    gas: str = "prescribed"
-    wrinkle_law: str = "mechanics"
-    nuisance: tuple[str, ...] = ()
-    walkers: int = 32
-    max_steps: int = 20_000
-    surrogate: bool = True
 
 
 def options_forward_model(session: Session, options: EstimatorOptions) -> AbstractForwardModel:

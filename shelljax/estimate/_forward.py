@@ -18,6 +18,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from .._options import FORWARD_MODELS, WRINKLE_LAWS
 from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
 from ..physics import ShellProperties, Similarity, scaling_wrinkle_count
 
@@ -58,9 +59,6 @@ class ScalingLawModel(AbstractForwardModel):
         depth = forces / (jnp.pi * self.k_s * radius * gauge_pressure)
         count = scaling_wrinkle_count(gauge_pressure, radius, young_modulus, thickness, self.poisson_ratio)
         return Prediction(depth=depth, wrinkle_count=count, converged=jnp.array(True))
-
-
-WRINKLE_LAWS = ("mechanics", "scaling")
 
 
 ENGINE_RADIUS = 0.08  # [m] the engine's radius, the smallest bundled object's (docs: Compilation)
@@ -175,9 +173,6 @@ class AxisymForwardModel(AbstractForwardModel):
         converged = jnp.all(curve.converged[0])
         return self.prediction(curve.w0[0], curve.wrinkle_count[0, -1], converged, gauge_pressure, young_modulus,
                                thickness, radius, forces)
-
-
-FORWARD_MODELS = ("axisym", "scaling")
 
 
 def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwardModel:

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from .._arguments import whole
 from ._execute import ExecutorOptions
 
 
 def add_executor_arguments(parser: argparse.ArgumentParser, *, resume: bool = True) -> None:
     """Add ``--workers``, ``--cluster``, ``--cache-dir`` (and ``--resume RUN_DIR``) to ``parser``."""
     group = parser.add_argument_group("where the work runs (docs/cluster.md)")
-    group.add_argument("--workers", type=int, default=None, metavar="N",
+    group.add_argument("--workers", type=whole(1), default=None, metavar="N",
                        help="run the items on a local Dask cluster of N processes (default: in this process)")
     group.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT",
                        help="run the items on a running Dask scheduler (SLURM, PBS, Kubernetes: docs/cluster.md)")

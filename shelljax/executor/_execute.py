@@ -20,8 +20,10 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import socket
 import sys
 import time
+import urllib.parse
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -108,6 +110,50 @@ def _check_keys(items: Sequence[WorkItem]) -> None:
         seen.add(item.key)
 
 
+def _no_dask() -> InvalidInputError:
+    return InvalidInputError("--workers and --cluster run on Dask, which is not installed. Fix: "
+                             "python3 -m pip install 'shelljax[cluster]' (or dask[distributed])")
+
+
+def _no_scheduler(options: ExecutorOptions, err: BaseException) -> InvalidInputError:
+    return InvalidInputError(
+        f"--cluster {options.cluster}: no Dask scheduler answered within {options.connect_timeout_s:g} s "
+        f"({type(err).__name__}). Fix: start one (`dask scheduler`, then `dask worker {options.cluster}` on "
+        "each machine), check the address, or leave --cluster out to run locally")
+
+
+def check_executor(options: ExecutorOptions) -> None:
+    """Refuse, before a caller lays out a run directory, options that cannot run: Dask not
+    installed, or nothing listening at a ``tcp://`` or ``tls://`` scheduler address (the port is
+    tried; other protocols are left to Dask).
+
+    Raises:
+        InvalidInputError: naming the option and a fix.
+    """
+    if not options.distributed:
+        return
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise _no_dask() from None
+    if options.cluster is None:
+        return
+    address = urllib.parse.urlsplit(str(options.cluster))
+    try:
+        port = address.port
+    except ValueError:
+        port = None
+    if address.scheme not in ("tcp", "tls"):
+        return
+    if not address.hostname or port is None:
+        raise InvalidInputError(f"--cluster = {options.cluster!r}: no host and port in the address. Fix: give it as "
+                                "tcp://HOST:PORT (what `dask scheduler` prints)")
+    try:
+        socket.create_connection((address.hostname, port), timeout=options.connect_timeout_s).close()
+    except OSError as err:
+        raise _no_scheduler(options, err) from None
+
+
 @contextlib.contextmanager
 def dask_client(options: ExecutorOptions):
     """A ``distributed.Client`` for ``options`` (a new LocalCluster, or the given scheduler),
@@ -116,8 +162,7 @@ def dask_client(options: ExecutorOptions):
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise InvalidInputError("--workers and --cluster run on Dask, which is not installed. Fix: "
-                                "python3 -m pip install 'shelljax[cluster]' (or dask[distributed])") from None  # fmt: skip
+        raise _no_dask() from None
 
     from ._plugin import CompilationCache
 
@@ -126,10 +171,7 @@ def dask_client(options: ExecutorOptions):
         try:
             client = Client(options.cluster, timeout=f"{options.connect_timeout_s}s")
         except (OSError, TimeoutError) as err:
-            raise InvalidInputError(
-                f"--cluster {options.cluster}: no Dask scheduler answered within {options.connect_timeout_s:g} s "
-                f"({type(err).__name__}). Fix: start one (`dask scheduler`, then `dask worker {options.cluster}` on "
-                "each machine), check the address, or leave --cluster out to run locally") from None  # fmt: skip
+            raise _no_scheduler(options, err) from None
     else:
         cluster = LocalCluster(n_workers=options.workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.CRITICAL)  # fmt: skip

@@ -143,15 +143,17 @@ class _Loading:
         """From a ``shelljax replica`` output directory (``replica.json``: P_g [Pa], E [Pa], ν [-],
         h [m], mass [kg], gas law; ``replica.glb``: the inflated mesh [m]), as
         :func:`shelljax.replica.load_replica` reads it, with ``rest_shape`` as :meth:`from_shell`."""
-        import json
-
         from .. import shell3d as s3
+        from .._files import read_json
 
         directory = Path(directory)
         path = directory / "replica.json"
         if not path.is_file():
             raise InvalidInputError(f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`.")
-        replica = json.loads(path.read_text())
+        replica = read_json(path, "replica file", fix="export the replica again with `shelljax replica SESSION --out DIR`")
+        if not isinstance(replica, dict):
+            raise InvalidInputError(f"{path}: not a replica file (a JSON {type(replica).__name__}). Fix: export the "
+                                    "replica again with `shelljax replica SESSION --out DIR`")
         values = {}
         for name in ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg"):
             entry = replica.get(name)

@@ -42,12 +42,12 @@ from ..diagnose._effects import MANOMETER_STD, PRIOR_STD
 from ..diagnose._measurement import widened_grid, with_measurement
 from ..diagnose._study import object_unknowns
 from ..diagnose._model import WRINKLE_LAWS, physical
+from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES
 from ..paper import PAPER_INDENTER_RADIUS
 from ..session import RigidPress, Session, files_sha256, load_rigid_press, load_session
 from ._press import PressFit, fit_press, press_data
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
-ESTIMATOR_GASES = ("prescribed", "isothermal")  # the estimators' gas laws (the fitted estimator's)
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
 BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
 MIN_WEIGHT = 1e-3  # a model below this weight is dropped from the rig (its weight goes to the others)
@@ -286,8 +286,8 @@ def _objects(sessions, gas, force_ref, manometer_std):
 def calibrate_rig(
     sessions: Sequence[Session | str | Path],
     *,
-    gas: str = "isothermal",
-    wrinkle_law: str = "scaling",
+    gas: str = DEFAULT_OPTIONS.gas,
+    wrinkle_law: str = DEFAULT_OPTIONS.wrinkle_law,
     terms: Sequence[str] | None = None,
     presses: Sequence = (),
     manometer_std: float = MANOMETER_STD,

@@ -133,7 +133,7 @@ def _prepare(sessions, rig: Rig):
         if s.wrinkle_counts is None:
             raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; E needs the wrinkle counts. "
                                     "Fix: add one count per trial")  # fmt: skip
-    study = build_study(sessions, rig.noise, min_trials=1)
+    study = build_study(sessions, rig.noise, min_trials=1, command="estimate --rig")
     base = study_arrays(study, gas=rig.gas, indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
     return sessions, study, widened_grid(base, _true_forces(rig, study.force), ESTIMATE_GRID_SPAN)
 

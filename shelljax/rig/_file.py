@@ -124,6 +124,11 @@ def load_rig(path: str | Path) -> Rig:
     # a rig file is written by `shelljax rig calibrate`, so every field's fix is to write it again
     check = TomlReader(path, fix="re-create the file with `shelljax rig calibrate`", doc="docs/rig.md")
     fmt = data.get("format")
+    if fmt is None:
+        is_session = "object" in data or "indentation" in data
+        what = "this is a measurement session, not a rig file" if is_session else "not a rig file"
+        raise check.fail("format", f"missing: {what}", "make a rig file from sessions with manometer readings: "
+                         "`shelljax rig calibrate SESSIONS... --out rig.toml`, then pass --rig rig.toml")
     if fmt != FORMAT:
         raise check.fail("format", f"{fmt!r} is not this shelljax's rig format {FORMAT}", "re-calibrate the rig with this version")
     version = check.typed(data, "shelljax_version", str)

@@ -16,9 +16,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .._errors import InvalidInputError
-from .._files import atomic_write_text
+from .._files import atomic_write_text, check_output_dir
 from ..config import bundled_data_dir
-from ..executor import ExecutorOptions, WorkItem, check_inputs, run_items
+from ..estimate import DEFAULT_OPTIONS
+from ..executor import ExecutorOptions, WorkItem, check_executor, check_inputs, run_items
 
 SUMMARY = "diagnoses.json"
 
@@ -70,7 +71,7 @@ def diagnose_study_item(paths: Sequence[str], out_dir: str, effects: Sequence[st
     from ..report import jsonable, write_diagnosis
 
     measurement, gas, wrinkle_law = diagnosis_baseline(rig, gas, wrinkle_law)
-    result = diagnose(list(paths), effects=effects, baseline=baseline, gas=gas, wrinkle_law=wrinkle_law or "scaling",
+    result = diagnose(list(paths), effects=effects, baseline=baseline, gas=gas, wrinkle_law=wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
                       progress=False, measurement=measurement)  # fmt: skip
     written = write_diagnosis(result, out_dir)
     report = result.report
@@ -109,9 +110,9 @@ def diagnose_studies(studies: Sequence[tuple[str, Sequence[Path]]], out_dir: str
     if effects is not None:
         effects = list(check_effect_names(effects))
     diagnosis_baseline(rig, gas, wrinkle_law)  # a bad or incompatible rig fails here, before any study runs
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InvalidInputError(f"--out {out}: exists and is not a directory. Fix: name a directory")
+    out = check_output_dir(out_dir, "--out")
+    executor = executor or ExecutorOptions()
+    check_executor(executor)  # an unreachable cluster is refused before inputs.json is written
     rig = None if rig is None else str(Path(rig).resolve())
     options = {"effects": effects, "baseline": baseline, "gas": gas, "wrinkle_law": wrinkle_law, "rig": rig}
     check_inputs(out, {"studies": [[name, [str(p) for p in paths]] for name, paths in studies], "options": options},
@@ -119,7 +120,6 @@ def diagnose_studies(studies: Sequence[tuple[str, Sequence[Path]]], out_dir: str
     items = [WorkItem(f"study{i:03d}-{name}", diagnose_study_item,
                       ([str(p) for p in paths], str(out / name), effects, baseline, gas, wrinkle_law, rig))
              for i, (name, paths) in enumerate(studies)]  # fmt: skip
-    executor = executor or ExecutorOptions()
     results = run_items(items, run_dir=out, options=executor, resume=resume, progress=progress, desc="diagnosing studies")
     rows = [{"study": name, "directory": str(out / name), "session_files": [str(p) for p in paths], "status": r.status,
              **({"error": r.error} if r.error else r.value), "seconds": r.seconds, "seconds_unit": "s", "worker": r.worker,

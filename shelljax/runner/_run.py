@@ -20,9 +20,10 @@ from tqdm.auto import tqdm
 
 from .. import __version__
 from .._errors import InvalidInputError
+from .._files import check_output_dir
 from ..config import ExperimentConfig, load_config
 from ..estimate import Estimate, EstimatorOptions, calibrate_ks, paper_k_s
-from ..executor import ExecutorOptions, WorkItem, read_item, run_items
+from ..executor import ExecutorOptions, WorkItem, check_executor, read_item, run_items
 from ..report import write_run_report
 from ..rig import load_rig
 from ..session import Session, file_sha256, load_session
@@ -174,6 +175,10 @@ def run_experiment(config_path: str | Path | None = None, *, output_dir: str | P
         raise InvalidInputError("no experiment config given. Fix: shelljax run configs/paper.toml, or --resume RUN_DIR")
     config = load_config(config_path)
     executor = executor or config.executor
+    if resume is None:  # every output checked before any work; nothing is created until all are
+        check_output_dir(config.output_dir if output_dir is None else output_dir,
+                         "--out" if output_dir is not None else f"{config.source}: output_dir")
+    check_executor(executor)  # an unreachable cluster is refused before the run directory exists
     disable = None if progress is None else not progress
     calibration_sessions = [load_session(p) for p in config.calibration_sessions]
     sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
@@ -194,6 +199,10 @@ def run_experiment(config_path: str | Path | None = None, *, output_dir: str | P
     try:
         done = run_items(items, run_dir=run_dir, options=executor, resume=resume is not None,
                          progress=progress, desc="estimating")  # fmt: skip
+    except InvalidInputError:
+        if resume is None:  # refused before any session ran: a fresh run leaves nothing behind
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
     except KeyboardInterrupt:
         finished = sum(read_item(run_dir, item.key) is not None for item in items)
         tqdm.write(f"interrupted: {finished} of {len(items)} sessions finished in {run_dir}; finish the run with "

@@ -14,6 +14,7 @@ import numpy as np
 from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
+from .._files import check_output_dir
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties
 from ..report import write_scenario_report
@@ -276,7 +277,7 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     """
     from tqdm.auto import tqdm
 
-    out = Path(out_dir) if out_dir is not None else scenario.output_dir / scenario.name
+    out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
     obj = resolve_object(scenario, session)
     system = build_system(scenario, obj)
     if scenario.prescribed is not None:

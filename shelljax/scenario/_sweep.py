@@ -13,8 +13,8 @@ import json
 from pathlib import Path
 
 from .._errors import InvalidInputError
-from .._files import atomic_write_text
-from ..executor import ExecutorOptions, WorkItem, check_inputs, run_items
+from .._files import atomic_write_text, check_output_dir
+from ..executor import ExecutorOptions, WorkItem, check_executor, check_inputs, run_items
 from ..session import file_sha256
 from ._load import Scenario, load_scenario
 from ._run import run_scenario
@@ -66,7 +66,9 @@ def run_sweep(scenario: Scenario, out_dir: str | Path | None = None, *, session:
         raise InvalidInputError(f"{scenario.source}: no [sweep] table to run. Fix: add [sweep] parameter = \"...\" "
                                 "and values = [...] (docs/cluster.md), or run the scenario itself")  # fmt: skip
     sweep = scenario.sweep
-    out = Path(out_dir) if out_dir is not None else scenario.output_dir / scenario.name
+    out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
+    executor = executor or ExecutorOptions()
+    check_executor(executor)  # an unreachable cluster is refused before anything is written
     items = [WorkItem(f"value{i:03d}-{value_directory(sweep.parameter, v)}", simulate_sweep_value,
                       (str(scenario.source), v, str(out / value_directory(sweep.parameter, v)),
                        None if session is None else str(session)))
@@ -74,7 +76,6 @@ def run_sweep(scenario: Scenario, out_dir: str | Path | None = None, *, session:
     check_inputs(out, {"config": str(Path(scenario.source).resolve()), "config_sha256": file_sha256(scenario.source),
                        "session": None if session is None else str(Path(session).resolve())},
                  resume=resume, what="sweep")  # fmt: skip
-    executor = executor or ExecutorOptions()
     results = run_items(items, run_dir=out, options=executor, resume=resume, progress=progress,
                         desc=f"sweeping {sweep.parameter}")  # fmt: skip
     summary = {"scenario": str(scenario.source), "name": scenario.name, "parameter": sweep.parameter,

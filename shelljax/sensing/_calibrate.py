@@ -20,6 +20,7 @@ from ._console import Console
 from ._driver import SerialSensor
 
 DEFAULT_MASSES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 2.5)  # [kg]: 2.5 kg ≈ 24.5 N covers 20 N levels
+MAX_MASS = 20.0  # [kg]: 196 N, about what the force range of a finger's session allows (shelljax.session)
 
 
 def calibrate_sensor(
@@ -43,8 +44,9 @@ def calibrate_sensor(
     forces. Every sample is logged to ``log_path`` (CSV, durable) if given.
     """
     masses = sorted(float(m) for m in masses)
-    if not masses or masses[0] != 0.0 or any(m < 0 for m in masses):
-        raise InvalidInputError(f"--masses {masses}: include 0 (unloaded) and only non-negative masses [kg]")
+    if not masses or masses[0] != 0.0 or any(not 0 <= m <= MAX_MASS for m in masses) or len(set(masses)) < 3:
+        raise InvalidInputError(f"--masses {masses}: not a set of calibration weights. Fix: give 0 (unloaded) and at "
+                                f"least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5")
     operator = operator or HumanOperator()
     if not driver.is_open:
         driver.open()

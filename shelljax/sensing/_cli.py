@@ -15,15 +15,18 @@ import time
 from importlib import resources
 from pathlib import Path
 
+from .._arguments import real, shown, whole
 from .._errors import DeviceError, InvalidInputError
+from .._files import check_output_file
 from ..paper import PAPER_FORCES
-from ._calibrate import DEFAULT_MASSES, calibrate_sensor
+from ..session import MASS_UNITS, PLAUSIBLE_RANGES, PRESSURE_UNITS, convert_unit, implausible, likely_unit
+from ._calibrate import DEFAULT_MASSES, MAX_MASS, calibrate_sensor
 from ._calibration import MODELS, SensorCalibration
 from ._capture import HumanOperator
 from ._console import AutoConsole, Console, TerminalConsole
 from ._driver import DEFAULT_BAUD, SerialSensor, logger
 from ._emulator import EmulatedDevice, EmulatedOperator, Faults, PtyLink
-from ._recording import LENGTH_UNITS, AcquisitionPlan, RecordingAborted, acquire
+from ._recording import LENGTH_UNITS, AcquisitionPlan, RecordingAborted, RecordingPaths, acquire
 
 EXIT_INTERRUPTED = 130
 EXIT_ABORTED = 3
@@ -44,58 +47,114 @@ def register(subparsers) -> None:
         "write a session file for `shelljax estimate`. See docs/sensing.md.",
     )
     _add_source(acq)
-    acq.add_argument("--out", required=True, help="session TOML to write (other files go beside it)")
+    acq.add_argument("--out", required=True, help="session TOML to write (other files go beside it; checked before "
+                     "the first sample)")
     acq.add_argument("--resume", action="store_true", help="continue the interrupted recording at --out")
     acq.add_argument("--calibration", help="sensor calibration TOML (from `shelljax sensor-calibrate`); "
-                     "default with --emulate: the bundled calibration of the emulated film")  # fmt: skip
-    meta = acq.add_argument_group("session fields (see the session format; ignored with --resume)")
-    meta.add_argument("--object", help="object name (default with --emulate: emulated-ball)")
-    meta.add_argument("--notes", default="", help="free text")
-    meta.add_argument("--poisson-ratio", type=float)
-    meta.add_argument("--mass", type=float, help="object mass, in --mass-unit")
-    meta.add_argument("--mass-unit", choices=["kg", "g"], default="kg")
-    meta.add_argument("--manometer-pressure", type=float, help="measured gauge pressure (calibration objects), in --pressure-unit")
-    meta.add_argument("--pressure-unit", default="Pa", choices=["Pa", "hPa", "kPa", "mbar", "bar", "psi"])
-    meta.add_argument("--radius", type=float, help="local radius of curvature at the poke point, in --length-unit")
-    meta.add_argument("--radius-std", type=float)
-    meta.add_argument("--mesh", help="mesh file (instead of --radius); stored relative to the session file")
-    meta.add_argument("--poke-point", type=float, nargs=3, metavar=("X", "Y", "Z"), help="with --mesh, in --length-unit")
-    meta.add_argument("--fit-radius", type=float, help="with --mesh, in --length-unit")
-    meta.add_argument("--length-unit", default="m", choices=list(LENGTH_UNITS))
-    meta.add_argument("--thickness", type=float, help="wall thickness, in --thickness-unit")
-    meta.add_argument("--thickness-std", type=float)
-    meta.add_argument("--thickness-unit", default="mm", choices=list(LENGTH_UNITS))
+                     "default with --emulate: the bundled calibration of the emulated film")
+    _add_session_fields(acq)
     proto = acq.add_argument_group("protocol")
-    proto.add_argument("--forces", default="5:20:2.5", help="levels [N]: START:STOP:STEP or a comma list (default 5:20:2.5)")
-    proto.add_argument("--trials", type=int, default=3)
-    proto.add_argument("--hold", type=float, default=0.5, help="[s] a level is captured after holding this long")
-    proto.add_argument("--tolerance", type=float, default=0.5, help="[N] allowed deviation from the level while holding")
-    proto.add_argument("--level-timeout", type=float, default=60.0, help="[s] before offering retry/skip/quit")
+    proto.add_argument("--forces", default="5:20:2.5", help="levels [N]: START:STOP:STEP or a comma list")
+    proto.add_argument("--trials", type=whole(1), default=3, help="sweeps through the levels [count]")
+    proto.add_argument("--hold", type=real(0.0, 60.0, low_open=True, unit="s"), default=0.5,
+                       help="[s] a level is captured after holding this long")
+    proto.add_argument("--tolerance", type=real(0.0, 10.0, low_open=True, unit="N"), default=0.5,
+                       help="[N] allowed deviation from the level while holding")
+    proto.add_argument("--level-timeout", type=real(0.0, low_open=True, unit="s"), default=60.0,
+                       help="[s] before offering retry/skip/quit")
     proto.add_argument("--depth-unit", default="mm", choices=list(LENGTH_UNITS), help="unit of typed depths")
     proto.add_argument("--depth-from-channel", action="store_true", help="read the depth from the sensor's second channel")
-    proto.add_argument("--depth-scale", type=float, help="[m/count] of the second channel (with --depth-from-channel)")
+    proto.add_argument("--depth-scale", type=real(0.0, low_open=True, unit="m/count"),
+                       help="[m/count] of the second channel (with --depth-from-channel)")
     proto.add_argument("--no-level-wrinkles", action="store_true", help="ask for the wrinkle count only once per trial")
     acq.set_defaults(func=cmd_acquire)
 
     cal = subparsers.add_parser("sensor-calibrate", help="calibrate the force sensor with known weights")
     _add_source(cal)
-    cal.add_argument("--out", required=True, help="calibration TOML to write")
+    cal.add_argument("--out", required=True, help="calibration TOML to write (checked before the first weight)")
     cal.add_argument("--masses", default=",".join(f"{m:g}" for m in DEFAULT_MASSES),
-                     help="known masses [kg], comma-separated, including 0 (default %(default)s)")  # fmt: skip
-    cal.add_argument("--cycles", type=int, default=2, help="up-and-down cycles through the masses")
-    cal.add_argument("--hold", type=float, default=1.0, help="[s] averaged per mass")
-    cal.add_argument("--model", choices=MODELS, default="power")
+                     help="known masses [kg], comma-separated, including 0")
+    cal.add_argument("--cycles", type=whole(1), default=2, help="up-and-down cycles through the masses [count]")
+    cal.add_argument("--hold", type=real(0.0, 60.0, low_open=True, unit="s"), default=1.0, help="[s] averaged per mass")
+    cal.add_argument("--model", choices=MODELS, default="power", help="calibration curve (docs/sensing.md)")
     cal.add_argument("--sensor", default="", help="a name for the sensor (stored in the file)")
-    cal.add_argument("--gravity", type=float, default=9.80665, help="[m/s^2] local gravity")
+    cal.add_argument("--gravity", type=real(9.7, 9.9, unit="m/s^2"), default=9.80665, help="[m/s^2] local gravity")
     cal.set_defaults(func=cmd_calibrate)
 
     emu = subparsers.add_parser("sensor-emulator",
                                 help="serve the emulated sensor on a pseudo-terminal (try the hardware path without hardware)")  # fmt: skip
     emu.add_argument("--link", default=None, help="path of the port symlink to create (default: a temporary path)")
     emu.add_argument("--faults", action="store_true", help="add garbage bytes, corrupted lines and an unplug every 20 s")
-    emu.add_argument("--seed", type=int, default=0)
-    emu.add_argument("--duration", type=float, default=None, help="[s] stop after this long (default: until Ctrl-C)")
+    emu.add_argument("--seed", type=whole(0), default=0, help="emulator random seed")
+    emu.add_argument("--duration", type=real(0.0, low_open=True, unit="s"), default=None,
+                     help="[s] stop after this long (default: until Ctrl-C)")
     emu.set_defaults(func=cmd_emulator)
+
+
+def _add_session_fields(acq: argparse.ArgumentParser) -> None:
+    """The session's own fields of ``shelljax acquire``: every number in the unit its unit option
+    names, checked against the session format's plausible ranges before the first sample."""
+    meta = acq.add_argument_group("session fields (see the session format; ignored with --resume)")
+    meta.add_argument("--object", help="object name (default with --emulate: emulated-ball)")
+    meta.add_argument("--notes", default="", help="free text")
+    meta.add_argument("--poisson-ratio", type=real(-1.0, 0.5, low_open=True, high_open=True),
+                      help="Poisson's ratio of the wall [-] (default: the paper's 0.4)")
+    meta.add_argument("--mass", type=real(0.0, low_open=True), help="object mass, in --mass-unit")
+    meta.add_argument("--mass-unit", choices=list(MASS_UNITS), default="kg", help="unit of --mass")
+    meta.add_argument("--manometer-pressure", type=real(0.0, low_open=True),
+                      help="measured gauge pressure (calibration objects), in --pressure-unit")
+    meta.add_argument("--pressure-unit", default="Pa", choices=list(PRESSURE_UNITS), help="unit of --manometer-pressure")
+    meta.add_argument("--radius", type=real(0.0, low_open=True),
+                      help="local radius of curvature at the poke point, in --length-unit")
+    meta.add_argument("--radius-std", type=real(0.0), help="standard deviation of --radius, in --length-unit")
+    meta.add_argument("--mesh", help="mesh file (instead of --radius); stored relative to the session file")
+    meta.add_argument("--poke-point", type=real(), nargs=3, metavar=("X", "Y", "Z"), help="with --mesh, in --length-unit")
+    meta.add_argument("--fit-radius", type=real(0.0, low_open=True), help="with --mesh, in --length-unit")
+    meta.add_argument("--length-unit", default="m", choices=list(LENGTH_UNITS),
+                      help="unit of --radius, --radius-std, --poke-point, --fit-radius and the mesh")
+    meta.add_argument("--thickness", type=real(0.0, low_open=True), help="wall thickness, in --thickness-unit")
+    meta.add_argument("--thickness-std", type=real(0.0), help="standard deviation of --thickness, in --thickness-unit")
+    meta.add_argument("--thickness-unit", default="mm", choices=list(LENGTH_UNITS),
+                      help="unit of --thickness and --thickness-std (a calliper reads millimetres)")
+
+
+# (option, its attribute, its range in shelljax.session.PLAUSIBLE_RANGES, the option naming its unit)
+_RANGED_OPTIONS = (
+    ("--radius", "radius", "radius", "--length-unit"),
+    ("--fit-radius", "fit_radius", "fit_radius", "--length-unit"),
+    ("--thickness", "thickness", "thickness", "--thickness-unit"),
+    ("--mass", "mass", "mass", "--mass-unit"),
+    ("--manometer-pressure", "manometer_pressure", "pressure", "--pressure-unit"),
+)
+
+
+def _check_session_options(args) -> None:
+    """Refuse, before the sensor is opened, a session field the session format would refuse: a
+    value outside its plausible range in the unit its unit option names (with the unit that would
+    make it plausible), or a standard deviation as large as its value."""
+    for option, attribute, name, unit_option in _RANGED_OPTIONS:
+        value = getattr(args, attribute)
+        unit = getattr(args, unit_option.removeprefix("--").replace("-", "_"))
+        problem = None if value is None else implausible(name, value, unit)
+        if problem is None:
+            continue
+        likely = likely_unit(name, value)
+        fix = f"{option} is in {unit_option} ({unit})"
+        if likely is not None and likely != unit:
+            meant = convert_unit(value, PLAUSIBLE_RANGES[name].quantity, likely, unit)
+            fix += f": if you meant {value:g} {likely}, add {unit_option} {likely} (or write {option} {meant:g})"
+        else:
+            fix += "; check the value you measured"
+        raise InvalidInputError(f"{option} {shown(value)}: {problem}. Fix: {fix}")
+    for option, std, value in (("--radius-std", args.radius_std, args.radius),
+                               ("--thickness-std", args.thickness_std, args.thickness)):
+        if std is not None and value is not None and std >= value:
+            raise InvalidInputError(f"{option} {std:g}: not smaller than {option.removesuffix('-std')} {value:g}. Fix: give "
+                                    "the standard deviation in the same unit, e.g. 5 % of the value")
+    for level in _parse_forces(args.forces):
+        problem = implausible("force", level, "N")
+        if problem is not None:
+            raise InvalidInputError(f"--forces {args.forces}: {problem}. Fix: give levels in newtons, e.g. 5:20:2.5")
 
 
 def _add_source(parser: argparse.ArgumentParser) -> None:
@@ -105,11 +164,11 @@ def _add_source(parser: argparse.ArgumentParser) -> None:
                         help="no hardware: an emulated sensor on a pseudo-terminal, in real time")  # fmt: skip
     source.add_argument("--emulate-fast", action="store_true",
                         help="no hardware: an in-process emulated sensor on a virtual clock (seconds)")  # fmt: skip
-    parser.add_argument("--baud", type=int, default=DEFAULT_BAUD, help="baud rate (default %(default)s)")
+    parser.add_argument("--baud", type=whole(1), default=DEFAULT_BAUD, help="baud rate [bit/s]")
     parser.add_argument("--yes", action="store_true", help="accept every default (no typing; emulator demo)")
     parser.add_argument("--emulate-faults", action="store_true",
                         help="emulator: garbage bytes, corrupted lines, split writes and one unplug")  # fmt: skip
-    parser.add_argument("--seed", type=int, default=0, help="emulator random seed")
+    parser.add_argument("--seed", type=whole(0), default=0, help="emulator random seed")
 
 
 def _parse_forces(text: str) -> tuple[float, ...]:
@@ -122,7 +181,8 @@ def _parse_forces(text: str) -> tuple[float, ...]:
             return tuple(start + i * step for i in range(n + 1))
         return tuple(float(x) for x in text.split(","))
     except ValueError:
-        raise InvalidInputError(f"--forces {text!r}: write START:STOP:STEP (e.g. 5:20:2.5) or a comma list") from None
+        raise InvalidInputError(f"--forces {text!r}: not a list of levels. Fix: write START:STOP:STEP (e.g. 5:20:2.5) or "
+                                "a comma list [N]") from None
 
 
 def _console(args) -> Console:
@@ -172,7 +232,7 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
     ball = device.ball if device is not None else None
     name = args.object or ("emulated-ball" if ball else None)
     if name is None:
-        raise InvalidInputError("--object: the object's name is required for a new recording")
+        raise InvalidInputError("--object: the object's name is required for a new recording. Fix: add --object NAME")
     meta: dict = {"object": name}
     notes = args.notes
     if ball is not None:
@@ -192,13 +252,13 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
         meta["pressure_unit"] = args.pressure_unit
     geometry: dict = {"length_unit": args.length_unit}
     if args.mesh and args.radius is not None:
-        raise InvalidInputError("give either --radius or --mesh, not both")
+        raise InvalidInputError("--radius and --mesh both given. Fix: give either --radius or --mesh, not both")
     if args.mesh:
         if args.poke_point is None:
-            raise InvalidInputError("--mesh needs --poke-point X Y Z")
+            raise InvalidInputError("--mesh without --poke-point. Fix: add --poke-point X Y Z (in --length-unit)")
         mesh = Path(args.mesh).resolve()
         if not mesh.exists():
-            raise InvalidInputError(f"--mesh {args.mesh}: file not found")
+            raise InvalidInputError(f"--mesh {args.mesh}: file not found. Fix: check the path")
         geometry["mesh"] = os.path.relpath(mesh, out.resolve().parent)
         geometry["poke_point"] = list(args.poke_point)
         if args.fit_radius is not None:
@@ -208,7 +268,8 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
     elif ball is not None:
         geometry = {"radius": ball.radius, "length_unit": "m"}
     else:
-        raise InvalidInputError("--radius (or --mesh with --poke-point) is required: the local radius of curvature")
+        raise InvalidInputError("--radius missing: the local radius of curvature is required. Fix: add --radius R "
+                                "(in --length-unit), or --mesh with --poke-point")
     if args.radius_std is not None:
         geometry["radius_std"] = args.radius_std
     meta["geometry"] = geometry
@@ -218,14 +279,20 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
     elif ball is not None and args.thickness is None:
         meta["wall"] = {"thickness": ball.thickness * 1e3, "thickness_std": 0.05, "thickness_unit": "mm"}
     else:
-        raise InvalidInputError("--thickness and --thickness-std are required (caliper reading, e.g. 0.9 and 0.05 mm)")
+        raise InvalidInputError("--thickness or --thickness-std missing: the wall is required. Fix: add both (a "
+                                "calliper reading in --thickness-unit, e.g. --thickness 0.9 --thickness-std 0.05 for mm)")
     return meta
 
 
 def cmd_acquire(args) -> int:
-    """Handler of ``shelljax acquire``; returns the exit code."""
-    console = _console(args)
+    """Handler of ``shelljax acquire``; returns the exit code. Every option of a new recording is
+    checked before the sensor is opened: a refused one records nothing and writes nothing."""
     out = Path(args.out)
+    paths = RecordingPaths.for_session(out)
+    if not args.resume:
+        paths.check_new()
+        _check_session_options(args)
+    console = _console(args)
     with _source(args, console) as (driver, operator, device):
         kwargs: dict = {}
         if not args.resume:
@@ -266,12 +333,16 @@ def cmd_acquire(args) -> int:
 
 def cmd_calibrate(args) -> int:
     """Handler of ``shelljax sensor-calibrate``."""
-    console = _console(args)
     try:
         masses = [float(m) for m in args.masses.split(",")]
     except ValueError:
-        raise InvalidInputError(f"--masses {args.masses!r}: a comma-separated list of kg, e.g. 0,0.5,1,2") from None
-    out = Path(args.out)
+        raise InvalidInputError(f"--masses {args.masses!r}: not a list of numbers. Fix: a comma-separated list of kg, "
+                                "e.g. 0,0.5,1,2") from None
+    if not masses or min(masses) != 0.0 or any(not 0 <= m <= MAX_MASS for m in masses) or len(set(masses)) < 3:
+        raise InvalidInputError(f"--masses {args.masses}: not a set of calibration weights. Fix: give 0 (unloaded) and "
+                                f"at least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5")
+    out = check_output_file(args.out, "--out", example="sensor.toml")
+    console = _console(args)
     with _source(args, console) as (driver, operator, _device):
         try:
             calibration = calibrate_sensor(
@@ -293,6 +364,12 @@ def cmd_emulator(args) -> int:
     """Handler of ``shelljax sensor-emulator``: an autopilot finger pokes 5→20 N, over and over."""
     faults = Faults(garbage_rate=0.01, corrupt_rate=0.01, disconnects=tuple(20.0 * k for k in range(1, 1000))) \
         if args.faults else Faults()  # fmt: skip
+    if args.link is not None:
+        link = Path(args.link)
+        if link.exists() and not link.is_symlink():
+            raise InvalidInputError(f"--link {link}: exists and is not a link; the emulator would replace it. Fix: name a "
+                                    "new path, e.g. --link /tmp/ttyEMU0")
+        check_output_file(link, "--link", example="ttyEMU0")
     device = EmulatedDevice(faults=faults, seed=args.seed, finger_tau=0.3)
     levels = PAPER_FORCES
     with PtyLink(device, args.link) as link:

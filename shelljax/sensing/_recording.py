@@ -37,6 +37,7 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from .._files import check_output_file
 from ..paper import PAPER_FORCES
 from ..session import LENGTH_UNITS
 from ._calibration import ADC_SATURATED, SensorCalibration
@@ -71,19 +72,21 @@ class AcquisitionPlan:
     def check(self, calibration: SensorCalibration) -> None:
         """Raise :class:`InvalidInputError` if the plan cannot be recorded with ``calibration``."""
         if len(self.forces) < 3 or any(not f > 0 for f in self.forces):
-            raise InvalidInputError(f"--forces {self.forces}: need at least 3 positive force levels [N]")
+            raise InvalidInputError(f"--forces {self.forces}: fewer than 3 positive force levels. Fix: give at least 3 "
+                                    "levels in N, e.g. 5:20:2.5")
         if self.trials < 1:
-            raise InvalidInputError(f"--trials {self.trials}: need at least one trial")
+            raise InvalidInputError(f"--trials {self.trials}: no trial. Fix: give at least one, e.g. --trials 3")
         if self.depth_unit not in LENGTH_UNITS:
-            raise InvalidInputError(f"--depth-unit {self.depth_unit!r}: use one of {', '.join(LENGTH_UNITS)}")
+            raise InvalidInputError(f"--depth-unit {self.depth_unit!r}: unknown unit. Fix: use one of {', '.join(LENGTH_UNITS)}")
         if self.depth_source not in ("prompt", "channel"):
-            raise InvalidInputError(f"depth source {self.depth_source!r}: use 'prompt' or 'channel'")
+            raise InvalidInputError(f"depth source {self.depth_source!r}: unknown. Fix: use 'prompt' or 'channel'")
         if self.depth_source == "channel" and not (self.depth_scale and self.depth_scale > 0):
             raise InvalidInputError(
-                "--depth-from-channel needs --depth-scale, the depth sensor's metres per count (> 0)"
+                "--depth-from-channel without --depth-scale. Fix: add --depth-scale, the depth sensor's metres per count (> 0)"
             )
         if self.hold <= 0 or self.tolerance <= 0 or self.level_timeout <= self.hold:
-            raise InvalidInputError("--hold and --tolerance must be > 0 and --level-timeout longer than --hold")
+            raise InvalidInputError(f"--level-timeout {self.level_timeout:g} s is not longer than --hold {self.hold:g} s. "
+                                    "Fix: give --hold and --tolerance > 0 and a --level-timeout longer than --hold")
         low = min(self.forces) - self.tolerance
         high = max(self.forces) + self.tolerance
         if low < calibration.force_min or high > calibration.force_max:
@@ -110,13 +113,24 @@ class RecordingPaths:
     def for_session(cls, out: str | Path) -> "RecordingPaths":
         out = Path(out)
         if out.suffix != ".toml":
-            raise InvalidInputError(f"--out {out}: the session file must end in .toml")
+            raise InvalidInputError(f"--out {out}: the session file must end in .toml. Fix: e.g. --out "
+                                    f"{out.with_suffix('.toml')}")
         stem = out.with_suffix("")
         return cls(out, stem.parent / f"{stem.name}_trials.csv", stem.parent / f"{stem.name}.samples.csv",
                    stem.parent / f"{stem.name}.events.jsonl")  # fmt: skip
 
     def existing(self) -> list[Path]:
         return [p for p in (self.session, self.trials_csv, self.samples, self.events) if p.exists()]
+
+    def check_new(self) -> None:
+        """Refuse a new recording that would overwrite these files or could not write them."""
+        check_output_file(self.session, "--out", example="session.toml")
+        clash = self.existing()
+        if clash:
+            raise InvalidInputError(
+                f"--out {self.session}: {', '.join(str(p) for p in clash)} already exist(s). Fix: add "
+                "--resume to continue that recording, or choose another --out"
+            )
 
 
 class EventLog:
@@ -230,12 +244,7 @@ def _started(paths: RecordingPaths, calibration: SensorCalibration | None, plan:
     """The state of a new recording, after checking that nothing would be overwritten."""
     if calibration is None or plan is None or meta is None:
         raise ValueError("a new recording needs calibration, plan and meta")
-    clash = paths.existing()
-    if clash:
-        raise InvalidInputError(
-            f"--out {paths.session}: {', '.join(str(p) for p in clash)} already exist(s). Fix: add "
-            "--resume to continue that recording, or choose another --out"
-        )
+    paths.check_new()
     plan.check(calibration)
     for key in ("object", "geometry", "wall"):
         if key not in meta:

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..paper import DEFAULT_POISSON_RATIO
+from ._ranges import check_forwards, check_plausible, check_plausible_samples, check_spread, implausible
 from ._reader import _read_toml, _Reader, file_sha256
 from ._schema import SHAPE_OBSERVABLES, Session
 
@@ -30,30 +31,34 @@ _WRINKLE_KEYS = {"counts", "onset_depth"}
 _CSV_COLUMNS = ("trial", "force", "depth")
 _SHAPE_KEYS = {"length_unit", "force_unit", "shape_csv", "trial", "force", *SHAPE_OBSERVABLES}
 _SHAPE_COLUMNS = ("trial", "force", *SHAPE_OBSERVABLES)
-# Nothing in the rig is this large: a larger shape length is millimetres read as metres.
-_SHAPE_MAX_LENGTH = 50.0  # [m]
 MIN_FORCE_LEVELS = 3
 # The `kind` key: absent means an indentation session, the only kind before presses existed.
 SESSION_KINDS = ("indentation", "rigid_press")
 
 
-def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: str, *, positive: bool = True) -> None:
-    """Every value finite and, with ``positive``, above zero (a magnitude); the first offender named."""
+def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: list[str], *, positive: bool = True) -> None:
+    """Every value finite and, with ``positive``, above zero (a magnitude); the first offender
+    named, with ``where[i]`` (its CSV line, or "") before the problem."""
     bad_finite = np.flatnonzero(~np.isfinite(values))
     if bad_finite.size:
         i = bad_finite[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where}value {float(values[i])!r} is not finite",
+            f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} is not finite",
             "re-measure or delete that sample (the whole row, in every column)",
         )  # fmt: skip
     bad_sign = np.flatnonzero(values <= 0) if positive else np.empty(0, dtype=np.int64)
     if bad_sign.size:
         i = bad_sign[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where}value {float(values[i])!r} must be positive "
+            f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} must be positive "
             f"({bad_sign.size} non-positive samples)",
             f"{field} is a magnitude: write |value|; drop samples taken before contact",
         )  # fmt: skip
+
+
+def _unit_name(table: dict, key: str, default: str) -> str:
+    """The unit ``key`` names (already checked by ``_Reader.unit``), or ``default``."""
+    return table.get(key, default)
 
 
 def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
@@ -67,7 +72,8 @@ def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
         return list(csv.reader(handle))
 
 
-def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """(trial, force, depth) as written in the CSV, and each sample's line number."""
     rows = _csv_rows(reader, "indentation.trials_csv", csv_path)
     if not rows or [c.strip() for c in rows[0]] != list(_CSV_COLUMNS):
         header = rows[0] if rows else []
@@ -76,9 +82,11 @@ def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.nd
             f"'{','.join(_CSV_COLUMNS)}' (units are set in the session's [indentation] table)"
         )
     columns: list[list[float]] = [[], [], []]
+    lines = []
     for line_number, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
             continue
+        lines.append(line_number)
         if len(row) != 3:
             raise InvalidInputError(
                 f"{csv_path}, line {line_number}: expected 3 values (trial,force,depth), got "
@@ -95,7 +103,7 @@ def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.nd
     trial, force, depth = (np.asarray(c, dtype=np.float64) for c in columns)
     if trial.size == 0:
         raise InvalidInputError(f"{csv_path}: no samples. Fix: add rows 'trial,force,depth'")
-    return trial, force, depth
+    return trial, force, depth, lines
 
 
 def _trial_ids(reader: _Reader, field: str, trial: np.ndarray) -> np.ndarray:
@@ -170,15 +178,15 @@ def _read_header(reader: _Reader, data: dict) -> dict:
         raise reader.fail("poisson_ratio", f"value {poisson_ratio} outside (-1, 0.5)", "rubbers sit at 0.3-0.5; the default is 0.4")
     mass = reader.number(data, "mass", default=None, positive=True)
     if mass is not None:
-        mass *= reader.unit(data, "mass_unit", "mass", "kg")
+        scale = reader.unit(data, "mass_unit", "mass", "kg")
+        check_plausible(reader, "mass", "mass", mass, _unit_name(data, "mass_unit", "kg"), "mass_unit")
+        mass *= scale
     manometer = reader.number(data, "manometer_gauge_pressure", default=None, positive=True)
     if manometer is not None:
-        manometer *= reader.unit(data, "pressure_unit", "pressure", "Pa")
-        if manometer > 1e6:
-            raise reader.fail(
-                "manometer_gauge_pressure", f"{manometer:g} Pa is above 10 bar",
-                "inflated toys hold 0.1-10 kPa: check pressure_unit (e.g. 'kPa')",
-            )  # fmt: skip
+        scale = reader.unit(data, "pressure_unit", "pressure", "Pa")
+        check_plausible(reader, "pressure", "manometer_gauge_pressure", manometer, _unit_name(data, "pressure_unit", "Pa"),
+                         "pressure_unit")
+        manometer *= scale
     rig_name = data.get("rig")
     if rig_name is not None and (not isinstance(rig_name, str) or not rig_name.strip()):
         raise reader.fail("rig", f"expected the measuring chain's name, got {rig_name!r}", 'write rig = "alice-index-film3"')
@@ -190,16 +198,14 @@ def _read_wall(reader: _Reader, data: dict) -> tuple[float, float]:
     """(thickness h [m], its standard deviation [m]) from [wall]."""
     wall = reader.table(data, "wall", _WALL_KEYS, required=True)
     wall_scale = reader.unit(wall, "thickness_unit", "length", "m", "wall.")
-    thickness = reader.number(wall, "thickness", "wall.", positive=True) * wall_scale
-    thickness_std = reader.number(wall, "thickness_std", "wall.") * wall_scale
+    unit = _unit_name(wall, "thickness_unit", "m")
+    thickness = reader.number(wall, "thickness", "wall.", positive=True)
+    check_plausible(reader, "thickness", "wall.thickness", thickness, unit, "thickness_unit")
+    thickness_std = reader.number(wall, "thickness_std", "wall.")
     if thickness_std < 0:
         raise reader.fail("wall.thickness_std", f"value {thickness_std} is negative", "write a standard deviation >= 0")
-    if thickness > 0.05:
-        raise reader.fail(
-            "wall.thickness", f"{thickness:g} m is a thick wall for an inflated shell",
-            "if you wrote millimetres, set thickness_unit = \"mm\"",
-        )  # fmt: skip
-    return thickness, thickness_std
+    check_spread(reader, "wall.thickness_std", thickness_std, thickness, unit, "thickness", "thickness_unit")
+    return thickness * wall_scale, thickness_std * wall_scale
 
 
 def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
@@ -218,14 +224,12 @@ def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
         return {"radius": float(radius), "radius_std": float(radius_std), "mesh_path": mesh_path,
                 "poke_point": poke_point, "fit_radius": fit_radius, "fit_rms_residual": fit_rms,
                 "enclosed_volume": mesh_volume}  # fmt: skip
-    radius = reader.number(geometry, "radius", "geometry.", positive=True) * length_scale
-    radius_std = (reader.number(geometry, "radius_std", "geometry.", default=None) or 0.0) * length_scale
-    if radius > 50.0:
-        raise reader.fail(
-            "geometry.radius", f"{radius:g} m is implausibly large",
-            "if you wrote millimetres or centimetres, set length_unit in [geometry]",
-        )  # fmt: skip
-    return {"radius": float(radius), "radius_std": float(radius_std)}
+    unit = _unit_name(geometry, "length_unit", "m")
+    radius = reader.number(geometry, "radius", "geometry.", positive=True)
+    check_plausible(reader, "radius", "geometry.radius", radius, unit, "length_unit")
+    radius_std = reader.number(geometry, "radius_std", "geometry.", default=None, nonnegative=True) or 0.0
+    check_spread(reader, "geometry.radius_std", radius_std, radius, unit, "radius", "length_unit")
+    return {"radius": float(radius * length_scale), "radius_std": float(radius_std * length_scale)}
 
 
 def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
@@ -238,9 +242,9 @@ def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
                 "use either trials_csv or inline arrays, not both",
             )  # fmt: skip
         csv_path = reader.path.parent / str(indentation["trials_csv"])
-        trial, force, depth = _read_trials_csv(reader, csv_path)
+        trial, force, depth, lines = _read_trials_csv(reader, csv_path)
         input_files[str(csv_path)] = file_sha256(csv_path)
-        return trial, force, depth, f"(in {csv_path.name}) "
+        return trial, force, depth, [f"(in {csv_path.name}, line {n}) " for n in lines]
     for key in ("force", "depth"):
         if key not in indentation:
             raise reader.fail(
@@ -255,15 +259,16 @@ def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
             "indentation", f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
             "give one trial id, force and depth per sample",
         )  # fmt: skip
-    return trial, force, depth, ""
+    return trial, force, depth, [""] * force.size
 
 
 def _read_indentation_samples(reader: _Reader, data: dict, input_files: dict, *, positive_depth: bool = True):
     """(trial ids, forces [N], depths [m], the depth unit [m], where) from [indentation], in SI.
 
-    Every value is finite and every force positive; depths must be positive only with
-    ``positive_depth`` (a rigid press reads the pad's compression plus the gauge's zero error,
-    which may be zero or negative). ``where`` names the CSV for the callers' own messages.
+    Every value is finite and every force positive and plausible; depths must be positive only
+    with ``positive_depth`` (a rigid press reads the pad's compression plus the gauge's zero error,
+    which may be zero or negative). ``where[i]`` names sample i's CSV line (or is "") for the
+    callers' own messages.
     """
     indentation = reader.table(data, "indentation", _INDENTATION_KEYS, required=True)
     force_scale = reader.unit(indentation, "force_unit", "force", "N", "indentation.")
@@ -271,13 +276,15 @@ def _read_indentation_samples(reader: _Reader, data: dict, input_files: dict, *,
     trial, force, depth, where = _indentation_arrays(reader, indentation, input_files)
     _check_samples(reader, "indentation.force", force, where)
     _check_samples(reader, "indentation.depth", depth, where, positive=positive_depth)
+    check_plausible_samples(reader, "force", "indentation.force", force, _unit_name(indentation, "force_unit", "N"),
+                             "force_unit", where)
     trial = _trial_ids(reader, "indentation.trial", trial)
     return trial, force * force_scale, depth * depth_scale, depth_scale, where
 
 
 def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: dict):
     """(trial ids, forces [N], depths [m], the depth unit [m]) from [indentation], checked against R [m]."""
-    trial, force, depth, depth_scale, _ = _read_indentation_samples(reader, data, input_files)
+    trial, force, depth, depth_scale, where = _read_indentation_samples(reader, data, input_files)
     if np.unique(force).size < MIN_FORCE_LEVELS:
         raise reader.fail(
             "indentation.force", f"only {np.unique(force).size} distinct force level(s) {np.unique(force).tolist()} N",
@@ -289,6 +296,9 @@ def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: d
             "indentation.depth", f"deepest indentation {deepest:g} m exceeds the radius {radius:g} m",
             "depths look like millimetres written as metres: set depth_unit = \"mm\"",
         )  # fmt: skip
+    unit = _unit_name(data["indentation"], "depth_unit", "m")
+    check_plausible_samples(reader, "depth", "indentation.depth", depth / depth_scale, unit, "depth_unit", where)
+    check_forwards(reader, trial, force, depth / depth_scale, unit, where)
     return trial, force, depth, depth_scale
 
 
@@ -302,7 +312,10 @@ def _read_wrinkles(reader: _Reader, data: dict, trial: np.ndarray, depth_scale: 
         wrinkle_counts = _wrinkle_counts(reader, wrinkles["counts"], np.unique(trial).size)
     if "onset_depth" in wrinkles:
         onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
-        _check_samples(reader, "wrinkles.onset_depth", onset_depth, "")
+        _check_samples(reader, "wrinkles.onset_depth", onset_depth, [""] * onset_depth.size)
+        check_plausible_samples(reader, "depth", "wrinkles.onset_depth", onset_depth,
+                                 _unit_name(data["indentation"], "depth_unit", "m"), "depth_unit in [indentation]",
+                                 [""] * onset_depth.size)
         onset_depth = onset_depth * depth_scale
     return wrinkle_counts, onset_depth
 
@@ -355,7 +368,8 @@ def _read_shape(reader: _Reader, data: dict, trial: np.ndarray, input_files: dic
     else:
         columns = _inline_shape_columns(reader, table)
         where = [""] * columns["trial"][0].size
-    return _check_shape(reader, columns, where, np.unique(trial), length_scale, force_scale)
+    units = (_unit_name(table, "length_unit", "m"), _unit_name(table, "force_unit", "N"))
+    return _check_shape(reader, columns, where, np.unique(trial), length_scale, force_scale, units)
 
 
 def _inline_shape_columns(reader: _Reader, table: dict) -> _ShapeColumns:
@@ -434,8 +448,9 @@ def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, lis
 
 
 def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], trial_ids: np.ndarray,
-                 length_scale: float, force_scale: float):  # fmt: skip
-    """Validate parsed shape columns (values as written) and convert them to SI."""
+                 length_scale: float, force_scale: float, units: tuple[str, str]):  # fmt: skip
+    """Validate parsed shape columns (values as written; ``units``: the length and force units
+    they are written in) and convert them to SI."""
     for name, (values, measured) in columns.items():
         field = f"shape.{name}"
         bad = np.flatnonzero(measured & ~np.isfinite(values))
@@ -470,13 +485,12 @@ def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], tria
                 f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} must be {sign}",
                 f"{name} is a {'force magnitude' if name == 'force' else 'length'}: write |value|",
             )  # fmt: skip
-        bad = np.flatnonzero(measured & (values * length_scale > _SHAPE_MAX_LENGTH))
-        if name != "force" and bad.size:
-            i = bad[0]
-            raise reader.fail(
-                f"{field}[{i}]", f"{where[i]}{values[i] * length_scale:g} m is implausibly large",
-                "if you wrote millimetres, set length_unit = \"mm\" in [shape]",
-            )  # fmt: skip
+        if name == "force":
+            kind, unit, unit_key = "force", units[1], "force_unit in [shape]"
+        else:
+            kind, unit, unit_key = "shape_length", units[0], "length_unit in [shape]"
+        checked = measured & ~((values == 0) & zero_ok)  # a sunken depth of 0: no dimple yet
+        check_plausible_samples(reader, kind, field, np.where(checked, values, np.nan), unit, unit_key, where)
     unmeasured = np.flatnonzero(~np.any([columns[k][1] for k in columns if k in SHAPE_OBSERVABLES], axis=0))
     if unmeasured.size:
         i = unmeasured[0]
@@ -505,8 +519,10 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     if not np.all(np.isfinite(poke_point)):
         raise reader.fail("geometry.poke_point", f"{raw_point!r} is not finite", "write three finite numbers")
     fit_radius = reader.number(geometry, "fit_radius", "geometry.", default=None, positive=True)
-    fit_radius = None if fit_radius is None else fit_radius * length_scale
-    unit_name = geometry.get("length_unit", "m")
+    unit_name = _unit_name(geometry, "length_unit", "m")
+    if fit_radius is not None:
+        check_plausible(reader, "fit_radius", "geometry.fit_radius", fit_radius, unit_name, "length_unit")
+        fit_radius *= length_scale
     try:
         mesh = geo.load_mesh(mesh_path, length_unit=unit_name)
         local = geo.fit_local_sphere(mesh, poke_point, fit_radius)
@@ -514,5 +530,9 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
         volume = geo.enclosed_volume(mesh) if mesh.is_watertight else None
     except InvalidInputError as err:
         raise InvalidInputError(f"{reader.path}: field 'geometry.mesh': {err}") from None
+    problem = implausible("radius", local.radius, "m")
+    if problem is not None:
+        raise reader.fail("geometry.mesh", f"the sphere fitted at poke_point: {problem}",
+                          "check length_unit (it applies to the mesh's coordinates and poke_point) and fit_radius")
     input_files[str(mesh_path)] = file_sha256(mesh_path)
     return local.radius, local.radius_std, mesh_path, poke_point, fit_radius, local.rms_residual, volume

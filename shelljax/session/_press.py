@@ -57,7 +57,7 @@ def load_rigid_press(path: str | Path) -> RigidPress:
     largest = int(np.argmax(np.abs(depth)))
     if abs(depth[largest]) > _PRESS_MAX_DEPTH:
         raise reader.fail(
-            f"indentation.depth[{largest}]", f"{where}{depth[largest]:g} m is more than a finger pad compresses "
+            f"indentation.depth[{largest}]", f"{where[largest]}{depth[largest]:g} m is more than a finger pad compresses "
             f"(|depth| <= {_PRESS_MAX_DEPTH:g} m)",
             'depths look like millimetres written as metres: set depth_unit = "mm"',
         )  # fmt: skip

@@ -14,7 +14,7 @@ Headless::
 from ._gif import write_gif
 from ._hand import HandControl
 from ._headless import Replay, replay
-from ._play import DEFAULT_SCRIPT, play_headless, play_live, play_scene
+from ._play import DEFAULT_SCRIPT, check_replay_outputs, play_headless, play_live, play_scene
 from ._scene import Scene, load_scene, resolve_source
 from ._script import (
     ACTION_KINDS,
@@ -25,7 +25,7 @@ from ._script import (
     load_script,
 )
 
-__all__ = ["ACTION_KINDS", "DEFAULT_SCRIPT", "Action", "Hand", "HandControl", "InteractionScript", "Replay", "Scene", "ScriptPlane",
+__all__ = ["ACTION_KINDS", "DEFAULT_SCRIPT", "Action", "check_replay_outputs", "Hand", "HandControl", "InteractionScript", "Replay", "Scene", "ScriptPlane",
            "load_scene", "load_script", "play_headless", "play_live", "play_scene", "replay", "require_viser", "resolve_source", "serve", "write_gif"]  # fmt: skip
 
 

@@ -8,6 +8,7 @@ import time as _time
 from pathlib import Path
 
 from .._errors import InvalidInputError
+from .._files import check_output_file
 from ..realtime import BlowUpError
 from ._gif import write_gif
 from ._headless import Replay, replay
@@ -29,11 +30,25 @@ def play_scene(source, script_path=None, *, mesh_faces: int | None = None, gas: 
     return load_scene(source, script, gas=gas)
 
 
+def check_replay_outputs(record: str | Path | None, records_json: str | Path | None) -> None:
+    """Refuse, before a replay is simulated, a GIF path (``--record``) or records path
+    (``--records``) that cannot be written; creates nothing."""
+    if record is not None:
+        check_output_file(record, "--record", example="play.gif")
+        if Path(record).suffix.lower() != ".gif":
+            raise InvalidInputError(f"--record {record}: the replay is written as a GIF. Fix: name a .gif file, e.g. "
+                                    f"--record {Path(record).with_suffix('.gif')}")
+    if records_json is not None:
+        check_output_file(records_json, "--records", example="records.json")
+
+
 def play_headless(scene: Scene, *, record: str | Path | None = None, records_json: str | Path | None = None,
                   dpi: int = 72) -> Replay:  # fmt: skip
     """Replay the scene's script; write the GIF to ``record`` and the per-frame records to
-    ``records_json`` where given. A blow-up still writes both (up to the failing frame, the GIF's
-    last frame marked) and is then raised."""
+    ``records_json`` where given (both checked before the replay, their folders created after it).
+    A blow-up still writes both (up to the failing frame, the GIF's last frame marked) and is then
+    raised."""
+    check_replay_outputs(record, records_json)
     script = scene.script
     if not script.actions:
         raise InvalidInputError(f"{script.source or 'the script'}: field 'actions': none to replay. Fix: add [[actions]] "
@@ -48,6 +63,9 @@ def play_headless(scene: Scene, *, record: str | Path | None = None, records_jso
 
 
 def _write(result: Replay, scene: Scene, record, records_json, dpi: int) -> None:
+    for path in (record, records_json):
+        if path is not None:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
     if record is not None and len(result.shape_frames):
         write_gif(result, record, hand_radius=scene.script.hand.radius, gif_fps=scene.script.gif_fps, dpi=dpi)
     if records_json is not None:
