@@ -194,7 +194,7 @@ def _fit(row, session, true, model, args) -> None:
 def _bayes(row, session, truth, true, model, args, seed: int) -> None:
     """``sample_posterior`` on the sessions ``--bayes-noise`` and ``--bayes-realisations`` select."""
     from shelljax import InvalidInputError, NoConvergenceError
-    from shelljax.estimate import ConvergenceWarning, sample_posterior
+    from shelljax.estimate import ConvergenceWarning, fit_session, sample_posterior
 
     selected = truth["realisation"] < args.bayes_realisations and any(
         abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise)  # fmt: skip
@@ -204,9 +204,9 @@ def _bayes(row, session, truth, true, model, args, seed: int) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         try:
-            post = sample_posterior(session, model, n_walkers=args.walkers, max_steps=args.bayes_steps,
-                                    min_steps=min(1000, args.bayes_steps), seed=seed, progress=False,
-                                    nuisance=tuple(args.bayes_nuisance))  # fmt: skip
+            fit = fit_session(session, model, nuisance=tuple(args.bayes_nuisance), raise_on_failure=False)
+            post = sample_posterior(fit, n_walkers=args.walkers, max_steps=args.bayes_steps,
+                                    min_steps=min(1000, args.bayes_steps), seed=seed, progress=False)
             row[args.bayes_label] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
             row[args.bayes_label].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
                                          converged=post.converged, failed_forward=post.failed_forward,

@@ -381,7 +381,7 @@ def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_wa
     ``model`` will run (the engine's curves and the sampler), while its fit compiles on this one.
 
     XLA compiles a program on one core; started before the fit, the two compile at once. The
-    thread solves the engine at one point and evaluates a placeholder surrogate's posterior,
+    thread evaluates a placeholder surrogate's posterior and solves the engine at one point,
     which is what compiles them; the programs a structure needs are compiled once per process.
     None when there is nothing to compile ahead. Best effort: an error on the thread is dropped,
     since the same programs run, and raise, on the caller's thread.
@@ -396,8 +396,8 @@ def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_wa
 
     def compile_programs():
         try:
+            # the sampler first: it compiles in seconds, the engine's curves in tens of them
             start = np.array([[1e3, 1e6, session.thickness, session.radius]])
-            engine_predictions(model, start, np.asarray(session.force), workers=1)
             log_center = np.log(start[0])
             placeholder = surrogate_from_values(np.zeros((*surrogate_nodes, model.n_grid + 1)), log_center - 1.0,
                                                 log_center + 1.0, np.linspace(model.force_min, model.force_max, model.n_grid),
@@ -407,6 +407,7 @@ def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_wa
             free = np.zeros(len(ALL_NAMES) + 1, bool)
             free[np.append(columns, len(ALL_NAMES))] = True
             stretch_block(padded, np.zeros((n_walkers, free.size)), 0, free, 0, check_every)
+            engine_predictions(model, start, np.asarray(session.force), workers=1)
         except Exception:  # noqa: BLE001 (the caller's thread runs the same programs and raises)
             pass
 
