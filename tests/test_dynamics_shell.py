@@ -25,8 +25,7 @@ from shelljax.config import bundled_data_dir
 from shelljax.dynamics._shell import PATTERNS, _pattern_key
 from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
-from shelljax.scenario import eqx_replace_damping, load_scenario
-from shelljax.scenario._run import SCENARIO_CHUNK
+from shelljax.scenario import SCENARIO_CHUNK, eqx_replace_damping, load_scenario
 
 pytestmark = pytest.mark.slow  # 3D shells in motion: every test runs the dynamics
 
