@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -26,11 +27,11 @@ LINEAR = d.CompressionCurve(lambda x: K_LINEAR * x, energy_curve=lambda x: 0.5 *
 HERTZ = d.CompressionCurve(lambda x: K_HERTZ * x**1.5, energy_curve=lambda x: 0.4 * K_HERTZ * x**2.5)
 
 
-def spring_impact(damping=0.0, integrator=d.Newmark(), dt=2e-5, law=LINEAR):
-    """A 0.1 kg mass at 1 m/s onto a linear spring, no gravity: one half-sine impact."""
+def spring_impact(damping=0.0, integrator=d.Newmark(), dt=2e-5, law=LINEAR, duration=0.0125):
+    """A 0.1 kg mass at 1 m/s onto a linear spring, no gravity: one half-sine impact (then it flies off for good)."""
     system = d.PointMassOnGround(MASS, [d.ground(law, damping=damping)], gravity=0.0)
     state = d.initial_state(system, [0.0, 0.0, 1e-3], [0.0, 0.0, -1.0])
-    return d.simulate(system, state, dt, 0.0125, integrator=integrator, progress=False)
+    return d.simulate(system, state, dt, duration, integrator=integrator, progress=False)
 
 
 def hertz_drop(damping=0.0, duration=0.16, dt=1e-4, height=0.1):
@@ -67,7 +68,9 @@ def test_backward_euler_cor_below_one_and_converging_to_one_as_dt_falls():
     omega = math.sqrt(K_LINEAR / MASS)
     cors = []
     for dt in (2e-4, 1e-4, 5e-5):
-        (impact,) = d.measured_cor(spring_impact(integrator=d.BackwardEuler(), dt=dt))
+        # At least one whole chunk of simulate's 250 steps at each Δt (0.05 s: 250 steps at the
+        # largest): a run shorter than a chunk compiles a chunk of its own length, one per Δt.
+        (impact,) = d.measured_cor(spring_impact(integrator=d.BackwardEuler(), dt=dt, duration=0.05))
         cors.append(impact.cor)
         # Each step scales the amplitude by (1 + ω²Δt²)^(−½); over π/(ωΔt) steps that is
         # exp(−πωΔt/2) to first order in ωΔt (measured 0.9058 vs 0.9054 at Δt = 0.2 ms).
@@ -129,11 +132,14 @@ def test_bounce_apex_gradient_in_damping_and_stiffness_matches_finite_difference
         return end.position[2] + end.velocity[2] ** 2 / (2 * g), record
 
     c0, k0 = 10.0, K_HERTZ
-    value, record = jax.jit(apex)(c0, k0)
+    run = jax.jit(apex)  # one compiled roll-out for the run and the finite differences
+    value, record = run(c0, k0)
     touching = np.flatnonzero(np.asarray(record.min_gap_m[:, 0]) < 0.0)
     assert bool(record.converged.all()) and touching[0] > 0 and touching[-1] < 89  # onset and release inside the run
     grad_c, grad_k = jax.jit(jax.grad(lambda c, k: apex(c, k)[0], argnums=(0, 1)))(c0, k0)
-    f = jax.jit(lambda c, k: apex(c, k)[0])
+    def f(c, k):
+        return run(c, k)[0]
+
     fd_c = (f(c0 + 1e-3, k0) - f(c0 - 1e-3, k0)) / 2e-3
     fd_k = (f(c0, k0 * (1 + 1e-5)) - f(c0, k0 * (1 - 1e-5))) / (2e-5 * k0)
     # Central differences converge as O(h²) to the implicit gradient (for K: 3e-3, 3e-5, 3e-7 at
@@ -190,10 +196,12 @@ def test_a_step_minimiser_returns_the_shared_solution():
     state = d.initial_state(system, [0.0, 0.0, 1e-4], [0.0, 0.0, -1.0])
     potential = d.incremental_potential(system, d.Newmark(), state, jnp.asarray(1e-3))
     y0 = potential.free(state.position)
-    solved = d.DenseNewton().minimise(potential, y0)
+    # compiled: op by op the Newton loop's operations are each compiled on their own (~150 of them)
+    minimise = eqx.filter_jit(lambda minimiser, potential, y: minimiser.minimise(potential, y))
+    solved = minimise(d.DenseNewton(), potential, y0)
     assert isinstance(solved, shelljax.Solution) and bool(solved.converged)
     assert solved.result == shelljax.RESULTS.successful and int(solved.stats["assemblies"]) == int(solved.iterations)
-    cut = d.DenseNewton(max_steps=1).minimise(potential, y0)
+    cut = minimise(d.DenseNewton(max_steps=1), potential, y0)
     assert cut.result == shelljax.RESULTS.max_steps_reached and not bool(cut.converged)
 
 

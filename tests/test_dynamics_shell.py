@@ -25,7 +25,7 @@ from shelljax.config import bundled_data_dir
 from shelljax.dynamics._shell import PATTERNS, _pattern_key
 from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
-from shelljax.scenario import load_scenario
+from shelljax.scenario import SCENARIO_CHUNK, eqx_replace_damping, load_scenario
 
 pytestmark = pytest.mark.slow  # 3D shells in motion: every test runs the dynamics
 
@@ -33,7 +33,9 @@ G = 9.80665
 RADIUS, THICKNESS, E, NU, P_G, MASS = 0.05, 0.5e-3, 2e6, 0.4, 5000.0, 0.1
 BALL = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=THICKNESS, poisson_ratio=NU)
 GHAT = 5e-4
-CHUNK = 50  # one compiled chunk length for every run of the module
+# One compiled chunk length for every run of the module, the scenario's own: the CLI's runs and
+# the tests' backward-Euler runs on this ball (the TINY config's mesh) then share one program.
+CHUNK = SCENARIO_CHUNK
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +46,9 @@ def shell():
 @pytest.fixture(scope="module")
 def system(shell):
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(GHAT, 1e3), name="ground")
-    return d.shell_system(shell, BALL, gas="isothermal", mass=MASS, planes=[ground])
+    # The TINY config's system: its damping a float64 array as the scenario sets it (not a weakly
+    # typed one), so that the CLI's runs reuse the programs these tests traced.
+    return d.shell_system(shell, BALL, gas="isothermal", mass=MASS, planes=[eqx_replace_damping(ground, 0.0)])
 
 
 def _impact_state(system, height):
@@ -57,8 +61,8 @@ def test_inflated_state_is_in_equilibrium_and_free_falls_exactly(system):
     # a₀ = M⁻¹F(x₀): the rest-shape solve leaves nodal residuals ~1e-8 E h L, i.e. ~1e-9 m/s² here.
     assert np.max(np.abs(np.asarray(state.acceleration).reshape(-1, 3) - [0.0, 0.0, -G])) < 1e-6
     assert float(system.gas_state(system.inflated)[0]) == pytest.approx(P_G, rel=1e-9)
-    # 0.6 ms steps: one chunk of CHUNK, the bounce's compiled program
-    traj = d.simulate(system, state, 6e-4, CHUNK * 6e-4, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
+    # 50 steps of 0.6 ms in chunks of CHUNK: the bounce's compiled program
+    traj = d.simulate(system, state, 6e-4, 50 * 6e-4, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
     t, z = traj["time_s"], traj["com_position_m"][:, 2]
     # Newmark integrates constant gravity exactly and internal forces sum to zero: only Newton's 1e-10 m tolerance remains.
     assert np.max(np.abs(z - (z[0] - 0.5 * G * t**2))) < 1e-9
@@ -121,7 +125,7 @@ def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_
     pattern = PATTERNS[system.pattern_key]
     assert _pattern_key(dataclasses.replace(pattern, free=~pattern.free)) != system.pattern_key
     newton = d.SparseNewton(reuse_matrix=False)
-    traj = d.simulate(adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, CHUNK * 2.5e-4, minimiser=newton, progress=False, chunk=CHUNK)
+    traj = d.simulate(adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, 50 * 2.5e-4, minimiser=newton, progress=False, chunk=CHUNK)
     # Quadratic Newton (a fresh matrix every iteration): the stall against round-off in Φ_inc ran into max_steps = 50.
     assert np.max(traj["newton_iterations"]) <= 8
     volume, pressure = traj["gas_volume_m3"], traj["gas_pressure_Pa"]
@@ -135,7 +139,7 @@ def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_
 
 
 def test_kept_newton_matrix_gives_the_same_bounce_with_fewer_factorisations(system):
-    state, n_steps, tolerance = _impact_state(system, 0.02), CHUNK, 1e-10
+    state, n_steps, tolerance = _impact_state(system, 0.02), 50, 1e-10
     runs = {reuse: d.simulate(system, state, 1e-3, n_steps * 1e-3, integrator=d.BackwardEuler(), progress=False, chunk=CHUNK,
                               minimiser=d.SparseNewton(step_tolerance=tolerance, reuse_matrix=reuse)) for reuse in (True, False)}  # fmt: skip
     kept, fresh = runs[True], runs[False]
@@ -154,11 +158,13 @@ def test_a_wild_acceleration_changes_newtons_start_not_the_step(system):
     kick = np.abs(np.random.default_rng(0).standard_normal(state.acceleration.shape))  # every component positive: upward, off the ground
     wild = eqx.tree_at(lambda s: s.acceleration, state, jnp.asarray(1e5 * kick))
     ends = []
-    step = eqx.filter_jit(d.step)  # one compiled step for both starts instead of two runs op by op
+    # One chunk of the module's backward-Euler runs (their compiled program, not one of its own);
+    # its first step is the one from each start.
     for start in (state, wild):
-        new, record = step(system, start, jnp.asarray(1e-2), d.BackwardEuler(), d.SparseNewton())
-        assert bool(record.converged)
-        ends.append(np.asarray(new.position))
+        traj = d.simulate(system, start, 1e-2, CHUNK * 1e-2, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(), progress=False,
+                          chunk=CHUNK)  # fmt: skip
+        assert bool(traj["converged"][1])
+        ends.append(traj["position_m"][1])
     # Both end within about Newton's 1e-10 m step tolerance of the same minimiser: 2e-10 apart at most, 1e-9 with margin.
     assert np.max(np.abs(ends[0] - ends[1])) < 1e-9
 
@@ -300,7 +306,7 @@ def test_contact_damping_calibrates_to_0_75_and_rejects_a_cor_above_the_numerics
 
     @functools.cache  # the 0.9 check reuses the bracket's runs
     def cor(c):
-        damped = system.with_planes([eqx.tree_at(lambda p: p.damping, system.planes[0], jnp.asarray(c))])
+        damped = system.with_planes([eqx_replace_damping(system.planes[0], c)])
         # 50 steps hold the 42 ms contact and its release; the apex is extrapolated ballistically.
         traj = d.simulate(damped, _impact_state(damped, height), dt, 0.05, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(),
                           progress=False, chunk=CHUNK)  # fmt: skip

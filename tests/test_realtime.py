@@ -27,6 +27,10 @@ from shelljax.realtime import _kernels as K
 from shelljax.shell3d import Shell, ShellMesh
 from shelljax.shell3d._energy import bending_energy, make_geometry, membrane_energy
 
+# One xdist worker for the files that step the real-time runtime (conftest.py): its Numba kernels
+# (≈ 30 s to compile) are then compiled once, by the first file, and loaded from Numba's cache by the other.
+SHARED_PROGRAMS = "realtime kernels"
+
 E, NU, H, P_G, R, MASS = 2.34e6, 0.4, 0.9e-3, 1300.0, 0.13, 0.8
 PROPS = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=H, poisson_ratio=NU, radius=R)
 

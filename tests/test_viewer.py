@@ -23,6 +23,10 @@ from shelljax.cli import main
 from shelljax.physics import ShellProperties
 from shelljax.shell3d import Shell, ShellMesh
 
+# One xdist worker for the files that step the real-time runtime (conftest.py): its Numba kernels
+# (≈ 30 s to compile) are then compiled once, by the first file, and loaded from Numba's cache by the other.
+SHARED_PROGRAMS = "realtime kernels"
+
 R, H, MASS = 0.13, 0.9e-3, 0.8
 PROPS = ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=H, poisson_ratio=0.4, radius=R)
 WEIGHT = MASS * 9.80665
