@@ -85,9 +85,16 @@ def _cold_curve(setup):
 
 
 @functools.lru_cache(maxsize=None)
-def _indented_states(setup):
-    return _cold_curve(setup)(PEZZI)["state"]
+def _indented_curve(setup):
+    return _cold_curve(setup)(PEZZI)
 
+
+def _indented_states(setup):
+    return _indented_curve(setup)["state"]
+
+
+# the indented states the Hessians are compared at (21 elements, sealed gas)
+STATES_SETUP = Setup(radius=0.13, n_elements=21, gas="isothermal")
 
 # Jitted: run op by op, the dense autodiff Hessian compiled ≈ 900 single-operation programs
 # (≈ 45 s of the suite's time from an empty compilation cache).
@@ -99,12 +106,15 @@ _assembled_hessian = jax.jit(hessian_at, static_argnums=1)
                                              ("point", "prescribed"), ("none", "isothermal")])
 def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     # A wrinkled, indented state (15 N, both contacts active, relaxed hoop stress in the dimple)
-    # with a random perturbation, so that every term has a non-zero gradient and curvature.
+    # with a random perturbation, so that every term has a non-zero gradient and curvature. The
+    # state is only where both Hessians are evaluated: every case takes the sealed-gas curve's
+    # (one compiled curve, shared with the inflation test below), whatever its own gas, and its
+    # inflated state and rest radius (the inflation is the same for every gas: the sealed gas
+    # is off while inflating, test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem).
     setup = Setup(radius=0.13, n_elements=21, gas=gas)
-    params = tuple(PEZZI)
-    states = _indented_states(setup)
-    r0, y_inflated, _, _ = inflate(setup, shell(params))
-    x_inflated, _ = split(y_inflated, len(setup.theta()))
+    curve = _indented_curve(STATES_SETUP)
+    states, r0 = curve["state"], curve["rest_radius"]
+    x_inflated, _ = split(states[0], len(setup.theta()))
     cfg = Config(theta=setup.theta(), gas=gas, loading=loading, ground=loading != "none",
                  pin_bottom=loading == "none", relax=True, hoop_capacity=setup.hoop_capacity)
     p = _params(2.34e6, 9e-4, 0.4, r0, 1300.0, setup, force=15.0, ref_volume=enclosed_volume(x_inflated),
@@ -127,24 +137,29 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
 def test_contact_springs_model_the_penalty_of_a_node_entering_contact():
     # The active-set model of a node predicted in contact with the indenter is the exact Hessian
     # of k/2 (gap linearised)²: compare to the dense Hessian of that quadratic in (x_i, z_c).
+    # (the zeroed Hessian only gives the block structure of 21 elements: it comes from the
+    # Hessian test's compiled sphere-prescribed program; the model and the springs are jitted,
+    # one program each instead of hundreds of single operations)
     setup = Setup(radius=0.13, n_elements=21)
-    cfg = Config(theta=setup.theta(), loading="sphere", ground=True, pin_bottom=False)
+    cfg = Config(theta=setup.theta(), gas="prescribed", loading="sphere", ground=True, pin_bottom=False,
+                 relax=True, hoop_capacity=setup.hoop_capacity)
     n = cfg.n_nodes
-    hess = jax.tree_util.tree_map(jnp.zeros_like, hessian_at(
+    hess = jax.tree_util.tree_map(jnp.zeros_like, _assembled_hessian(
         jnp.concatenate([jnp.ones(2 * n), jnp.zeros(1)]), cfg,
         _params(2.34e6, 9e-4, 0.4, 0.13, 1300.0, setup, ground_z=-1.0)))
     rng = np.random.default_rng(1)
     normal = rng.normal(size=(n, 2))
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     k_indenter, k_ground = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
-    springs = newton._add_contact_springs(hess, jnp.asarray(k_ground), jnp.asarray(k_indenter), jnp.asarray(normal))
+    springs = jax.jit(newton._add_contact_springs)(hess, jnp.asarray(k_ground), jnp.asarray(k_indenter),
+                                                   jnp.asarray(normal))
 
     def model(v):  # Σ k/2 (n·Δx − n_z Δz_c)² + Σ k_g/2 Δz²
         dx, dzc = split(v, n)
         return 0.5 * jnp.sum(k_indenter * (jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) ** 2
                              + k_ground * dx[:, 1] ** 2)
 
-    reference = np.asarray(jax.hessian(model)(jnp.zeros(2 * n + 1)))
+    reference = np.asarray(jax.jit(jax.hessian(model))(jnp.zeros(2 * n + 1)))
     springs = eqx.tree_at(lambda h: h.gas_grad, springs, jnp.zeros_like(springs.gas_grad))
     np.testing.assert_allclose(_dense(jax.tree_util.tree_map(np.asarray, springs), np.zeros(2 * n + 1, bool)),
                                reference, rtol=0, atol=1e-14)
@@ -273,9 +288,10 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
     # Params.inflating switching the sealed gas, the relaxation, the contacts, the load and the
     # weight off (one solver program for both). The state must be the equilibrium of the plain
     # inflation problem: prescribed gauge pressure, nothing touching, unrelaxed wall, bottom pinned.
-    setup = Setup(radius=0.13, n_elements=21, gas="isothermal")
-    r0, y, res, _ = inflate(setup, shell(PEZZI))
-    # the same solve, jitted inside the curve and run op by op here: equal to round-off
+    setup = STATES_SETUP
+    # jitted: op by op, its hundreds of single operations each compile a program of their own
+    r0, y, res, _ = jax.jit(lambda theta: inflate(setup, shell(theta)))(PEZZI)
+    # the same solve, inside the curve's program and in a program of its own here: equal to round-off
     np.testing.assert_allclose(np.asarray(_indented_states(setup)[0]), np.asarray(y), rtol=0, atol=1e-14)
     assert float(res) <= setup.atol
     plain = Config(theta=setup.theta(), gas="prescribed", loading="none", ground=False, pin_bottom=True, relax=False)
