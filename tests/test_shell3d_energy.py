@@ -132,6 +132,13 @@ def _random_state(mesh, rng, scale=0.02):
     return mesh.vertices * 1.01 + scale * rng.normal(size=mesh.vertices.shape) * 0.1
 
 
+def _contact_params(c):
+    """The parameters of the tests on the 134-face sphere with indenter and ground: one pytree,
+    so that one compiled energy, gradient and Hessian serves them all (the sealed gas's entries
+    are unused by the prescribed gas; the weight is linear in x, it adds nothing to the Hessian)."""
+    return _params(indenter_center=c, reference_volume=4.0, atmospheric_pressure=1e5, mass=0.3)
+
+
 @pytest.mark.parametrize("gas", ["prescribed", "isothermal", "adiabatic"])
 def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch):
     import shelljax.shell3d._hessian as model_module
@@ -147,7 +154,7 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
     c = x[top] + np.array([0.0, 0.0, 0.3 + 0.02])
     x[:, 2] = np.maximum(x[:, 2], -1.0)  # every vertex above the ground plane
     q = np.concatenate([x.ravel(), c])
-    params = _params(indenter_center=c, reference_volume=4.0, atmospheric_pressure=1e5, mass=0.3)
+    params = _contact_params(c)
     assert np.isfinite(model.host_energy(q, params))
     g = model.host_gradient(q, params)
     v = rng.normal(size=q.size) * 1e-3
@@ -256,7 +263,7 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     x[:, 2] = np.maximum(x[:, 2], ground + 1e-7 * ghat)
     c = x[int(np.argmax(x[:, 2]))] + np.array([0.0, 0.0, 0.32])
     q = np.concatenate([x.ravel(), c])
-    params = _params(indenter_center=c)
+    params = _contact_params(c)  # the prescribed-gas gradient test's programs
     g = model.host_gradient(q, params)
     hessian = model.host_hessian(q, params)[0].toarray()
     newton_matrix = model.host_hessian(q, params, gradient=g)[0].toarray()
