@@ -37,14 +37,23 @@ def test_random_graded_mesh_meets_the_requested_face_count():
         virtual.random_graded_shell(5e-4, 3000)  # 8 mm edges away from the poles give ≥ 7.6k faces
 
 
-def test_travels_stop_at_the_depth_on_walls_that_meet_within_the_force_grid():
+def test_travels_stop_at_the_depth_on_walls_that_meet_within_the_force_grid(monkeypatch):
     # At τ = 10 (h = 1.73 mm) the indenter pushes the top wall onto the bottom one at ≈ 52 N,
     # inside the 2.5–60 N search grid: those levels have no ball state. The search must use the
     # converged levels up to the requested depth instead of aborting (it raised before).
+    # The reference is the axisymmetric curve the search itself solved, on its grid (captured):
+    # a second curve on the first len(travels) levels would compile a second program of the
+    # axisymmetric engine (another force count) for the same load steps and the same solver.
+    curves = []
+    solve = rw.axisym_curve
+    monkeypatch.setattr(rw, "axisym_curve", lambda *args, **kwargs: curves.append(solve(*args, **kwargs)) or curves[-1])
     h = rw.thickness_for(10.0)
     travels = rw.travels_for(h, 7.0)
-    curve = rw.axisym_curve(h, rw.FORCE_STEP * np.arange(1, len(travels) + 1))
-    np.testing.assert_allclose(travels, curve["travel"], rtol=1e-9)  # same load steps, same solver
-    depths = rw.dimensionless_depth(curve["w0"], h)
+    (curve,) = curves
+    levels = len(travels)
+    assert not curve["converged"].all()  # the walls do meet within the grid
+    assert curve["converged"][:levels].all()  # every level up to the depth has a ball state
+    np.testing.assert_allclose(travels, curve["travel"][:levels], rtol=1e-9)  # the first levels, in order
+    depths = rw.dimensionless_depth(curve["w0"][:levels], h)
     assert depths[-1] >= 7.0 > depths[-2]  # stops at the first level that reaches the depth
     assert np.all(np.diff(travels) > 0)

@@ -11,6 +11,10 @@ from shelljax.physics import ShellProperties, lame_constants_2d
 from shelljax.geometry import signed_volume
 from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel, rigid_mode_pins
 
+# The ground-barrier Newton test solves tests/test_shell3d_indent.py's prescribed-gas ball: on one
+# xdist worker, after this file, that file finds its programs in the persistent cache.
+SHARED_PROGRAMS = "shell3d_ball"
+
 E, NU, H = 1.0e6, 0.3, 1.0e-3
 
 
@@ -128,6 +132,13 @@ def _random_state(mesh, rng, scale=0.02):
     return mesh.vertices * 1.01 + scale * rng.normal(size=mesh.vertices.shape) * 0.1
 
 
+def _contact_params(c):
+    """The parameters of the tests on the 134-face sphere with indenter and ground: one pytree,
+    so that one compiled energy, gradient and Hessian serves them all (the sealed gas's entries
+    are unused by the prescribed gas; the weight is linear in x, it adds nothing to the Hessian)."""
+    return _params(indenter_center=c, reference_volume=4.0, atmospheric_pressure=1e5, mass=0.3)
+
+
 @pytest.mark.parametrize("gas", ["prescribed", "isothermal", "adiabatic"])
 def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch):
     import shelljax.shell3d._hessian as model_module
@@ -143,7 +154,7 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
     c = x[top] + np.array([0.0, 0.0, 0.3 + 0.02])
     x[:, 2] = np.maximum(x[:, 2], -1.0)  # every vertex above the ground plane
     q = np.concatenate([x.ravel(), c])
-    params = _params(indenter_center=c, reference_volume=4.0, atmospheric_pressure=1e5, mass=0.3)
+    params = _contact_params(c)
     assert np.isfinite(model.host_energy(q, params))
     g = model.host_gradient(q, params)
     v = rng.normal(size=q.size) * 1e-3
@@ -174,7 +185,7 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     import shelljax.shell3d._hessian as model_module
 
     rng = np.random.default_rng(5)
-    mesh = s3.ShellMesh.sphere(1.0, 150)
+    mesh = s3.ShellMesh.sphere(1.0, 120)  # 134 faces, the other tests' mesh: 4 chunks of 34
     n_chunks = -(-mesh.n_faces // 35)
     assert n_chunks * -(-mesh.n_faces // n_chunks) > mesh.n_faces  # the last chunk overlaps its predecessor
     contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
@@ -252,7 +263,7 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     x[:, 2] = np.maximum(x[:, 2], ground + 1e-7 * ghat)
     c = x[int(np.argmax(x[:, 2]))] + np.array([0.0, 0.0, 0.32])
     q = np.concatenate([x.ravel(), c])
-    params = _params(indenter_center=c)
+    params = _contact_params(c)  # the prescribed-gas gradient test's programs
     g = model.host_gradient(q, params)
     hessian = model.host_hessian(q, params)[0].toarray()
     newton_matrix = model.host_hessian(q, params, gradient=g)[0].toarray()
@@ -292,8 +303,12 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     17 iterations back), with Newton's softened matrix the gaps come back in a few (4)."""
     from shelljax.shell3d import EquilibriumProblem, newton
 
-    ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=600)
-    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4), progress=False)
+    # The ball, indenter and rest shape of tests/test_shell3d_indent.py's prescribed-gas tests
+    # (500 faces, 1 cm indenter, the scan as rest shape): one set of compiled model programs
+    # serves both files (SHARED_PROGRAMS).
+    ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=500)
+    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4),
+                         indenter_radius=0.01, rest_shape="scan", progress=False)  # fmt: skip
     state = sim.solve(depth=0.005)
     model, params = sim.model, sim.params_at(state.q)
     x = state.vertices.copy()

@@ -19,6 +19,11 @@ from _balance import net_vertical_residual
 
 pytestmark = pytest.mark.slow  # solves the 3D shell
 
+# tests/test_shell3d_energy.py and tests/test_shell3d_friction.py solve this file's balls (500
+# faces, 1 cm indenter, the scan as rest shape): run on one worker, the model programs they compile
+# are found here in the persistent cache.
+SHARED_PROGRAMS = "shell3d_ball"
+
 R, H, E, NU, PG = 0.13, 0.9e-3, 2.34e6, 0.4, 1300.0
 PEZZI = ShellProperties(gauge_pressure=PG, young_modulus=E, thickness=H, poisson_ratio=NU)
 N_TRI = 500
