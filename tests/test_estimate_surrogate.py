@@ -14,6 +14,10 @@ from shelljax.estimate import ScalingLawModel, build_surrogate, surrogate_error
 from shelljax.estimate._forward import AxisymForwardModel
 from shelljax.estimate._surrogate import node_axes, surrogate_from_values
 
+# one xdist worker for the files that fit alike (conftest.py): the engine check's 128-curve
+# program is the posterior's surrogate program of the default experiment's runs
+SHARED_PROGRAMS = "bundled-session fits"
+
 CENTER = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 9e-4, "radius": 0.13}
 FORCES = np.linspace(5.0, 20.0, 7)
 
