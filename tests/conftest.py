@@ -43,9 +43,11 @@ import shelljax  # noqa: E402,F401  (x64 for every test, whatever it imports fir
 # the same time on the other worker. A file says so itself, with a module-level
 # ``SHARED_PROGRAMS = "<group>"``, so that the group moves with the file when it is renamed: the
 # sim_to_real notebook's diagnosis is test_diagnose's joint fit (4 sessions), and
-# test_estimate_forward_model, the estimators notebook and test_runner_cli all fit with the main
-# job's program. The scheduler runs where no test module is imported, so it reads the name from
-# the file's source.
+# test_estimate_forward_model, test_readme and test_runner_cli all fit with the main job's program.
+# A group runs on one worker, so it must stay well under half the suite: the heaviest files that
+# share the main job's programs (test_rig, test_runner_cluster) are left out and take them from
+# the persistent cache. The scheduler runs where no test module is imported, so it reads the name
+# from the file's source.
 GROUP_ATTRIBUTE = "SHARED_PROGRAMS"
 
 

@@ -24,7 +24,7 @@ from shelljax.diagnose._study import build_study
 from shelljax.session import load_session, write_session
 
 pytestmark = pytest.mark.slow  # diagnoses whole studies: joint fits of every candidate effect
-SHARED_PROGRAMS = "bundled-session fits"  # one xdist worker for the files that fit alike (conftest.py)
+SHARED_PROGRAMS = "joint diagnosis"  # the sim_to_real notebook's diagnosis is this file's joint fit: one xdist worker (conftest.py)
 
 LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)
 PRESSURES = (900.0, 1200.0, 1500.0, 1800.0)  # [Pa]

@@ -33,7 +33,6 @@ from shelljax.session import load_session, write_session
 # one xdist worker for the files that fit alike (conftest.py): the calibration's joint fit of four
 # sessions is test_diagnose's, and it, the one-session estimate through the rig and the plain fit
 # are the rig_calibration notebook's programs
-SHARED_PROGRAMS = "bundled-session fits"
 
 PAD = 0.3e-3  # [m/N] planted pad compliance: 6 mm at 20 N, about a fifth of the Pezzi ball's depths
 TERMS = ("pad_linear", "depth_offset", "sensor_gain")  # candidates: enough to choose among, few to fit

@@ -16,7 +16,6 @@ from shelljax.cli import main
 from shelljax.config import load_config
 from shelljax.runner import run_experiment, summary_table
 
-SHARED_PROGRAMS = "bundled-session fits"  # one xdist worker for the files that fit alike (conftest.py)
 
 HELD_OUT = ["bundled:sessions/heldout_pezzi_1100Pa.toml", "bundled:sessions/heldout_pezzi_1450Pa.toml"]
 THREE = HELD_OUT + ["bundled:sessions/pezzi.toml"]
