@@ -122,7 +122,7 @@ def main() -> None:
     medians = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
     # issue #57's targets, after the install for the main job and the fit, with it for the suite
     targets = {"main_job_cold": 45.0, "main_job_warm": 12.0, "fit_new_object_cold": 8.0, "suite_cold": 480.0}
-    print(f"\n| measure | median [s] | runs [s] | target [s] |\n|---|---:|---|---:|")
+    print("\n| measure | median [s] | runs [s] | target [s] |\n|---|---:|---|---:|")
     for key, median in medians.items():
         target = targets.get(key)
         print(f"| {key} | {median:.0f} | {', '.join(f'{r[key]:.0f}' for r in runs)} | {'' if target is None else f'{target:.0f}'} |")

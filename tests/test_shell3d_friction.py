@@ -8,7 +8,7 @@ import pytest
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax.physics import ShellProperties, friction_energy, friction_force, friction_mollifier
-from shelljax.shell3d import ContactConfig, ModelConfig, ShellModel
+from shelljax.shell3d import ContactConfig
 
 from _balance import net_vertical_residual
 
