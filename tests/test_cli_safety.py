@@ -98,14 +98,15 @@ def test_every_output_directory_is_checked_before_any_work(workdir, capsys, case
 
 
 # ------------------------------------------------------------------------------ values
-def _outside(low=None, high=None, *, integer=False):
-    """Values a range [low, high] refuses: below, above, and for numbers nan and inf."""
+def _outside(low=None, high=None, *, integer=False, low_open=False):
+    """Values a range [low, high] ((low, high] with ``low_open``) refuses: below, above, and for
+    numbers nan and inf."""
     if integer:
         out = [st.integers(max_value=low - 1)] + ([st.integers(min_value=high + 1)] if high is not None else [])
         return st.one_of(out).map(str)
     out = [st.sampled_from(["nan", "inf", "-inf"])]
     if low is not None:
-        out.append(st.floats(max_value=low, exclude_max=True, allow_nan=False, allow_infinity=False))
+        out.append(st.floats(max_value=low, exclude_max=not low_open, allow_nan=False, allow_infinity=False))
     if high is not None:
         out.append(st.floats(min_value=high, exclude_min=True, allow_nan=False, allow_infinity=False))
     return st.one_of(out).map(lambda v: v if isinstance(v, str) else repr(float(v)))
@@ -119,14 +120,14 @@ BAD_VALUES = [
     (lambda v: ["estimate", SESSION, "--seed", v], "--seed", _outside(0, integer=True)),
     (lambda v: ["estimate", SESSION, "--method", "bayes", "--walkers", v], "--walkers", _outside(8, integer=True)),
     (lambda v: ["estimate", SESSION, "--method", "bayes", "--max-steps", v], "--max-steps", _outside(100, integer=True)),
-    (lambda v: ["estimate", SESSION, "--k-s", v], "--k-s", _outside(1e-9, 10.0)),
+    (lambda v: ["estimate", SESSION, "--k-s", v], "--k-s", _outside(0.0, 10.0, low_open=True)),
     (lambda v: ["estimate", SESSION, "--k-s-std", v], "--k-s-std", _outside(0.0)),
     (lambda v: ["replica", SESSION, "--out", "r", "--mesh-faces", v], "--mesh-faces", _outside(20, 10**6, integer=True)),
-    (lambda v: ["replica", SESSION, "--out", "r", "--cor", v], "--cor", _outside(1e-9, 1.0)),
+    (lambda v: ["replica", SESSION, "--out", "r", "--cor", v], "--cor", _outside(0.0, 1.0, low_open=True)),
     (lambda v: ["play", SESSION, "--mesh-faces", v], "--mesh-faces", _outside(20, 10**6, integer=True)),
     (lambda v: ["play", SESSION, "--port", v], "--port", _outside(1, 65535, integer=True)),
     (lambda v: ["rig", "calibrate", *CALIBRATION, "--out", "rig.toml", "--manometer-std", v], "--manometer-std",
-     _outside(1e-9, 1.0)),
+     _outside(0.0, 1.0, low_open=True)),
     (lambda v: ["run", CONFIG, "--workers", v], "--workers", _outside(1, integer=True)),
     (lambda v: ["simulate", DROP, "--workers", v], "--workers", _outside(1, integer=True)),
     (lambda v: ["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", "d", "--workers", v], "--workers",
@@ -138,7 +139,7 @@ BAD_VALUES = [
     (lambda v: [*ACQUIRE, "--manometer-pressure", v], "--manometer-pressure", _outside(10.0, 1e5)),
     (lambda v: [*ACQUIRE, "--poisson-ratio", v], "--poisson-ratio", _outside(-1.0, 0.5)),
     (lambda v: [*ACQUIRE, "--trials", v], "--trials", _outside(1, integer=True)),
-    (lambda v: [*ACQUIRE, "--tolerance", v], "--tolerance", _outside(1e-9, 10.0)),
+    (lambda v: [*ACQUIRE, "--tolerance", v], "--tolerance", _outside(0.0, 10.0, low_open=True)),
     (lambda v: [*ACQUIRE, "--forces", f"5,10,{v}"], "--forces", _outside(0.01, 200.0)),
     (lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--cycles", v], "--cycles",
      _outside(1, integer=True)),
@@ -146,7 +147,7 @@ BAD_VALUES = [
      _outside(9.7, 9.9)),
     (lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--masses", f"0,1,{v}"], "--masses",
      _outside(0.0, 20.0)),
-    (lambda v: ["sensor-emulator", "--duration", v], "--duration", _outside(1e-9)),
+    (lambda v: ["sensor-emulator", "--duration", v], "--duration", _outside(0.0, low_open=True)),
 ]
 
 
