@@ -15,7 +15,7 @@ itself, keyed by everything that shapes it:
 A program is looked for in memory, then in ``programs/`` under JAX's persistent-cache directory
 (see :mod:`shelljax`; off with ``SHELLJAX_NO_COMPILATION_CACHE=1``), then among the programs the
 package ships (``shelljax/data/programs/``, written by ``tools/ship_programs.py`` for the
-default experiment's fit), and is traced and stored only when none has it. The program that
+default experiment's fit and posterior), and is traced and stored only when none has it. The program that
 runs is the exported one in every case, so a run does not depend on where it came from.
 
 Programs that cannot be exported (host callbacks, such as the 3D shell's sparse factorisation)
@@ -106,11 +106,11 @@ def _write(key: str, exported: jax.export.Exported) -> None:
         warnings.warn(f"{directory}: cannot keep the traced program {key} ({error}); the next process traces it again", stacklevel=3)
 
 
-def persistent_jit(fn: Callable, *, static_argnames: tuple[str, ...] = (), cpu_compiler_options: dict | None = None) -> Callable:
-    """``jax.jit(fn, static_argnames=...)`` whose traced program is kept across processes.
+def persistent_jit(fn: Callable, *, cpu_compiler_options: dict | None = None) -> Callable:
+    """``jax.jit(fn)`` whose traced program is kept across processes.
 
     Positional arguments are pytrees of arrays (an ``eqx.Module``'s static fields are part of the
-    key); ``static_argnames`` are passed by keyword and must have a faithful ``repr``.
+    key); keyword arguments are static, part of the key, and must have a faithful ``repr``.
     ``cpu_compiler_options``: XLA options for compiling it on the CPU (part of the persistent
     compilation cache's key, not of this one's).
     """

@@ -36,7 +36,7 @@ def kept(tmp_path, monkeypatch):
     monkeypatch.setattr(_programs, "user_program_dir", lambda: tmp_path)
     monkeypatch.setattr(_programs, "_LOADED", {})
     _energy.traces = 0
-    return _programs.persistent_jit(_energy, static_argnames=("power",))
+    return _programs.persistent_jit(_energy)
 
 
 def test_a_program_read_back_runs_without_tracing_and_gives_the_same_result(kept, tmp_path, monkeypatch):
@@ -119,7 +119,7 @@ def test_a_cache_that_cannot_be_written_costs_a_warning_not_the_result(tmp_path,
     monkeypatch.setattr(_programs, "_LOADED", {})
     _energy.traces = 0
     with pytest.warns(UserWarning, match="cannot keep the traced program"):
-        out = _programs.persistent_jit(_energy, static_argnames=("power",))(_Spring(jnp.ones(3), "single"), jnp.ones(3), power=2)
+        out = _programs.persistent_jit(_energy)(_Spring(jnp.ones(3), "single"), jnp.ones(3), power=2)
     assert float(out[0]) == pytest.approx(3.0, rel=1e-15)
 
 

@@ -145,9 +145,9 @@ def _curves(params, forces, physics: CurvePhysics, cold, *, setup: Setup, chunk:
         lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
-_batched = jax.jit(_curves, static_argnames=("setup", "chunk"))
+_batched = jax.jit(_curves)
 # the checked API's calls, made outside any trace: their traced programs are kept across processes
-_batched_kept = persistent_jit(_curves, static_argnames=("setup", "chunk"))
+_batched_kept = persistent_jit(_curves)
 
 
 def _rows(properties: ShellProperties) -> Float[Array, "b 4"]:

@@ -71,7 +71,7 @@ def _block(problem: PaddedProblem, coords: Float[Array, "w 7"], key: UInt32[Arra
             "failed_forward": failed}
 
 
-_block_kept = persistent_jit(_block, static_argnames=("length",))
+_block_kept = persistent_jit(_block)
 
 
 def stretch_block(problem: PaddedProblem, coords, seed: int, free, steps: int, length: int) -> dict:

@@ -124,7 +124,7 @@ def _solve(problem: PaddedProblem, u0, rtol, atol, max_steps: int):
 # a fit is compiled more often than it runs long: XLA:CPU's legacy elemental emitters and LLVM at
 # -O1 compile it faster, and it runs as fast (docs/fit-and-bayes.md#compilation)
 _FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
-_solve_kept = persistent_jit(_solve, static_argnames=("max_steps",), cpu_compiler_options=_FIT_COMPILER_OPTIONS)
+_solve_kept = persistent_jit(_solve, cpu_compiler_options=_FIT_COMPILER_OPTIONS)
 
 
 def solve_least_squares(problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
