@@ -145,7 +145,7 @@ def _curves(params, forces, physics: CurvePhysics, cold, *, setup: Setup, chunk:
         lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
-_batched = jax.jit(_curves)
+_batched = jax.jit(_curves, static_argnames=("setup", "chunk"))
 # the checked API's calls, made outside any trace: their traced programs are kept across processes
 _batched_kept = persistent_jit(_curves)
 
