@@ -42,14 +42,14 @@ def _params(n, seed=0):
 
 def _shell(rows):
     """The rows (n, 4) of P_g [Pa], E [Pa], h [m], ν [-] as the engine's ShellProperties."""
-    return ShellProperties(gauge_pressure=rows[:, 0], young_modulus=rows[:, 1], thickness=rows[:, 2],
-                           poisson_ratio=rows[:, 3])
+    return ShellProperties(
+        gauge_pressure=rows[:, 0], young_modulus=rows[:, 1], thickness=rows[:, 2], poisson_ratio=rows[:, 3]
+    )
 
 
 def _work(result):
     """(fraction of curves converged at every level [-], median Newton iterations per curve [-])."""
-    return (float(np.mean(np.all(result.converged, axis=1))),
-            float(np.median(np.sum(result.iterations, axis=1))))
+    return (float(np.mean(np.all(result.converged, axis=1))), float(np.median(np.sum(result.iterations, axis=1))))
 
 
 def _time(fn, repeats):
@@ -70,8 +70,9 @@ def main(argv=None):
     ap.add_argument("--large", type=int, default=1024, help="batch size timed for the 1e5 estimate")
     ap.add_argument("--n-elements", type=int, default=101)
     ap.add_argument("--chunk", type=int, default=8, help="vmapped lanes (0: the whole batch at once)")
-    ap.add_argument("--workers", type=int, default=None,
-                    help="host threads for the batches (default: every CPU core; 1 on a GPU)")
+    ap.add_argument(
+        "--workers", type=int, default=None, help="host threads for the batches (default: every CPU core; 1 on a GPU)"
+    )
     args = ap.parse_args(argv)
 
     setup = Setup(radius=0.13, n_elements=args.n_elements)
@@ -85,8 +86,9 @@ def main(argv=None):
     workers = cpu_workers() if args.workers is None else args.workers
 
     def batch(params, n_workers):
-        return map_batch(lambda rows: indentation_curves_raw(_shell(rows), forces, setup, args.chunk),
-                         params, n_workers)
+        return map_batch(
+            lambda rows: indentation_curves_raw(_shell(rows), forces, setup, args.chunk), params, n_workers
+        )
 
     b64 = _params(64, 1)
     t64_one, r64 = _time(lambda: batch(b64, 1), args.repeats)
@@ -103,23 +105,46 @@ def main(argv=None):
 
     device = jax.devices()[0]
     machine = dict(
-        platform=platform.platform(), processor=platform.processor(),
-        cpu_count=os.cpu_count(), jax=jax.__version__, device=str(device.device_kind),
-        backend=jax.default_backend(), n_elements=args.n_elements, chunk=args.chunk,
+        platform=platform.platform(),
+        processor=platform.processor(),
+        cpu_count=os.cpu_count(),
+        jax=jax.__version__,
+        device=str(device.device_kind),
+        backend=jax.default_backend(),
+        n_elements=args.n_elements,
+        chunk=args.chunk,
         workers=workers,
     )
     print(f"machine: {machine}")
-    print(f"{'case':34s} {'batch':>7s} {'median [s]':>11s} {'per curve [ms]':>15s} "
-          f"{'conv. frac':>10s} {'Newton its/curve':>16s} {'target':>10s}")
+    print(
+        f"{'case':34s} {'batch':>7s} {'median [s]':>11s} {'per curve [ms]':>15s} "
+        f"{'conv. frac':>10s} {'Newton its/curve':>16s} {'target':>10s}"
+    )
     for name, n, t, per, conv, its, target in rows:
-        print(f"{name:34s} {n:7d} {t:11.4f} {per * 1e3:15.3f} {'' if conv is None else f'{conv:.3f}':>10s} "
-              f"{'' if its is None else f'{its:g}':>16s} {target:>10s}")
+        print(
+            f"{name:34s} {n:7d} {t:11.4f} {per * 1e3:15.3f} {'' if conv is None else f'{conv:.3f}':>10s} "
+            f"{'' if its is None else f'{its:g}':>16s} {target:>10s}"
+        )
     with open(args.out, "w") as fh:
-        json.dump(dict(machine=machine, rows=[
-            dict(case=a, batch=b, median_s=c, per_curve_s=d, converged=e, median_newton_iterations_per_curve=f,
-                 target=g)
-            for a, b, c, d, e, f, g in rows
-        ]), fh, indent=2)
+        json.dump(
+            dict(
+                machine=machine,
+                rows=[
+                    dict(
+                        case=a,
+                        batch=b,
+                        median_s=c,
+                        per_curve_s=d,
+                        converged=e,
+                        median_newton_iterations_per_curve=f,
+                        target=g,
+                    )
+                    for a, b, c, d, e, f, g in rows
+                ],
+            ),
+            fh,
+            indent=2,
+        )
     print(f"wrote {args.out}")
 
 

@@ -76,7 +76,7 @@ def write_catalogue(directory: Path, n_sessions: int, seed: int) -> Path:
             continue
     config = directory / "catalogue.toml"
     listed = ", ".join(f'"{p.name}"' for p in paths[:n_sessions])
-    config.write_text(f'''name = "catalogue"
+    config.write_text(f"""name = "catalogue"
 output_dir = "runs"
 seed = 0
 
@@ -92,7 +92,7 @@ paths = [{listed}]
 
 [outputs]
 figures = false
-''')
+""")
     return config
 
 
@@ -148,10 +148,18 @@ def paper_run(config: Path, workers: int | None, out: Path) -> tuple[float, dict
 
     command = [sys.executable, "-m", "shelljax.cli", "run", str(config), "--out", str(out), "--quiet"]
     root = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}  # this checkout's shelljax
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+    }  # this checkout's shelljax
     start, cpu_start = time.perf_counter(), _children_cpu_seconds()
-    subprocess.run(command + ([] if workers is None else ["--workers", str(workers)]), check=True, cwd=root, env=env,
-                   stdout=subprocess.DEVNULL)  # fmt: skip
+    subprocess.run(
+        command + ([] if workers is None else ["--workers", str(workers)]),
+        check=True,
+        cwd=root,
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
     seconds, cpu = time.perf_counter() - start, _children_cpu_seconds() - cpu_start
     (run_dir,) = out.iterdir()
     return seconds, json.loads((run_dir / "results.json").read_text()), cpu
@@ -178,22 +186,35 @@ def paper(workers: int, repeats: int, tmp: Path) -> dict:
             values = _values(results["sessions"])
             reference = reference or values
             stages = results["compilation"]["stages"]
-            runs.append({"workers": n, "seconds": seconds, "cpu_cores": cpu / seconds, "load_average_before": load_before,
-                         "load_average_after": os.getloadavg()[0], "values_compared": len(values),
-                         "values_identical_to_first_serial": values == reference,
-                         "items_seconds": [item["seconds"] for item in results["items"]],
-                         "compile_seconds": results["compilation"]["total_seconds"],
-                         "trace_seconds": sum(s["trace_seconds"] for s in stages),
-                         "programs_compiled": sum(s["programs_compiled"] for s in stages),
-                         "persistent_cache_hits": sum(s["persistent_cache_hits"] for s in stages)})  # fmt: skip
+            runs.append(
+                {
+                    "workers": n,
+                    "seconds": seconds,
+                    "cpu_cores": cpu / seconds,
+                    "load_average_before": load_before,
+                    "load_average_after": os.getloadavg()[0],
+                    "values_compared": len(values),
+                    "values_identical_to_first_serial": values == reference,
+                    "items_seconds": [item["seconds"] for item in results["items"]],
+                    "compile_seconds": results["compilation"]["total_seconds"],
+                    "trace_seconds": sum(s["trace_seconds"] for s in stages),
+                    "programs_compiled": sum(s["programs_compiled"] for s in stages),
+                    "persistent_cache_hits": sum(s["persistent_cache_hits"] for s in stages),
+                }
+            )
             print(json.dumps(runs[-1]), flush=True)
     serial = [r["seconds"] for r in runs if r["workers"] is None]
     cluster = [r["seconds"] for r in runs if r["workers"] is not None]
-    return {"config": str(config), "sessions": len(results["sessions"]), "runs": runs,
-            "serial_seconds_best": min(serial), "cluster_seconds_best": min(cluster),
-            "speedup_best_of_each": min(serial) / min(cluster),
-            "speedup_bound": workers / float(np.median([r["cpu_cores"] for r in runs if r["workers"] is None])),
-            "values_identical": all(r["values_identical_to_first_serial"] for r in runs)}  # fmt: skip
+    return {
+        "config": str(config),
+        "sessions": len(results["sessions"]),
+        "runs": runs,
+        "serial_seconds_best": min(serial),
+        "cluster_seconds_best": min(cluster),
+        "speedup_best_of_each": min(serial) / min(cluster),
+        "speedup_bound": workers / float(np.median([r["cpu_cores"] for r in runs if r["workers"] is None])),
+        "values_identical": all(r["values_identical_to_first_serial"] for r in runs),
+    }
 
 
 def main():
@@ -206,15 +227,26 @@ def main():
     parser.add_argument("--noop-items", type=int, default=200)
     parser.add_argument("--seed", type=int, default=49)
     parser.add_argument("--skip", nargs="*", default=[], choices=["catalogue", "diagnosis"])
-    parser.add_argument("--out", default=None, help="JSON to write (default: docs/bench/cluster-cpu-2core.json, "
-                        "or cluster-paper-cpu-2core.json for --case paper)")
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="JSON to write (default: docs/bench/cluster-cpu-2core.json, "
+        "or cluster-paper-cpu-2core.json for --case paper)",
+    )
     args = parser.parse_args()
     bench = Path(__file__).resolve().parents[1] / "docs" / "bench"
-    args.out = args.out or str(bench / ("cluster-paper-cpu-2core.json" if args.case == "paper" else "cluster-cpu-2core.json"))
+    args.out = args.out or str(
+        bench / ("cluster-paper-cpu-2core.json" if args.case == "paper" else "cluster-cpu-2core.json")
+    )
     if args.case == "paper":
         with tempfile.TemporaryDirectory() as tmp:
-            report = {"machine": platform.platform(), "cpus": len(__import__("os").sched_getaffinity(0)),
-                      "workers": args.workers, "unit": "s", "paper": paper(args.workers, args.repeats, Path(tmp))}  # fmt: skip
+            report = {
+                "machine": platform.platform(),
+                "cpus": len(__import__("os").sched_getaffinity(0)),
+                "workers": args.workers,
+                "unit": "s",
+                "paper": paper(args.workers, args.repeats, Path(tmp)),
+            }
         print(json.dumps({k: v for k, v in report["paper"].items() if k != "runs"}, indent=1))
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(report, indent=1))
@@ -243,11 +275,17 @@ def main():
             a, b = _values(serial["sessions"]), _values(parallel["sessions"])
             # the serial run already keeps serial_cpu / serial_s cores busy (its batches' threads):
             # N workers on N cores can at best make it N / that faster
-            report["catalogue"] = {"sessions": args.sessions, "serial_seconds": serial_s, "cluster_seconds": cluster_s,
-                                   "speedup": serial_s / cluster_s, "serial_cpu_cores": serial_cpu / serial_s,
-                                   "speedup_bound": args.workers * serial_s / serial_cpu, "values_compared": len(a),
-                                   "values_identical": a == b,
-                                   "differing": sorted(k for k in a if a.get(k) != b.get(k))[:20]}  # fmt: skip
+            report["catalogue"] = {
+                "sessions": args.sessions,
+                "serial_seconds": serial_s,
+                "cluster_seconds": cluster_s,
+                "speedup": serial_s / cluster_s,
+                "serial_cpu_cores": serial_cpu / serial_s,
+                "speedup_bound": args.workers * serial_s / serial_cpu,
+                "values_compared": len(a),
+                "values_identical": a == b,
+                "differing": sorted(k for k in a if a.get(k) != b.get(k))[:20],
+            }
             rows.append(("catalogue (closed form, fit, bayes)", args.sessions, serial_s, cluster_s, a == b))
             print(json.dumps(report["catalogue"]), flush=True)
         if "diagnosis" not in args.skip:
@@ -263,21 +301,34 @@ def main():
             strip = [{k: v for k, v in (r.value or {}).items() if k != "seconds"} for r in serial]
             strip_p = [{k: v for k, v in (r.value or {}).items() if k != "seconds"} for r in parallel]
             identical = strip == strip_p
-            report["diagnosis"] = {"studies": args.studies, "serial_seconds": serial_s, "cluster_seconds": cluster_s,
-                                   "speedup": serial_s / cluster_s, "values_identical": identical,
-                                   "items_identical_with_wall_times": sum(same),
-                                   "per_study_seconds": float(np.median([r.value["seconds"] for r in serial
-                                                                         if r.status == "done"]))}  # fmt: skip
+            report["diagnosis"] = {
+                "studies": args.studies,
+                "serial_seconds": serial_s,
+                "cluster_seconds": cluster_s,
+                "speedup": serial_s / cluster_s,
+                "values_identical": identical,
+                "items_identical_with_wall_times": sum(same),
+                "per_study_seconds": float(np.median([r.value["seconds"] for r in serial if r.status == "done"])),
+            }
             rows.append((f"diagnosis of {args.studies} studies", args.studies, serial_s, cluster_s, identical))
     model = report["costs"]
     per_item = report.get("catalogue", {}).get("serial_seconds", 0.0) / max(args.sessions, 1)
     if per_item:
-        predicted = (model["cluster_start_seconds"] + model["import_seconds"] + model["first_fit_seconds"]
-                     + math.ceil(1000 / 100) * (per_item + model["scheduler_overhead_per_item_seconds"]))  # fmt: skip
-        report["scaling_model"] = {"per_session_seconds": per_item, "predicted_1000_objects_100_workers_seconds": predicted,
-                                   "formula": "start + first item + ceil(N/W) (t_item + overhead)"}  # fmt: skip
-    lines = [f"{'workload':<40s} {'items':>6s} {'serial [s]':>11s} {f'{args.workers} workers [s]':>12s} "
-             f"{'speedup':>8s} {'identical':>10s}"]  # fmt: skip
+        predicted = (
+            model["cluster_start_seconds"]
+            + model["import_seconds"]
+            + model["first_fit_seconds"]
+            + math.ceil(1000 / 100) * (per_item + model["scheduler_overhead_per_item_seconds"])
+        )
+        report["scaling_model"] = {
+            "per_session_seconds": per_item,
+            "predicted_1000_objects_100_workers_seconds": predicted,
+            "formula": "start + first item + ceil(N/W) (t_item + overhead)",
+        }
+    lines = [
+        f"{'workload':<40s} {'items':>6s} {'serial [s]':>11s} {f'{args.workers} workers [s]':>12s} "
+        f"{'speedup':>8s} {'identical':>10s}"
+    ]
     for name, n, s, c, same in rows:
         lines.append(f"{name:<40s} {n:6d} {s:11.1f} {c:12.1f} {s / c:8.2f} {str(same):>10s}")
     lines.append(json.dumps(report["costs"], indent=1))

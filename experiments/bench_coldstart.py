@@ -98,8 +98,12 @@ def _readme_commands() -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--measures", default="main,fit,suite", help="comma-separated subset of main,fit,suite (fit runs with main)")
-    parser.add_argument("--workdir", default=None, help="where venvs, caches and clones go (default: a temporary directory, removed)")
+    parser.add_argument(
+        "--measures", default="main,fit,suite", help="comma-separated subset of main,fit,suite (fit runs with main)"
+    )
+    parser.add_argument(
+        "--workdir", default=None, help="where venvs, caches and clones go (default: a temporary directory, removed)"
+    )
     parser.add_argument("--no-pip-cache", action="store_true", help="install without pip's wheel cache")
     parser.add_argument("--out", default=str(ROOT / "docs" / "bench" / "coldstart-cpu-2core.json"))
     args = parser.parse_args()
@@ -115,7 +119,10 @@ def main() -> None:
             if "suite" in measures:
                 times.update(_suite(workdir, repeat, not args.no_pip_cache))
             runs.append(times)
-            print(f"repeat {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()), flush=True)
+            print(
+                f"repeat {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()),
+                flush=True,
+            )
     finally:
         if args.workdir is None:
             shutil.rmtree(workdir, ignore_errors=True)
@@ -125,12 +132,21 @@ def main() -> None:
     print("\n| measure | median [s] | runs [s] | target [s] |\n|---|---:|---|---:|")
     for key, median in medians.items():
         target = targets.get(key)
-        print(f"| {key} | {median:.0f} | {', '.join(f'{r[key]:.0f}' for r in runs)} | {'' if target is None else f'{target:.0f}'} |")
+        print(
+            f"| {key} | {median:.0f} | {', '.join(f'{r[key]:.0f}' for r in runs)} | {'' if target is None else f'{target:.0f}'} |"
+        )
     record = {
-        "unit": "s", "medians": medians, "runs": runs, "targets": targets, "repeats": args.repeats,
-        "pip_cache": not args.no_pip_cache, "cores": os.cpu_count(), "machine": platform.platform(),
-        "python": platform.python_version(), "date": time.strftime("%Y-%m-%d %H:%M"),
-    }  # fmt: skip
+        "unit": "s",
+        "medians": medians,
+        "runs": runs,
+        "targets": targets,
+        "repeats": args.repeats,
+        "pip_cache": not args.no_pip_cache,
+        "cores": os.cpu_count(),
+        "machine": platform.platform(),
+        "python": platform.python_version(),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
     print(f"wrote {args.out}")

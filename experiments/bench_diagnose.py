@@ -55,8 +55,9 @@ def _cold(repeats: int) -> list[float]:
 def _without_trial(session, trial):
     keep = session.trial != trial
     counts = session.wrinkle_counts[session.trial_ids != trial]
-    return dataclasses.replace(session, trial=session.trial[keep], force=session.force[keep], depth=session.depth[keep],
-                               wrinkle_counts=counts)  # fmt: skip
+    return dataclasses.replace(
+        session, trial=session.trial[keep], force=session.force[keep], depth=session.depth[keep], wrinkle_counts=counts
+    )
 
 
 def loo_check() -> dict:
@@ -100,9 +101,13 @@ def loo_check() -> dict:
         white = np.linalg.solve(chol, r)
         refit.append(float(-0.5 * white @ white - np.sum(np.log(np.diag(chol))) + log_jac[i]))
     refit = np.array(refit)
-    return {"linearised": linear.tolist(), "refitted": refit.tolist(),
-            "max_abs_difference_nats": float(np.max(np.abs(linear - refit))),
-            "total_linearised": float(linear.sum()), "total_refitted": float(refit.sum())}  # fmt: skip
+    return {
+        "linearised": linear.tolist(),
+        "refitted": refit.tolist(),
+        "max_abs_difference_nats": float(np.max(np.abs(linear - refit))),
+        "total_linearised": float(linear.sum()),
+        "total_refitted": float(refit.sum()),
+    }
 
 
 def main():
@@ -119,16 +124,22 @@ def main():
     check = loo_check()
     result = {
         "machine": f"{platform.machine()} {os.cpu_count()} cores, {platform.python_version()}",
-        "sessions": [Path(p).name for p in SESSIONS], "candidates": warm[0]["candidates"], "verdict": warm[0]["verdict"],
-        "cold_seconds": cold, "cold_median_seconds": statistics.median(cold),
-        "warm_seconds": [w["seconds"] for w in warm], "warm_median_seconds": statistics.median(w["seconds"] for w in warm),
+        "sessions": [Path(p).name for p in SESSIONS],
+        "candidates": warm[0]["candidates"],
+        "verdict": warm[0]["verdict"],
+        "cold_seconds": cold,
+        "cold_median_seconds": statistics.median(cold),
+        "warm_seconds": [w["seconds"] for w in warm],
+        "warm_median_seconds": statistics.median(w["seconds"] for w in warm),
         "loo_check": check,
-    }  # fmt: skip
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1))
     print(f"{'measure':<52s} {'value':>10s}")
-    print(f"{'diagnosis, 4 sessions x %d candidates, cold (process, empty cache)' % result['candidates']:<52s} "
-          f"{result['cold_median_seconds']:9.1f} s")  # fmt: skip
+    print(
+        f"{'diagnosis, 4 sessions x %d candidates, cold (process, empty cache)' % result['candidates']:<52s} "
+        f"{result['cold_median_seconds']:9.1f} s"
+    )
     print(f"{'same, warm (same process)':<52s} {result['warm_median_seconds']:9.1f} s")
     print(f"{'linearised vs refitted LOO, largest |Δ| per trial':<52s} {check['max_abs_difference_nats']:9.3f} nats")
     print(f"{'total elpd, linearised / refitted':<52s} {check['total_linearised']:.2f} / {check['total_refitted']:.2f}")

@@ -49,8 +49,13 @@ def _median_time(fn, *args, repeats: int = 7) -> float:
 def _system(faces: int, gas: str):
     shell = s3.ball(0.13, 0.9e-3, n_triangles=faces)
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(1e-3, 1e3), name="ground")
-    return shell, d.shell_system(shell, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=shell.thickness,
-                                                 poisson_ratio=0.4), gas=gas, mass=0.8, planes=[ground])
+    return shell, d.shell_system(
+        shell,
+        ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=shell.thickness, poisson_ratio=0.4),
+        gas=gas,
+        mass=0.8,
+        planes=[ground],
+    )
 
 
 def breakdown(system, state, dt: float, integrator) -> dict:
@@ -97,7 +102,9 @@ def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrato
         timings.append(time.perf_counter() - start)
         if not np.all(np.asarray(record.converged)):
             k = int(np.flatnonzero(~np.asarray(record.converged))[0])
-            raise RuntimeError(f"step {len(timings) * chunk - chunk + k + 1} did not converge ({faces} faces, {gas} gas)")
+            raise RuntimeError(
+                f"step {len(timings) * chunk - chunk + k + 1} did not converge ({faces} faces, {gas} gas)"
+            )
         iterations.append(np.asarray(record.newton_iterations))
         matrices.append(np.asarray(record.newton_matrices))
         gaps.append(np.asarray(record.min_gap_m)[:, 0])
@@ -111,23 +118,43 @@ def run(faces: int, dt: float, height: float, chunk: int, chunks: int, integrato
     # Each iteration: a gradient and at least one energy in the line search; one more of each to start.
     energies = (newton + 1.0) * (parts["gradient_s"] + parts["energy_s"])
     return {
-        "faces": int(shell.mesh.n_faces), "dofs": 3 * shell.mesh.n_vertices, "dt_s": dt,
-        "integrator": type(integrator).__name__, "gas": gas, "reuse_matrix": reuse, "setup_s": setup,
-        "compile_s": timings[0] - per_step * chunk, "steps_per_chunk": chunk, "timed_chunks": chunks,
-        "seconds_per_step": per_step, "chunk_seconds": timings[1:], "newton_iterations_per_step": newton,
-        "newton_matrices_per_step": fresh, "steps_in_contact": int(np.sum(touching)),
-        "newton_matrices_per_step_in_contact": float(np.mean(np.concatenate(matrices[1:])[touching])) if touching.any() else None,
-        "min_gap_m": float(np.min(np.concatenate(gaps))), "final_gap_m": float(gaps[-1][-1]),
-        "breakdown_s_per_step": {"hessian_assembly": hessian, "host_factorisation_solve": host,
-                                 "gradients_energies": energies, "other": per_step - hessian - host - energies},
-        "isolated_s": parts, "projected_1s_of_motion_s": per_step / dt,
-    }  # fmt: skip
+        "faces": int(shell.mesh.n_faces),
+        "dofs": 3 * shell.mesh.n_vertices,
+        "dt_s": dt,
+        "integrator": type(integrator).__name__,
+        "gas": gas,
+        "reuse_matrix": reuse,
+        "setup_s": setup,
+        "compile_s": timings[0] - per_step * chunk,
+        "steps_per_chunk": chunk,
+        "timed_chunks": chunks,
+        "seconds_per_step": per_step,
+        "chunk_seconds": timings[1:],
+        "newton_iterations_per_step": newton,
+        "newton_matrices_per_step": fresh,
+        "steps_in_contact": int(np.sum(touching)),
+        "newton_matrices_per_step_in_contact": float(np.mean(np.concatenate(matrices[1:])[touching]))
+        if touching.any()
+        else None,
+        "min_gap_m": float(np.min(np.concatenate(gaps))),
+        "final_gap_m": float(gaps[-1][-1]),
+        "breakdown_s_per_step": {
+            "hessian_assembly": hessian,
+            "host_factorisation_solve": host,
+            "gradients_energies": energies,
+            "other": per_step - hessian - host - energies,
+        },
+        "isolated_s": parts,
+        "projected_1s_of_motion_s": per_step / dt,
+    }
 
 
 def table(rows: list[dict]) -> str:
     """The results as a fixed-width text table."""
-    head = f"{'faces':>6} {'reuse':>5} {'setup s':>8} {'compile s':>9} {'ms/step':>8} {'Newton':>6} {'matrix':>6} " \
-           f"{'Hess ms':>8} {'host ms':>8} {'grad ms':>8} {'other ms':>8} {'1 s [s]':>8}"  # fmt: skip
+    head = (
+        f"{'faces':>6} {'reuse':>5} {'setup s':>8} {'compile s':>9} {'ms/step':>8} {'Newton':>6} {'matrix':>6} "
+        f"{'Hess ms':>8} {'host ms':>8} {'grad ms':>8} {'other ms':>8} {'1 s [s]':>8}"
+    )
     lines = [head]
     for r in rows:
         b = {k: 1e3 * v for k, v in r["breakdown_s_per_step"].items()}
@@ -148,18 +175,29 @@ def main() -> None:
     p.add_argument("--height", type=float, default=0.005, help="drop height [m] (contact within the first steps)")
     p.add_argument("--integrator", choices=["newmark", "backward-euler"], default="backward-euler")
     p.add_argument("--gas", choices=["isothermal", "adiabatic", "prescribed"], default="isothermal")
-    p.add_argument("--reuse", choices=["kept", "fresh", "both"], default="both",
-                   help="Newton's matrix: kept while it contracts (simplified Newton, the default), fresh every iteration, or both")
+    p.add_argument(
+        "--reuse",
+        choices=["kept", "fresh", "both"],
+        default="both",
+        help="Newton's matrix: kept while it contracts (simplified Newton, the default), fresh every iteration, or both",
+    )
     p.add_argument("--json", type=Path, default=None, help="write the results here")
     args = p.parse_args()
     integrator = d.Newmark() if args.integrator == "newmark" else d.BackwardEuler()
     reuses = {"kept": [True], "fresh": [False], "both": [True, False]}[args.reuse]
-    rows = [run(f, args.dt, args.height, args.chunk, args.chunks, integrator, args.gas, r) for f in args.faces for r in reuses]
+    rows = [
+        run(f, args.dt, args.height, args.chunk, args.chunks, integrator, args.gas, r)
+        for f in args.faces
+        for r in reuses
+    ]
     print(table(rows))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        machine = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average": os.getloadavg(),
-                   "date": time.strftime("%Y-%m-%d", time.gmtime())}  # fmt: skip
+        machine = {
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            "load_average": os.getloadavg(),
+            "date": time.strftime("%Y-%m-%d", time.gmtime()),
+        }
         args.json.write_text(json.dumps(machine | {"runs": rows}, indent=1) + "\n")
 
 

@@ -99,8 +99,9 @@ def main(argv=None):
             warnings.simplefilter("ignore", ConvergenceWarning)
             t = time.perf_counter()
             fit = fit_session(session, model, raise_on_failure=False)
-            post = sample_posterior(fit, n_walkers=args.walkers, max_steps=20_000, progress=False,
-                                    surrogate=not args.no_surrogate)
+            post = sample_posterior(
+                fit, n_walkers=args.walkers, max_steps=20_000, progress=False, surrogate=not args.no_surrogate
+            )
             return time.perf_counter() - t, post, fit
 
     bayes_first, _, fit = posterior()
@@ -132,19 +133,32 @@ def main(argv=None):
             ("exact engine: s per walker evaluation", f"{exact_per_eval * 1e3:.1f} ms"),
             ("exact engine: same chain (extrapolated)", f"{exact_per_eval * steps * args.walkers:.0f} s"),
         ]
-    print(f"session {session.source.name}, model {args.model} {options}, machine: {platform.platform()}, {os.cpu_count()} CPUs")
+    print(
+        f"session {session.source.name}, model {args.model} {options}, machine: {platform.platform()}, {os.cpu_count()} CPUs"
+    )
     width = max(len(r[0]) for r in rows)
     for name, value in rows:
         print(f"  {name:<{width}}  {value}")
     result = {
-        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "session": str(session.source), "model": args.model, "model_options": options,
-        "fit_first_s": fit_first, "fit_s": fit_times, "fit_median_s": statistics.median(fit_times),
-        "fit_every_bundled_session_s": fit_every_s, "fit_every_bundled_session_steps": fit_every_steps,
-        "bayes_first_s": bayes_first, "bayes_s": times, "bayes_effective_samples": ess,
-        "bayes_seconds_per_1000_effective": 1000 / statistics.median(rate), "walkers": args.walkers,
-        "bayes_steps_median": steps, "surrogate": surrogate, "exact_seconds_per_walker_evaluation": exact_per_eval,
+        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs",
+        "session": str(session.source),
+        "model": args.model,
+        "model_options": options,
+        "fit_first_s": fit_first,
+        "fit_s": fit_times,
+        "fit_median_s": statistics.median(fit_times),
+        "fit_every_bundled_session_s": fit_every_s,
+        "fit_every_bundled_session_steps": fit_every_steps,
+        "bayes_first_s": bayes_first,
+        "bayes_s": times,
+        "bayes_effective_samples": ess,
+        "bayes_seconds_per_1000_effective": 1000 / statistics.median(rate),
+        "walkers": args.walkers,
+        "bayes_steps_median": steps,
+        "surrogate": surrogate,
+        "exact_seconds_per_walker_evaluation": exact_per_eval,
         "shelljax_version": shelljax.__version__,
-    }  # fmt: skip
+    }
     with open(args.out, "w") as handle:
         json.dump(result, handle, indent=2)
     print(f"wrote {args.out}")

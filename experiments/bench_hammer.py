@@ -35,6 +35,7 @@ def axis(points: np.ndarray) -> np.ndarray:
 def bending(system, trajectory, head: np.ndarray, handle: np.ndarray) -> np.ndarray:
     """Per step, the change [deg] of the angle between the head's and the handle's axes from the rest angle
     (0 for the rigid swing): how much the head–handle joint and the handle bend."""
+
     def angle(x):
         a, b = axis(x[head]), axis(x[handle])
         return np.degrees(np.arccos(min(abs(float(a @ b)), 1.0)))
@@ -48,14 +49,23 @@ def run(args):
     timings = {}
     start = time.perf_counter()
     scenario = load_scenario(args.config)
-    scenario = dataclasses.replace(scenario, mesh_faces=args.faces or scenario.mesh_faces, duration=args.duration, max_frames=args.frames,
-                                   step_tolerance=args.tolerance or scenario.step_tolerance)
+    scenario = dataclasses.replace(
+        scenario,
+        mesh_faces=args.faces or scenario.mesh_faces,
+        duration=args.duration,
+        max_frames=args.frames,
+        step_tolerance=args.tolerance or scenario.step_tolerance,
+    )
     obj = resolve_object(scenario)
     timings["mesh_s"] = time.perf_counter() - start
     system = hold(scenario, build_system(scenario, obj, scenario.contact_damping or 0.0))
     timings["setup_s"] = time.perf_counter() - start - timings["mesh_s"]
     state = d.initial_state(system, system.posed(0.0))
-    options = dict(integrator=d.BackwardEuler() if scenario.scheme == "backward-euler" else d.Newmark(), minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance), chunk=args.chunk)
+    options = dict(
+        integrator=d.BackwardEuler() if scenario.scheme == "backward-euler" else d.Newmark(),
+        minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
+        chunk=args.chunk,
+    )
     start = time.perf_counter()
     d.simulate(system, state, scenario.dt, args.chunk * scenario.dt, progress=False, **options)
     first = time.perf_counter() - start
@@ -76,7 +86,9 @@ def summary(scenario, system, trajectory) -> dict:
     schedule = np.stack([np.asarray(system.prescribed_positions(t)) for t in times])
     rest = np.asarray(system.inflated).reshape(-1, 3)
     head = np.flatnonzero(rest[:, 2] > -0.06)  # the head: its axis is z = 0, radius 8 cm
-    handle = np.flatnonzero((rest[:, 2] < -0.12) & (rest[:, 2] > rest[:, 2].min() + 0.03))  # the handle, clear of joint and hand
+    handle = np.flatnonzero(
+        (rest[:, 2] < -0.12) & (rest[:, 2] > rest[:, 2].min() + 0.03)
+    )  # the handle, clear of joint and hand
     bend = bending(system, trajectory, head, handle)
     rigid = np.stack([np.asarray(system.posed(t)) for t in times])
     deviation = np.linalg.norm((positions - rigid).reshape(len(times), -1, 3), axis=2).max(axis=1)
@@ -84,23 +96,38 @@ def summary(scenario, system, trajectory) -> dict:
     pressure = trajectory["gas_pressure_Pa"]
     touch = np.flatnonzero(trajectory["min_gap_m"][:, 0] < trajectory.contact_distances_m[0])
     return {
-        "faces": int(np.asarray(system.faces).shape[0]), "vertices": int(rest.shape[0]), "held_vertices": int(held.size),
-        "dt_s": scenario.dt, "duration_s": float(times[-1]), "steps": int(len(times) - 1),
-        "newton_iterations_mean": float(trajectory["newton_iterations"][1:].mean()), "newton_iterations_max": int(trajectory["newton_iterations"].max()),
-        "held_error_m": float(np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))),
-        "wall_first_contact_s": float(times[touch[0]]) if touch.size else None, "wall_min_gap_m": float(trajectory["min_gap_m"][:, 0].min()),
-        "wall_peak_force_N": float(wall.max()), "wall_peak_force_time_s": float(times[np.argmax(wall)]),
-        "gas_pressure_start_Pa": float(pressure[0]), "gas_pressure_peak_Pa": float(pressure.max()), "gas_pressure_peak_time_s": float(times[np.argmax(pressure)]),
-        "head_handle_angle_change_max_deg": float(np.max(np.abs(bend))), "head_handle_angle_change_max_time_s": float(times[np.argmax(np.abs(bend))]),
+        "faces": int(np.asarray(system.faces).shape[0]),
+        "vertices": int(rest.shape[0]),
+        "held_vertices": int(held.size),
+        "dt_s": scenario.dt,
+        "duration_s": float(times[-1]),
+        "steps": int(len(times) - 1),
+        "newton_iterations_mean": float(trajectory["newton_iterations"][1:].mean()),
+        "newton_iterations_max": int(trajectory["newton_iterations"].max()),
+        "held_error_m": float(
+            np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))
+        ),
+        "wall_first_contact_s": float(times[touch[0]]) if touch.size else None,
+        "wall_min_gap_m": float(trajectory["min_gap_m"][:, 0].min()),
+        "wall_peak_force_N": float(wall.max()),
+        "wall_peak_force_time_s": float(times[np.argmax(wall)]),
+        "gas_pressure_start_Pa": float(pressure[0]),
+        "gas_pressure_peak_Pa": float(pressure.max()),
+        "gas_pressure_peak_time_s": float(times[np.argmax(pressure)]),
+        "head_handle_angle_change_max_deg": float(np.max(np.abs(bend))),
+        "head_handle_angle_change_max_time_s": float(times[np.argmax(np.abs(bend))]),
         "head_handle_angle_change_end_deg": float(bend[-1]),
-        "max_deviation_from_rigid_m": float(deviation.max()), "max_deviation_time_s": float(times[np.argmax(deviation)]),
-    }  # fmt: skip
+        "max_deviation_from_rigid_m": float(deviation.max()),
+        "max_deviation_time_s": float(times[np.argmax(deviation)]),
+    }
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", default=str(ROOT / "configs" / "hammer.toml"))
-    p.add_argument("--faces", type=int, default=None, help="triangles of the refined hammer (default: the config's mesh_faces)")
+    p.add_argument(
+        "--faces", type=int, default=None, help="triangles of the refined hammer (default: the config's mesh_faces)"
+    )
     p.add_argument("--duration", type=float, default=1.5, help="seconds of the swing to run")
     p.add_argument("--chunk", type=int, default=50, help="steps per compiled chunk")
     p.add_argument("--frames", type=int, default=60)
@@ -110,8 +137,13 @@ def main() -> None:
     args = p.parse_args()
     scenario, system, trajectory, timings = run(args)
     d.write_results(trajectory, args.out, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames)
-    out = {"machine": "shared 2-core x86-64 VM", "config": str(Path(args.config).name), "timings_s": timings, "run": summary(scenario, system, trajectory),
-           "outputs": args.out}  # fmt: skip
+    out = {
+        "machine": "shared 2-core x86-64 VM",
+        "config": str(Path(args.config).name),
+        "timings_s": timings,
+        "run": summary(scenario, system, trajectory),
+        "outputs": args.out,
+    }
     for table in (timings, out["run"]):
         for key, value in table.items():
             print(f"{key:>38s}  {value:.4g}" if isinstance(value, float) else f"{key:>38s}  {value}")

@@ -39,7 +39,9 @@ def timed(fn):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-cpu-2core.json"))
+    parser.add_argument(
+        "--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-cpu-2core.json")
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     from shelljax.config import bundled_data_dir
@@ -48,25 +50,44 @@ def main():
     sessions = bundled_data_dir() / "sessions"
     calibration = [padded(sessions / f"calib_pezzi_{p:04d}Pa.toml") for p in PRESSURES]
     held_out = padded(sessions / "heldout_pezzi_1100Pa.toml")
-    rows = {"calibrate (4 sessions, 7 candidate terms)": [], "estimate through the rig: fit": [],
-            "estimate through the rig: bayes": []}  # fmt: skip
+    rows = {
+        "calibrate (4 sessions, 7 candidate terms)": [],
+        "estimate through the rig: fit": [],
+        "estimate through the rig: bayes": [],
+    }
     rig = None
     for _ in range(args.repeats + 1):
         seconds, rig = timed(lambda: calibrate_rig(calibration, progress=False))
         rows["calibrate (4 sessions, 7 candidate terms)"].append(seconds)
         rows["estimate through the rig: fit"].append(timed(lambda: estimate_with_rig(held_out, rig))[0])
-        rows["estimate through the rig: bayes"].append(timed(lambda: estimate_with_rig(held_out, rig, method="bayes"))[0])
-    table = {name: {"cold_s": times[0], "warm_median_s": statistics.median(times[1:]), "warm_runs_s": times[1:]}
-             for name, times in rows.items()}  # fmt: skip
+        rows["estimate through the rig: bayes"].append(
+            timed(lambda: estimate_with_rig(held_out, rig, method="bayes"))[0]
+        )
+    table = {
+        name: {"cold_s": times[0], "warm_median_s": statistics.median(times[1:]), "warm_runs_s": times[1:]}
+        for name, times in rows.items()
+    }
     print(f"{'measure':>45s} {'cold [s]':>9s} {'warm median [s]':>16s}  warm runs [s]")
     for name, t in table.items():
-        print(f"{name:>45s} {t['cold_s']:9.1f} {t['warm_median_s']:16.2f}  {', '.join(f'{v:.2f}' for v in t['warm_runs_s'])}")
+        print(
+            f"{name:>45s} {t['cold_s']:9.1f} {t['warm_median_s']:16.2f}  {', '.join(f'{v:.2f}' for v in t['warm_runs_s'])}"
+        )
     print(f"rig models: {[('+'.join(m.terms) or 'ideal', round(m.weight, 2)) for m in rig.models]}")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"machine": platform.platform(), "processor": platform.processor(), "repeats": args.repeats,
-                               "unit": "s", "results": table,
-                               "models": [{"terms": list(m.terms), "weight": m.weight} for m in rig.models]}, indent=1))  # fmt: skip
+    out.write_text(
+        json.dumps(
+            {
+                "machine": platform.platform(),
+                "processor": platform.processor(),
+                "repeats": args.repeats,
+                "unit": "s",
+                "results": table,
+                "models": [{"terms": list(m.terms), "weight": m.weight} for m in rig.models],
+            },
+            indent=1,
+        )
+    )
     return 0
 
 

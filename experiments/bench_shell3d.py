@@ -109,12 +109,13 @@ def main(argv=None):
     if args.one:
         print(json.dumps(run_one(args.one, args.repeats)))
         return
-    machine = f"{platform.node()}: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {platform.system()}"
+    machine = (
+        f"{platform.node()}: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {platform.system()}"
+    )
     rows = []
     for n in args.sizes:
         out = subprocess.run(
-            [sys.executable, __file__, "--one", str(n), "--repeats", str(args.repeats)],
-            capture_output=True, text=True,
+            [sys.executable, __file__, "--one", str(n), "--repeats", str(args.repeats)], capture_output=True, text=True
         )
         if out.returncode != 0:
             print(f"size {n}: failed\n{out.stderr[-2000:]}")
@@ -122,8 +123,10 @@ def main(argv=None):
             continue
         rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
     print(f"machine: {machine}")
-    hdr = (f"{'faces':>7} {'dofs':>7} {'setup[s]':>9} {'compile[s]':>10} {'curve[s]':>9} {'Newton its/level':>24} "
-           f"{'factorizations/level':>24} {'CG products/level':>28} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'factor[ms]':>10} {'F(2cm)[N]':>9}")
+    hdr = (
+        f"{'faces':>7} {'dofs':>7} {'setup[s]':>9} {'compile[s]':>10} {'curve[s]':>9} {'Newton its/level':>24} "
+        f"{'factorizations/level':>24} {'CG products/level':>28} {'peak[MiB]':>10} {'assembly[ms]':>12} {'GFLOP/s':>8} {'factor[ms]':>10} {'F(2cm)[N]':>9}"
+    )
     print(hdr)
     for r in rows:
         if "error" in r:

@@ -87,16 +87,31 @@ def reality_curves(obj, truth, pressure, true_forces):
     areal_weight = mass * STANDARD_GRAVITY / (4 * math.pi * (obj["radius"] / stretch) ** 2)
     physics = CurvePhysics(
         indenter_radius=np.array([truth.get("indenter_radius", PAPER_INDENTER_RADIUS) / scale]),
-        gas_volume_ratio=np.ones(1), gas_exponent=np.array([truth.get("gas_exponent", 1.0)]),
-        stiffening=np.array([truth.get("stiffening", 0.0)]), areal_weight=np.array([areal_weight]),
+        gas_volume_ratio=np.ones(1),
+        gas_exponent=np.array([truth.get("gas_exponent", 1.0)]),
+        stiffening=np.array([truth.get("stiffening", 0.0)]),
+        areal_weight=np.array([areal_weight]),
         friction_coefficient=np.array([truth.get("friction_coefficient", 0.0)]),
-    )  # fmt: skip
-    shell = ShellProperties(gauge_pressure=pressure, young_modulus=obj["young_modulus"], thickness=thickness / scale,
-                            poisson_ratio=POISSON, radius=REALITY_RADIUS)
-    curve = indentation_curves(shell, np.asarray(true_forces) / scale**2,
-                               n_elements=REALITY_ELEMENTS, gas="polytropic", physics=physics, workers=1)  # fmt: skip
-    return {k: scale * np.asarray(getattr(curve, k)[0]) for k in
-            ("w0", "height", "upper_diameter", "contact_diameter", "sunken_depth")}
+    )
+    shell = ShellProperties(
+        gauge_pressure=pressure,
+        young_modulus=obj["young_modulus"],
+        thickness=thickness / scale,
+        poisson_ratio=POISSON,
+        radius=REALITY_RADIUS,
+    )
+    curve = indentation_curves(
+        shell,
+        np.asarray(true_forces) / scale**2,
+        n_elements=REALITY_ELEMENTS,
+        gas="polytropic",
+        physics=physics,
+        workers=1,
+    )
+    return {
+        k: scale * np.asarray(getattr(curve, k)[0])
+        for k in ("w0", "height", "upper_diameter", "contact_diameter", "sunken_depth")
+    }
 
 
 def make_study(rng, effect: str, directory: Path, with_shape: bool):
@@ -120,7 +135,8 @@ def make_study(rng, effect: str, directory: Path, with_shape: bool):
             at = {key: v[inverse] for key, v in reality_curves(obj, truth, pressure, unique).items()}
             w0 = at["w0"][: recorded.size]
             measured = (w0 + truth.get("depth_offset", 0.0) + truth.get("finger_compliance", 0.0) * true) * (
-                1 + rng.normal(0.0, 0.02, recorded.size)) + rng.normal(0.0, 0.5e-3)  # fmt: skip
+                1 + rng.normal(0.0, 0.02, recorded.size)
+            ) + rng.normal(0.0, 0.5e-3)
             trial += [t] * recorded.size
             force += recorded.tolist()
             depth += (np.round(measured * 2e3) / 2e3).tolist()
@@ -128,8 +144,10 @@ def make_study(rng, effect: str, directory: Path, with_shape: bool):
             counts.append(int(round(float(mean_count) + rng.normal(0.0, 0.5))))
             if with_shape:
                 for j, f in enumerate(SHAPE_FORCES):
-                    row = {key: float(np.round((at[key][recorded.size + j] + rng.normal(0, 1e-3)) * 2e3) / 2e3)
-                           for key in ("height", "upper_diameter", "contact_diameter", "sunken_depth")}  # fmt: skip
+                    row = {
+                        key: float(np.round((at[key][recorded.size + j] + rng.normal(0, 1e-3)) * 2e3) / 2e3)
+                        for key in ("height", "upper_diameter", "contact_diameter", "sunken_depth")
+                    }
                     row["sunken_depth"] = max(row["sunken_depth"], 0.0)
                     shape_rows.append((t, f, row))
         shape = None
@@ -138,14 +156,29 @@ def make_study(rng, effect: str, directory: Path, with_shape: bool):
             for key in ("height", "upper_diameter", "contact_diameter"):
                 shape[key] = [r[2][key] for r in shape_rows]
         path = directory / f"session_{k}.toml"
-        write_session(path, object_name="ball", radius=obj["radius"], radius_std=0.02 * obj["radius"],
-                      thickness=obj["thickness"], thickness_std=0.05 * obj["thickness"], trial=trial, force=force,
-                      depth=depth, wrinkle_counts=counts, mass=round(obj["mass"] * (1 + rng.normal(0.0, 0.02)), 3),
-                      manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))),
-                      poisson_ratio=POISSON, shape=shape)  # fmt: skip
+        write_session(
+            path,
+            object_name="ball",
+            radius=obj["radius"],
+            radius_std=0.02 * obj["radius"],
+            thickness=obj["thickness"],
+            thickness_std=0.05 * obj["thickness"],
+            trial=trial,
+            force=force,
+            depth=depth,
+            wrinkle_counts=counts,
+            mass=round(obj["mass"] * (1 + rng.normal(0.0, 0.02)), 3),
+            manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))),
+            poisson_ratio=POISSON,
+            shape=shape,
+        )
         paths.append(path)
-    return paths, dict(effect=effect, truth=truth, object={k: (v.tolist() if isinstance(v, np.ndarray) else v)
-                                                           for k, v in obj.items()}, shape=with_shape)  # fmt: skip
+    return paths, dict(
+        effect=effect,
+        truth=truth,
+        object={k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in obj.items()},
+        shape=with_shape,
+    )
 
 
 def recovered_magnitude(report, effect, true_value):
@@ -156,8 +189,12 @@ def recovered_magnitude(report, effect, true_value):
         return None
     entry = next(e for e in report["ranking"] if e["effect"] == effect)
     est = entry["parameters"][LIBRARY[effect].parameters[0]]
-    return dict(covered=bool(est["ci95"][0] <= true_value <= est["ci95"][1]), value=est["value"], ci95=est["ci95"],
-                truth=true_value)  # fmt: skip
+    return dict(
+        covered=bool(est["ci95"][0] <= true_value <= est["ci95"][1]),
+        value=est["value"],
+        ci95=est["ci95"],
+        truth=true_value,
+    )
 
 
 def diagnose_study(index, effect, paths, label) -> dict:
@@ -180,15 +217,23 @@ def diagnose_study(index, effect, paths, label) -> dict:
     before = report["baseline"]["estimates"]
     after = report["winner"]["estimates_after"] if report["winner"] else before
     true_e = label["object"]["young_modulus"]
-    return dict(study=index, effect=effect, truth=label["truth"], shape=label["shape"], verdict=report["verdict"],
-                seconds=seconds, shrink=report["shrink"], gap_before=report["gap_before"]["rms_standardized"],
-                gap_after=report["gap_after"]["rms_standardized"],
-                ranking=[(e["effect"], e["delta"], e["delta_se"]) for e in report["ranking"][:4]],
-                magnitude=recovered_magnitude(report, effect, true_value),
-                pressure_error_before=[100 * (b["value"] / t - 1) for b, t in zip(before["gauge_pressure"], truth_p)],
-                pressure_error_after=[100 * (a["value"] / t - 1) for a, t in zip(after["gauge_pressure"], truth_p)],
-                modulus_error_before=100 * (before["young_modulus"]["value"] / true_e - 1),
-                modulus_error_after=100 * (after["young_modulus"]["value"] / true_e - 1))  # fmt: skip
+    return dict(
+        study=index,
+        effect=effect,
+        truth=label["truth"],
+        shape=label["shape"],
+        verdict=report["verdict"],
+        seconds=seconds,
+        shrink=report["shrink"],
+        gap_before=report["gap_before"]["rms_standardized"],
+        gap_after=report["gap_after"]["rms_standardized"],
+        ranking=[(e["effect"], e["delta"], e["delta_se"]) for e in report["ranking"][:4]],
+        magnitude=recovered_magnitude(report, effect, true_value),
+        pressure_error_before=[100 * (b["value"] / t - 1) for b, t in zip(before["gauge_pressure"], truth_p)],
+        pressure_error_after=[100 * (a["value"] / t - 1) for a, t in zip(after["gauge_pressure"], truth_p)],
+        modulus_error_before=100 * (before["young_modulus"]["value"] / true_e - 1),
+        modulus_error_after=100 * (after["young_modulus"]["value"] / true_e - 1),
+    )
 
 
 def main():
@@ -197,7 +242,9 @@ def main():
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--effects", nargs="+", default=list(EFFECTS))
     add_executor_arguments(parser, resume=False)
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "blind-gap-study.json"))
+    parser.add_argument(
+        "--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "blind-gap-study.json")
+    )
     args = parser.parse_args()
     from shelljax import NoConvergenceError
 
@@ -220,14 +267,19 @@ def main():
                     print(f"    redrawn: {str(err).splitlines()[0][:100]}", flush=True)
             items.append(WorkItem(f"study{i}", diagnose_study, (i, effect, [str(p) for p in paths], label)))
         done = run_items(items, options=executor_options(args), progress=True, desc="studies")
-    results = [r.value if r.status == "done" else dict(study=i, effect=names[i], verdict="failed", error=r.error)
-               for i, r in enumerate(done)]  # fmt: skip
+    results = [
+        r.value if r.status == "done" else dict(study=i, effect=names[i], verdict="failed", error=r.error)
+        for i, r in enumerate(done)
+    ]
     for row in results:
         if row["verdict"] == "failed":
             print(f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> FAILED: {row['error'][:120]}", flush=True)
         else:
-            print(f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> {row['verdict']:<26s} "
-                  f"shrink {row['shrink']:.2f}  {row['seconds']:.0f} s", flush=True)  # fmt: skip
+            print(
+                f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> {row['verdict']:<26s} "
+                f"shrink {row['shrink']:.2f}  {row['seconds']:.0f} s",
+                flush=True,
+            )
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"summary": summarize(results), "studies": results}, indent=1, default=float))
     print(table(summarize(results)))
@@ -235,19 +287,26 @@ def main():
 
 def summarize(results):
     labels = sorted({r["effect"] for r in results} | {r["verdict"] for r in results})
-    confusion = {t: {p: sum(1 for r in results if r["effect"] == t and r["verdict"] == p) for p in labels}
-                 for t in sorted({r["effect"] for r in results})}  # fmt: skip
+    confusion = {
+        t: {p: sum(1 for r in results if r["effect"] == t and r["verdict"] == p) for p in labels}
+        for t in sorted({r["effect"] for r in results})
+    }
     with_effect = [r for r in results if r["effect"] != "none"]
     none = [r for r in results if r["effect"] == "none"]
     mags = [r["magnitude"] for r in with_effect if r.get("magnitude") is not None]
     ok = [r for r in results if r["verdict"] != "failed"]
     rms = lambda xs: float(np.sqrt(np.mean(np.square(xs)))) if len(xs) else None  # noqa: E731
     return dict(
-        studies=len(results), effects=len({r["effect"] for r in results}) - (1 if none else 0),
+        studies=len(results),
+        effects=len({r["effect"] for r in results}) - (1 if none else 0),
         attribution_accuracy=float(np.mean([r["verdict"] == r["effect"] for r in results])),
-        attribution_accuracy_with_effect=float(np.mean([r["verdict"] == r["effect"] for r in with_effect])) if with_effect else None,
+        attribution_accuracy_with_effect=float(np.mean([r["verdict"] == r["effect"] for r in with_effect]))
+        if with_effect
+        else None,
         false_alarm_rate=float(np.mean([r["verdict"] not in ("none",) for r in none])) if none else None,
-        median_shrink_with_effect=float(np.median([r.get("shrink", 1.0) for r in with_effect])) if with_effect else None,
+        median_shrink_with_effect=float(np.median([r.get("shrink", 1.0) for r in with_effect]))
+        if with_effect
+        else None,
         failed=sum(r["verdict"] == "failed" for r in results),
         magnitude_coverage=float(np.mean([m["covered"] for m in mags])) if mags else None,
         magnitude_count=len(mags),
@@ -257,7 +316,7 @@ def summarize(results):
         modulus_rms_error_percent_after=rms([r["modulus_error_after"] for r in ok]),
         median_seconds=float(np.median([r["seconds"] for r in ok])) if ok else None,
         confusion=confusion,
-    )  # fmt: skip
+    )
 
 
 def table(summary):

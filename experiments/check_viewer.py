@@ -26,8 +26,16 @@ import numpy as np
 
 from shelljax import viewer
 
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]  # fmt: skip
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def _free_port() -> int:
@@ -77,8 +85,15 @@ def main() -> None:
         pressing = threading.Thread(target=_press_on_top, args=(app, scene, stop), daemon=True)
         pressing.start()
         with tempfile.TemporaryDirectory() as profile:
-            command = [args.chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--window-size=1200,800",
-                       f"--virtual-time-budget={args.wait_ms}", f"--screenshot={out.resolve()}", f"http://127.0.0.1:{app.port}"]  # fmt: skip
+            command = [
+                args.chromium,
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                "--window-size=1200,800",
+                f"--virtual-time-budget={args.wait_ms}",
+                f"--screenshot={out.resolve()}",
+                f"http://127.0.0.1:{app.port}",
+            ]
             shot = time.perf_counter()
             run = subprocess.run(command, check=False, capture_output=True, text=True, timeout=120)
             shot = time.perf_counter() - shot
@@ -89,14 +104,24 @@ def main() -> None:
     version = subprocess.run([args.chromium, "--version"], check=True, capture_output=True, text=True).stdout.strip()
     pixels = _ball_pixels(out) if out.is_file() else 0
     result = {
-        "source": args.source, "script": args.script, "scene": scene.label, "scene_load_s": round(loaded, 2),
-        "chromium": version, "flags": CHROMIUM_FLAGS + ["--window-size=1200,800", f"--virtual-time-budget={args.wait_ms}"],
+        "source": args.source,
+        "script": args.script,
+        "scene": scene.label,
+        "scene_load_s": round(loaded, 2),
+        "chromium": version,
+        "flags": CHROMIUM_FLAGS + ["--window-size=1200,800", f"--virtual-time-budget={args.wait_ms}"],
         "webgl": "software (SwiftShader, Chromium's fallback under --disable-gpu)",
-        "chromium_exit_code": run.returncode, "screenshot": str(out), "screenshot_bytes": out.stat().st_size if out.is_file() else 0,
-        "screenshot_wall_s": round(shot, 1), "ball_pixels": pixels, "ball_visible": pixels > 500,
-        "readouts_when_chromium_exited": {k: (round(v, 3) if isinstance(v, float) else v) for k, v in state.items()
-                                   if k != "plane_forces_N"} | {"plane_forces_N": [round(f, 3) for f in state["plane_forces_N"]]},
-    }  # fmt: skip
+        "chromium_exit_code": run.returncode,
+        "screenshot": str(out),
+        "screenshot_bytes": out.stat().st_size if out.is_file() else 0,
+        "screenshot_wall_s": round(shot, 1),
+        "ball_pixels": pixels,
+        "ball_visible": pixels > 500,
+        "readouts_when_chromium_exited": {
+            k: (round(v, 3) if isinstance(v, float) else v) for k, v in state.items() if k != "plane_forces_N"
+        }
+        | {"plane_forces_N": [round(f, 3) for f in state["plane_forces_N"]]},
+    }
     Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
     print(json.dumps(result, indent=1))
 

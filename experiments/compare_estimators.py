@@ -46,9 +46,13 @@ from shelljax.virtual import (
 
 def _record(est, truth: float) -> dict:
     lo, hi = est.ci95
-    return {"value": est.value, "std": est.std, "ci95": [lo, hi], "rel_error": est.value / truth - 1.0,
-            "covered": bool(lo <= truth <= hi)}  # fmt: skip
-
+    return {
+        "value": est.value,
+        "std": est.std,
+        "ci95": [lo, hi],
+        "rel_error": est.value / truth - 1.0,
+        "covered": bool(lo <= truth <= hi),
+    }
 
 
 NOISE_FREE_DEPTH_NOISE = 1e-3  # [m]: σ_w assumed by the noise-free fits; it only scales their Laplace errors
@@ -61,18 +65,32 @@ def _noise_free_bias(curves, model, fit_session, out: Path):
     rows = []
     print(f"\n{'set':>4}{'tau':>6}{'P_g err':>9}{'E err':>9}{'sd(P_g)':>9}{'sd(E)':>8}{'corr':>7}")
     for c in sorted(curves, key=lambda c: c["tau"]):
-        fit = fit_session(noise_free_session(c, name=f"set{c.get('set')}_noise_free"), model,
-                          depth_noise=NOISE_FREE_DEPTH_NOISE)  # fmt: skip
+        fit = fit_session(
+            noise_free_session(c, name=f"set{c.get('set')}_noise_free"), model, depth_noise=NOISE_FREE_DEPTH_NOISE
+        )
         sd = np.sqrt(np.diag(fit.covariance))  # relative (log-parametrised unknowns)
-        row = {"set": c.get("set"), "tau": c["tau"],
-               "rel_error": {q: fit.estimates[q].value / c[q] - 1.0 for q in QUANTITIES},
-               "rel_std": {q: float(sd[i]) for i, q in enumerate(QUANTITIES)},
-               "correlation": float(fit.covariance[0, 1] / (sd[0] * sd[1]))}  # fmt: skip
+        row = {
+            "set": c.get("set"),
+            "tau": c["tau"],
+            "rel_error": {q: fit.estimates[q].value / c[q] - 1.0 for q in QUANTITIES},
+            "rel_std": {q: float(sd[i]) for i, q in enumerate(QUANTITIES)},
+            "correlation": float(fit.covariance[0, 1] / (sd[0] * sd[1])),
+        }
         rows.append(row)
-        print(f"{row['set']:>4}{row['tau']:>6.0f}{row['rel_error']['gauge_pressure']:>+9.4f}"
-              f"{row['rel_error']['young_modulus']:>+9.4f}{sd[0]:>9.3f}{sd[1]:>8.3f}{row['correlation']:>7.2f}")  # fmt: skip
-    out.write_text(json.dumps({"machine": f"{platform.platform()}, {os.cpu_count()} CPUs",
-                               "depth_noise_m": NOISE_FREE_DEPTH_NOISE, "rows": rows}, indent=2))  # fmt: skip
+        print(
+            f"{row['set']:>4}{row['tau']:>6.0f}{row['rel_error']['gauge_pressure']:>+9.4f}"
+            f"{row['rel_error']['young_modulus']:>+9.4f}{sd[0]:>9.3f}{sd[1]:>8.3f}{row['correlation']:>7.2f}"
+        )
+    out.write_text(
+        json.dumps(
+            {
+                "machine": f"{platform.platform()}, {os.cpu_count()} CPUs",
+                "depth_noise_m": NOISE_FREE_DEPTH_NOISE,
+                "rows": rows,
+            },
+            indent=2,
+        )
+    )
     print(f"wrote {out}")
 
 
@@ -81,31 +99,64 @@ def _parse(argv=None):
     ap.add_argument("--curves", type=Path, default=CURVES_PATH)
     ap.add_argument("--realisations", type=int, default=4, help="noise draws per curve and noise level")
     ap.add_argument("--wrinkle-law", default="scaling", choices=["scaling", "mechanics"])
-    ap.add_argument("--no-relax", action="store_true",
-                    help="forward model without the wrinkling relaxation of the hoop stress (docs/estimators.md)")
-    ap.add_argument("--hoop-capacity", type=float, default=None,
-                    help="hoop compression of the wrinkled wall in classical buckling resultants "
-                         "(default: the engine's calibrated value; 0: tension field)")
+    ap.add_argument(
+        "--no-relax",
+        action="store_true",
+        help="forward model without the wrinkling relaxation of the hoop stress (docs/estimators.md)",
+    )
+    ap.add_argument(
+        "--hoop-capacity",
+        type=float,
+        default=None,
+        help="hoop compression of the wrinkled wall in classical buckling resultants "
+        "(default: the engine's calibrated value; 0: tension field)",
+    )
     ap.add_argument("--fit-label", default="fit", help="method name of this fit variant in the table")
-    ap.add_argument("--bayes-noise", type=float, nargs="*", default=[1.0],
-                    help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)")
-    ap.add_argument("--bayes-realisations", type=int, default=1,
-                    help="how many realisations per curve and noise level get bayes (from the first)")
-    ap.add_argument("--bayes-nuisance", nargs="*", default=[], choices=["depth_offset", "force_gain"],
-                    help="nuisance parameters of bayes (force_gain: a 5 %% prior on the force scale, which "
-                         "also absorbs a proportional model discrepancy)")
+    ap.add_argument(
+        "--bayes-noise",
+        type=float,
+        nargs="*",
+        default=[1.0],
+        help="depth-noise levels [mm] whose first realisation gets bayes (none: skip bayes)",
+    )
+    ap.add_argument(
+        "--bayes-realisations",
+        type=int,
+        default=1,
+        help="how many realisations per curve and noise level get bayes (from the first)",
+    )
+    ap.add_argument(
+        "--bayes-nuisance",
+        nargs="*",
+        default=[],
+        choices=["depth_offset", "force_gain"],
+        help="nuisance parameters of bayes (force_gain: a 5 %% prior on the force scale, which "
+        "also absorbs a proportional model discrepancy)",
+    )
     ap.add_argument("--bayes-label", default="bayes", help="method name of this bayes variant in the table")
     ap.add_argument("--walkers", type=int, default=32)
     ap.add_argument("--bayes-steps", type=int, default=20_000)
     ap.add_argument("--skip-fit", action="store_true")
     ap.add_argument("--only-bayes", action="store_true", help="skip closed form and fit (a parallel bayes job)")
-    ap.add_argument("--also", type=Path, nargs="*", default=[],
-                    help="per-session .jsonl files of other runs whose method results join the table")
-    ap.add_argument("--noise-free", action="store_true",
-                    help="only fit each curve's noise-free session (the forward model's bias per ball) and exit")
+    ap.add_argument(
+        "--also",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="per-session .jsonl files of other runs whose method results join the table",
+    )
+    ap.add_argument(
+        "--noise-free",
+        action="store_true",
+        help="only fit each curve's noise-free session (the forward model's bias per ball) and exit",
+    )
     ap.add_argument("--out", type=Path, default=Path("compare_estimators.json"))
-    ap.add_argument("--write-rows", type=Path, default=None,
-                    help="also write the final per-session rows (closed form recomputed, --also merged) as JSON lines")
+    ap.add_argument(
+        "--write-rows",
+        type=Path,
+        default=None,
+        help="also write the final per-session rows (closed form recomputed, --also merged) as JSON lines",
+    )
     args = ap.parse_args(argv)
     return args
 
@@ -123,8 +174,10 @@ def main(argv=None):
     curves = load_curves(args.curves)
     sessions = draw_sessions(curves, realisations=args.realisations)
     calib = calibrate_ks(draw_calibration_sessions(curves))
-    print(f"{len(curves)} curves, {len(sessions)} sessions; calibrated k_s = {calib.k_s.value:.4f} "
-          f"± {calib.k_s.std:.4f}", flush=True)  # fmt: skip
+    print(
+        f"{len(curves)} curves, {len(sessions)} sessions; calibrated k_s = {calib.k_s.value:.4f} ± {calib.k_s.std:.4f}",
+        flush=True,
+    )
     model = _forward_model(curves, args)
     if args.noise_free:
         _noise_free_bias(curves, model, fit_session, args.out)
@@ -153,23 +206,32 @@ def _forward_model(curves, args):
     radius = curves[0]["radius"]
     if any(c["radius"] != radius for c in curves):
         raise SystemExit("all curves must share one radius (one compiled forward model)")
-    return AxisymForwardModel.for_forces(radius, [FORCES[0] - 0.3, FORCES[-1] + 0.3],
-                                         poisson_ratio=curves[0]["poisson_ratio"], wrinkle_law=args.wrinkle_law,
-                                         relax=not args.no_relax,
-                                         **({} if args.hoop_capacity is None else {"hoop_capacity": args.hoop_capacity}))  # fmt: skip
+    return AxisymForwardModel.for_forces(
+        radius,
+        [FORCES[0] - 0.3, FORCES[-1] + 0.3],
+        poisson_ratio=curves[0]["poisson_ratio"],
+        wrinkle_law=args.wrinkle_law,
+        relax=not args.no_relax,
+        **({} if args.hoop_capacity is None else {"hoop_capacity": args.hoop_capacity}),
+    )
 
 
 def _closed_forms(row, session, true, calib, args) -> None:
     """The closed form with the calibrated and the paper's k_s (instant: always recomputed)."""
     from shelljax.estimate import estimate_session
 
-    for label, ks in (() if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None))):
+    for label, ks in () if args.only_bayes else (("closed_form_calibrated", calib.k_s), ("closed_form_paper", None)):
         t0 = time.perf_counter()
-        cf = estimate_session(session, k_s=ks, bootstrap_samples=0) if ks is not None else \
-            estimate_session(session, bootstrap_samples=0)  # fmt: skip
-        row[label] = {"gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
-                      "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
-                      "seconds": time.perf_counter() - t0}  # fmt: skip
+        cf = (
+            estimate_session(session, k_s=ks, bootstrap_samples=0)
+            if ks is not None
+            else estimate_session(session, bootstrap_samples=0)
+        )
+        row[label] = {
+            "gauge_pressure": _record(cf.gauge_pressure, true["gauge_pressure"]),
+            "young_modulus": _record(cf.young_modulus, true["young_modulus"]),
+            "seconds": time.perf_counter() - t0,
+        }
 
 
 def _fit(row, session, true, model, args) -> None:
@@ -197,7 +259,8 @@ def _bayes(row, session, truth, true, model, args, seed: int) -> None:
     from shelljax.estimate import ConvergenceWarning, fit_session, sample_posterior
 
     selected = truth["realisation"] < args.bayes_realisations and any(
-        abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise)  # fmt: skip
+        abs(truth["depth_noise"] * 1e3 - b) < 1e-9 for b in args.bayes_noise
+    )
     if args.bayes_label in row or not selected:
         return
     t0 = time.perf_counter()
@@ -205,12 +268,22 @@ def _bayes(row, session, truth, true, model, args, seed: int) -> None:
         warnings.simplefilter("ignore", ConvergenceWarning)
         try:
             fit = fit_session(session, model, nuisance=tuple(args.bayes_nuisance), raise_on_failure=False)
-            post = sample_posterior(fit, n_walkers=args.walkers, max_steps=args.bayes_steps,
-                                    min_steps=min(1000, args.bayes_steps), seed=seed, progress=False)
+            post = sample_posterior(
+                fit,
+                n_walkers=args.walkers,
+                max_steps=args.bayes_steps,
+                min_steps=min(1000, args.bayes_steps),
+                seed=seed,
+                progress=False,
+            )
             row[args.bayes_label] = {q: _record(post.estimates[q], true[q]) for q in QUANTITIES}
-            row[args.bayes_label].update(effective_samples=post.effective_samples, n_steps=post.n_steps,
-                                         converged=post.converged, failed_forward=post.failed_forward,
-                                         surrogate=post.surrogate)  # fmt: skip
+            row[args.bayes_label].update(
+                effective_samples=post.effective_samples,
+                n_steps=post.n_steps,
+                converged=post.converged,
+                failed_forward=post.failed_forward,
+                surrogate=post.surrogate,
+            )
         except (NoConvergenceError, InvalidInputError) as err:
             row[args.bayes_label] = {"error": str(err)[:300]}
     row[args.bayes_label]["seconds"] = time.perf_counter() - t0
@@ -231,8 +304,7 @@ def _run_sessions(sessions, model, calib, args, log_path: Path) -> dict:
             previous = done.get(truth["name"], {})
             row = dict(truth)
             # the closed form is recomputed, so a k_s calibrated on a grown set of curves applies to every session
-            row.update({m: v for m, v in previous.items()
-                        if isinstance(v, dict) and not m.startswith("closed_form")})
+            row.update({m: v for m, v in previous.items() if isinstance(v, dict) and not m.startswith("closed_form")})
             true = {q: truth[q] for q in QUANTITIES}
             _closed_forms(row, session, true, calib, args)
             _fit(row, session, true, model, args)
@@ -249,12 +321,17 @@ def _per_set(rows, methods) -> dict:
     per_set = {}
     for k in sorted({r["set"] for r in rows}):
         mine = [r for r in rows if r["set"] == k]
-        per_set[k] = {m: {q: float(np.median([r[m][q]["rel_error"] for r in mine if q in r.get(m, {})]))
-                          for q in QUANTITIES} for m in methods if any(QUANTITIES[0] in r.get(m, {}) for r in mine)}  # fmt: skip
+        per_set[k] = {
+            m: {q: float(np.median([r[m][q]["rel_error"] for r in mine if q in r.get(m, {})])) for q in QUANTITIES}
+            for m in methods
+            if any(QUANTITIES[0] in r.get(m, {}) for r in mine)
+        }
         fits = [r["fit"] for r in mine if "chi2" in r.get("fit", {})]
         if fits:
             per_set[k]["fit"]["chi2_per_dof"] = float(np.median([f["chi2"] / f["dof"] for f in fits]))
-            per_set[k]["fit"]["coverage95_gauge_pressure"] = float(np.mean([f["gauge_pressure"]["covered"] for f in fits]))
+            per_set[k]["fit"]["coverage95_gauge_pressure"] = float(
+                np.mean([f["gauge_pressure"]["covered"] for f in fits])
+            )
     return per_set
 
 
@@ -264,31 +341,50 @@ def _report(rows, curves, calib, args, wall: float) -> None:
     for family in ("fit", "bayes"):
         methods += tuple(sorted({m for r in rows for m in r if m.startswith(family) and isinstance(r[m], dict)}))
     summary = {m: summarise(rows, m) for m in methods}
-    print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
-          f"wrinkle law {args.wrinkle_law}; wall {wall:.0f} s")  # fmt: skip
+    print(
+        f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; {len(rows)} sessions; "
+        f"wrinkle law {args.wrinkle_law}; wall {wall:.0f} s"
+    )
     print(f"{'method':<26}{'qty':<5}{'n':>4}{'bias':>9}{'med|err|':>10}{'RMS':>9}{'cover95':>9}")
     for m in methods:
         for q in QUANTITIES:
             s = summary[m].get(q)
             if s:
-                print(f"{m:<26}{'P_g' if q == 'gauge_pressure' else 'E':<5}{s['n']:>4}{s['bias']:>+9.3f}"
-                      f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}")  # fmt: skip
+                print(
+                    f"{m:<26}{'P_g' if q == 'gauge_pressure' else 'E':<5}{s['n']:>4}{s['bias']:>+9.3f}"
+                    f"{s['median_abs']:>10.3f}{s['rms']:>9.3f}{s['coverage95']:>9.2f}"
+                )
         if summary[m].get("failed"):
             print(f"{m:<26}failed: {summary[m]['failed']}")
     per_set = _per_set(rows, methods)
     print("\nmedian relative error per parameter set (P_g / E):")
     for k, v in per_set.items():
-        print(f"set {k}: " + "  ".join(f"{m} {e['gauge_pressure']:+.3f}/{e['young_modulus']:+.3f}" for m, e in v.items()))
-    timing = {m: float(np.median([r[m]["seconds"] for r in rows if m in r])) for m in methods if any(m in r for r in rows)}
+        print(
+            f"set {k}: " + "  ".join(f"{m} {e['gauge_pressure']:+.3f}/{e['young_modulus']:+.3f}" for m, e in v.items())
+        )
+    timing = {
+        m: float(np.median([r[m]["seconds"] for r in rows if m in r])) for m in methods if any(m in r for r in rows)
+    }
     result = {
-        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs", "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
-        "n_sessions": len(rows), "wrinkle_law": args.wrinkle_law, "k_s_calibrated": calib.k_s.to_dict(),
-        "bayes": {"walkers": args.walkers, "max_steps": args.bayes_steps, "noise_levels_mm": args.bayes_noise,
-                  "realisations": args.bayes_realisations},
-        "median_seconds_per_session": timing, "summary": summary, "median_rel_error_per_set": per_set,
-        "curves": [{k: c[k] for k in ("gauge_pressure", "young_modulus", "thickness", "tau", "n_faces", "pole_edge")}
-                   for c in curves],
-    }  # fmt: skip
+        "machine": f"{platform.platform()}, {os.cpu_count()} CPUs",
+        "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+        "n_sessions": len(rows),
+        "wrinkle_law": args.wrinkle_law,
+        "k_s_calibrated": calib.k_s.to_dict(),
+        "bayes": {
+            "walkers": args.walkers,
+            "max_steps": args.bayes_steps,
+            "noise_levels_mm": args.bayes_noise,
+            "realisations": args.bayes_realisations,
+        },
+        "median_seconds_per_session": timing,
+        "summary": summary,
+        "median_rel_error_per_set": per_set,
+        "curves": [
+            {k: c[k] for k in ("gauge_pressure", "young_modulus", "thickness", "tau", "n_faces", "pole_edge")}
+            for c in curves
+        ],
+    }
     args.out.write_text(json.dumps(result, indent=2))
 
 

@@ -67,8 +67,12 @@ class Checkpoint:
         if self.watchdog is not None:
             self.watchdog.beat()
         if self.path is not None:
-            np.savez(self.path, travels=[s[0] for s in solved], forces=[s[1] for s in solved],
-                     states=np.stack([s[2] for s in solved]))  # fmt: skip
+            np.savez(
+                self.path,
+                travels=[s[0] for s in solved],
+                forces=[s[1] for s in solved],
+                states=np.stack([s[2] for s in solved]),
+            )
 
 
 def run_with_restarts(cmd: list[str], restarts: int, label: str) -> bool:

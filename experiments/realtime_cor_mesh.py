@@ -48,9 +48,16 @@ def drop_cor(faces: int, height: float, safety: float = SAFETY) -> dict:
 
     shell = Shell(mesh=ShellMesh.sphere(PEZZI["radius"], faces, pole_refinement=1.0), thickness=PEZZI["thickness"])
     ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], BarrierContact(1e-3, 1e3), name="ground")
-    ball = rt.RealtimeShell.from_shell(shell, ShellProperties(**PEZZI), mass=MASS, gas="adiabatic",
-                                       rest_shape="small-strain", planes=[ground], safety=safety,
-                                       max_refinements=0)  # fmt: skip
+    ball = rt.RealtimeShell.from_shell(
+        shell,
+        ShellProperties(**PEZZI),
+        mass=MASS,
+        gas="adiabatic",
+        rest_shape="small-strain",
+        planes=[ground],
+        safety=safety,
+        max_refinements=0,
+    )
     ball.drop(0.3)
     ball.relax(0.1)  # settles the small-strain start to its inflated shape, in the air
     x0 = ball.x.copy()
@@ -70,9 +77,17 @@ def drop_cor(faces: int, height: float, safety: float = SAFETY) -> dict:
         return drop_cor(faces, height, 0.5 * safety)
     a = np.array(rows)
     m = impact(a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], rest_height)
-    return {"faces": int(ball.faces.shape[0]), "height_m": height, "safety": safety, "dt_s": ball.stable.dt_s, "cor": m["cor"],
-            "impact_speed_m_per_s": m["impact_speed_m_per_s"], "contact_time_s": m["contact_time_s"],
-            "max_compression_m": m["max_compression_m"], "wall_s": time.perf_counter() - start}  # fmt: skip
+    return {
+        "faces": int(ball.faces.shape[0]),
+        "height_m": height,
+        "safety": safety,
+        "dt_s": ball.stable.dt_s,
+        "cor": m["cor"],
+        "impact_speed_m_per_s": m["impact_speed_m_per_s"],
+        "contact_time_s": m["contact_time_s"],
+        "max_compression_m": m["max_compression_m"],
+        "wall_s": time.perf_counter() - start,
+    }
 
 
 def main():
@@ -82,17 +97,29 @@ def main():
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "bench" / "realtime-cor-mesh.json")
     args = parser.parse_args()
     rows = []
-    print(f"{'faces':>6} {'height m':>8} {'dt ms':>7} {'v_in m/s':>8} {'COR':>7} {'contact ms':>10} {'compr mm':>8} {'wall s':>7}")
+    print(
+        f"{'faces':>6} {'height m':>8} {'dt ms':>7} {'v_in m/s':>8} {'COR':>7} {'contact ms':>10} {'compr mm':>8} {'wall s':>7}"
+    )
     for faces in args.faces:
         for height in args.heights:
             r = drop_cor(faces, height)
             rows.append(r)
-            print(f"{r['faces']:>6} {height:>8.2f} {r['dt_s'] * 1e3:>7.4f} {r['impact_speed_m_per_s']:>8.3f} {r['cor']:>7.4f} "
-                  f"{r['contact_time_s'] * 1e3:>10.2f} {r['max_compression_m'] * 1e3:>8.2f} {r['wall_s']:>7.1f}", flush=True)  # fmt: skip
+            print(
+                f"{r['faces']:>6} {height:>8.2f} {r['dt_s'] * 1e3:>7.4f} {r['impact_speed_m_per_s']:>8.3f} {r['cor']:>7.4f} "
+                f"{r['contact_time_s'] * 1e3:>10.2f} {r['max_compression_m'] * 1e3:>8.2f} {r['wall_s']:>7.1f}",
+                flush=True,
+            )
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"ball": {**PEZZI, "mass_kg": MASS, "gas": "adiabatic"},
-                                     "ground": "barrier ĝ 1 mm, κ 1e3 J/m², frictionless, no damping", "drops": rows},
-                                    indent=1))  # fmt: skip
+    args.json.write_text(
+        json.dumps(
+            {
+                "ball": {**PEZZI, "mass_kg": MASS, "gas": "adiabatic"},
+                "ground": "barrier ĝ 1 mm, κ 1e3 J/m², frictionless, no damping",
+                "drops": rows,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {args.json}")
 
 

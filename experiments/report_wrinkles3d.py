@@ -68,9 +68,14 @@ def dimensionless_depth(w0, thickness):
 
 
 # compared observable → (its name in shelljax.shell3d.observables, its axisymmetric CurveResult field)
-COMPARED = {"top_drop": ("w0", "top_drop"), "H": ("H", "height"), "D_u": ("D_u", "upper_diameter"),
-            "D_l": ("D_l", "contact_diameter"), "D_l_mesh": ("D_l_mesh", "contact_diameter_mesh"),
-            "d": ("d", "sunken_depth")}
+COMPARED = {
+    "top_drop": ("w0", "top_drop"),
+    "H": ("H", "height"),
+    "D_u": ("D_u", "upper_diameter"),
+    "D_l": ("D_l", "contact_diameter"),
+    "D_l_mesh": ("D_l_mesh", "contact_diameter_mesh"),
+    "d": ("d", "sunken_depth"),
+}
 
 
 def axisym_curve(thickness: float, forces, relax: bool = True, raise_on_failure: bool = True) -> dict:
@@ -79,11 +84,20 @@ def axisym_curve(thickness: float, forces, relax: bool = True, raise_on_failure:
     "converged" [bool] per force."""
     from shelljax.axisym import indentation_curves
 
-    shell = ShellProperties(gauge_pressure=GAUGE_PRESSURE, young_modulus=YOUNG_MODULUS, thickness=thickness,
-                            poisson_ratio=POISSON, radius=RADIUS)
-    res = indentation_curves(shell, np.asarray(forces), relax=relax, raise_on_failure=raise_on_failure)  # fmt: skip
-    out = {"w0": np.asarray(res.w0)[0], "n": np.asarray(res.wrinkle_count)[0], "travel": np.asarray(res.travel)[0],
-           "converged": np.asarray(res.converged)[0]}
+    shell = ShellProperties(
+        gauge_pressure=GAUGE_PRESSURE,
+        young_modulus=YOUNG_MODULUS,
+        thickness=thickness,
+        poisson_ratio=POISSON,
+        radius=RADIUS,
+    )
+    res = indentation_curves(shell, np.asarray(forces), relax=relax, raise_on_failure=raise_on_failure)
+    out = {
+        "w0": np.asarray(res.w0)[0],
+        "n": np.asarray(res.wrinkle_count)[0],
+        "travel": np.asarray(res.travel)[0],
+        "converged": np.asarray(res.converged)[0],
+    }
     out.update({k: np.asarray(getattr(res, field))[0] for k, (_, field) in COMPARED.items()})
     return out
 
@@ -98,8 +112,10 @@ def travels_for(thickness: float, depth: float) -> tuple[float, ...]:
     curve = axisym_curve(thickness, grid, raise_on_failure=False)
     reached = np.nonzero(curve["converged"] & (dimensionless_depth(curve["w0"], thickness) >= depth))[0]
     if reached.size == 0 or not curve["converged"][: reached[0] + 1].all():
-        raise SystemExit(f"h = {thickness * 1e3:.3f} mm: −W(0) = {depth} not reached by a converged level "
-                         f"of the {grid[0]}..{grid[-1]} N grid")
+        raise SystemExit(
+            f"h = {thickness * 1e3:.3f} mm: −W(0) = {depth} not reached by a converged level "
+            f"of the {grid[0]}..{grid[-1]} N grid"
+        )
     return tuple(float(t) for t in curve["travel"][: reached[0] + 1])
 
 
@@ -112,10 +128,22 @@ def run_child(args):
     target_tau, faces = args.taus[0], args.faces[0]
     h = thickness_for(target_tau)
     travels = travels_for(h, args.depth)
-    ckpt = Checkpoint(Path(f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}{'' if args.mesh == 'ball' else '_' + args.mesh}_depth.npz"),
-                      watchdog)  # fmt: skip
-    curve = solve_curve((GAUGE_PRESSURE, YOUNG_MODULUS, h), faces, POLE_REFINEMENT, ckpt, travels=travels,
-                        force_tolerance=FORCE_TOLERANCE, mesh=args.mesh, max_newton_iterations=NEWTON_ITERATIONS)  # fmt: skip
+    ckpt = Checkpoint(
+        Path(
+            f"/tmp/shelljax_wrinkles3d_tau{target_tau:g}_{faces}{'' if args.mesh == 'ball' else '_' + args.mesh}_depth.npz"
+        ),
+        watchdog,
+    )
+    curve = solve_curve(
+        (GAUGE_PRESSURE, YOUNG_MODULUS, h),
+        faces,
+        POLE_REFINEMENT,
+        ckpt,
+        travels=travels,
+        force_tolerance=FORCE_TOLERANCE,
+        mesh=args.mesh,
+        max_newton_iterations=NEWTON_ITERATIONS,
+    )
     curve["target_tau"], curve["requested_faces"], curve["target_depth"] = target_tau, faces, args.depth
     data = json.loads(args.out.read_text()) if args.out.exists() else {"runs": []}
     data["runs"].append(curve)
@@ -135,38 +163,68 @@ def report(out: Path) -> dict:
             deepest[key] = r
     runs = sorted(deepest.values(), key=lambda r: (r["target_tau"], r["mesh"], r["n_faces"]))
     # both axisymmetric hoop models at each run's 3D forces, solved once for both tables
-    axisym = [{"relaxed": axisym_curve(r["thickness"], r["force"]),
-               "unrelaxed": axisym_curve(r["thickness"], r["force"], relax=False)} for r in runs]  # fmt: skip
+    axisym = [
+        {
+            "relaxed": axisym_curve(r["thickness"], r["force"]),
+            "unrelaxed": axisym_curve(r["thickness"], r["force"], relax=False),
+        }
+        for r in runs
+    ]
     rows, cross = [], []
-    print("\nDominant mode (m ≥ 2) and the dominant one of m ≥ 3 with its growth since the first level "
-          "(wrinkles grow; a mesh's pattern and the m = 2 ovalisation of a faceted mesh are there from the start):")
-    print("| τ | h [mm] | faces | F [N] | −W(0) (3D) | 3D mode (amplitude [mm]) | m ≥ 3 (amplitude [mm], growth) "
-          "| axisym n | 1.33 τ^½ |")  # fmt: skip
+    print(
+        "\nDominant mode (m ≥ 2) and the dominant one of m ≥ 3 with its growth since the first level "
+        "(wrinkles grow; a mesh's pattern and the m = 2 ovalisation of a faceted mesh are there from the start):"
+    )
+    print(
+        "| τ | h [mm] | faces | F [N] | −W(0) (3D) | 3D mode (amplitude [mm]) | m ≥ 3 (amplitude [mm], growth) "
+        "| axisym n | 1.33 τ^½ |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for run, models in zip(runs, axisym):
         relaxed = models["relaxed"]
-        scaling = float(scaling_wrinkle_count(run["gauge_pressure"], run["radius"], run["young_modulus"],
-                                              run["thickness"], run["poisson_ratio"]))  # fmt: skip
+        scaling = float(
+            scaling_wrinkle_count(
+                run["gauge_pressure"], run["radius"], run["young_modulus"], run["thickness"], run["poisson_ratio"]
+            )
+        )
         modes = np.asarray(run.get("modes", []))
         per_mode = np.asarray(run.get("mode_amplitude", []))  # (levels, modes) [m]
         for i, force in enumerate(run["force"]):
-            row = {"tau": run["tau"], "thickness": run["thickness"], "n_faces": run["n_faces"], "mesh": run["mesh"], "force": force,
-                   "W0_3d": float(dimensionless_depth(run["w0"][i], run["thickness"])),
-                   "mode_3d": run["wrinkle_mode"][i], "amplitude_3d": run["wrinkle_amplitude"][i],
-                   "n_axisym": float(relaxed["n"][i]), "n_scaling": float(scaling)}  # fmt: skip
+            row = {
+                "tau": run["tau"],
+                "thickness": run["thickness"],
+                "n_faces": run["n_faces"],
+                "mesh": run["mesh"],
+                "force": force,
+                "W0_3d": float(dimensionless_depth(run["w0"][i], run["thickness"])),
+                "mode_3d": run["wrinkle_mode"][i],
+                "amplitude_3d": run["wrinkle_amplitude"][i],
+                "n_axisym": float(relaxed["n"][i]),
+                "n_scaling": float(scaling),
+            }
             above2 = "n/a"
             if per_mode.size:
                 k = int(np.argmax(np.where(modes >= 3, per_mode[i], -np.inf)))
-                row.update(mode_3d_m3=int(modes[k]), amplitude_rss_3d_m3=float(per_mode[i, k]),
-                           growth_3d_m3=float(per_mode[i, k] / per_mode[0, k]))  # fmt: skip
+                row.update(
+                    mode_3d_m3=int(modes[k]),
+                    amplitude_rss_3d_m3=float(per_mode[i, k]),
+                    growth_3d_m3=float(per_mode[i, k] / per_mode[0, k]),
+                )
                 above2 = f"{row['mode_3d_m3']} ({1e3 * row['amplitude_rss_3d_m3']:.2f}, ×{row['growth_3d_m3']:.1f})"
             rows.append(row)
-            print(f"| {row['tau']:.0f} | {1e3 * row['thickness']:.3f} | {row['n_faces']} {row['mesh']} | {force:.1f} | "
-                  f"{row['W0_3d']:.2f} | {row['mode_3d']} ({1e3 * row['amplitude_3d']:.2f}) | {above2} | "
-                  f"{row['n_axisym']:.2f} | {scaling:.2f} |")  # fmt: skip
+            print(
+                f"| {row['tau']:.0f} | {1e3 * row['thickness']:.3f} | {row['n_faces']} {row['mesh']} | {force:.1f} | "
+                f"{row['W0_3d']:.2f} | {row['mode_3d']} ({1e3 * row['amplitude_3d']:.2f}) | {above2} | "
+                f"{row['n_axisym']:.2f} | {scaling:.2f} |"
+            )
     print("\nCross-validation, 3D engine vs axisymmetric (relaxed / unrelaxed), relative difference axisym/3D − 1:")
-    print("| τ | faces | F [N] | " + " | ".join(f"{k} 3D [mm]" for k in COMPARED) + " | "
-          + " | ".join(f"{k} relaxed / unrelaxed" for k in COMPARED) + " |")  # fmt: skip
+    print(
+        "| τ | faces | F [N] | "
+        + " | ".join(f"{k} 3D [mm]" for k in COMPARED)
+        + " | "
+        + " | ".join(f"{k} relaxed / unrelaxed" for k in COMPARED)
+        + " |"
+    )
     print("|---|---:|---:|" + "---:|" * (2 * len(COMPARED)))
     for run, models in zip(runs, axisym):
         if "observables" not in run or any(name not in run["observables"][0] for name, _ in COMPARED.values()):
@@ -174,13 +232,24 @@ def report(out: Path) -> dict:
         for i, force in enumerate(run["force"]):
             three_d = {k: run["observables"][i][name] for k, (name, _) in COMPARED.items()}
             diff = {m: {k: float(c[k][i] / three_d[k] - 1.0) for k in COMPARED} for m, c in models.items()}
-            cross.append({"tau": run["tau"], "n_faces": run["n_faces"], "mesh": run["mesh"], "force": force, "shell3d": three_d,
-                          "axisym": {m: {k: float(c[k][i]) for k in COMPARED} for m, c in models.items()},
-                          "rel_diff": diff})  # fmt: skip
-            print(f"| {run['tau']:.0f} | {run['n_faces']} {run['mesh']} | {force:.1f} | "
-                  + " | ".join(f"{1e3 * three_d[k]:.1f}" for k in COMPARED) + " | "
-                  + " | ".join(f"{100 * diff['relaxed'][k]:+.1f} / {100 * diff['unrelaxed'][k]:+.1f} %"
-                               for k in COMPARED) + " |")  # fmt: skip
+            cross.append(
+                {
+                    "tau": run["tau"],
+                    "n_faces": run["n_faces"],
+                    "mesh": run["mesh"],
+                    "force": force,
+                    "shell3d": three_d,
+                    "axisym": {m: {k: float(c[k][i]) for k in COMPARED} for m, c in models.items()},
+                    "rel_diff": diff,
+                }
+            )
+            print(
+                f"| {run['tau']:.0f} | {run['n_faces']} {run['mesh']} | {force:.1f} | "
+                + " | ".join(f"{1e3 * three_d[k]:.1f}" for k in COMPARED)
+                + " | "
+                + " | ".join(f"{100 * diff['relaxed'][k]:+.1f} / {100 * diff['unrelaxed'][k]:+.1f} %" for k in COMPARED)
+                + " |"
+            )
     data["rows"], data["cross_validation"] = rows, cross
     out.write_text(json.dumps(data, indent=1))
     return data
@@ -191,9 +260,13 @@ def main(argv=None):
     ap.add_argument("--taus", type=float, nargs="+", default=[10.0, 40.0, 100.0])
     ap.add_argument("--faces", type=int, nargs="+", default=[24000, 48000])
     ap.add_argument("--depth", type=float, default=5.0, help="deepest −W(0) to reach (axisymmetric estimate)")
-    ap.add_argument("--mesh", default="ball", choices=["ball", "icosphere", "random"],
-                    help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check); "
-                         "random: seeded random vertices, no rings, sectors or spirals, refined about the indenter")
+    ap.add_argument(
+        "--mesh",
+        default="ball",
+        choices=["ball", "icosphere", "random"],
+        help="ball: ring mesh refined at the poles; icosphere: uniform, no sectors (an independent check); "
+        "random: seeded random vertices, no rings, sectors or spirals, refined about the indenter",
+    )
     ap.add_argument("--out", type=Path, default=Path("wrinkles3d.json"))
     ap.add_argument("--restarts", type=int, default=5)
     ap.add_argument("--watchdog", type=float, default=1800.0, help="seconds without a solved level before a restart")
@@ -209,16 +282,35 @@ def main(argv=None):
     for target_tau in args.taus:
         for faces in args.faces:
             done = json.loads(args.out.read_text())["runs"] if args.out.exists() else []
-            if any((r["target_tau"], r["requested_faces"], r["target_depth"], r.get("mesh", "ball")) == (target_tau, faces, args.depth, args.mesh)
-                   for r in done):  # fmt: skip
+            if any(
+                (r["target_tau"], r["requested_faces"], r["target_depth"], r.get("mesh", "ball"))
+                == (target_tau, faces, args.depth, args.mesh)
+                for r in done
+            ):
                 continue
             t0 = time.perf_counter()
-            cmd = [sys.executable, __file__, "--child", "--taus", str(target_tau), "--faces", str(faces),
-                   "--depth", str(args.depth), "--out", str(args.out), "--watchdog", str(args.watchdog),
-                   "--mesh", args.mesh]  # fmt: skip
+            cmd = [
+                sys.executable,
+                __file__,
+                "--child",
+                "--taus",
+                str(target_tau),
+                "--faces",
+                str(faces),
+                "--depth",
+                str(args.depth),
+                "--out",
+                str(args.out),
+                "--watchdog",
+                str(args.watchdog),
+                "--mesh",
+                args.mesh,
+            ]
             ok = run_with_restarts(cmd, args.restarts, f"τ = {target_tau:g}, {faces} faces")
-            print(f"τ = {target_tau:g}, {faces} faces: {'done' if ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)",
-                  flush=True)  # fmt: skip
+            print(
+                f"τ = {target_tau:g}, {faces} faces: {'done' if ok else 'FAILED'} ({time.perf_counter() - t0:.0f} s)",
+                flush=True,
+            )
     if args.out.exists():
         report(args.out)
 

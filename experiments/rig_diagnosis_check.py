@@ -34,8 +34,14 @@ def draw_rig(rng, kind: str) -> dict:
     if kind == "wide_finger":
         return {"finger": {"radius": rng.uniform(15e-3, 20e-3)}}
     if kind == "sensor":
-        return {"sensor": {"kind": str(rng.choice(["power", "quadratic"])), "gain": 1.0, "exponent": rng.uniform(0.8, 1.2),
-                           "beta": rng.choice([-1, 1]) * rng.uniform(0.1, 0.2)}}  # fmt: skip
+        return {
+            "sensor": {
+                "kind": str(rng.choice(["power", "quadratic"])),
+                "gain": 1.0,
+                "exponent": rng.uniform(0.8, 1.2),
+                "beta": rng.choice([-1, 1]) * rng.uniform(0.1, 0.2),
+            }
+        }
     return {"depth": {"offset": rng.choice([-1, 1]) * rng.uniform(1e-3, 3e-3)}}
 
 
@@ -43,7 +49,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--studies", type=int, default=16)
     parser.add_argument("--seed", type=int, default=47)
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-diagnosis-check.json"))
+    parser.add_argument(
+        "--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-diagnosis-check.json")
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     from shelljax.diagnose import diagnose
@@ -64,24 +72,41 @@ def main():
         chosen = report["winner"]["estimates_after"] if report["winner"] else report["baseline"]["estimates"]
         e = chosen["young_modulus"]
         robust = report["robust"]["young_modulus"]
-        rows.append(dict(kind=kind, rig=rig, verdict=report["verdict"], seconds=seconds,
-                         e_error=100 * (e["value"] / true_e - 1), e_covered=bool(e["ci95"][0] <= true_e <= e["ci95"][1]),
-                         robust_covered=bool(robust["range95"][0] <= true_e <= robust["range95"][1]),
-                         robust_range=robust["range95"], width_ratio=robust["width_ratio"],
-                         warned=report["robust"]["warning"] is not None,
-                         not_excluded=[k["effect"] for k in report["not_excluded"]],
-                         failed=[r["effect"] for r in report["ranking"] if r["status"] != "ok"]))  # fmt: skip
+        rows.append(
+            dict(
+                kind=kind,
+                rig=rig,
+                verdict=report["verdict"],
+                seconds=seconds,
+                e_error=100 * (e["value"] / true_e - 1),
+                e_covered=bool(e["ci95"][0] <= true_e <= e["ci95"][1]),
+                robust_covered=bool(robust["range95"][0] <= true_e <= robust["range95"][1]),
+                robust_range=robust["range95"],
+                width_ratio=robust["width_ratio"],
+                warned=report["robust"]["warning"] is not None,
+                not_excluded=[k["effect"] for k in report["not_excluded"]],
+                failed=[r["effect"] for r in report["ranking"] if r["status"] != "ok"],
+            )
+        )
         r = rows[-1]
-        print(f"[{i + 1}/{args.studies}] {kind:>11s} -> {r['verdict']:<26s} E {r['e_error']:+6.1f} % "
-              f"(covered {r['e_covered']}, robust {r['robust_covered']}, warned {r['warned']}), "
-              f"{len(r['not_excluded'])} not excluded, failed refits {r['failed']}  {seconds:.0f} s", flush=True)  # fmt: skip
-    summary = dict(studies=len(rows), refits=sum(10 for _ in rows), failed_refits=sum(len(r["failed"]) for r in rows),
-                   e_interval_coverage=float(np.mean([r["e_covered"] for r in rows])),
-                   robust_range_coverage=float(np.mean([r["robust_covered"] for r in rows])),
-                   off_by_more_than_15_percent=sum(abs(r["e_error"]) > 15 for r in rows),
-                   off_and_warned_or_robust_covered=sum(abs(r["e_error"]) > 15 and (r["warned"] or r["robust_covered"])
-                                                        for r in rows),
-                   median_seconds=float(np.median([r["seconds"] for r in rows])))  # fmt: skip
+        print(
+            f"[{i + 1}/{args.studies}] {kind:>11s} -> {r['verdict']:<26s} E {r['e_error']:+6.1f} % "
+            f"(covered {r['e_covered']}, robust {r['robust_covered']}, warned {r['warned']}), "
+            f"{len(r['not_excluded'])} not excluded, failed refits {r['failed']}  {seconds:.0f} s",
+            flush=True,
+        )
+    summary = dict(
+        studies=len(rows),
+        refits=sum(10 for _ in rows),
+        failed_refits=sum(len(r["failed"]) for r in rows),
+        e_interval_coverage=float(np.mean([r["e_covered"] for r in rows])),
+        robust_range_coverage=float(np.mean([r["robust_covered"] for r in rows])),
+        off_by_more_than_15_percent=sum(abs(r["e_error"]) > 15 for r in rows),
+        off_and_warned_or_robust_covered=sum(
+            abs(r["e_error"]) > 15 and (r["warned"] or r["robust_covered"]) for r in rows
+        ),
+        median_seconds=float(np.median([r["seconds"] for r in rows])),
+    )
     print(json.dumps(summary, indent=1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -62,8 +62,15 @@ FAMILIES = ("pad", "finger", "sensor", "depth")
 METHODS = ("fit", "fit+rig", "bayes+rig", "closed-form k_s", "fit+rig, object")
 CALIBRATION_WEIGHTS = "fit+rig, calibration weights"  # the same fits, mixed by the rig's weights alone
 TRUE_FAMILIES = "fit+rig, model of the true families"  # the rig model whose families are the truth's, where selected
-TERM_FAMILY = {"pad_linear": "pad", "pad_hertz": "pad", "pad_power": "pad", "finger_radius": "finger",
-               "depth_offset": "depth", "sensor_gain": "sensor", "sensor_power": "sensor"}  # fmt: skip
+TERM_FAMILY = {
+    "pad_linear": "pad",
+    "pad_hertz": "pad",
+    "pad_power": "pad",
+    "finger_radius": "finger",
+    "depth_offset": "depth",
+    "sensor_gain": "sensor",
+    "sensor_power": "sensor",
+}
 
 
 def draw_rig(rng, n_imperfections: int) -> dict:
@@ -78,8 +85,12 @@ def draw_rig(rng, n_imperfections: int) -> dict:
             rig["finger"] = {"radius": rng.uniform(10e-3, 25e-3)}
         elif family == "sensor":
             kind = str(rng.choice(["gain", "power", "quadratic"]))
-            rig["sensor"] = {"kind": kind, "gain": rng.uniform(0.8, 1.25), "exponent": rng.uniform(0.8, 1.2),
-                             "beta": rng.choice([-1, 1]) * rng.uniform(0.1, 0.2)}  # fmt: skip
+            rig["sensor"] = {
+                "kind": kind,
+                "gain": rng.uniform(0.8, 1.25),
+                "exponent": rng.uniform(0.8, 1.2),
+                "beta": rng.choice([-1, 1]) * rng.uniform(0.1, 0.2),
+            }
         else:
             rig["depth"] = {"offset": rng.choice([-1, 1]) * rng.uniform(1e-3, 3e-3)}
     return rig
@@ -122,13 +133,24 @@ def reality_w0(obj, rig, pressure, forces):
 
     scale = obj["radius"] / REALITY_RADIUS
     radius = rig.get("finger", {}).get("radius", PAPER_INDENTER_RADIUS)
-    physics = CurvePhysics(indenter_radius=np.array([radius / scale]), gas_volume_ratio=np.ones(1),
-                           gas_exponent=np.ones(1), stiffening=np.zeros(1), areal_weight=np.zeros(1),
-                           friction_coefficient=np.zeros(1))  # fmt: skip
-    shell = ShellProperties(gauge_pressure=pressure, young_modulus=obj["young_modulus"],
-                            thickness=obj["thickness"] / scale, poisson_ratio=POISSON, radius=REALITY_RADIUS)
-    curve = indentation_curves(shell, np.asarray(forces) / scale**2, n_elements=REALITY_ELEMENTS,
-                               gas="polytropic", physics=physics, workers=1)  # fmt: skip
+    physics = CurvePhysics(
+        indenter_radius=np.array([radius / scale]),
+        gas_volume_ratio=np.ones(1),
+        gas_exponent=np.ones(1),
+        stiffening=np.zeros(1),
+        areal_weight=np.zeros(1),
+        friction_coefficient=np.zeros(1),
+    )
+    shell = ShellProperties(
+        gauge_pressure=pressure,
+        young_modulus=obj["young_modulus"],
+        thickness=obj["thickness"] / scale,
+        poisson_ratio=POISSON,
+        radius=REALITY_RADIUS,
+    )
+    curve = indentation_curves(
+        shell, np.asarray(forces) / scale**2, n_elements=REALITY_ELEMENTS, gas="polytropic", physics=physics, workers=1
+    )
     return scale * np.asarray(curve.w0[0])
 
 
@@ -145,8 +167,9 @@ def write_object(rng, obj, rig, pressures, directory: Path, name: str, manometer
             w0 = np.empty_like(true)
             w0[order] = reality_w0(obj, rig, pressure, true[order])
             offset = rig.get("depth", {}).get("offset", 0.0)
-            measured = (w0 + pad_compression(rig, true) + offset) * (1 + rng.normal(0.0, 0.02, true.size)) \
-                + rng.normal(0.0, 0.5e-3)
+            measured = (w0 + pad_compression(rig, true) + offset) * (1 + rng.normal(0.0, 0.02, true.size)) + rng.normal(
+                0.0, 0.5e-3
+            )
             trial += [t] * recorded.size
             force += recorded.tolist()
             depth += (np.round(measured * 2e3) / 2e3).tolist()
@@ -154,10 +177,20 @@ def write_object(rng, obj, rig, pressures, directory: Path, name: str, manometer
             counts.append(int(round(float(mean) + rng.normal(0.0, 0.5))))
         path = directory / f"{name}_{k}.toml"
         radius, thickness = obj.get("measured_radius", obj["radius"]), obj.get("measured_thickness", obj["thickness"])
-        write_session(path, object_name=name, radius=radius, radius_std=obj.get("radius_std", RADIUS_STD) * radius,
-                      thickness=thickness, thickness_std=THICKNESS_STD * thickness, trial=trial, force=force,
-                      depth=depth, wrinkle_counts=counts, poisson_ratio=POISSON,
-                      manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))) if manometer else None)  # fmt: skip
+        write_session(
+            path,
+            object_name=name,
+            radius=radius,
+            radius_std=obj.get("radius_std", RADIUS_STD) * radius,
+            thickness=thickness,
+            thickness_std=THICKNESS_STD * thickness,
+            trial=trial,
+            force=force,
+            depth=depth,
+            wrinkle_counts=counts,
+            poisson_ratio=POISSON,
+            manometer_gauge_pressure=float(pressure * (1 + rng.normal(0.0, 0.01))) if manometer else None,
+        )
         paths.append(path)
     return paths
 
@@ -173,12 +206,21 @@ def measured_geometry(obj, geometry_rng, radius_std: float = RADIUS_STD) -> dict
     if geometry_rng is None:
         return obj
     radius_error, thickness_error = geometry_rng.standard_normal(2) * (radius_std, THICKNESS_STD)
-    return {**obj, "measured_radius": obj["radius"] * (1 + radius_error),
-            "measured_thickness": obj["thickness"] * (1 + thickness_error)}
+    return {
+        **obj,
+        "measured_radius": obj["radius"] * (1 + radius_error),
+        "measured_thickness": obj["thickness"] * (1 + thickness_error),
+    }
 
 
-def make_rig_world(rng, n_imperfections: int, n_objects: int, directory: Path, geometry_rng=None,
-                   calibration_radius_std: float = RADIUS_STD):
+def make_rig_world(
+    rng,
+    n_imperfections: int,
+    n_objects: int,
+    directory: Path,
+    geometry_rng=None,
+    calibration_radius_std: float = RADIUS_STD,
+):
     """Write one rig's calibration and test sessions; return (rig truth, calibration paths, tests).
 
     Each object's R and h are measured once (``measured_geometry``) and recorded in all its sessions.
@@ -224,8 +266,11 @@ def _calibration_weighted(result):
     ok = [m for m in result.models if m["status"] == "ok"]
     out = {}
     for name in ("gauge_pressure", "young_modulus"):
-        center, lo, hi, _ = normal_mixture([math.log(m["estimates"][name]["value"]) for m in ok],
-                                           [m["estimates"][name]["relative_std"] for m in ok], [m["weight"] for m in ok])
+        center, lo, hi, _ = normal_mixture(
+            [math.log(m["estimates"][name]["value"]) for m in ok],
+            [m["estimates"][name]["relative_std"] for m in ok],
+            [m["weight"] for m in ok],
+        )
         out[name] = (math.exp(center), (math.exp(lo), math.exp(hi)))
     return out
 
@@ -252,7 +297,10 @@ def evaluate_session(path, truth_p, truth_e, rig_model, k_s, methods):
                 result = estimate_with_rig(session, rig_model, method=method.split("+")[0])
                 est = result.estimates
                 if method == "fit+rig":
-                    out[CALIBRATION_WEIGHTS] = {**_errors(_calibration_weighted(result), truth_p, truth_e), "seconds": 0.0}
+                    out[CALIBRATION_WEIGHTS] = {
+                        **_errors(_calibration_weighted(result), truth_p, truth_e),
+                        "seconds": 0.0,
+                    }
                     out["rig_models"] = list(result.models)  # per model: weights, evidence, its own estimates
             pairs = {k: (v.value, v.ci95) for k, v in est.items() if k in ("gauge_pressure", "young_modulus")}
             out[method] = {**_errors(pairs, truth_p, truth_e), "seconds": time.perf_counter() - start}
@@ -273,9 +321,20 @@ def _object_estimate(test, rig) -> list[dict]:
         return [{"failed": str(err)[:300]}] * len(test["paths"])
     seconds = time.perf_counter() - start
     e = est["young_modulus"]
-    return [{**_errors({"gauge_pressure": (est[f"gauge_pressure[{k}]"].value, est[f"gauge_pressure[{k}]"].ci95),
-                        "young_modulus": (e.value, e.ci95)}, p, test["object"]["young_modulus"]), "seconds": seconds}
-            for k, p in enumerate(test["pressures"])]  # fmt: skip
+    return [
+        {
+            **_errors(
+                {
+                    "gauge_pressure": (est[f"gauge_pressure[{k}]"].value, est[f"gauge_pressure[{k}]"].ci95),
+                    "young_modulus": (e.value, e.ci95),
+                },
+                p,
+                test["object"]["young_modulus"],
+            ),
+            "seconds": seconds,
+        }
+        for k, p in enumerate(test["pressures"])
+    ]
 
 
 def evaluate_rig(index, world, methods, bayes_every: int, manometer_std: float) -> dict:
@@ -297,11 +356,23 @@ def evaluate_rig(index, world, methods, bayes_every: int, manometer_std: float) 
             row = evaluate_session(path, pressure, test["object"]["young_modulus"], rig, k_s, use)
             if joint:
                 row["fit+rig, object"] = joint[k]
-            rows.append(dict(radius=test["object"]["radius"], pressure=pressure,
-                             young_modulus=test["object"]["young_modulus"], results=row))  # fmt: skip
-    return dict(rig=index, truth=truth, families=sorted(truth), calibration_seconds=seconds,
-                selected=[dict(terms=list(m.terms), weight=m.weight) for m in rig.models],
-                not_identified=list(rig.not_identified), sessions=rows)  # fmt: skip
+            rows.append(
+                dict(
+                    radius=test["object"]["radius"],
+                    pressure=pressure,
+                    young_modulus=test["object"]["young_modulus"],
+                    results=row,
+                )
+            )
+    return dict(
+        rig=index,
+        truth=truth,
+        families=sorted(truth),
+        calibration_seconds=seconds,
+        selected=[dict(terms=list(m.terms), weight=m.weight) for m in rig.models],
+        not_identified=list(rig.not_identified),
+        sessions=rows,
+    )
 
 
 def _with_true_families(rig) -> dict:
@@ -311,14 +382,24 @@ def _with_true_families(rig) -> dict:
     truth = set(rig["families"])
     sessions = []
     for row in rig["sessions"]:
-        models = [m for m in row["results"].get("rig_models", [])
-                  if m.get("status") == "ok" and {TERM_FAMILY[t] for t in m["terms"]} == truth]  # fmt: skip
+        models = [
+            m
+            for m in row["results"].get("rig_models", [])
+            if m.get("status") == "ok" and {TERM_FAMILY[t] for t in m["terms"]} == truth
+        ]
         results = dict(row["results"])
         if models:
             est = models[0]["estimates"]
-            pairs = {name: (est[name]["value"], (est[name]["value"] * math.exp(-1.96 * est[name]["relative_std"]),
-                                                 est[name]["value"] * math.exp(1.96 * est[name]["relative_std"])))
-                     for name in ("gauge_pressure", "young_modulus")}  # fmt: skip
+            pairs = {
+                name: (
+                    est[name]["value"],
+                    (
+                        est[name]["value"] * math.exp(-1.96 * est[name]["relative_std"]),
+                        est[name]["value"] * math.exp(1.96 * est[name]["relative_std"]),
+                    ),
+                )
+                for name in ("gauge_pressure", "young_modulus")
+            }
             results[TRUE_FAMILIES] = {**_errors(pairs, row["pressure"], row["young_modulus"]), "seconds": 0.0}
         sessions.append({**row, "results": results})
     return {**rig, "sessions": sessions}
@@ -327,12 +408,22 @@ def _with_true_families(rig) -> dict:
 def _median_interval(rigs, method, key, draws: int = 2000) -> list[float]:
     """95 % bootstrap interval [%] of the median |error| of ``method`` over rigs: a rig's sessions share
     its calibration (and an object's sessions its R and h), so rigs are the independent draws."""
-    per_rig = [np.array([abs(r["results"][method][f"{key}_error"]) for r in rig["sessions"]
-                         if method in r["results"] and f"{key}_error" in r["results"][method]]) for rig in rigs]  # fmt: skip
+    per_rig = [
+        np.array(
+            [
+                abs(r["results"][method][f"{key}_error"])
+                for r in rig["sessions"]
+                if method in r["results"] and f"{key}_error" in r["results"][method]
+            ]
+        )
+        for rig in rigs
+    ]
     per_rig = [errors for errors in per_rig if errors.size]
     rng = np.random.default_rng(0)
-    samples = [np.median(np.concatenate([per_rig[i] for i in rng.integers(0, len(per_rig), len(per_rig))]))
-               for _ in range(draws)]  # fmt: skip
+    samples = [
+        np.median(np.concatenate([per_rig[i] for i in rng.integers(0, len(per_rig), len(per_rig))]))
+        for _ in range(draws)
+    ]
     return [float(np.percentile(samples, 2.5)), float(np.percentile(samples, 97.5))]
 
 
@@ -347,22 +438,32 @@ def summarize(rigs, methods):
             failed = sum(1 for r in rows if m in r["results"] and "failed" in r["results"][m])
             if not ok:
                 continue
-            entry = dict(n=len(ok), failed=failed, median_abs_p_error=float(np.median([abs(o["p_error"]) for o in ok])),
-                         median_abs_p_error_ci95=_median_interval(group, m, "p"),
-                         p_coverage=float(np.mean([o["p_covered"] for o in ok])),
-                         p_coverage_ci95=_coverage_interval([o["p_covered"] for o in ok]))  # fmt: skip
+            entry = dict(
+                n=len(ok),
+                failed=failed,
+                median_abs_p_error=float(np.median([abs(o["p_error"]) for o in ok])),
+                median_abs_p_error_ci95=_median_interval(group, m, "p"),
+                p_coverage=float(np.mean([o["p_covered"] for o in ok])),
+                p_coverage_ci95=_coverage_interval([o["p_covered"] for o in ok]),
+            )
             with_e = [o for o in ok if "e_error" in o]
             if with_e:
-                entry.update(median_abs_e_error=float(np.median([abs(o["e_error"]) for o in with_e])),
-                             median_abs_e_error_ci95=_median_interval(group, m, "e"),
-                             e_coverage=float(np.mean([o["e_covered"] for o in with_e])),
-                             e_coverage_ci95=_coverage_interval([o["e_covered"] for o in with_e]))  # fmt: skip
+                entry.update(
+                    median_abs_e_error=float(np.median([abs(o["e_error"]) for o in with_e])),
+                    median_abs_e_error_ci95=_median_interval(group, m, "e"),
+                    e_coverage=float(np.mean([o["e_covered"] for o in with_e])),
+                    e_coverage_ci95=_coverage_interval([o["e_covered"] for o in with_e]),
+                )
             entry["median_seconds"] = float(np.median([o["seconds"] for o in ok]))
             out[m] = entry
         return out
 
-    summary = {"rigs": len(rigs), "test_sessions": sum(len(rig["sessions"]) for rig in rigs), "all": stats(rigs),
-               "clean": stats([rig for rig in rigs if not rig["families"]])}  # fmt: skip
+    summary = {
+        "rigs": len(rigs),
+        "test_sessions": sum(len(rig["sessions"]) for rig in rigs),
+        "all": stats(rigs),
+        "clean": stats([rig for rig in rigs if not rig["families"]]),
+    }
     for family in FAMILIES:
         summary[f"with_{family}"] = stats([rig for rig in rigs if family in rig["families"]])
     clean = [rig for rig in rigs if not rig["families"]]
@@ -388,38 +489,55 @@ def _median_difference(rigs, method, baseline, draws: int = 2000) -> dict:
     for rig in rigs:
         for row in rig["sessions"]:
             objects.setdefault((str(rig["rig"]), row["radius"]), []).append(row["results"])
-    groups = [rows for rows in objects.values()
-              if all(m in r and "failed" not in r[m] for r in rows for m in (method, baseline))]  # fmt: skip
+    groups = [
+        rows
+        for rows in objects.values()
+        if all(m in r and "failed" not in r[m] for r in rows for m in (method, baseline))
+    ]
     rng = np.random.default_rng(0)
     out = {"objects": len(groups), "unit": "percentage points"}
     for key in ("p", "e"):
+
         def difference(picked):
             rows = [r for g in picked for r in g]
-            return float(np.median([abs(r[method][f"{key}_error"]) for r in rows])
-                         - np.median([abs(r[baseline][f"{key}_error"]) for r in rows]))  # fmt: skip
+            return float(
+                np.median([abs(r[method][f"{key}_error"]) for r in rows])
+                - np.median([abs(r[baseline][f"{key}_error"]) for r in rows])
+            )
+
         samples = [difference([groups[i] for i in rng.integers(0, len(groups), len(groups))]) for _ in range(draws)]
-        out[key] = {"difference": difference(groups), "ci95": [float(np.percentile(samples, 2.5)),
-                                                                float(np.percentile(samples, 97.5))]}  # fmt: skip
+        out[key] = {
+            "difference": difference(groups),
+            "ci95": [float(np.percentile(samples, 2.5)), float(np.percentile(samples, 97.5))],
+        }
     return out
 
 
 def table(summary, methods) -> str:
-    lines = [f"{summary['rigs']} rigs, {summary['test_sessions']} test sessions; median calibration "
-             f"{summary['median_calibration_seconds']:.0f} s",
-             f"{'group':>14s} {'method':>36s} {'n':>4s} {'|P_g err| med (95 % over rigs)':>30s} {'P cov95':>8s} "
-             f"{'|E err| med (95 % over rigs)':>28s} {'E cov95':>8s}"]  # fmt: skip
+    lines = [
+        f"{summary['rigs']} rigs, {summary['test_sessions']} test sessions; median calibration "
+        f"{summary['median_calibration_seconds']:.0f} s",
+        f"{'group':>14s} {'method':>36s} {'n':>4s} {'|P_g err| med (95 % over rigs)':>30s} {'P cov95':>8s} "
+        f"{'|E err| med (95 % over rigs)':>28s} {'E cov95':>8s}",
+    ]
     for group in ("all", "clean") + tuple(f"with_{f}" for f in FAMILIES):
         for m, s in summary.get(group, {}).items():
             p_lo, p_hi = s["median_abs_p_error_ci95"]
             e_lo, e_hi = s.get("median_abs_e_error_ci95", (float("nan"),) * 2)
-            lines.append(f"{group:>14s} {m:>36s} {s['n']:4d} {s['median_abs_p_error']:10.1f}% ({p_lo:4.1f} … {p_hi:4.1f} %) "
-                         f"{100 * s['p_coverage']:7.0f}% {s.get('median_abs_e_error', float('nan')):8.1f}% "
-                         f"({e_lo:4.1f} … {e_hi:4.1f} %) {100 * s.get('e_coverage', float('nan')):7.0f}%")  # fmt: skip
+            lines.append(
+                f"{group:>14s} {m:>36s} {s['n']:4d} {s['median_abs_p_error']:10.1f}% ({p_lo:4.1f} … {p_hi:4.1f} %) "
+                f"{100 * s['p_coverage']:7.0f}% {s.get('median_abs_e_error', float('nan')):8.1f}% "
+                f"({e_lo:4.1f} … {e_hi:4.1f} %) {100 * s.get('e_coverage', float('nan')):7.0f}%"
+            )
     if "clean_fit+rig_minus_fit" in summary:
         d = summary["clean_fit+rig_minus_fit"]
-        lines.append(f"clean rigs, fit+rig minus fit ({d['objects']} objects, bootstrap 95 %): "
-                     + ", ".join(f"{name} {d[k]['difference']:+.1f} ({d[k]['ci95'][0]:+.1f} … {d[k]['ci95'][1]:+.1f}) points"
-                                 for k, name in (("p", "|P_g err|"), ("e", "|E err|"))))  # fmt: skip
+        lines.append(
+            f"clean rigs, fit+rig minus fit ({d['objects']} objects, bootstrap 95 %): "
+            + ", ".join(
+                f"{name} {d[k]['difference']:+.1f} ({d[k]['ci95'][0]:+.1f} … {d[k]['ci95'][1]:+.1f}) points"
+                for k, name in (("p", "|P_g err|"), ("e", "|E err|"))
+            )
+        )
     return "\n".join(lines)
 
 
@@ -430,21 +548,41 @@ def main():
     parser.add_argument("--seed", type=int, default=46)
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--bayes-every", type=int, default=2, help="bayes+rig on every n-th session of an object")
-    parser.add_argument("--manometer-std", type=float, default=0.01,
-                        help="the calibration's manometer accuracy, as the generator's noise (1 %%)")
-    parser.add_argument("--exact-geometry", action="store_true",
-                        help="record each object's true R and h in its sessions (with the stated std all the same)")
-    parser.add_argument("--calibration-radius-std", type=float, default=RADIUS_STD,
-                        help="relative std of the calibration ball's R, as measured and as its sessions state "
-                             "(default: the mesh's 2 %%; a tape round the equator: about 0.3 %%)")
+    parser.add_argument(
+        "--manometer-std",
+        type=float,
+        default=0.01,
+        help="the calibration's manometer accuracy, as the generator's noise (1 %%)",
+    )
+    parser.add_argument(
+        "--exact-geometry",
+        action="store_true",
+        help="record each object's true R and h in its sessions (with the stated std all the same)",
+    )
+    parser.add_argument(
+        "--calibration-radius-std",
+        type=float,
+        default=RADIUS_STD,
+        help="relative std of the calibration ball's R, as measured and as its sessions state "
+        "(default: the mesh's 2 %%; a tape round the equator: about 0.3 %%)",
+    )
     add_executor_arguments(parser, resume=False)
-    parser.add_argument("--run-dir", default=None,
-                        help="write each finished rig's record here and skip the rigs already recorded (a killed "
-                             "study resumes where it stopped)")
-    parser.add_argument("--combine", nargs="+", default=None, metavar="JSON",
-                        help="summarise the rigs of earlier studies' JSON outputs together (other seeds) into --out; "
-                             "runs nothing")
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json"))
+    parser.add_argument(
+        "--run-dir",
+        default=None,
+        help="write each finished rig's record here and skip the rigs already recorded (a killed "
+        "study resumes where it stopped)",
+    )
+    parser.add_argument(
+        "--combine",
+        nargs="+",
+        default=None,
+        metavar="JSON",
+        help="summarise the rigs of earlier studies' JSON outputs together (other seeds) into --out; runs nothing",
+    )
+    parser.add_argument(
+        "--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "bench" / "rig-transfer-study.json")
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     if args.combine:
@@ -460,13 +598,22 @@ def main():
         # same draws however many workers evaluate them
         worlds = []
         for i, n in enumerate(counts):
-            truth, calibration, _, tests = make_rig_world(rng, n, args.objects, Path(tmp) / f"rig{i}", geometry_rng,
-                                                          args.calibration_radius_std)  # fmt: skip
+            truth, calibration, _, tests = make_rig_world(
+                rng, n, args.objects, Path(tmp) / f"rig{i}", geometry_rng, args.calibration_radius_std
+            )
             worlds.append(dict(truth=truth, calibration=[str(p) for p in calibration], tests=tests))
-        items = [WorkItem(f"rig{i}", evaluate_rig, (i, world, args.methods, args.bayes_every, args.manometer_std))
-                 for i, world in enumerate(worlds)]  # fmt: skip
-        results = run_items(items, run_dir=args.run_dir, resume=args.run_dir is not None,
-                            options=executor_options(args), progress=True, desc="rigs")  # fmt: skip
+        items = [
+            WorkItem(f"rig{i}", evaluate_rig, (i, world, args.methods, args.bayes_every, args.manometer_std))
+            for i, world in enumerate(worlds)
+        ]
+        results = run_items(
+            items,
+            run_dir=args.run_dir,
+            resume=args.run_dir is not None,
+            options=executor_options(args),
+            progress=True,
+            desc="rigs",
+        )
     failed = [r for r in results if r.status != "done"]
     for r in failed:
         print(f"{r.key} failed: {r.error}", flush=True)
@@ -475,8 +622,13 @@ def main():
         print(f"rig {rig['rig']} {rig['truth']} -> {[m['terms'] for m in rig['selected'][:3]]}", flush=True)
     summary = summarize(rigs, args.methods)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"summary": summary, "seed": args.seed, "rigs": rigs,
-                               "failed": [r.to_dict() for r in failed]}, indent=1, default=float))  # fmt: skip
+    out.write_text(
+        json.dumps(
+            {"summary": summary, "seed": args.seed, "rigs": rigs, "failed": [r.to_dict() for r in failed]},
+            indent=1,
+            default=float,
+        )
+    )
     print(table(summary, args.methods))
     return 0
 

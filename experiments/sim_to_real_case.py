@@ -16,7 +16,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from shelljax.diagnose import PAPER_BALLS, PAPER_SHAPE_ERROR, ks_scan, reconcile, reconciliation_table, shape_sensitivity
+from shelljax.diagnose import (
+    PAPER_BALLS,
+    PAPER_SHAPE_ERROR,
+    ks_scan,
+    reconcile,
+    reconciliation_table,
+    shape_sensitivity,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,8 +35,17 @@ def main():
     out = ROOT / "docs" / "bench" / "sim-to-real-case.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     shape = shape_sensitivity()
-    out.write_text(json.dumps({"scans": scans, "reconciliation_shared": shared, "reconciliation_per_ball": per_ball,
-                              "shape_sensitivity": shape}, indent=1))  # fmt: skip
+    out.write_text(
+        json.dumps(
+            {
+                "scans": scans,
+                "reconciliation_shared": shared,
+                "reconciliation_per_ball": per_ball,
+                "shape_sensitivity": shape,
+            },
+            indent=1,
+        )
+    )
     print(reconciliation_table("one magnitude shared by both balls", shared))
     for ball, table in per_ball.items():
         print(reconciliation_table(f"{ball} ball alone", table))

@@ -54,7 +54,16 @@ def _shell(radius, thickness, faces):
 def make_system(args, gas="isothermal", gravity=G, faces=None):
     shell = _shell(args.radius, args.thickness, faces or args.faces)
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(args.ghat, 1e3), name="ground")
-    return d.shell_system(shell, ShellProperties(gauge_pressure=args.pressure, young_modulus=args.young, thickness=shell.thickness, poisson_ratio=0.4), gas=gas, mass=args.mass, planes=[ground], gravity=gravity)
+    return d.shell_system(
+        shell,
+        ShellProperties(
+            gauge_pressure=args.pressure, young_modulus=args.young, thickness=shell.thickness, poisson_ratio=0.4
+        ),
+        gas=gas,
+        mass=args.mass,
+        planes=[ground],
+        gravity=gravity,
+    )
 
 
 def contact_diameter(x, ghat):
@@ -88,7 +97,15 @@ def run_drop(system, args, height, dt, duration, integrator=None, damping=0.0):
     damped = with_damping(system, damping)
     state = d.drop_state(damped, damped.inflated, 2 * args.ghat, velocity=[0.0, 0.0, -speed])
     try:
-        return d.simulate(damped, state, dt, duration, integrator=integrator or d.Newmark(), minimiser=d.SparseNewton(), progress=False)
+        return d.simulate(
+            damped,
+            state,
+            dt,
+            duration,
+            integrator=integrator or d.Newmark(),
+            minimiser=d.SparseNewton(),
+            progress=False,
+        )
     except NoConvergenceError as err:
         return str(err).splitlines()[0]
 
@@ -101,15 +118,25 @@ def drop(system, args, dt, duration, integrator=None, damping=0.0, height=None):
         return {"dt_s": dt, "failed": traj}
     impacts = d.measured_cor(traj)
     e = traj["total_energy_J"]
-    out = {"dt_s": dt, "seconds": time.perf_counter() - start, "steps": len(e) - 1,
-           "max_energy_change_per_mgH": float(np.max(np.abs(e - e[0])) / (args.mass * G * (height or args.height)))}  # fmt: skip
+    out = {
+        "dt_s": dt,
+        "seconds": time.perf_counter() - start,
+        "steps": len(e) - 1,
+        "max_energy_change_per_mgH": float(np.max(np.abs(e - e[0])) / (args.mass * G * (height or args.height))),
+    }
     if impacts:
         m = impacts[0]
-        out.update(contact_time_s=m.contact_time_s, peak_force_N=m.peak_force_N, max_compression_m=m.max_compression_m,
-                   cor=bounce_cor(impacts))
+        out.update(
+            contact_time_s=m.contact_time_s,
+            peak_force_N=m.peak_force_N,
+            max_compression_m=m.max_compression_m,
+            cor=bounce_cor(impacts),
+        )
         k = int(np.argmax(traj["contact_force_N"][:, 0, 2]))
         out["diameter_at_peak_m"] = contact_diameter(traj["position_m"][k], args.ghat)
-        out["edge_diameter_at_peak_m"] = edge_contact_diameter(traj["position_m"][k], d.mesh_edges(np.asarray(system.surface_faces())), args.ghat)
+        out["edge_diameter_at_peak_m"] = edge_contact_diameter(
+            traj["position_m"][k], d.mesh_edges(np.asarray(system.surface_faces())), args.ghat
+        )
     return out
 
 
@@ -126,10 +153,18 @@ def quasi_static_curve(args, levels, faces=None):
         system = eqx.tree_at(lambda s: s.gravity, base, base.gravity * level)
         state = d.drop_state(system, system.inflated, args.ghat / 2)
         # Backward Euler at Δt = 10 ms damps the contact mode (ω ≈ 100 /s) by ~0.7 per step: 50 steps settle.
-        traj = d.simulate(system, state, 0.01, 0.5, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(), progress=False)
+        traj = d.simulate(
+            system, state, 0.01, 0.5, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(), progress=False
+        )
         x = traj["position_m"][-1]
-        rows.append((z_touch - float(system.centre_of_mass(jnp.asarray(x))[2]), level * G * args.mass,
-                     contact_diameter(x, args.ghat), edge_contact_diameter(x, edges, args.ghat)))  # fmt: skip
+        rows.append(
+            (
+                z_touch - float(system.centre_of_mass(jnp.asarray(x))[2]),
+                level * G * args.mass,
+                contact_diameter(x, args.ghat),
+                edge_contact_diameter(x, edges, args.ghat),
+            )
+        )
     return np.array(rows)
 
 
@@ -143,16 +178,29 @@ def part_model(args, report):
     reference = drop(make_system(args), args, 2.5e-4, args.duration)
     curve = quasi_static_curve(args, (1.0, 3.0, 6.0, 10.0, 15.0, 20.0))
     report["model_reference_newmark"] = reference
-    report["quasi_static"] = {"compression_m": curve[:, 0].tolist(), "force_N": curve[:, 1].tolist(), "diameter_m": curve[:, 2].tolist(),
-                              "edge_diameter_m": curve[:, 3].tolist()}  # fmt: skip
+    report["quasi_static"] = {
+        "compression_m": curve[:, 0].tolist(),
+        "force_N": curve[:, 1].tolist(),
+        "diameter_m": curve[:, 2].tolist(),
+        "edge_diameter_m": curve[:, 3].tolist(),
+    }
     one_dof = d.PointMassOnGround(args.mass, [d.ground(d.TabulatedCompressionCurve(curve[:, 0], curve[:, 1]))])
     speed = math.sqrt(2 * G * (args.height - 2 * args.ghat))
-    traj = d.simulate(one_dof, d.initial_state(one_dof, [0.0, 0.0, 0.0], [0.0, 0.0, -speed]), 2e-5, args.duration, progress=False)
+    traj = d.simulate(
+        one_dof, d.initial_state(one_dof, [0.0, 0.0, 0.0], [0.0, 0.0, -speed]), 2e-5, args.duration, progress=False
+    )
     m = d.measured_cor(traj)[0]
-    report["one_dof"] = {"contact_time_s": m.contact_time_s, "peak_force_N": m.peak_force_N, "max_compression_m": m.max_compression_m}
+    report["one_dof"] = {
+        "contact_time_s": m.contact_time_s,
+        "peak_force_N": m.peak_force_N,
+        "max_compression_m": m.max_compression_m,
+    }
     k = d.pressurized_ball_stiffness(args.radius, args.pressure)
-    report["textbook"] = {"stiffness_N_per_m": k, "contact_time_s": d.pressurized_ball_contact_time(args.mass, args.radius, args.pressure),
-                          "peak_force_N": speed * math.sqrt(k * args.mass)}  # fmt: skip
+    report["textbook"] = {
+        "stiffness_N_per_m": k,
+        "contact_time_s": d.pressurized_ball_contact_time(args.mass, args.radius, args.pressure),
+        "peak_force_N": speed * math.sqrt(k * args.mass),
+    }
     report["quasi_static_diameter_at_peak_m"] = float(np.interp(reference["peak_force_N"], curve[:, 1], curve[:, 2]))
 
 
@@ -170,7 +218,7 @@ def bounce_cor(impacts):
     """
     bounce = [m.bounce_height_m for m in impacts if np.isfinite(m.bounce_height_m)][-1]
     # A bounce below the onset height (the ball stays pressed until the record ends) counts as COR 0.
-    return math.sqrt(max(bounce, 0.0) / (impacts[0].speed_in_m_per_s**2 / (2 * G)))
+    return math.sqrt(max(bounce, 0.0) / (impacts[0].speed_in_m_per_s ** 2 / (2 * G)))
 
 
 def calibrations(args, system, integrator, dt, duration, bracket=(0.0, 10.0)):
@@ -188,8 +236,13 @@ def calibrations(args, system, integrator, dt, duration, bracket=(0.0, 10.0)):
         start = time.perf_counter()
         try:
             cal = d.calibrate_contact_damping(cor, target, bracket, rtol=2e-3)
-            out["targets"][str(target)] = {"damping_N_s_per_m": cal.damping, "cor": cal.cor, "relative_error": (cal.cor - target) / target,
-                                           "runs": len(cal.evaluations), "seconds": time.perf_counter() - start}  # fmt: skip
+            out["targets"][str(target)] = {
+                "damping_N_s_per_m": cal.damping,
+                "cor": cal.cor,
+                "relative_error": (cal.cor - target) / target,
+                "runs": len(cal.evaluations),
+                "seconds": time.perf_counter() - start,
+            }
             out["evaluations"] += cal.evaluations
         except InvalidInputError as err:
             out["targets"][str(target)] = {"unreachable": str(err)}
@@ -205,7 +258,9 @@ def part_cor(args, report):
         scheme, dt = case.split(":")
         # Newmark's COR(c) falls faster and is ragged above ~8 N·s/m (docs/dynamics.md).
         bracket = (0.0, 8.0) if scheme == "newmark" else (0.0, 10.0)
-        report["cor_calibration"][case] = calibrations(args, system, schemes[scheme], float(dt), args.duration, bracket=bracket)
+        report["cor_calibration"][case] = calibrations(
+            args, system, schemes[scheme], float(dt), args.duration, bracket=bracket
+        )
 
 
 def impact_extremes(traj, system, args, window):
@@ -220,9 +275,15 @@ def impact_extremes(traj, system, args, window):
     diam = [edge_contact_diameter(x, edges, args.ghat) for x in traj["position_m"][:deepest]]
     vert = [contact_diameter(x, args.ghat) for x in traj["position_m"][:deepest]]
     e = traj["total_energy_J"][:deepest]
-    return {"peak_force_N": float(force.max()), "smoothed_peak_force_N": float(smooth.max()), "force_at_deepest_N": float(force[deepest - 1]),
-            "max_compression_m": touching_com_height(system, args.ghat) - float(z.min()), "max_edge_diameter_m": float(max(diam)),
-            "max_vertex_diameter_m": float(max(vert)), "energy_change_to_deepest_J": float(np.max(np.abs(e - e[0])))}  # fmt: skip
+    return {
+        "peak_force_N": float(force.max()),
+        "smoothed_peak_force_N": float(smooth.max()),
+        "force_at_deepest_N": float(force[deepest - 1]),
+        "max_compression_m": touching_com_height(system, args.ghat) - float(z.min()),
+        "max_edge_diameter_m": float(max(diam)),
+        "max_vertex_diameter_m": float(max(vert)),
+        "energy_change_to_deepest_J": float(np.max(np.abs(e - e[0]))),
+    }
 
 
 def part_diameter(args, report):
@@ -232,8 +293,16 @@ def part_diameter(args, report):
         newmark_dt = math.floor(2.5e-4 * min(1.0, math.sqrt(200 / faces)) / 5e-5 + 1e-9) * 5e-5
         curve = quasi_static_curve(args, (0.5, 1.0, 2.0, 4.0, 7.0, 10.0, 14.0, 20.0, 27.0), faces=faces)
         system = make_system(args, faces=faces)
-        entry = {"faces": int(system.surface_faces().shape[0]), "quasi_static": {"compression_m": curve[:, 0].tolist(), "force_N": curve[:, 1].tolist(),
-                 "vertex_diameter_m": curve[:, 2].tolist(), "edge_diameter_m": curve[:, 3].tolist()}, "drops": []}  # fmt: skip
+        entry = {
+            "faces": int(system.surface_faces().shape[0]),
+            "quasi_static": {
+                "compression_m": curve[:, 0].tolist(),
+                "force_N": curve[:, 1].tolist(),
+                "vertex_diameter_m": curve[:, 2].tolist(),
+                "edge_diameter_m": curve[:, 3].tolist(),
+            },
+            "drops": [],
+        }
         schemes = {"newmark": (d.Newmark(), newmark_dt), "backward_euler": (d.BackwardEuler(), 2.5e-4)}
         for scheme, (integrator, dt) in ((k, schemes[k]) for k in args.diameter_schemes):
             for height in args.heights:
@@ -248,8 +317,12 @@ def part_diameter(args, report):
                     row["qs_edge_diameter_at_peak_m"] = qs(row["peak_force_N"], 3)
                     row["qs_edge_diameter_at_smoothed_peak_m"] = qs(row["smoothed_peak_force_N"], 3)
                     row["qs_vertex_diameter_at_peak_m"] = qs(row["peak_force_N"], 2)
-                    row["qs_edge_diameter_at_compression_m"] = float(np.interp(row["max_compression_m"], curve[:, 0], curve[:, 3]))
-                    row["qs_force_at_compression_N"] = float(np.interp(row["max_compression_m"], curve[:, 0], curve[:, 1]))
+                    row["qs_edge_diameter_at_compression_m"] = float(
+                        np.interp(row["max_compression_m"], curve[:, 0], curve[:, 3])
+                    )
+                    row["qs_force_at_compression_N"] = float(
+                        np.interp(row["max_compression_m"], curve[:, 0], curve[:, 1])
+                    )
                 print(faces, json.dumps(row), flush=True)
                 entry["drops"].append(row)
         out[str(entry["faces"])] = entry
@@ -266,27 +339,60 @@ def observed_orders(values):
 def part_convergence(args, report):
     keys = ("contact_time_s", "peak_force_N", "max_compression_m", "cor")
     system = make_system(args)
-    in_time = [drop(system, args, dt, args.duration, d.BackwardEuler(), damping=args.damping) for dt in (2e-3, 1e-3, 5e-4, 2.5e-4)]
-    in_mesh = [drop(make_system(args, faces=f), args, 5e-4, args.duration, d.BackwardEuler(), damping=args.damping) for f in args.mesh_faces]
+    in_time = [
+        drop(system, args, dt, args.duration, d.BackwardEuler(), damping=args.damping)
+        for dt in (2e-3, 1e-3, 5e-4, 2.5e-4)
+    ]
+    in_mesh = [
+        drop(make_system(args, faces=f), args, 5e-4, args.duration, d.BackwardEuler(), damping=args.damping)
+        for f in args.mesh_faces
+    ]
     for row, f in zip(in_mesh, args.mesh_faces):
         row["faces"] = int(make_system(args, faces=f).surface_faces().shape[0])
     report["convergence"] = {
-        "damping_N_s_per_m": args.damping, "scheme": "BackwardEuler",
-        "time_step": in_time, "time_step_orders": {k: observed_orders([r.get(k, np.nan) for r in in_time]) for k in keys},
-        "mesh_dt_s": 5e-4, "mesh": in_mesh,
-    }  # fmt: skip
+        "damping_N_s_per_m": args.damping,
+        "scheme": "BackwardEuler",
+        "time_step": in_time,
+        "time_step_orders": {k: observed_orders([r.get(k, np.nan) for r in in_time]) for k in keys},
+        "mesh_dt_s": 5e-4,
+        "mesh": in_mesh,
+    }
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--parts", default="energy,model,adiabatic", help=f"comma-separated, of {', '.join(PARTS)}")
     p.add_argument("--faces", type=int, default=200)
-    p.add_argument("--diameter-faces", type=lambda s: [int(v) for v in s.split(",")], default=[200, 500], help="the diameter part's meshes")
-    p.add_argument("--diameter-schemes", type=lambda s: s.split(","), default=["newmark", "backward_euler"], help="the diameter part's schemes")
-    p.add_argument("--mesh-faces", type=lambda s: [int(v) for v in s.split(",")], default=[200, 500, 1000], help="the convergence part's meshes")
-    p.add_argument("--heights", type=lambda s: [float(v) for v in s.split(",")], default=[0.005, 0.01, 0.02, 0.05], help="drop heights [m]")
-    p.add_argument("--cor-cases", type=lambda s: s.split(","), default=["backward_euler:1e-3", "newmark:2.5e-4", "backward_euler:2.5e-4"],
-                   help="the cor part's scheme:Δt [s] cases")
+    p.add_argument(
+        "--diameter-faces",
+        type=lambda s: [int(v) for v in s.split(",")],
+        default=[200, 500],
+        help="the diameter part's meshes",
+    )
+    p.add_argument(
+        "--diameter-schemes",
+        type=lambda s: s.split(","),
+        default=["newmark", "backward_euler"],
+        help="the diameter part's schemes",
+    )
+    p.add_argument(
+        "--mesh-faces",
+        type=lambda s: [int(v) for v in s.split(",")],
+        default=[200, 500, 1000],
+        help="the convergence part's meshes",
+    )
+    p.add_argument(
+        "--heights",
+        type=lambda s: [float(v) for v in s.split(",")],
+        default=[0.005, 0.01, 0.02, 0.05],
+        help="drop heights [m]",
+    )
+    p.add_argument(
+        "--cor-cases",
+        type=lambda s: s.split(","),
+        default=["backward_euler:1e-3", "newmark:2.5e-4", "backward_euler:2.5e-4"],
+        help="the cor part's scheme:Δt [s] cases",
+    )
     p.add_argument("--damping", type=float, default=2.0, help="the convergence part's fixed c [N·s/m]")
     p.add_argument("--radius", type=float, default=0.05)
     p.add_argument("--thickness", type=float, default=0.5e-3)
@@ -313,7 +419,9 @@ def main() -> None:
     merged.setdefault("ball", {}).update({k: v for k, v in vars(args).items() if k not in ("parts", "out")})
     seconds = {**merged.get("seconds", {}), **report.pop("seconds")}
     for key, value in report.items():  # the diameter part's meshes accumulate
-        merged[key] = {**merged[key], **value} if isinstance(value, dict) and isinstance(merged.get(key), dict) else value
+        merged[key] = (
+            {**merged[key], **value} if isinstance(value, dict) and isinstance(merged.get(key), dict) else value
+        )
     merged.update(seconds=seconds, machine="shared 2-core x86-64 VM, heavy load (other jobs)")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(merged, indent=1, default=str))

@@ -59,8 +59,13 @@ PEZZI = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 0.9e-3,
 RADIUS, MASS = 0.13, 0.8
 G = 9.80665
 #: The issue's criteria per impact quantity: ("abs" | "rel", tolerance).
-CRITERIA = {"cor": ("abs", 0.02), "contact_time_s": ("rel", 0.03), "max_compression_m": ("rel", 0.03),
-            "peak_force_N": ("rel", 0.05), "peak_gauge_pressure_Pa": ("rel", 0.01)}  # fmt: skip
+CRITERIA = {
+    "cor": ("abs", 0.02),
+    "contact_time_s": ("rel", 0.03),
+    "max_compression_m": ("rel", 0.03),
+    "peak_force_N": ("rel", 0.05),
+    "peak_gauge_pressure_Pa": ("rel", 0.01),
+}
 #: The cases: drops from rest (lowest point ``height`` [m] above the ground) and the wall throw.
 CASES = {
     "drop-0.25": {"height_m": 0.25},
@@ -69,8 +74,15 @@ CASES = {
     "wall": {"height_m": 0.3, "velocity_m_per_s": (3.0, 0.0, 0.0), "wall_gap_m": 0.4},
 }
 #: Records kept in the cache (per step); the per-vertex positions are left out (48 MB a run at 2k faces).
-KEPT = ("time_s", "com_position_m", "com_velocity_m_per_s", "contact_force_N", "gas_pressure_Pa",
-        "total_energy_J", "newton_iterations")  # fmt: skip
+KEPT = (
+    "time_s",
+    "com_position_m",
+    "com_velocity_m_per_s",
+    "contact_force_N",
+    "gas_pressure_Pa",
+    "total_energy_J",
+    "newton_iterations",
+)
 
 
 def moving_average(time_s, signal, window):
@@ -119,8 +131,11 @@ def impact(time_s, com_height, com_speed, force, pressure, rest_height, peak_cut
     level = 0.02 * float(smooth[window].max())
     on = np.flatnonzero(smooth[window] > level) + i0 - 1
     return {
-        "start_s": float(t_on), "cor": -v_out / v_in, "contact_time_s": float(t_off - t_on),
-        "impact_speed_m_per_s": -v_in, "max_compression_m": float(rest_height - com_height[window].min()),
+        "start_s": float(t_on),
+        "cor": -v_out / v_in,
+        "contact_time_s": float(t_off - t_on),
+        "impact_speed_m_per_s": -v_in,
+        "max_compression_m": float(rest_height - com_height[window].min()),
         "peak_force_N": float(low_pass(time_s, force, peak_cutoff_hz)[window].max()),
         "peak_gauge_pressure_Pa": float(low_pass(time_s, pressure, peak_cutoff_hz)[window].max()),
         "peak_force_raw_N": float(force[window].max()),
@@ -128,7 +143,7 @@ def impact(time_s, com_height, com_speed, force, pressure, rest_height, peak_cut
         "peak_gauge_pressure_raw_Pa": float(pressure[window].max()),
         "peak_gauge_pressure_8ms_Pa": float(moving_average(time_s, pressure, 8e-3)[window].max()),
         "contact_time_force_threshold_s": float(time_s[on[-1]] - time_s[on[0]]) if on.size else None,
-    }  # fmt: skip
+    }
 
 
 def planes_for(case, damping, friction, barrier=True, slip_tolerance=1e-4):
@@ -151,8 +166,13 @@ def duration_for(case):
 
 def build_system(faces, case, damping, friction, slip_tolerance=1e-4):
     shell = Shell(mesh=ShellMesh.sphere(RADIUS, faces, pole_refinement=1.0), thickness=PEZZI["thickness"])
-    return d.shell_system(shell, ShellProperties(**PEZZI), gas="adiabatic", mass=MASS,
-                          planes=planes_for(case, damping, friction, slip_tolerance=slip_tolerance))  # fmt: skip
+    return d.shell_system(
+        shell,
+        ShellProperties(**PEZZI),
+        gas="adiabatic",
+        mass=MASS,
+        planes=planes_for(case, damping, friction, slip_tolerance=slip_tolerance),
+    )
 
 
 def cache_path(cache, case, faces, integrator, dt, damping, friction, slip_velocity):
@@ -174,8 +194,15 @@ def reference_run(case, faces, integrator, dt, damping, friction, slip_velocity,
     state = d.drop_state(system, system.inflated, c["height_m"], velocity=c.get("velocity_m_per_s"))
     start = time.perf_counter()
     try:
-        r = d.simulate(system, state, dt, duration_for(case), integrator=getattr(d, integrator)(),
-                       minimiser=d.SparseNewton(), progress=False).records  # fmt: skip
+        r = d.simulate(
+            system,
+            state,
+            dt,
+            duration_for(case),
+            integrator=getattr(d, integrator)(),
+            minimiser=d.SparseNewton(),
+            progress=False,
+        ).records
         out = {k: np.asarray(r[k]) for k in KEPT}
     except Exception as error:  # noqa: BLE001 - a failed reference is a result to report, not a crash
         out = {"failed": np.asarray(str(error).splitlines()[0])}
@@ -200,9 +227,15 @@ def realtime_run(shell, case, duration):
         forces.append(f.plane_forces_N.copy())
     wall = time.perf_counter() - t
     a = np.array(rows)
-    return {"time_s": a[:, 0], "com_position_m": a[:, 1:4], "com_velocity_m_per_s": a[:, 4:7],
-            "contact_force_N": np.array(forces), "gas_pressure_Pa": a[:, 7], "total_energy_J": a[:, 8],
-            "wall_s": wall}  # fmt: skip
+    return {
+        "time_s": a[:, 0],
+        "com_position_m": a[:, 1:4],
+        "com_velocity_m_per_s": a[:, 4:7],
+        "contact_force_N": np.array(forces),
+        "gas_pressure_Pa": a[:, 7],
+        "total_energy_J": a[:, 8],
+        "wall_s": wall,
+    }
 
 
 def case_impacts(case, record, system, peak_cutoff_hz):
@@ -211,15 +244,23 @@ def case_impacts(case, record, system, peak_cutoff_hz):
     x0 = np.asarray(system.inflated).reshape(-1, 3)
     com0 = np.asarray(system.centre_of_mass(system.inflated))
     out, after = {}, 0.0
-    for p in ([1, 0] if len(planes) > 1 else [0]):
+    for p in [1, 0] if len(planes) > 1 else [0]:
         n = np.asarray(planes[p].normal, dtype=float)
         point = np.asarray(planes[p].point, dtype=float)
         rest_height = float(np.max((com0 - x0) @ n))  # the COM's height over the free shape's lowest point along n
         height = (record["com_position_m"] - point) @ n
         speed = record["com_velocity_m_per_s"] @ n
         force = record["contact_force_N"][:, p, :] @ n
-        m = impact(record["time_s"], height, speed, force, record["gas_pressure_Pa"], rest_height,
-                   peak_cutoff_hz=peak_cutoff_hz, after=after)  # fmt: skip
+        m = impact(
+            record["time_s"],
+            height,
+            speed,
+            force,
+            record["gas_pressure_Pa"],
+            rest_height,
+            peak_cutoff_hz=peak_cutoff_hz,
+            after=after,
+        )
         out[planes[p].name] = m
         after = m["start_s"] + m["contact_time_s"]
     return out
@@ -245,8 +286,17 @@ def static_force(ball):
     return float(-ball.contact_forces()[1][2])
 
 
-def poke(faces, depth=0.02, radius=0.008, friction=0.0, stiffness_factor=30.0, stages=40, tolerance=1e-3,
-         max_blocks=16, cache=None):
+def poke(
+    faces,
+    depth=0.02,
+    radius=0.008,
+    friction=0.0,
+    stiffness_factor=30.0,
+    stages=40,
+    tolerance=1e-3,
+    max_blocks=16,
+    cache=None,
+):
     """Static poke force [N] at ``depth`` [m]: shell3d.Indentation (quasi-static, barrier, no
     gravity) and the realtime ball (penalty) relaxed under a sphere collider whose lowest point is
     at the engine's solved indenter height above the ground, same mesh and gas.
@@ -269,8 +319,11 @@ def poke(faces, depth=0.02, radius=0.008, friction=0.0, stiffness_factor=30.0, s
     else:
         sim = s3.Indentation(shell, props, gas="isothermal", indenter_radius=radius, ground=True)
         state = sim.solve(depth=depth)
-        ref = {"force_N": float(state.observables()["force"]), "activation_distance_m": float(sim.activation_distance),
-               "indenter_bottom_m": float(state.indenter_center[2] - radius)}  # above the ground (z = 0) [m]
+        ref = {
+            "force_N": float(state.observables()["force"]),
+            "activation_distance_m": float(sim.activation_distance),
+            "indenter_bottom_m": float(state.indenter_center[2] - radius),
+        }  # above the ground (z = 0) [m]
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(json.dumps(ref))
@@ -282,12 +335,14 @@ def poke(faces, depth=0.02, radius=0.008, friction=0.0, stiffness_factor=30.0, s
     # ``stiffness_factor`` × it is within 0.3 % of that limit, at a smaller Δt.
     ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], friction=friction, name="ground")
     probe = rt.RealtimeShell.from_system(system, planes=[ground], gravity=0.0)
-    ball = rt.RealtimeShell.from_system(system, planes=[ground], gravity=0.0,
-                                        contact_stiffness=stiffness_factor * float(probe.k_contact.max()))  # fmt: skip
+    ball = rt.RealtimeShell.from_system(
+        system, planes=[ground], gravity=0.0, contact_stiffness=stiffness_factor * float(probe.k_contact.max())
+    )
     ball.drop(0.0)
     top = int(np.argmax(ball.x[:, 2]))
     touch = np.array([ball.x[top, 0], ball.x[top, 1], ball.x[top, 2] + radius])
     travel = float(ball.x[top, 2] - ref["indenter_bottom_m"])  # into the free shape [m]
+
     def relax_under_the_sphere():
         # The engine pins the shell's horizontal rigid modes; here the shell is shifted back under
         # the sphere after each relaxation (a rigid shift: no force changes), as those pins hold it.
@@ -308,22 +363,44 @@ def poke(faces, depth=0.02, radius=0.008, friction=0.0, stiffness_factor=30.0, s
         if abs(force - previous) < tolerance * abs(force):
             break
     com, _ = ball.com()
-    return {"reference_force_N": ref["force_N"], "realtime_force_N": force, "depth_m": depth,
-            "settle_relaxations": settles, "last_block_change_N": float(force - previous),
-            "travel_into_free_shape_m": travel, "reference_activation_distance_m": ref["activation_distance_m"],
-            "realtime_com_offset_m": float(np.hypot(com[0] - touch[0], com[1] - touch[1])),
-            "contact_stiffness_N_per_m": float(ball.k_contact.max()), "realtime_dt_s": ball.stable.dt_s,
-            "ground_friction": friction, "stiffness_factor": stiffness_factor}  # fmt: skip
+    return {
+        "reference_force_N": ref["force_N"],
+        "realtime_force_N": force,
+        "depth_m": depth,
+        "settle_relaxations": settles,
+        "last_block_change_N": float(force - previous),
+        "travel_into_free_shape_m": travel,
+        "reference_activation_distance_m": ref["activation_distance_m"],
+        "realtime_com_offset_m": float(np.hypot(com[0] - touch[0], com[1] - touch[1])),
+        "contact_stiffness_N_per_m": float(ball.k_contact.max()),
+        "realtime_dt_s": ball.stable.dt_s,
+        "ground_friction": friction,
+        "stiffness_factor": stiffness_factor,
+    }
 
 
 def row(reference, realtime, kind, tol, **extra):
     """One table row: the error (``kind`` "abs" or "rel") against ``tol``; None where pending."""
     if reference is None or realtime is None:
-        return {"reference": reference, "realtime": realtime, "error": None, "error_kind": kind, "tolerance": tol,
-                "ok": None, **extra}  # fmt: skip
+        return {
+            "reference": reference,
+            "realtime": realtime,
+            "error": None,
+            "error_kind": kind,
+            "tolerance": tol,
+            "ok": None,
+            **extra,
+        }
     err = realtime - reference if kind == "abs" else (realtime - reference) / reference
-    return {"reference": reference, "realtime": realtime, "error": err, "error_kind": kind, "tolerance": tol,
-            "ok": bool(abs(err) <= tol), **extra}  # fmt: skip
+    return {
+        "reference": reference,
+        "realtime": realtime,
+        "error": err,
+        "error_kind": kind,
+        "tolerance": tol,
+        "ok": bool(abs(err) <= tol),
+        **extra,
+    }
 
 
 def print_table(rows):
@@ -346,10 +423,14 @@ def pick(impacts, plane, key):
 
 def cached_impacts(case, system, args, dt):
     """The reference's impacts at ``dt`` from the cache: a dict, {"pending": path} or {"failed": why}."""
-    path = cache_path(args.cache, case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity)
+    path = cache_path(
+        args.cache, case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity
+    )
     if not path.is_file():
         return {"pending": str(path)}
-    ref = reference_run(case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity, args.cache)
+    ref = reference_run(
+        case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity, args.cache
+    )
     if "failed" in ref:
         return {"failed": str(ref["failed"]), "wall_s": float(ref["wall_s"])}
     return {**case_impacts(case, ref, system, args.peak_cutoff), "wall_s": float(ref["wall_s"])}
@@ -358,8 +439,13 @@ def cached_impacts(case, system, args, dt):
 def realtime_impacts(system, case, args, **options):
     barrier = args.realtime_contact == "barrier"
     # a blow-up in a fidelity run is reported, not stepped around by redone frames
-    ball = rt.RealtimeShell.from_system(system, planes=planes_for(case, args.damping, args.friction, barrier=barrier),
-                                        slip_velocity=args.slip_velocity, max_refinements=0, **options)  # fmt: skip
+    ball = rt.RealtimeShell.from_system(
+        system,
+        planes=planes_for(case, args.damping, args.friction, barrier=barrier),
+        slip_velocity=args.slip_velocity,
+        max_refinements=0,
+        **options,
+    )
     real = realtime_run(ball, case, duration_for(case))
     return {**case_impacts(case, real, system, args.peak_cutoff), "dt_s": ball.stable.dt_s, "wall_s": real["wall_s"]}
 
@@ -369,7 +455,8 @@ def poke_row(args, result):
     p = poke(args.faces, cache=args.cache)
     # The penalty's own convergence: the force with springs 3× softer and 3× stiffer.
     p["realtime_force_by_stiffness_factor_N"] = {
-        f"{f:g}": poke(args.faces, cache=args.cache, stiffness_factor=f)["realtime_force_N"] for f in (10.0, 100.0)}
+        f"{f:g}": poke(args.faces, cache=args.cache, stiffness_factor=f)["realtime_force_N"] for f in (10.0, 100.0)
+    }
     result["poke"] = p
     return row(p["reference_force_N"], p["realtime_force_N"], "rel", 0.02)
 
@@ -378,13 +465,25 @@ def reference_convergence(args):
     """The reference's COR, contact time, compression and 60 Hz peaks per case at each of
     ``args.convergence``'s steps, and their spread [%] (max − min over the mean)."""
     keys = ("cor", "contact_time_s", "max_compression_m", "peak_force_N", "peak_gauge_pressure_Pa")
-    out = {"integrator": args.integrator, "slip_velocity_m_per_s": args.slip_velocity, "steps_s": args.convergence,
-           "cases": {}}  # fmt: skip
-    print(f"{'case, impact':<22} {'quantity':<24} " + " ".join(f"{dt * 1e3:>9.4g} ms" for dt in args.convergence) + "  spread")
+    out = {
+        "integrator": args.integrator,
+        "slip_velocity_m_per_s": args.slip_velocity,
+        "steps_s": args.convergence,
+        "cases": {},
+    }
+    print(
+        f"{'case, impact':<22} {'quantity':<24} "
+        + " ".join(f"{dt * 1e3:>9.4g} ms" for dt in args.convergence)
+        + "  spread"
+    )
     for case in args.cases:
         system = build_system(args.faces, case, args.damping, args.friction)
-        runs = {dt: reference_run(case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity,
-                                  args.cache) for dt in args.convergence}  # fmt: skip
+        runs = {
+            dt: reference_run(
+                case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity, args.cache
+            )
+            for dt in args.convergence
+        }
         impacts = {dt: case_impacts(case, r, system, args.peak_cutoff) for dt, r in runs.items() if "failed" not in r}
         out["cases"][case] = {f"{dt:g}": m for dt, m in impacts.items()}
         for plane in next(iter(impacts.values()), {}):
@@ -392,7 +491,11 @@ def reference_convergence(args):
                 values = np.array([impacts[dt][plane][key] for dt in impacts])
                 spread = float(np.ptp(values) / abs(values.mean()))
                 out["cases"][case][f"{plane} {key} spread"] = spread
-                print(f"{case + ', ' + plane:<22} {key:<24} " + " ".join(f"{v:>12.5g}" for v in values) + f"  {100 * spread:5.2f} %")
+                print(
+                    f"{case + ', ' + plane:<22} {key:<24} "
+                    + " ".join(f"{v:>12.5g}" for v in values)
+                    + f"  {100 * spread:5.2f} %"
+                )
     args.convergence_json.write_text(json.dumps(out, indent=1))
     print(f"wrote {args.convergence_json}")
 
@@ -403,27 +506,49 @@ def main():
     parser.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
     parser.add_argument("--integrator", default="TRBDF2", help="a shelljax.dynamics integrator class name")
     parser.add_argument("--dt", type=float, default=6.25e-5, help="the reference's time step [s]")
-    parser.add_argument("--coarse-dt", type=float, default=1.25e-4,
-                        help="a coarser reference step [s], for the reference's own Δt-convergence (0: none)")
+    parser.add_argument(
+        "--coarse-dt",
+        type=float,
+        default=1.25e-4,
+        help="a coarser reference step [s], for the reference's own Δt-convergence (0: none)",
+    )
     parser.add_argument("--damping", type=float, default=0.0, help="contact dashpot c [N·s/m]")
     parser.add_argument("--friction", type=float, default=0.5)
-    parser.add_argument("--slip-velocity", type=float, default=0.1,
-                        help="both engines' friction regularisation [m/s]: the realtime's v_ε, the reference's "
-                             "slip tolerance ε = v_ε Δt (configs' ε = 0.1 mm at Δt = 1 ms)")
-    parser.add_argument("--realtime-contact", choices=("barrier", "spring"), default="barrier",
-                        help="the realtime's planes: the reference's barrier (continued by the contact spring where it "
-                             "gets stiffer) or the plain spring behind the plane")
-    parser.add_argument("--peak-cutoff", type=float, default=60.0,
-                        help="low-pass cut-off for the peak force and pressure [Hz] (docs/realtime.md: below the "
-                             "ball's breathing mode and the vertices' chatter, which neither engine converges)")
+    parser.add_argument(
+        "--slip-velocity",
+        type=float,
+        default=0.1,
+        help="both engines' friction regularisation [m/s]: the realtime's v_ε, the reference's "
+        "slip tolerance ε = v_ε Δt (configs' ε = 0.1 mm at Δt = 1 ms)",
+    )
+    parser.add_argument(
+        "--realtime-contact",
+        choices=("barrier", "spring"),
+        default="barrier",
+        help="the realtime's planes: the reference's barrier (continued by the contact spring where it "
+        "gets stiffer) or the plain spring behind the plane",
+    )
+    parser.add_argument(
+        "--peak-cutoff",
+        type=float,
+        default=60.0,
+        help="low-pass cut-off for the peak force and pressure [Hz] (docs/realtime.md: below the "
+        "ball's breathing mode and the vertices' chatter, which neither engine converges)",
+    )
     parser.add_argument("--poke", action="store_true", help="also the static poke force (≈ 2 min)")
     parser.add_argument("--cache", type=Path, default=ROOT / "runs" / ".cache" / "realtime-fidelity")
     parser.add_argument("--reference-only", action="store_true", help="only fill the reference cache (slow)")
     parser.add_argument("--poke-only", action="store_true", help="only the static poke, into the existing --json")
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "bench" / "realtime-fidelity.json")
-    parser.add_argument("--convergence", type=float, nargs="+", default=None, metavar="DT",
-                        help="only the reference's own convergence over these steps [s] (e.g. 1e-3 5e-4 2.5e-4, "
-                             "#48 part 1), into --convergence-json; runs the references that are not cached")
+    parser.add_argument(
+        "--convergence",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="DT",
+        help="only the reference's own convergence over these steps [s] (e.g. 1e-3 5e-4 2.5e-4, "
+        "#48 part 1), into --convergence-json; runs the references that are not cached",
+    )
     parser.add_argument("--convergence-json", type=Path, default=ROOT / "docs" / "bench" / "reference-convergence.json")
     args = parser.parse_args()
     steps = [args.dt] + ([args.coarse_dt] if args.coarse_dt else [])
@@ -432,10 +557,15 @@ def main():
         for dt in steps:
             for case in args.cases:
                 t = time.perf_counter()
-                r = reference_run(case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity, args.cache)
+                r = reference_run(
+                    case, args.faces, args.integrator, dt, args.damping, args.friction, args.slip_velocity, args.cache
+                )
                 status = f"failed: {r['failed']}" if "failed" in r else "ok"
-                print(f"{time.strftime('%H:%M:%S')} {case} {args.integrator} dt {dt:g} s: {status} "
-                      f"({time.perf_counter() - t:.0f} s)", flush=True)  # fmt: skip
+                print(
+                    f"{time.strftime('%H:%M:%S')} {case} {args.integrator} dt {dt:g} s: {status} "
+                    f"({time.perf_counter() - t:.0f} s)",
+                    flush=True,
+                )
         if args.poke:
             print(f"{time.strftime('%H:%M:%S')} poke reference {poke(args.faces, cache=args.cache)}", flush=True)
         return
@@ -451,10 +581,17 @@ def main():
         print(f"wrote {args.json}")
         return
 
-    result = {"faces": None, "integrator": args.integrator, "reference_dt_s": args.dt, "coarse_dt_s": args.coarse_dt,
-              "damping_N_s_per_m": args.damping, "friction": args.friction, "slip_velocity_m_per_s": args.slip_velocity,
-              "peak_cutoff_Hz": args.peak_cutoff,
-              "cases": {}}  # fmt: skip
+    result = {
+        "faces": None,
+        "integrator": args.integrator,
+        "reference_dt_s": args.dt,
+        "coarse_dt_s": args.coarse_dt,
+        "damping_N_s_per_m": args.damping,
+        "friction": args.friction,
+        "slip_velocity_m_per_s": args.slip_velocity,
+        "peak_cutoff_Hz": args.peak_cutoff,
+        "cases": {},
+    }
     rows = {}
     for case in args.cases:
         system = build_system(args.faces, case, args.damping, args.friction)
@@ -465,30 +602,52 @@ def main():
         probe = rt.RealtimeShell.from_system(system)
         stiff = realtime_impacts(system, case, args, contact_stiffness=4.0 * float(np.median(probe.k_contact)))
         refs = {f"{dt:g}": cached_impacts(case, system, args, dt) for dt in steps}
-        result["cases"][case] = {"realtime": real, "realtime_quarter_dt": fine, "realtime_stiff_contact": stiff,
-                                 "reference": refs}  # fmt: skip
+        result["cases"][case] = {
+            "realtime": real,
+            "realtime_quarter_dt": fine,
+            "realtime_stiff_contact": stiff,
+            "reference": refs,
+        }
         main_ref = refs[f"{args.dt:g}"]
         coarse = refs.get(f"{args.coarse_dt:g}", {})
         for plane in ("wall", "ground") if "wall_gap_m" in CASES[case] else ("ground",):
             for key, (kind, tol) in CRITERIA.items():
-                rows[f"{case} {plane} {key}"] = row(pick(main_ref, plane, key), real[plane][key], kind, tol,
-                                                    reference_coarse=pick(coarse, plane, key),
-                                                    realtime_quarter_dt=fine[plane][key],
-                                                    realtime_stiff=stiff[plane][key])  # fmt: skip
+                rows[f"{case} {plane} {key}"] = row(
+                    pick(main_ref, plane, key),
+                    real[plane][key],
+                    kind,
+                    tol,
+                    reference_coarse=pick(coarse, plane, key),
+                    realtime_quarter_dt=fine[plane][key],
+                    realtime_stiff=stiff[plane][key],
+                )
     cors = [m["cor"] for e in result["cases"].values() for m in e["realtime"].values() if isinstance(m, dict)]
     if args.damping == 0.0:
         rows["zero-damping COR (lowest of the impacts)"] = {
-            "reference": None, "realtime": min(cors), "error": None, "error_kind": "≥", "tolerance": 0.97,
-            "ok": bool(min(cors) >= 0.97)}  # fmt: skip
+            "reference": None,
+            "realtime": min(cors),
+            "error": None,
+            "error_kind": "≥",
+            "tolerance": 0.97,
+            "ok": bool(min(cors) >= 0.97),
+        }
     drift, spread = free_flight_drift(rt.RealtimeShell.from_system(build_system(args.faces, "drop-0.5", 0.0, 0.0)))
-    rows["free-flight energy drift [1/s]"] = {"reference": None, "realtime": drift, "error": None, "error_kind": "<",
-                                              "tolerance": 0.005, "ok": bool(abs(drift) < 0.005),
-                                              "peak_to_peak_fraction": spread}  # fmt: skip
+    rows["free-flight energy drift [1/s]"] = {
+        "reference": None,
+        "realtime": drift,
+        "error": None,
+        "error_kind": "<",
+        "tolerance": 0.005,
+        "ok": bool(abs(drift) < 0.005),
+        "peak_to_peak_fraction": spread,
+    }
     if args.poke:
         rows["static poke force [N]"] = poke_row(args, result)
     result["comparison"] = rows
-    print(f"{result['faces']}-face ball; reference {args.integrator} at {args.dt:g} s (and {args.coarse_dt:g} s); "
-          f"peak force and pressure low-passed at {args.peak_cutoff:g} Hz")  # fmt: skip
+    print(
+        f"{result['faces']}-face ball; reference {args.integrator} at {args.dt:g} s (and {args.coarse_dt:g} s); "
+        f"peak force and pressure low-passed at {args.peak_cutoff:g} Hz"
+    )
     print_table(rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=1))

@@ -71,7 +71,13 @@ def inflation(n_faces):
     lam = (float(model.volume(jnp.asarray(res.value))) / v0) ** (1 / 3)
     err_inc = 2 * mu * h * (1 / lam - 1 / lam**7) / p_inc - 1
     edge = np.sqrt(8 * np.pi / (np.sqrt(3) * mesh.n_faces))
-    return dict(faces=mesh.n_faces, edge=edge, small_strain=err_small, exact_lambda_1p3=err_large, incompressible_lambda_1p01=err_inc)
+    return dict(
+        faces=mesh.n_faces,
+        edge=edge,
+        small_strain=err_small,
+        exact_lambda_1p3=err_large,
+        incompressible_lambda_1p01=err_inc,
+    )
 
 
 def stiffness(pole_spacing, taus):
@@ -112,9 +118,15 @@ def main(argv=None):
     print("\n1. Inflation of a Neo-Hookean sphere (relative errors of pressure)")
     print(f"{'faces':>7} {'edge/R':>8} {'small-strain':>13} {'exact λ=1.3':>12} {'incompr. λ=1.01':>16} {'rate':>6}")
     for i, r in enumerate(infl):
-        rt = rate(infl[i - 1]["exact_lambda_1p3"], r["exact_lambda_1p3"], infl[i - 1]["edge"], r["edge"]) if i else float("nan")
+        rt = (
+            rate(infl[i - 1]["exact_lambda_1p3"], r["exact_lambda_1p3"], infl[i - 1]["edge"], r["edge"])
+            if i
+            else float("nan")
+        )
         r["rate_exact"] = rt
-        print(f"{r['faces']:>7} {r['edge']:>8.4f} {r['small_strain']:>13.2e} {r['exact_lambda_1p3']:>12.2e} {r['incompressible_lambda_1p01']:>16.2e} {rt:>6.2f}")
+        print(
+            f"{r['faces']:>7} {r['edge']:>8.4f} {r['small_strain']:>13.2e} {r['exact_lambda_1p3']:>12.2e} {r['incompressible_lambda_1p01']:>16.2e} {rt:>6.2f}"
+        )
     report["inflation"] = infl
     taus = (0.0, 0.1, 1.0, 10.0, 100.0)
     spacings = (8e-4, 4e-4) if args.quick else (8e-4, 4e-4, 2e-4)
@@ -132,7 +144,13 @@ def main(argv=None):
     report["point_load"] = {"rows": stiff, "rates_last_pair": rates}
     # 3. Sealed gas and balance on a ball indentation.
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=1000 if args.quick else 3000)
-    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4), gas="isothermal", indenter_radius=0.008, progress=False)
+    sim = s3.Indentation(
+        ball,
+        ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4),
+        gas="isothermal",
+        indenter_radius=0.008,
+        progress=False,
+    )
     rows = []
     p0v0 = (ATMOSPHERIC_PRESSURE + 1300.0) * sim.reference_volume
     print("\n3. Sealed isothermal ball (R = 0.13 m, h = 0.9 mm, E = 2.34 MPa, P_g = 1300 Pa)")

@@ -60,18 +60,28 @@ def whole(low: int = 0, high: int | None = None, *, hint: str = "") -> Callable[
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number. Fix: write one {_bounds(low, high)}"
-                                             f"{hint}") from None
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not a whole number. Fix: write one {_bounds(low, high)}{hint}"
+            ) from None
         if value < low or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"{value} is out of range. Fix: give a whole number {_bounds(low, high)}{hint}")
+            raise argparse.ArgumentTypeError(
+                f"{value} is out of range. Fix: give a whole number {_bounds(low, high)}{hint}"
+            )
         return value
 
     parse.__name__ = "whole number"
     return parse
 
 
-def real(low: float | None = None, high: float | None = None, *, low_open: bool = False, high_open: bool = False,
-         unit: str = "", hint: str = "") -> Callable[[str], float]:
+def real(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+    hint: str = "",
+) -> Callable[[str], float]:
     """An argparse ``type``: a finite number from ``low`` to ``high`` (either bound left out with
     ``low_open`` / ``high_open``), in ``unit`` (named in the message); ``hint`` ends the fix."""
     suffix = f" {unit}" if unit else ""
@@ -80,12 +90,16 @@ def real(low: float | None = None, high: float | None = None, *, low_open: bool 
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number. Fix: write a plain decimal number{hint}") from None
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not a number. Fix: write a plain decimal number{hint}"
+            ) from None
         below = low is not None and (value <= low if low_open else value < low)
         above = high is not None and (value >= high if high_open else value > high)
         if not math.isfinite(value) or below or above:
-            raise argparse.ArgumentTypeError(f"{shown(value)}{suffix} is out of range. Fix: give a number "
-                                             f"{_bounds(low, high, low_open, high_open)}{suffix}{hint}")
+            raise argparse.ArgumentTypeError(
+                f"{shown(value)}{suffix} is out of range. Fix: give a number "
+                f"{_bounds(low, high, low_open, high_open)}{suffix}{hint}"
+            )
         return value
 
     parse.__name__ = "number"

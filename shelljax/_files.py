@@ -31,11 +31,15 @@ def _check_creatable(path: Path, option: str) -> None:
     """Refuse ``path`` when the directories above it cannot be created or written to."""
     existing = _nearest_existing(path.parent)
     if not existing.is_dir():
-        raise InvalidInputError(f"{option} {path}: {existing} is a file, so nothing can be created under it. Fix: "
-                                "choose a path whose parent is a directory")
+        raise InvalidInputError(
+            f"{option} {path}: {existing} is a file, so nothing can be created under it. Fix: "
+            "choose a path whose parent is a directory"
+        )
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{option} {path}: the directory {existing} is not writable. Fix: choose a path in a "
-                                "directory you can write to")
+        raise InvalidInputError(
+            f"{option} {path}: the directory {existing} is not writable. Fix: choose a path in a "
+            "directory you can write to"
+        )
 
 
 def check_output_file(path: str | Path, option: str, *, example: str = "result") -> Path:
@@ -49,10 +53,13 @@ def check_output_file(path: str | Path, option: str, *, example: str = "result")
     named_a_directory = str(path).endswith(("/", os.sep))
     path = Path(path)
     if named_a_directory or path.is_dir():
-        raise InvalidInputError(f"{option} {path}: is a directory, not a file. Fix: name a file, e.g. "
-                                f"{option} {path / example}")
+        raise InvalidInputError(
+            f"{option} {path}: is a directory, not a file. Fix: name a file, e.g. {option} {path / example}"
+        )
     if path.exists() and not os.access(path, os.W_OK):
-        raise InvalidInputError(f"{option} {path}: the file is not writable. Fix: choose another path, or make it writable")
+        raise InvalidInputError(
+            f"{option} {path}: the file is not writable. Fix: choose another path, or make it writable"
+        )
     _check_creatable(path, option)
     return path
 
@@ -67,10 +74,14 @@ def check_output_dir(path: str | Path, option: str) -> Path:
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise InvalidInputError(f"{option} {path}: exists and is not a directory. Fix: name a new or existing directory, "
-                                f"e.g. {option} {path.with_suffix('')}-out/")
+        raise InvalidInputError(
+            f"{option} {path}: exists and is not a directory. Fix: name a new or existing directory, "
+            f"e.g. {option} {path.with_suffix('')}-out/"
+        )
     if path.is_dir() and not os.access(path, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{option} {path}: the directory is not writable. Fix: choose a directory you can write to")
+        raise InvalidInputError(
+            f"{option} {path}: the directory is not writable. Fix: choose a directory you can write to"
+        )
     _check_creatable(path, option)
     return path
 

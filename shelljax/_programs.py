@@ -45,7 +45,9 @@ SHIPPED_DIR = PACKAGE_DIR / "data" / "programs"
 SUFFIX = ".jaxexport"
 # jaxlib's CPU linear-algebra kernels the fit calls (QR for Levenberg–Marquardt's damped step);
 # jax.export refuses those not on its stable list, which the key's jaxlib version makes safe here
-_LAPACK_KERNELS = tuple(f"lapack_{name}_ffi" for name in ("dormqr", "dorgqr", "dgeqrf", "dgetrf", "dpotrf", "dtrsm", "dsyevd", "dgesdd"))
+_LAPACK_KERNELS = tuple(
+    f"lapack_{name}_ffi" for name in ("dormqr", "dorgqr", "dgeqrf", "dgetrf", "dpotrf", "dtrsm", "dsyevd", "dgesdd")
+)
 _LOADED: dict[str, Callable] = {}
 
 
@@ -76,7 +78,13 @@ def program_key(name: str, args: tuple, static: dict) -> str:
     with np.printoptions(threshold=sys.maxsize):  # a static array's repr in full, never "..."
         structure = str(treedef)
     versions = [source_fingerprint(), jax.__version__, jaxlib.__version__, jax.export.default_export_platform()]
-    parts = [name, *versions, structure, *map(_leaf_signature, leaves), *(f"{k}={v!r}" for k, v in sorted(static.items()))]
+    parts = [
+        name,
+        *versions,
+        structure,
+        *map(_leaf_signature, leaves),
+        *(f"{k}={v!r}" for k, v in sorted(static.items())),
+    ]
     return f"{name}-{hashlib.sha256(chr(0).join(parts).encode()).hexdigest()[:32]}"
 
 
@@ -103,7 +111,10 @@ def _write(key: str, exported: jax.export.Exported) -> None:
             handle.write(exported.serialize())
         os.replace(handle.name, directory / (key + SUFFIX))
     except OSError as error:  # a read-only cache costs the next process a trace, not this run
-        warnings.warn(f"{directory}: cannot keep the traced program {key} ({error}); the next process traces it again", stacklevel=3)
+        warnings.warn(
+            f"{directory}: cannot keep the traced program {key} ({error}); the next process traces it again",
+            stacklevel=3,
+        )
 
 
 def persistent_jit(fn: Callable, *, cpu_compiler_options: dict | None = None) -> Callable:
@@ -171,8 +182,9 @@ def _load_or_export(fn: Callable, key: str, args: tuple, static: dict, options: 
 
         try:
             unchecked = [jax.export.DisabledSafetyCheck.custom_call(kernel) for kernel in _LAPACK_KERNELS]
-            exported = jax.export.export(jax.jit(flat), platforms=[jax.export.default_export_platform()],
-                                         disabled_checks=unchecked)(*leaves)  # fmt: skip
+            exported = jax.export.export(
+                jax.jit(flat), platforms=[jax.export.default_export_platform()], disabled_checks=unchecked
+            )(*leaves)
         except Exception:  # not exportable: the plain trace raises the function's own errors
             return jax.jit(flat, compiler_options=options)
         _write(key, exported)

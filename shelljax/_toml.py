@@ -22,7 +22,9 @@ REQUIRED: Any = object()
 _NO_VALUE = object()
 
 
-def read_toml(path: str | Path, what: str, *, fix_missing: str, fix_syntax: str = "correct the syntax") -> dict[str, Any]:
+def read_toml(
+    path: str | Path, what: str, *, fix_missing: str, fix_syntax: str = "correct the syntax"
+) -> dict[str, Any]:
     """The TOML document at ``path`` (``what``: "session file", "rig file", ... for the messages).
 
     Raises InvalidInputError when there is no such file (fix: ``fix_missing``), when it is not
@@ -62,7 +64,9 @@ class TomlReader:
     def fail(self, field: str, problem: str, fix: str | None = None, *, value: Any = _NO_VALUE) -> InvalidInputError:
         """The error for ``field`` (its ``value`` when given); the caller raises it."""
         shown = "" if value is _NO_VALUE else f" = {value!r}"
-        return InvalidInputError(f"{self.path}: field '{field}'{shown}: {problem}. Fix: {fix or self.fix or 'correct it'}")
+        return InvalidInputError(
+            f"{self.path}: field '{field}'{shown}: {problem}. Fix: {fix or self.fix or 'correct it'}"
+        )
 
     def _fix(self, fix: str | None, own: str) -> str:
         return fix or self.fix or own
@@ -71,11 +75,21 @@ class TomlReader:
         """Refuse keys of ``table`` outside ``allowed`` (a misspelt key would otherwise be ignored)."""
         unknown = sorted(set(table) - set(allowed))
         if unknown:
-            raise self.fail(prefix + unknown[0], f"unknown key (unknown keys: {', '.join(prefix + k for k in unknown)})",
-                            f"remove it or fix its spelling; allowed keys here: {', '.join(sorted(allowed))}")  # fmt: skip
+            raise self.fail(
+                prefix + unknown[0],
+                f"unknown key (unknown keys: {', '.join(prefix + k for k in unknown)})",
+                f"remove it or fix its spelling; allowed keys here: {', '.join(sorted(allowed))}",
+            )
 
-    def table(self, data: Mapping, name: str, allowed: Collection[str] | None = None, *, required: bool = False,
-              prefix: str = "") -> dict | None:  # fmt: skip
+    def table(
+        self,
+        data: Mapping,
+        name: str,
+        allowed: Collection[str] | None = None,
+        *,
+        required: bool = False,
+        prefix: str = "",
+    ) -> dict | None:
         """The table ``data[name]`` with only ``allowed`` keys (None: any), or None when absent and not required."""
         if name not in data:
             if required:
@@ -84,13 +98,24 @@ class TomlReader:
             return None
         table = data[name]
         if not isinstance(table, dict):
-            raise self.fail(prefix + name, f"expected a table, got {table!r}", self._fix(None, f"write it as [{prefix + name}]"))
+            raise self.fail(
+                prefix + name, f"expected a table, got {table!r}", self._fix(None, f"write it as [{prefix + name}]")
+            )
         if allowed is not None:
             self.no_unknown_keys(table, allowed, prefix=f"{prefix}{name}.")
         return table
 
-    def number(self, table: Mapping, key: str, prefix: str = "", *, default: Any = REQUIRED, positive: bool = False,
-               nonnegative: bool = False, fix: str | None = None) -> float | None:  # fmt: skip
+    def number(
+        self,
+        table: Mapping,
+        key: str,
+        prefix: str = "",
+        *,
+        default: Any = REQUIRED,
+        positive: bool = False,
+        nonnegative: bool = False,
+        fix: str | None = None,
+    ) -> float | None:
         """A finite number as float (``default`` when absent, REQUIRED: it must be there)."""
         field = prefix + key
         if key not in table:
@@ -108,8 +133,16 @@ class TomlReader:
             raise self.fail(field, f"value {value!r} must be non-negative", self._fix(fix, "write a number ≥ 0"))
         return float(value)
 
-    def integer(self, table: Mapping, key: str, prefix: str = "", *, default: Any = REQUIRED, minimum: int = 0,
-                fix: str | None = None) -> int:  # fmt: skip
+    def integer(
+        self,
+        table: Mapping,
+        key: str,
+        prefix: str = "",
+        *,
+        default: Any = REQUIRED,
+        minimum: int = 0,
+        fix: str | None = None,
+    ) -> int:
         """An integer ≥ ``minimum`` (``default`` when absent)."""
         field = prefix + key
         if key not in table:
@@ -129,25 +162,43 @@ class TomlReader:
             raise self.fail(prefix + key, f"{value!r} is not true/false", self._fix(None, "write true or false"))
         return value
 
-    def choice(self, table: Mapping, key: str, prefix: str = "", options: Collection = (), default: Any = REQUIRED, *,
-               what: str = "value") -> Any:  # fmt: skip
+    def choice(
+        self,
+        table: Mapping,
+        key: str,
+        prefix: str = "",
+        options: Collection = (),
+        default: Any = REQUIRED,
+        *,
+        what: str = "value",
+    ) -> Any:
         """One of ``options`` (``default`` when absent); ``what`` names the kind of choice in the message."""
         if key not in table and default is REQUIRED:
             raise self.fail(prefix + key, "missing", self._fix(None, f"use one of {', '.join(map(str, options))}"))
         value = table.get(key, default)
         if not isinstance(value, (str, int, float)) or value not in options:
-            raise self.fail(prefix + key, f"unknown {what} {value!r}", self._fix(None, f"use one of {', '.join(map(str, options))}"))
+            raise self.fail(
+                prefix + key, f"unknown {what} {value!r}", self._fix(None, f"use one of {', '.join(map(str, options))}")
+            )
         return value
 
-    def vector(self, table: Mapping, key: str, prefix: str = "", size: int = 3, default: Any = REQUIRED) -> tuple[float, ...]:
+    def vector(
+        self, table: Mapping, key: str, prefix: str = "", size: int = 3, default: Any = REQUIRED
+    ) -> tuple[float, ...]:
         """A list of exactly ``size`` numbers, as floats (``default`` when absent)."""
         value = table.get(key, None if default is REQUIRED else default)
         if not (isinstance(value, list) and len(value) == size and all(_is_number(v) for v in value)):
-            raise self.fail(prefix + key, f"expected a list of {size} numbers", self._fix(None, f"write e.g. {[0.0] * size}"),
-                            value=value)  # fmt: skip
+            raise self.fail(
+                prefix + key,
+                f"expected a list of {size} numbers",
+                self._fix(None, f"write e.g. {[0.0] * size}"),
+                value=value,
+            )
         return tuple(float(v) for v in value)
 
-    def direction(self, table: Mapping, key: str, prefix: str = "", *, fix: str, default: Any = REQUIRED) -> tuple[float, ...]:
+    def direction(
+        self, table: Mapping, key: str, prefix: str = "", *, fix: str, default: Any = REQUIRED
+    ) -> tuple[float, ...]:
         """A nonzero list of 3 numbers, as floats, as given (a normal or an axis; not normalised);
         ``fix`` says which way it should point."""
         vector = self.vector(table, key, prefix, 3, default=default)
@@ -169,10 +220,14 @@ class TomlReader:
         field = prefix + key
         values = table.get(key)
         if not isinstance(values, list) or not values:
-            raise self.fail(field, f"expected a non-empty array, got {values!r}", self._fix(None, f"write '{key} = [v1, v2, ...]'"))
+            raise self.fail(
+                field, f"expected a non-empty array, got {values!r}", self._fix(None, f"write '{key} = [v1, v2, ...]'")
+            )
         for i, v in enumerate(values):
             if not _is_number(v):
-                raise self.fail(f"{field}[{i}]", f"expected a number, got {v!r}", self._fix(None, "write plain numbers"))
+                raise self.fail(
+                    f"{field}[{i}]", f"expected a number, got {v!r}", self._fix(None, "write plain numbers")
+                )
         return [float(v) for v in values]
 
     def typed(self, table: Mapping, key: str, kind: type, prefix: str = "", *, fix: str | None = None):
@@ -184,6 +239,9 @@ class TomlReader:
         if kind is float and _is_number(value):
             value = float(value)
         if not isinstance(value, kind) or (kind is float and not math.isfinite(value)):
-            raise self.fail(field, f"{value!r} is not a {'finite number' if kind is float else kind.__name__}",
-                            self._fix(fix, f"write a {kind.__name__}"))  # fmt: skip
+            raise self.fail(
+                field,
+                f"{value!r} is not a {'finite number' if kind is float else kind.__name__}",
+                self._fix(fix, f"write a {kind.__name__}"),
+            )
         return value

@@ -24,9 +24,14 @@ def _cmd_run(args) -> int:
 
     given = args.workers is not None or args.cluster is not None or args.cache_dir is not None
     try:
-        run_dir = run_experiment(args.config, output_dir=args.out, progress=None if not args.quiet else False,
-                                 verbose=args.verbose, executor=executor_options(args) if given else None,
-                                 resume=args.resume)  # fmt: skip
+        run_dir = run_experiment(
+            args.config,
+            output_dir=args.out,
+            progress=None if not args.quiet else False,
+            verbose=args.verbose,
+            executor=executor_options(args) if given else None,
+            resume=args.resume,
+        )
     except KeyboardInterrupt:
         return 130  # the runner said how to resume
     print(summary_table(json.loads((run_dir / "results.json").read_text())))
@@ -41,8 +46,10 @@ def _cmd_estimate(args) -> int:
     if args.rig is not None:
         return _estimate_with_rig(args)
     if len(args.session) > 1:
-        raise ShelljaxError(f"{len(args.session)} sessions given: without --rig, estimate one session at a time. Fix: "
-                            "pass one session, or several sessions of one object with --rig rig.toml")  # fmt: skip
+        raise ShelljaxError(
+            f"{len(args.session)} sessions given: without --rig, estimate one session at a time. Fix: "
+            "pass one session, or several sessions of one object with --rig rig.toml"
+        )
     if args.chain is not None:
         check_output_file(args.chain, "--chain", example="chain.h5")
     session = load_session(args.session[0])
@@ -50,14 +57,21 @@ def _cmd_estimate(args) -> int:
     if args.method == "closed-form" and args.k_s is not None:
         k_s = Estimate.lognormal(args.k_s, args.k_s_std / args.k_s, "1", "given on the command line")
     options = EstimatorOptions(
-        k_s=k_s, bootstrap_samples=args.bootstrap, seed=args.seed, forward_model=args.model,
-        gas=args.gas or DEFAULT_OPTIONS.gas, wrinkle_law=args.wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
-        nuisance=tuple(args.nuisance or ()), walkers=args.walkers, max_steps=args.max_steps,
+        k_s=k_s,
+        bootstrap_samples=args.bootstrap,
+        seed=args.seed,
+        forward_model=args.model,
+        gas=args.gas or DEFAULT_OPTIONS.gas,
+        wrinkle_law=args.wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
+        nuisance=tuple(args.nuisance or ()),
+        walkers=args.walkers,
+        max_steps=args.max_steps,
         surrogate=not args.no_surrogate,
     )
     with _stage_bar(f"estimate: {args.method} on {session.source.name}", args):
-        result = run_estimator(args.method, session, options, backend_path=args.chain,
-                               progress=None if not args.quiet else False)  # fmt: skip
+        result = run_estimator(
+            args.method, session, options, backend_path=args.chain, progress=None if not args.quiet else False
+        )
     out = {"session": str(session.source), "object": session.object_name, "method": args.method, **result.to_dict()}
     if args.method != "closed-form":
         out["forward_model"] = args.model
@@ -92,30 +106,41 @@ def _print_estimates(out: dict, estimates: dict, as_json: bool, sources: tuple[s
         unit = "" if est.unit == "1" else f" {est.unit}"
         if len(sources) > 1:
             name = re.sub(r"\[(\d+)\]", lambda m: f"[{Path(sources[int(m.group(1))]).stem}]", name)
-        print(f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
-              f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}")  # fmt: skip
+        print(
+            f"{name:>24s} = {est.value:.5g} ± {est.std:.2g}{unit}  "
+            f"(95 %: {est.ci95[0]:.5g} … {est.ci95[1]:.5g}){'  [' + est.note.split(':')[0] + ']' if est.note else ''}"
+        )
 
 
 def _estimate_with_rig(args) -> int:
     from .rig import estimate_with_rig, load_rig
 
     if args.method == "closed-form" or args.model != "axisym" or args.nuisance:
-        raise ShelljaxError("--rig works with --method fit or bayes through the axisym model, without --nuisance "
-                            "(the rig holds the measuring chain). Fix: add --method fit")  # fmt: skip
+        raise ShelljaxError(
+            "--rig works with --method fit or bayes through the axisym model, without --nuisance "
+            "(the rig holds the measuring chain). Fix: add --method fit"
+        )
     rig = load_rig(args.rig)
     with _stage_bar(f"estimate: {args.method} through the rig", args):
-        result = estimate_with_rig(args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law,
-                                   seed=args.seed)  # fmt: skip
-    out = {"session": result.sources[0] if len(result.sources) == 1 else list(result.sources), "method": args.method,
-           "rig": str(args.rig), **result.to_dict()}  # fmt: skip
+        result = estimate_with_rig(
+            args.session, rig, method=args.method, gas=args.gas, wrinkle_law=args.wrinkle_law, seed=args.seed
+        )
+    out = {
+        "session": result.sources[0] if len(result.sources) == 1 else list(result.sources),
+        "method": args.method,
+        "rig": str(args.rig),
+        **result.to_dict(),
+    }
     _print_estimates(out, result.estimates, args.json, tuple(result.sources))
     if not args.json:
         for m in result.models:
             share = f"{100 * m['weight']:.0f} %"
             print(f"    rig model {'+'.join(m['terms']) or 'ideal':<40s} weight {share:>5s}  {m['status']}")
         if result.not_identified:
-            print(f"    not identified by the calibration: {', '.join(result.not_identified)} "
-                  "(the intervals include their spread)")  # fmt: skip
+            print(
+                f"    not identified by the calibration: {', '.join(result.not_identified)} "
+                "(the intervals include their spread)"
+            )
             for s in result.separating():
                 print(f"      {s['term']}: {s['measurement']}")
             shrink = result.separating()[0]["young_modulus_interval_shrink"]
@@ -132,16 +157,29 @@ def _cmd_rig_calibrate(args) -> int:
     kinds = [session_kind(path) for path in args.sessions]
     presses = [p for p, kind in zip(args.sessions, kinds) if kind == "rigid_press"]
     sessions = [p for p, kind in zip(args.sessions, kinds) if kind != "rigid_press"]
-    rig = calibrate_rig(sessions, gas=args.gas, wrinkle_law=args.wrinkle_law, terms=args.terms, presses=presses,
-                        manometer_std=args.manometer_std, progress=not args.quiet)  # fmt: skip
+    rig = calibrate_rig(
+        sessions,
+        gas=args.gas,
+        wrinkle_law=args.wrinkle_law,
+        terms=args.terms,
+        presses=presses,
+        manometer_std=args.manometer_std,
+        progress=not args.quiet,
+    )
     write_rig(rig, args.out)
     print(f"rig: {len(rig.models)} model(s) the calibration cannot exclude (weights: pseudo-BMA+)")
     for m in rig.models:
         stds = [float(v) for v in (m.covariance.diagonal() ** 0.5)]
-        values = ", ".join(f"{n} = {v:.4g} ± {e:.2g}" for n, (v, e) in
-                           ((n, physical_parameter(n, float(u), s, rig.indenter_radius))
-                            for n, u, s in zip(m.parameters, m.mean, stds)))  # fmt: skip
-        print(f"  {'+'.join(m.terms) or 'ideal':<40s} weight {m.weight:5.2f}  Δelpd {m.delta:6.2f} ± {m.delta_se:4.2f}  {values}")
+        values = ", ".join(
+            f"{n} = {v:.4g} ± {e:.2g}"
+            for n, (v, e) in (
+                (n, physical_parameter(n, float(u), s, rig.indenter_radius))
+                for n, u, s in zip(m.parameters, m.mean, stds)
+            )
+        )
+        print(
+            f"  {'+'.join(m.terms) or 'ideal':<40s} weight {m.weight:5.2f}  Δelpd {m.delta:6.2f} ± {m.delta_se:4.2f}  {values}"
+        )
     if rig.not_identified:
         print(f"not identified: {', '.join(rig.not_identified)}")
     for f in rig.failed:
@@ -158,20 +196,30 @@ def _cmd_diagnose(args) -> int:
     if args.study:
         return _diagnose_studies(args)
     if not args.sessions:
-        raise ShelljaxError("no sessions given. Fix: shelljax diagnose S1.toml S2.toml ... (one object), or --study DIR "
-                            "--study DIR ... --out DIR (many studies)")  # fmt: skip
+        raise ShelljaxError(
+            "no sessions given. Fix: shelljax diagnose S1.toml S2.toml ... (one object), or --study DIR "
+            "--study DIR ... --out DIR (many studies)"
+        )
     if args.workers is not None or args.cluster is not None or args.resume is not None:
-        raise ShelljaxError("--workers/--cluster/--resume run many studies (--study), and one study is one piece of work. "
-                            "Fix: give each study as --study DIR_OR_PATTERN, or leave them out")  # fmt: skip
+        raise ShelljaxError(
+            "--workers/--cluster/--resume run many studies (--study), and one study is one piece of work. "
+            "Fix: give each study as --study DIR_OR_PATTERN, or leave them out"
+        )
     if args.out is not None:
         check_output_dir(args.out, "--out")
     measurement, gas, wrinkle_law = diagnosis_baseline(args.rig, args.gas, args.wrinkle_law)
     from .runner._compile_log import stage
 
     with stage("diagnose", args.verbose):
-        result = diagnose(args.sessions, effects=args.effects, baseline=args.baseline, gas=gas,
-                          wrinkle_law=wrinkle_law or DEFAULT_OPTIONS.wrinkle_law, progress=not args.quiet and not args.json,
-                          measurement=measurement)  # fmt: skip
+        result = diagnose(
+            args.sessions,
+            effects=args.effects,
+            baseline=args.baseline,
+            gas=gas,
+            wrinkle_law=wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
+            progress=not args.quiet and not args.json,
+            measurement=measurement,
+        )
     if args.out is not None:
         written = write_diagnosis(result, args.out)
         if not args.json:
@@ -190,15 +238,28 @@ def _diagnose_studies(args) -> int:
     from .runner import diagnose_studies, diagnoses_table, study_groups
 
     if args.sessions:
-        raise ShelljaxError(f"session files ({args.sessions[0]} ...) and --study both given. Fix: give one study as "
-                            "session files, or every study as --study")  # fmt: skip
+        raise ShelljaxError(
+            f"session files ({args.sessions[0]} ...) and --study both given. Fix: give one study as "
+            "session files, or every study as --study"
+        )
     out = _resumed_out(args)
     if out is None:
-        raise ShelljaxError("--study needs --out DIR: each study's diagnosis is written to DIR/<study>/. Fix: add --out DIR")
+        raise ShelljaxError(
+            "--study needs --out DIR: each study's diagnosis is written to DIR/<study>/. Fix: add --out DIR"
+        )
     try:
-        summary = diagnose_studies(study_groups(args.study), out, effects=args.effects, baseline=args.baseline,
-                                   gas=args.gas, wrinkle_law=args.wrinkle_law, rig=args.rig, executor=executor_options(args),
-                                   progress=None if not args.quiet else False, resume=args.resume is not None)  # fmt: skip
+        summary = diagnose_studies(
+            study_groups(args.study),
+            out,
+            effects=args.effects,
+            baseline=args.baseline,
+            gas=args.gas,
+            wrinkle_law=args.wrinkle_law,
+            rig=args.rig,
+            executor=executor_options(args),
+            progress=None if not args.quiet else False,
+            resume=args.resume is not None,
+        )
     except KeyboardInterrupt:
         return 130  # the finished studies' diagnoses and records stay in --out
     if args.json:
@@ -215,8 +276,10 @@ def _resumed_out(args):
     from pathlib import Path
 
     if args.resume is not None and args.out is not None and Path(args.resume).resolve() != Path(args.out).resolve():
-        raise ShelljaxError(f"--resume {args.resume} and --out {args.out} name two directories. Fix: give --resume alone "
-                            "(it continues in that directory)")  # fmt: skip
+        raise ShelljaxError(
+            f"--resume {args.resume} and --out {args.out} name two directories. Fix: give --resume alone "
+            "(it continues in that directory)"
+        )
     return args.resume if args.resume is not None else args.out
 
 
@@ -228,21 +291,29 @@ def _cmd_simulate(args) -> int:
     if scenario.sweep is not None:
         return _simulate_sweep(scenario, args, executor_options(args))
     if args.workers is not None or args.cluster is not None or args.resume is not None:
-        raise ShelljaxError(f"--workers/--cluster/--resume run the values of a [sweep] table, and {args.config} has none. "
-                            "Fix: add [sweep] parameter = \"...\" and values = [...] (docs/cluster.md), or leave them out")  # fmt: skip
+        raise ShelljaxError(
+            f"--workers/--cluster/--resume run the values of a [sweep] table, and {args.config} has none. "
+            'Fix: add [sweep] parameter = "..." and values = [...] (docs/cluster.md), or leave them out'
+        )
     summary = run_scenario(scenario, args.out, session=args.session, progress=not args.quiet, verbose=args.verbose)
     p = summary["parameters"]
-    print(f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
-          f"{p['gas']} gas, {p['mesh_faces']} faces, contact damping c = {summary['contact_damping_N_s_per_m']:.4g} N·s/m")  # fmt: skip
+    print(
+        f"{summary['name']}: P_g = {p['gauge_pressure_Pa']:.5g} Pa, E = {p['youngs_modulus_Pa']:.5g} Pa, m = {p['mass_kg']:.4g} kg, "
+        f"{p['gas']} gas, {p['mesh_faces']} faces, contact damping c = {summary['contact_damping_N_s_per_m']:.4g} N·s/m"
+    )
     for run in summary["runs"]:
         label = f"drop {run['drop_height_m']:.3g} m" if "drop_height_m" in run else "swing"
         if "max_deviation_from_rigid_m" in run:
-            print(f"  swing: held vertices on the schedule to {run['held_error_m']:.2g} m, largest departure from the rigid "
-                  f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm, peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa")  # fmt: skip
+            print(
+                f"  swing: held vertices on the schedule to {run['held_error_m']:.2g} m, largest departure from the rigid "
+                f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm, peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa"
+            )
         for m in run["impacts"]:
-            print(f"  {label}: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
-                  f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm, "
-                  f"contact diameter {1e3 * m['max_contact_diameter_m']:.1f} mm")  # fmt: skip
+            print(
+                f"  {label}: {m['plane']} impact at {m['onset_s']:.4f} s, COR {m['cor']:.4f}, "
+                f"contact {1e3 * m['contact_time_s']:.2f} ms, peak {m['peak_force_N']:.4g} N, compression {1e3 * m['max_compression_m']:.2f} mm, "
+                f"contact diameter {1e3 * m['max_contact_diameter_m']:.1f} mm"
+            )
         print(f"  results: {run['directory']}/results.json")
     return 0
 
@@ -254,8 +325,14 @@ def _simulate_sweep(scenario, args, executor) -> int:
 
     out = _resumed_out(args)
     try:
-        summary = run_sweep(scenario, out, session=args.session, executor=executor, progress=not args.quiet,
-                            resume=args.resume is not None)  # fmt: skip
+        summary = run_sweep(
+            scenario,
+            out,
+            session=args.session,
+            executor=executor,
+            progress=not args.quiet,
+            resume=args.resume is not None,
+        )
     except KeyboardInterrupt:
         return 130  # the finished values' records stay in the output directory: --resume DIR runs the rest
     print(sweep_table(summary))
@@ -266,8 +343,16 @@ def _simulate_sweep(scenario, args, executor) -> int:
 def _cmd_replica(args) -> int:
     from .replica import export_replica
 
-    written = export_replica(args.session, args.out, method=args.method, gas=args.gas, cor=args.cor, mesh_faces=args.mesh_faces,
-                             wrinkle_law=args.wrinkle_law, rig=args.rig)  # fmt: skip
+    written = export_replica(
+        args.session,
+        args.out,
+        method=args.method,
+        gas=args.gas,
+        cor=args.cor,
+        mesh_faces=args.mesh_faces,
+        wrinkle_law=args.wrinkle_law,
+        rig=args.rig,
+    )
     print(f"written: {', '.join(str(p) for p in written)}")
     return 0
 
@@ -278,7 +363,9 @@ def _cmd_validate(args) -> int:
     for path in args.sessions:
         if session_kind(path) == "rigid_press":
             p = load_rigid_press(path)
-            print(f"ok: {path}: rigid-surface press on {p.object_name}, {p.force.size} samples in {p.trial_ids.size} trials")
+            print(
+                f"ok: {path}: rigid-surface press on {p.object_name}, {p.force.size} samples in {p.trial_ids.size} trials"
+            )
             continue
         s = load_session(path)
         print(f"ok: {path}: {s.object_name}, {s.force.size} samples in {s.trial_ids.size} trials, R = {s.radius:.4g} m")
@@ -300,10 +387,12 @@ def _cmd_play(args) -> int:
         return play_live(scene, host=args.host, port=args.port)
     result = play_headless(scene, record=args.record, records_json=args.records)
     s = result.summary()
-    print(f"{scene.label}\n  {s['frames']} frames, {s['simulated_s']:.2f} s: peak gauge pressure {s['peak_gauge_pressure_Pa']:.0f} Pa, "
-          f"peak hand force {s['peak_collider_force_N']:.2f} N, "
-          + ", ".join(f"peak {n} force {f:.1f} N" for n, f in s["peak_plane_force_N"].items())
-          + f"; real-time factor {s['real_time_factor_median']:.1f} (median), {s['real_time_factor_p01']:.1f} (1st percentile)")  # fmt: skip
+    print(
+        f"{scene.label}\n  {s['frames']} frames, {s['simulated_s']:.2f} s: peak gauge pressure {s['peak_gauge_pressure_Pa']:.0f} Pa, "
+        f"peak hand force {s['peak_collider_force_N']:.2f} N, "
+        + ", ".join(f"peak {n} force {f:.1f} N" for n, f in s["peak_plane_force_N"].items())
+        + f"; real-time factor {s['real_time_factor_median']:.1f} (median), {s['real_time_factor_p01']:.1f} (1st percentile)"
+    )
     for path in (args.record, args.records):
         if path is not None:
             print(f"written: {path}")
@@ -312,21 +401,39 @@ def _cmd_play(args) -> int:
 
 def _register_play(sub) -> None:
     """``shelljax play``."""
-    play = sub.add_parser("play", help="move a replica or session in real time: live 3D view in the browser (viser), "
-                          "or --headless replay of an interaction script into a GIF (docs/realtime.md#viewer)")
-    play.add_argument("source", help="a `shelljax replica` directory (its P_g, E, mesh) or a session TOML (P_g and E by "
-                      "the closed form, seconds; e.g. bundled:sessions/pezzi.toml); the rest shape is the small-strain shrink "
-                      "of the mesh, relaxed on the ground (no 30 s JAX rest-shape solve): it starts in seconds")
-    play.add_argument("--script", default=None, help="interaction script TOML (planes, hand, timed drop/poke/throw/wait "
-                      "actions), e.g. configs/interaction.toml")
+    play = sub.add_parser(
+        "play",
+        help="move a replica or session in real time: live 3D view in the browser (viser), "
+        "or --headless replay of an interaction script into a GIF (docs/realtime.md#viewer)",
+    )
+    play.add_argument(
+        "source",
+        help="a `shelljax replica` directory (its P_g, E, mesh) or a session TOML (P_g and E by "
+        "the closed form, seconds; e.g. bundled:sessions/pezzi.toml); the rest shape is the small-strain shrink "
+        "of the mesh, relaxed on the ground (no 30 s JAX rest-shape solve): it starts in seconds",
+    )
+    play.add_argument(
+        "--script",
+        default=None,
+        help="interaction script TOML (planes, hand, timed drop/poke/throw/wait "
+        "actions), e.g. configs/interaction.toml",
+    )
     play.add_argument("--headless", action="store_true", help="no browser: replay --script and print its peaks")
-    play.add_argument("--record", default=None, help="with --headless: write the replay as a GIF here (a .gif file; "
-                      "missing folders are created)")
+    play.add_argument(
+        "--record",
+        default=None,
+        help="with --headless: write the replay as a GIF here (a .gif file; missing folders are created)",
+    )
     play.add_argument("--records", default=None, help="with --headless: write the per-frame records as JSON here")
-    play.add_argument("--mesh-faces", type=whole(*MESH_FACES), default=None,
-                      help="triangles of a session's sphere [count] (default: the script's, 500)")
-    play.add_argument("--gas", choices=GAS_LAWS, default="adiabatic",
-                      help="gas law of a session's shell (a replica keeps its own)")
+    play.add_argument(
+        "--mesh-faces",
+        type=whole(*MESH_FACES),
+        default=None,
+        help="triangles of a session's sphere [count] (default: the script's, 500)",
+    )
+    play.add_argument(
+        "--gas", choices=GAS_LAWS, default="adiabatic", help="gas law of a session's shell (a replica keeps its own)"
+    )
     play.add_argument("--host", default="127.0.0.1", help="address the live viewer listens on")
     play.add_argument("--port", type=whole(1, 65535), default=8080, help="TCP port of the live viewer")
     play.set_defaults(func=_cmd_play)
@@ -334,28 +441,59 @@ def _register_play(sub) -> None:
 
 def _register_diagnose(sub) -> None:
     """``shelljax diagnose``."""
-    diag = sub.add_parser("diagnose", help="sim-to-real gap: where the shell model misfits sessions of one object, "
-                          "which candidate effect explains it, how far the gap shrinks")
+    diag = sub.add_parser(
+        "diagnose",
+        help="sim-to-real gap: where the shell model misfits sessions of one object, "
+        "which candidate effect explains it, how far the gap shrinks",
+    )
     diag.add_argument("sessions", nargs="*", help="session TOML files of one object (e.g. at several pressures)")
-    diag.add_argument("--study", action="append", default=None, metavar="DIR_OR_PATTERN",
-                      help="many studies instead (repeat it): a directory of one object's session files, or a pattern "
-                      "such as 'dir/ball_*.toml' ('bundled:' for the package's); one work item per study, written to "
-                      "--out/<study>/ and summed up in --out/diagnoses.json (docs/cluster.md)")
+    diag.add_argument(
+        "--study",
+        action="append",
+        default=None,
+        metavar="DIR_OR_PATTERN",
+        help="many studies instead (repeat it): a directory of one object's session files, or a pattern "
+        "such as 'dir/ball_*.toml' ('bundled:' for the package's); one work item per study, written to "
+        "--out/<study>/ and summed up in --out/diagnoses.json (docs/cluster.md)",
+    )
     diag.add_argument("--out", default=None, help="directory for diagnosis.json, diagnosis.png and report.md (created)")
     diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
-    diag.add_argument("--baseline", choices=["estimator", "paper"], default="estimator",
-                      help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)")
-    diag.add_argument("--gas", choices=GAS_LAWS, default=None,
-                      help="gas law of the baseline (default: the baseline's; with --rig, the rig's)")
-    diag.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
-                      help=f"wrinkle count: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
-                      f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)")
-    diag.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: its measuring chain is the "
-                      "baseline, and its gas and wrinkle law the model's")
-    diag.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
-                      help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)")
+    diag.add_argument(
+        "--baseline",
+        choices=["estimator", "paper"],
+        default="estimator",
+        help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)",
+    )
+    diag.add_argument(
+        "--gas",
+        choices=GAS_LAWS,
+        default=None,
+        help="gas law of the baseline (default: the baseline's; with --rig, the rig's)",
+    )
+    diag.add_argument(
+        "--wrinkle-law",
+        choices=WRINKLE_LAWS,
+        default=None,
+        help=f"wrinkle count: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
+        f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)",
+    )
+    diag.add_argument(
+        "--rig",
+        default=None,
+        help="rig file from `shelljax rig calibrate`: its measuring chain is the "
+        "baseline, and its gas and wrinkle law the model's",
+    )
+    diag.add_argument(
+        "--effects",
+        nargs="+",
+        default=None,
+        metavar="EFFECT",
+        help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)",
+    )
     diag.add_argument("--quiet", action="store_true", help="no progress bar")
-    diag.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
+    diag.add_argument(
+        "--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)"
+    )
     from .executor import add_executor_arguments
 
     add_executor_arguments(diag)  # the studies of --study (docs/cluster.md); --resume: the --out of an interrupted one
@@ -367,18 +505,39 @@ def _register_rig(sub) -> None:
     rig = sub.add_parser("rig", help="the measuring chain: calibrate it once where the pressure is known (docs/rig.md)")
     rig_sub = rig.add_subparsers(dest="rig_command", required=True)
     cal = rig_sub.add_parser("calibrate", help="fit and select the rig's terms on sessions with manometer readings")
-    cal.add_argument("sessions", nargs="+", help="session TOML files with manometer readings, of one or more objects, "
-                     "and optionally rigid-surface press sessions (kind = \"rigid_press\", docs/session-format.md)")
+    cal.add_argument(
+        "sessions",
+        nargs="+",
+        help="session TOML files with manometer readings, of one or more objects, "
+        'and optionally rigid-surface press sessions (kind = "rigid_press", docs/session-format.md)',
+    )
     cal.add_argument("--out", required=True, help="rig TOML file to write (checked before the fit; folders created)")
-    cal.add_argument("--gas", choices=ESTIMATOR_GASES, default=DEFAULT_OPTIONS.gas,
-                     help="gas law of the forward model (every estimate through the rig uses it; a poke is slow, so a "
-                     "sealed object's gas is isothermal)")
-    cal.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=DEFAULT_OPTIONS.wrinkle_law,
-                     help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)")
-    cal.add_argument("--terms", nargs="+", default=None, metavar="TERM",
-                     help="candidate terms (default: all of shelljax.rig.RIG_TERMS)")
-    cal.add_argument("--manometer-std", type=real(0.0, 1.0, low_open=True), default=0.02,
-                     help="the manometer readings' relative standard deviation [-] (0.02: 2 %%)")
+    cal.add_argument(
+        "--gas",
+        choices=ESTIMATOR_GASES,
+        default=DEFAULT_OPTIONS.gas,
+        help="gas law of the forward model (every estimate through the rig uses it; a poke is slow, so a "
+        "sealed object's gas is isothermal)",
+    )
+    cal.add_argument(
+        "--wrinkle-law",
+        choices=WRINKLE_LAWS,
+        default=DEFAULT_OPTIONS.wrinkle_law,
+        help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)",
+    )
+    cal.add_argument(
+        "--terms",
+        nargs="+",
+        default=None,
+        metavar="TERM",
+        help="candidate terms (default: all of shelljax.rig.RIG_TERMS)",
+    )
+    cal.add_argument(
+        "--manometer-std",
+        type=real(0.0, 1.0, low_open=True),
+        default=0.02,
+        help="the manometer readings' relative standard deviation [-] (0.02: 2 %%)",
+    )
     cal.add_argument("--quiet", action="store_true", help="no progress bar")
     cal.set_defaults(func=_cmd_rig_calibrate)
 
@@ -388,9 +547,15 @@ def _register_run(sub) -> None:
     from .executor import add_executor_arguments
 
     run = sub.add_parser("run", help="run an experiment config into a fresh run directory")
-    run.add_argument("config", nargs="?", default=None,
-                     help="experiment config TOML, e.g. configs/paper.toml (not needed with --resume)")
-    run.add_argument("--out", default=None, help="parent directory of the run directory (default: the config's output_dir)")
+    run.add_argument(
+        "config",
+        nargs="?",
+        default=None,
+        help="experiment config TOML, e.g. configs/paper.toml (not needed with --resume)",
+    )
+    run.add_argument(
+        "--out", default=None, help="parent directory of the run directory (default: the config's output_dir)"
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bars")
     run.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it")
     add_executor_arguments(run)
@@ -401,36 +566,73 @@ def _register_estimate(sub) -> None:
     """``shelljax estimate``: its defaults are ``shelljax.estimate.DEFAULT_OPTIONS``."""
     d = DEFAULT_OPTIONS
     est = sub.add_parser("estimate", help="estimate P_g and E of one session")
-    est.add_argument("session", nargs="+", help="session TOML file (with --rig: the sessions of one object, estimated at "
-                     "once with a shared E and measuring chain)")
-    est.add_argument("--method", choices=METHODS, default="closed-form",
-                     help="closed-form: the paper's Procedures 2-3; fit: least squares through a shell model; "
-                     "bayes: MCMC posterior through a shell model")
+    est.add_argument(
+        "session",
+        nargs="+",
+        help="session TOML file (with --rig: the sessions of one object, estimated at "
+        "once with a shared E and measuring chain)",
+    )
+    est.add_argument(
+        "--method",
+        choices=METHODS,
+        default="closed-form",
+        help="closed-form: the paper's Procedures 2-3; fit: least squares through a shell model; "
+        "bayes: MCMC posterior through a shell model",
+    )
     est.add_argument("--json", action="store_true", help="print JSON on stdout")
-    est.add_argument("--k-s", type=real(0.0, 10.0, low_open=True), default=None,
-                     help="closed form: k_s [-] (default: the paper's 0.64)")
+    est.add_argument(
+        "--k-s",
+        type=real(0.0, 10.0, low_open=True),
+        default=None,
+        help="closed form: k_s [-] (default: the paper's 0.64)",
+    )
     est.add_argument("--k-s-std", type=real(0.0), default=0.0, help="closed form: standard deviation of --k-s [-]")
-    est.add_argument("--bootstrap", type=whole(0, hint=" (0 disables)"), default=d.bootstrap_samples,
-                     help="closed form: bootstrap resamples [count] (0 disables)")
+    est.add_argument(
+        "--bootstrap",
+        type=whole(0, hint=" (0 disables)"),
+        default=d.bootstrap_samples,
+        help="closed form: bootstrap resamples [count] (0 disables)",
+    )
     est.add_argument("--seed", type=whole(0), default=d.seed, help="random seed of the bootstrap and the MCMC")
-    est.add_argument("--model", choices=["axisym", "scaling"], default=d.forward_model,
-                     help="forward model of fit/bayes: the axisymmetric shell engine, or the scaling law")
-    est.add_argument("--gas", choices=ESTIMATOR_GASES, default=None,
-                     help=f"gas model of the axisym engine (default: {d.gas}, a sealed ball poked slowly; with --rig, "
-                     "the rig's)")
-    est.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
-                     help=f"wrinkle count of the axisym model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) "
-                     f"(default: {d.wrinkle_law}; with --rig, the rig's)")
-    est.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through the calibrated "
-                     "measuring chain (fit or bayes)")
+    est.add_argument(
+        "--model",
+        choices=["axisym", "scaling"],
+        default=d.forward_model,
+        help="forward model of fit/bayes: the axisymmetric shell engine, or the scaling law",
+    )
+    est.add_argument(
+        "--gas",
+        choices=ESTIMATOR_GASES,
+        default=None,
+        help=f"gas model of the axisym engine (default: {d.gas}, a sealed ball poked slowly; with --rig, the rig's)",
+    )
+    est.add_argument(
+        "--wrinkle-law",
+        choices=WRINKLE_LAWS,
+        default=None,
+        help=f"wrinkle count of the axisym model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) "
+        f"(default: {d.wrinkle_law}; with --rig, the rig's)",
+    )
+    est.add_argument(
+        "--rig",
+        default=None,
+        help="rig file from `shelljax rig calibrate`: estimate through the calibrated measuring chain (fit or bayes)",
+    )
     est.add_argument("--nuisance", nargs="*", choices=["depth_offset", "force_gain"], help="extra fitted parameters")
     est.add_argument("--walkers", type=whole(MIN_WALKERS), default=d.walkers, help="bayes: emcee walkers [count]")
-    est.add_argument("--max-steps", type=whole(MIN_MAX_STEPS), default=d.max_steps, help="bayes: most MCMC steps [count]")
+    est.add_argument(
+        "--max-steps", type=whole(MIN_MAX_STEPS), default=d.max_steps, help="bayes: most MCMC steps [count]"
+    )
     est.add_argument("--chain", default=None, help="bayes: HDF5 file for the chain (resumed if it exists)")
-    est.add_argument("--no-surrogate", action="store_true",
-                     help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)")
+    est.add_argument(
+        "--no-surrogate",
+        action="store_true",
+        help="bayes: sample through the axisym engine itself, not its checked Chebyshev surrogate (slow)",
+    )
     est.add_argument("--quiet", action="store_true", help="no progress bar")
-    est.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
+    est.add_argument(
+        "--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)"
+    )
     est.set_defaults(func=_cmd_estimate)
 
 
@@ -441,10 +643,16 @@ def _register_simulate(sub) -> None:
     sim = sub.add_parser("simulate", help="run a dynamic scenario config (drop, bounce) into --out")
     sim.add_argument("config", help="scenario config TOML, e.g. configs/drop.toml")
     sim.add_argument("--out", default=None, help="output directory (default: the config's output_dir/name)")
-    sim.add_argument("--session", default=None, help="take P_g and E from this session's estimate (overrides the config)")
+    sim.add_argument(
+        "--session", default=None, help="take P_g and E from this session's estimate (overrides the config)"
+    )
     sim.add_argument("--quiet", action="store_true", help="no progress bars")
-    sim.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)")
-    add_executor_arguments(sim)  # the values of a [sweep] table (docs/cluster.md); --resume: the --out of an interrupted one
+    sim.add_argument(
+        "--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)"
+    )
+    add_executor_arguments(
+        sim
+    )  # the values of a [sweep] table (docs/cluster.md); --resume: the --out of an interrupted one
     sim.set_defaults(func=_cmd_simulate)
 
 
@@ -454,17 +662,35 @@ def _register_replica(sub) -> None:
     rep.add_argument("session", help="session TOML file")
     rep.add_argument("--out", required=True, help="output directory (created; checked before the estimate)")
     rep.add_argument("--method", choices=METHODS, default="fit", help="estimator of P_g and E")
-    rep.add_argument("--gas", choices=GAS_LAWS, default="adiabatic",
-                     help="gas law of the replica's dynamics (its impacts are fast); the estimate's is "
-                     f"{DEFAULT_OPTIONS.gas} unless prescribed")
-    rep.add_argument("--cor", type=real(0.0, 1.0, low_open=True), default=None,
-                     help="measured coefficient of restitution [-], if known")
-    rep.add_argument("--mesh-faces", type=whole(*MESH_FACES), default=2000,
-                     help="triangles of a sphere replica [count] (sessions without a mesh)")
-    rep.add_argument("--wrinkle-law", choices=WRINKLE_LAWS, default=None,
-                     help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
-                     f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)")
-    rep.add_argument("--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through it (fit, bayes)")
+    rep.add_argument(
+        "--gas",
+        choices=GAS_LAWS,
+        default="adiabatic",
+        help="gas law of the replica's dynamics (its impacts are fast); the estimate's is "
+        f"{DEFAULT_OPTIONS.gas} unless prescribed",
+    )
+    rep.add_argument(
+        "--cor",
+        type=real(0.0, 1.0, low_open=True),
+        default=None,
+        help="measured coefficient of restitution [-], if known",
+    )
+    rep.add_argument(
+        "--mesh-faces",
+        type=whole(*MESH_FACES),
+        default=2000,
+        help="triangles of a sphere replica [count] (sessions without a mesh)",
+    )
+    rep.add_argument(
+        "--wrinkle-law",
+        choices=WRINKLE_LAWS,
+        default=None,
+        help="wrinkle count of the fit: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
+        f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)",
+    )
+    rep.add_argument(
+        "--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through it (fit, bayes)"
+    )
     rep.set_defaults(func=_cmd_replica)
 
 
@@ -476,8 +702,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="shelljax", description=__doc__.partition(";")[0] + ".")
     parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for register in (_register_run, _register_estimate, _register_diagnose, _register_simulate, _register_replica,
-                     _register_rig, _register_play):
+    for register in (
+        _register_run,
+        _register_estimate,
+        _register_diagnose,
+        _register_simulate,
+        _register_replica,
+        _register_rig,
+        _register_play,
+    ):
         register(sub)
     val = sub.add_parser("validate", help="check session files and report what they contain")
     val.add_argument("sessions", nargs="+", help="session TOML files (indentation sessions or rigid-surface presses)")

@@ -7,7 +7,9 @@ from pathlib import Path
 from ._errors import InvalidInputError
 
 
-def estimated_parameters(session, method: str, options: dict, rig: str | Path | None = None) -> tuple[float, float, dict]:
+def estimated_parameters(
+    session, method: str, options: dict, rig: str | Path | None = None
+) -> tuple[float, float, dict]:
     """(P_g [Pa], E [Pa], their values and standard deviations) from the session's ``method`` estimate
     with ``options`` (EstimatorOptions keyword arguments); with ``rig`` (a rig file), fit and bayes go
     through it (``shelljax.rig``), whose gas and wrinkle law ``options`` must not contradict."""
@@ -16,8 +18,9 @@ def estimated_parameters(session, method: str, options: dict, rig: str | Path | 
     if rig is not None and method != "closed-form":
         from .rig import estimate_with_rig, load_rig
 
-        result = estimate_with_rig(session, load_rig(rig), method=method, gas=options.get("gas"),
-                                   wrinkle_law=options.get("wrinkle_law"))  # fmt: skip
+        result = estimate_with_rig(
+            session, load_rig(rig), method=method, gas=options.get("gas"), wrinkle_law=options.get("wrinkle_law")
+        )
     else:
         result = run_estimator(method, session, EstimatorOptions(**options), progress=False)
     missing = [k for k in ("gauge_pressure", "young_modulus") if k not in result.estimates]

@@ -15,8 +15,13 @@ from .estimate import ClosedFormResult, KsCalibration  # noqa: E402
 from .session import Session  # noqa: E402
 
 
-def plot_force_depth(session: Session, result: ClosedFormResult, path: Path, level: float = 0.99,
-                     model_curves: dict[str, np.ndarray] | None = None) -> Path:  # fmt: skip
+def plot_force_depth(
+    session: Session,
+    result: ClosedFormResult,
+    path: Path,
+    level: float = 0.99,
+    model_curves: dict[str, np.ndarray] | None = None,
+) -> Path:
     """F against w(0): mean depth per force level ± std over trials, OLS line and its confidence band.
 
     The paper's gauge-pressure figure, panel (b). ``model_curves``: label → predicted depth [m] at
@@ -25,16 +30,22 @@ def plot_force_depth(session: Session, result: ClosedFormResult, path: Path, lev
     fig, ax = plt.subplots(figsize=(5, 4), dpi=120)
     levels = session.force_levels
     mean = np.array([session.depth[session.force == f].mean() for f in levels])
-    std = np.array([session.depth[session.force == f].std(ddof=1) if np.sum(session.force == f) > 1 else 0.0
-                    for f in levels])  # fmt: skip
+    std = np.array(
+        [session.depth[session.force == f].std(ddof=1) if np.sum(session.force == f) > 1 else 0.0 for f in levels]
+    )
     ax.scatter(session.depth * 1e3, session.force, s=8, color="0.7", label="samples", zorder=1)
-    ax.errorbar(mean * 1e3, levels, xerr=std * 1e3, fmt="o", color="C0", capsize=3,
-                label="mean ± std over trials", zorder=3)  # fmt: skip
+    ax.errorbar(
+        mean * 1e3, levels, xerr=std * 1e3, fmt="o", color="C0", capsize=3, label="mean ± std over trials", zorder=3
+    )
     reg = result.regression
     w = np.linspace(0.0, session.depth.max() * 1.1, 100)
     lo, hi = reg.band(w, level)
-    ax.plot(w * 1e3, reg.slope * w + reg.intercept, color="C1",
-            label=f"OLS: P̂ = {result.pressure_slope.value:.0f} ± {result.pressure_slope.std:.0f} Pa")  # fmt: skip
+    ax.plot(
+        w * 1e3,
+        reg.slope * w + reg.intercept,
+        color="C1",
+        label=f"OLS: P̂ = {result.pressure_slope.value:.0f} ± {result.pressure_slope.std:.0f} Pa",
+    )
     ax.fill_between(w * 1e3, lo, hi, color="C1", alpha=0.25, label=f"{level:.0%} confidence band")
     order = np.argsort(session.force)
     for i, (label, depth) in enumerate((model_curves or {}).items()):
@@ -59,18 +70,34 @@ def plot_calibration(calibration: KsCalibration, held_out: list[tuple[str, float
     fig, ax = plt.subplots(figsize=(5, 4), dpi=120)
     for i, obj in enumerate(sorted(set(calibration.objects))):
         sel = np.array([o == obj for o in calibration.objects])
-        ax.errorbar(calibration.gauge_pressures[sel] / 1e3, calibration.pressure_slopes[sel] / 1e3,
-                    yerr=calibration.pressure_slope_stds[sel] / 1e3, fmt="o", color=f"C{i}", capsize=3,
-                    label=f"train: {obj}")  # fmt: skip
+        ax.errorbar(
+            calibration.gauge_pressures[sel] / 1e3,
+            calibration.pressure_slopes[sel] / 1e3,
+            yerr=calibration.pressure_slope_stds[sel] / 1e3,
+            fmt="o",
+            color=f"C{i}",
+            capsize=3,
+            label=f"train: {obj}",
+        )
     for i, obj in enumerate(sorted({h[0] for h in held_out})):
         pts = np.array([h[1:] for h in held_out if h[0] == obj])
-        ax.errorbar(pts[:, 0] / 1e3, pts[:, 1] / 1e3, yerr=pts[:, 2] / 1e3, fmt="s", mfc="none",
-                    color=f"C{i + 3}", capsize=3, label=f"test: {obj}")  # fmt: skip
+        ax.errorbar(
+            pts[:, 0] / 1e3,
+            pts[:, 1] / 1e3,
+            yerr=pts[:, 2] / 1e3,
+            fmt="s",
+            mfc="none",
+            color=f"C{i + 3}",
+            capsize=3,
+            label=f"test: {obj}",
+        )
     everything = np.concatenate([calibration.gauge_pressures, [h[1] for h in held_out]])
     p = np.linspace(0, everything.max() * 1.1, 50)
     k = calibration.k_s
     ax.plot(p / 1e3, k.value * p / 1e3, color="k", label=f"k_s = {k.value:.3f} ± {k.std:.3f}")
-    ax.fill_between(p / 1e3, k.ci95[0] * p / 1e3, k.ci95[1] * p / 1e3, color="k", alpha=0.15, label="95 % interval of k_s")
+    ax.fill_between(
+        p / 1e3, k.ci95[0] * p / 1e3, k.ci95[1] * p / 1e3, color="k", alpha=0.15, label="95 % interval of k_s"
+    )
     ax.set_xlabel("manometer gauge pressure P_g [kPa]")
     ax.set_ylabel("P̂ = F / (π R w(0)) [kPa]")
     ax.legend(fontsize=7)
@@ -90,8 +117,10 @@ def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
     """
     fig, axes = plt.subplots(1, 2, figsize=(9, 0.35 * len(rows) + 1.5), dpi=120, sharey=True)
     y = np.arange(len(rows))
-    for ax, key, scale, label in ((axes[0], "gauge_pressure", 1e3, "gauge pressure P_g [kPa]"),
-                                  (axes[1], "young_modulus", 1e6, "Young's modulus E [MPa]")):  # fmt: skip
+    for ax, key, scale, label in (
+        (axes[0], "gauge_pressure", 1e3, "gauge pressure P_g [kPa]"),
+        (axes[1], "young_modulus", 1e6, "Young's modulus E [MPa]"),
+    ):
         methods = sorted({m for row in rows for m in row["estimates"]})
         for i, row in enumerate(rows):
             for j, method in enumerate(methods):
@@ -99,8 +128,15 @@ def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
                 if est is None:
                     continue
                 offset = 0.25 * (j - (len(methods) - 1) / 2)
-                ax.errorbar(est.value / scale, i + offset, xerr=[[(est.value - est.ci95[0]) / scale], [(est.ci95[1] - est.value) / scale]],
-                            fmt="o", color=f"C{j}", capsize=3, label=method if (i == 0 and key == "gauge_pressure") else None)  # fmt: skip
+                ax.errorbar(
+                    est.value / scale,
+                    i + offset,
+                    xerr=[[(est.value - est.ci95[0]) / scale], [(est.ci95[1] - est.value) / scale]],
+                    fmt="o",
+                    color=f"C{j}",
+                    capsize=3,
+                    label=method if (i == 0 and key == "gauge_pressure") else None,
+                )
             if key == "gauge_pressure" and row.get("manometer") is not None:
                 ax.plot(row["manometer"] / scale, i, "x", color="C3", ms=8)
         ax.set_xlabel(label)
@@ -115,16 +151,25 @@ def plot_estimate_summary(rows: list[dict], path: Path) -> Path:
     axes[0].plot([], [], "x", color="C3", label="manometer")
     # below the axes, never over a session's intervals
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=7, frameon=False,
-               title="95 % intervals", title_fontsize=7)  # fmt: skip
+    fig.legend(
+        handles,
+        labels,
+        loc="lower center",
+        ncol=len(labels),
+        fontsize=7,
+        frameon=False,
+        title="95 % intervals",
+        title_fontsize=7,
+    )
     fig.tight_layout(rect=(0, 0.5 / fig.get_figheight(), 1, 1))
     fig.savefig(path)
     plt.close(fig)
     return path
 
 
-def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tuple[str, ...], stem: str,
-                   directory: Path) -> list[Path]:  # fmt: skip
+def plot_posterior(
+    samples: dict[str, np.ndarray], chain: np.ndarray, names: tuple[str, ...], stem: str, directory: Path
+) -> list[Path]:
     """Corner plot of the posterior samples (SI, P_g in kPa, E in MPa) and trace plot of the chain.
 
     ``samples``: flat physical samples by name; ``chain``: raw (steps, walkers, dim) chain in the
@@ -132,12 +177,24 @@ def plot_posterior(samples: dict[str, np.ndarray], chain: np.ndarray, names: tup
     """
     import corner
 
-    scale = {"gauge_pressure": (1e3, "P_g [kPa]"), "young_modulus": (1e6, "E [MPa]"), "thickness": (1e-3, "h [mm]"),
-             "radius": (1e-3, "R [mm]"), "depth_offset": (1e-3, "offset [mm]"), "force_gain": (1.0, "gain [-]"),
-             "depth_noise": (1e-3, "σ_w [mm]")}  # fmt: skip
+    scale = {
+        "gauge_pressure": (1e3, "P_g [kPa]"),
+        "young_modulus": (1e6, "E [MPa]"),
+        "thickness": (1e-3, "h [mm]"),
+        "radius": (1e-3, "R [mm]"),
+        "depth_offset": (1e-3, "offset [mm]"),
+        "force_gain": (1.0, "gain [-]"),
+        "depth_noise": (1e-3, "σ_w [mm]"),
+    }
     data = np.stack([samples[n] / scale[n][0] for n in names], axis=1)
-    fig = corner.corner(data, labels=[scale[n][1] for n in names], quantiles=[0.025, 0.5, 0.975], show_titles=True,
-                        title_fmt=".3g", title_kwargs={"fontsize": 8})  # fmt: skip
+    fig = corner.corner(
+        data,
+        labels=[scale[n][1] for n in names],
+        quantiles=[0.025, 0.5, 0.975],
+        show_titles=True,
+        title_fmt=".3g",
+        title_kwargs={"fontsize": 8},
+    )
     corner_path = directory / f"corner_{stem}.png"
     fig.savefig(corner_path, dpi=90)
     plt.close(fig)
@@ -165,8 +222,9 @@ def _which_panel(ax, report: dict, chosen: str) -> None:
         if e["status"] != "ok":
             ax.text(0, yi, "  fit failed", va="center", fontsize=7, color="C3")
             continue
-        ax.errorbar(e["delta"], yi, xerr=2 * e["delta_se"], fmt="o", color="C2" if e["effect"] == chosen else "C0",
-                    capsize=3)  # fmt: skip
+        ax.errorbar(
+            e["delta"], yi, xerr=2 * e["delta_se"], fmt="o", color="C2" if e["effect"] == chosen else "C0", capsize=3
+        )
         ax.plot(max(4.0, 2 * e["delta_se"]), yi, "|", color="C3", ms=10)
     ax.axvline(0, color="k", lw=0.8)
     ax.set_yticks(y, [e["effect"] for e in ranked], fontsize=7)
@@ -213,8 +271,11 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     groups += [("regime", k, v) for k, v in report["where"]["by_regime"].items()]
     groups += [("session", Path(v["session"]).stem, v) for v in report["where"]["by_session"]]
     after_where = report.get("where_after") or report["where"]
-    after_groups = [v for v in after_where["by_observable"].values()] + list(after_where["by_regime"].values()) + \
-        after_where["by_session"]
+    after_groups = (
+        [v for v in after_where["by_observable"].values()]
+        + list(after_where["by_regime"].values())
+        + after_where["by_session"]
+    )
     y = np.arange(len(groups))
     ax.barh(y + 0.2, [g[2]["rms_standardized"] for g in groups], height=0.4, color="C3", label="baseline")
     if chosen != "baseline":
@@ -238,8 +299,11 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set_xlabel("LOO-PIT [-]")
     ax.set_ylabel("density")
-    ax.set_title(f"HOW FAR: gap {report['gap_before']['rms_standardized']:.2f} → "
-                 f"{report['gap_after']['rms_standardized']:.2f} (shrink {report['shrink']:.2g}×)", fontsize=9)  # fmt: skip
+    ax.set_title(
+        f"HOW FAR: gap {report['gap_before']['rms_standardized']:.2f} → "
+        f"{report['gap_after']['rms_standardized']:.2f} (shrink {report['shrink']:.2g}×)",
+        fontsize=9,
+    )
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path)

@@ -41,7 +41,13 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
     out.mkdir(parents=True, exist_ok=True)
     mesh_path = out / "replica.glb"
     trimesh.Trimesh(shell.mesh.vertices, shell.mesh.faces, process=False).export(mesh_path)
-    body = {"replica_version": REPLICA_VERSION, "mesh": mesh_path.name, "length_unit": "m", "gas": gas, "source": source or {}}
+    body = {
+        "replica_version": REPLICA_VERSION,
+        "mesh": mesh_path.name,
+        "length_unit": "m",
+        "gas": gas,
+        "source": source or {},
+    }
     for name in _QUANTITIES:
         q = quantities.get(name)
         body[name] = _quantity(*q) if isinstance(q, tuple) else _quantity(q)
@@ -49,9 +55,17 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
     return [mesh_path, out / "replica.json"]
 
 
-def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str = "fit", gas: str = "adiabatic",
-                   cor: float | None = None, mesh_faces: int = 2000, wrinkle_law: str | None = None,
-                   rig: str | Path | None = None) -> list[Path]:  # fmt: skip
+def export_replica(
+    session_path: str | Path,
+    out_dir: str | Path,
+    *,
+    method: str = "fit",
+    gas: str = "adiabatic",
+    cor: float | None = None,
+    mesh_faces: int = 2000,
+    wrinkle_law: str | None = None,
+    rig: str | Path | None = None,
+) -> list[Path]:
     """The replica of a session: P_g and E ± std from its ``method`` estimate, ν, h ± std, mass and
     the mesh (the session's, or a sphere of its radius with ``mesh_faces`` triangles).
 
@@ -69,8 +83,10 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
     if cor is not None and not 0.0 < cor <= 1.0:
         raise InvalidInputError(f"--cor {cor}: a COR is in (0, 1]. Fix: measure it as √(bounce height / drop height)")
     if getattr(session, "mesh_path", None) is None and not MESH_FACES[0] <= mesh_faces <= MESH_FACES[1]:
-        raise InvalidInputError(f"--mesh-faces {mesh_faces}: a sphere replica has {MESH_FACES[0]}-{MESH_FACES[1]} "
-                                "triangles. Fix: e.g. --mesh-faces 2000")
+        raise InvalidInputError(
+            f"--mesh-faces {mesh_faces}: a sphere replica has {MESH_FACES[0]}-{MESH_FACES[1]} "
+            "triangles. Fix: e.g. --mesh-faces 2000"
+        )
     check_output_dir(out_dir, "--out")  # before the estimate: a refused path costs no fit
     estimator_gas = "prescribed" if gas == "prescribed" else DEFAULT_OPTIONS.gas
     if rig is not None:
@@ -80,14 +96,32 @@ def export_replica(session_path: str | Path, out_dir: str | Path, *, method: str
     wrinkle_law = wrinkle_law or DEFAULT_OPTIONS.wrinkle_law
     p_g, e, stats = estimated_parameters(session, method, {"gas": estimator_gas, "wrinkle_law": wrinkle_law}, rig)
     mesh_path = getattr(session, "mesh_path", None)
-    shell = s3.load(mesh_path, session.thickness) if mesh_path else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
+    shell = (
+        s3.load(mesh_path, session.thickness)
+        if mesh_path
+        else s3.ball(session.radius, session.thickness, n_triangles=mesh_faces)
+    )
     quantities = {
-        "gauge_pressure_Pa": (p_g, stats["gauge_pressure_Pa"]["std"]), "youngs_modulus_Pa": (e, stats["youngs_modulus_Pa"]["std"]),
-        "poisson_ratio": (session.poisson_ratio, None), "thickness_m": (session.thickness, session.thickness_std),
-        "mass_kg": (session.mass, None), "cor": (cor, None),
-    }  # fmt: skip
-    return write_replica(out_dir, shell, quantities, gas=gas, source={"session": str(session.source), "estimator": method, "estimator_gas": estimator_gas, "wrinkle_law": wrinkle_law,
-                                                             "rig": None if rig is None else str(rig)})
+        "gauge_pressure_Pa": (p_g, stats["gauge_pressure_Pa"]["std"]),
+        "youngs_modulus_Pa": (e, stats["youngs_modulus_Pa"]["std"]),
+        "poisson_ratio": (session.poisson_ratio, None),
+        "thickness_m": (session.thickness, session.thickness_std),
+        "mass_kg": (session.mass, None),
+        "cor": (cor, None),
+    }
+    return write_replica(
+        out_dir,
+        shell,
+        quantities,
+        gas=gas,
+        source={
+            "session": str(session.source),
+            "estimator": method,
+            "estimator_gas": estimator_gas,
+            "wrinkle_law": wrinkle_law,
+            "rig": None if rig is None else str(rig),
+        },
+    )
 
 
 def load_replica(directory: str | Path, *, planes=(), gravity=None):
@@ -109,10 +143,20 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
             raise InvalidInputError(f"{path}: field '{name}.value' is missing. Fix: re-export the replica")
     value = lambda k: float(replica[k]["value"])  # noqa: E731
     shell = s3.load(directory / replica["mesh"], value("thickness_m"))
-    properties = ShellProperties(gauge_pressure=value("gauge_pressure_Pa"), young_modulus=value("youngs_modulus_Pa"),
-                                 thickness=shell.thickness, poisson_ratio=value("poisson_ratio"))
-    system = d.shell_system(shell, properties, gas=replica["gas"],
-                            mass=value("mass_kg"), planes=planes, gravity=STANDARD_GRAVITY if gravity is None else gravity)  # fmt: skip
+    properties = ShellProperties(
+        gauge_pressure=value("gauge_pressure_Pa"),
+        young_modulus=value("youngs_modulus_Pa"),
+        thickness=shell.thickness,
+        poisson_ratio=value("poisson_ratio"),
+    )
+    system = d.shell_system(
+        shell,
+        properties,
+        gas=replica["gas"],
+        mass=value("mass_kg"),
+        planes=planes,
+        gravity=STANDARD_GRAVITY if gravity is None else gravity,
+    )
     return system, replica
 
 

@@ -45,9 +45,11 @@ def write_diagnosis(diagnosis, out_dir: str | Path) -> list[Path]:
         raise InvalidInputError(f"--out {out}: exists and is not a directory. Fix: name a directory")
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, write in (("diagnosis.json", lambda p: p.write_text(json.dumps(jsonable(diagnosis.report), indent=2))),
-                        ("diagnosis.png", lambda p: plot_diagnosis(diagnosis, p)),
-                        ("report.md", lambda p: p.write_text(diagnosis_markdown(diagnosis.report)))):  # fmt: skip
+    for name, write in (
+        ("diagnosis.json", lambda p: p.write_text(json.dumps(jsonable(diagnosis.report), indent=2))),
+        ("diagnosis.png", lambda p: plot_diagnosis(diagnosis, p)),
+        ("report.md", lambda p: p.write_text(diagnosis_markdown(diagnosis.report))),
+    ):
         fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=Path(name).suffix)
         os.close(fd)
         try:
@@ -59,8 +61,6 @@ def write_diagnosis(diagnosis, out_dir: str | Path) -> list[Path]:
                 os.unlink(tmp)
         written.append(out / name)
     return written
-
-
 
 
 def _image(path: str, caption: str) -> str:
@@ -75,45 +75,70 @@ def summary_text(report: dict) -> str:
         if e["status"] != "ok":
             lines.append(f"{e['effect']:>26s}  FAILED: {e['message']}")
             continue
-        params = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
-                           for k, v in e.get("parameters", {}).items())  # fmt: skip
-        lines.append(f"{e['effect']:>26s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
-                     f"{e['delta_se']:7.2f}  {params}")  # fmt: skip
-    lines.append(f"gap (held-out rms of standardized residuals): {report['gap_before']['rms_standardized']:.3g} before, "
-                 f"{report['gap_after']['rms_standardized']:.3g} after, shrink {report['shrink']:.3g}x")  # fmt: skip
+        params = ", ".join(
+            f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
+            for k, v in e.get("parameters", {}).items()
+        )
+        lines.append(
+            f"{e['effect']:>26s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
+            f"{e['delta_se']:7.2f}  {params}"
+        )
+    lines.append(
+        f"gap (held-out rms of standardized residuals): {report['gap_before']['rms_standardized']:.3g} before, "
+        f"{report['gap_after']['rms_standardized']:.3g} after, shrink {report['shrink']:.3g}x"
+    )
     for name, g in report["gap_before"]["by_observable"].items():
         after = report["gap_after"]["by_observable"][name]
-        lines.append(f"  {name:>18s}: rms {g['rms']:.3g} -> {after['rms']:.3g} {g['unit']} "
-                     f"({g['rms_percent']:.3g} % -> {after['rms_percent']:.3g} % of the measured value)")  # fmt: skip
+        lines.append(
+            f"  {name:>18s}: rms {g['rms']:.3g} -> {after['rms']:.3g} {g['unit']} "
+            f"({g['rms_percent']:.3g} % -> {after['rms_percent']:.3g} % of the measured value)"
+        )
     kept = report.get("not_excluded") or []
     if len(kept) > 1:
-        lines.append(f"not excluded (within {report['decision']['win_nats']:g} nats / {report['decision']['win_se']:g} SE "
-                     f"of the best): {', '.join(k['effect'] for k in kept)}")  # fmt: skip
+        lines.append(
+            f"not excluded (within {report['decision']['win_nats']:g} nats / {report['decision']['win_se']:g} SE "
+            f"of the best): {', '.join(k['effect'] for k in kept)}"
+        )
         e = report["robust"]["young_modulus"]
-        lines.append(f"  E over them: {e['range95'][0]:.4g} … {e['range95'][1]:.4g} Pa (95 %), point values spread "
-                     f"{e['spread_percent']:.1f} %")  # fmt: skip
+        lines.append(
+            f"  E over them: {e['range95'][0]:.4g} … {e['range95'][1]:.4g} Pa (95 %), point values spread "
+            f"{e['spread_percent']:.1f} %"
+        )
         for s in report.get("separating", [])[:4]:
             lines.append(f"  to separate {s['effect']}: {s['measurement']}")
     if report.get("robust", {}).get("warning"):
         lines.append(f"warning: {report['robust']['warning']}")
     misfit = report["where"]["misfit_groups"]
-    lines.append("baseline misfit (p < {:g}): {}".format(report["where"]["misfit_threshold_p"], ", ".join(misfit) or "none"))
+    lines.append(
+        "baseline misfit (p < {:g}): {}".format(report["where"]["misfit_threshold_p"], ", ".join(misfit) or "none")
+    )
     return "\n".join(lines)
 
 
 def diagnosis_markdown(report: dict) -> str:
     """``report.md`` of ``shelljax diagnose``: the verdict, the ranking as printed, the figure."""
-    return "\n".join([
-        "# Diagnosis: the sim-to-real gap", "", f"**Verdict:** {report['verdict']}", "",
-        "```text", summary_text(report), "```", "",
-        _image("diagnosis.png", "where the baseline misfits, which effect explains it, how far the gap shrinks"),
-        "Everything in numbers: [diagnosis.json](diagnosis.json).", "",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "# Diagnosis: the sim-to-real gap",
+            "",
+            f"**Verdict:** {report['verdict']}",
+            "",
+            "```text",
+            summary_text(report),
+            "```",
+            "",
+            _image("diagnosis.png", "where the baseline misfits, which effect explains it, how far the gap shrinks"),
+            "Everything in numbers: [diagnosis.json](diagnosis.json).",
+            "",
+        ]
+    )
 
 
-_SESSION_FIGURES = (("force_depth", "force against indentation depth: trials, the OLS line (closed form) and the fitted model"),
-                    ("corner", "posterior (bayes): marginals and pairs, 2.5 / 50 / 97.5 % quantiles dashed"),
-                    ("trace", "MCMC trace of every walker (the sampler's log-scaled coordinates)"))  # fmt: skip
+_SESSION_FIGURES = (
+    ("force_depth", "force against indentation depth: trials, the OLS line (closed form) and the fitted model"),
+    ("corner", "posterior (bayes): marginals and pairs, 2.5 / 50 / 97.5 % quantiles dashed"),
+    ("trace", "MCMC trace of every walker (the sampler's log-scaled coordinates)"),
+)
 
 
 def _kind(figure: str) -> str | None:
@@ -124,10 +149,21 @@ def write_run_report(results: dict, run_dir: str | Path, table: str) -> Path:
     """``report.md`` of ``shelljax run`` in ``run_dir``: the config, the table as printed, every figure inline."""
     run_dir = Path(run_dir)
     config = results["config"]
-    lines = [f"# Run `{config['name']}`", "", config.get("description") or "", "",
-             f"shelljax {results['shelljax_version']}, {results['created']}, config `{config['path']}` "
-             f"(copy: [config.toml](config.toml)); everything in numbers: [results.json](results.json).", "",
-             "## Estimates", "", "```text", table, "```", ""]  # fmt: skip
+    lines = [
+        f"# Run `{config['name']}`",
+        "",
+        config.get("description") or "",
+        "",
+        f"shelljax {results['shelljax_version']}, {results['created']}, config `{config['path']}` "
+        f"(copy: [config.toml](config.toml)); everything in numbers: [results.json](results.json).",
+        "",
+        "## Estimates",
+        "",
+        "```text",
+        table,
+        "```",
+        "",
+    ]
     if results.get("summary_figure"):
         lines.append(_image(results["summary_figure"], "estimates of every session and method"))
     if results.get("calibration", {}).get("figure"):
@@ -135,21 +171,30 @@ def write_run_report(results: dict, run_dir: str | Path, table: str) -> Path:
     for entry in results["sessions"]:
         if entry["figures"]:
             lines += [f"## {Path(entry['session']).stem} ({entry['object']})", ""]
-            order = sorted(entry["figures"], key=lambda f: [k for k, _ in _SESSION_FIGURES].index(_kind(f)) if _kind(f) else 9)
+            order = sorted(
+                entry["figures"], key=lambda f: [k for k, _ in _SESSION_FIGURES].index(_kind(f)) if _kind(f) else 9
+            )
             lines += [_image(f, dict(_SESSION_FIGURES).get(_kind(f), Path(f).stem.replace("_", " "))) for f in order]
     return atomic_write_text(run_dir / "report.md", "\n".join(lines) + "\n")
 
 
-_IMPACT_HEADER = ("| run | plane | onset [s] | COR | contact [ms] | peak force [N] | compression [mm] | contact diameter [mm] |\n"
-                  "|---|---|---:|---:|---:|---:|---:|---:|")  # fmt: skip
-_RUN_FIGURES = (("preview.gif", "the run: faces coloured by membrane strain, contact dark; time, contact force, gauge pressure"),
-                ("figures/closeup.png", "the largest contact patch, seen through the plane"),
-                ("figures/max_deformation.png", "free and most deformed cross-sections"),
-                ("figures/contact_force.png", "contact force"), ("figures/energies.png", "energies"),
-                ("figures/trajectory.png", "centre of mass against time"))  # fmt: skip
-_SCENARIO_FIGURES = {"max_deformation.png": "the most deformed cross-section of every run, overlaid with the free shape",
-                     "trajectory.png": "the centre of mass's trajectory with the planes",
-                     "keyframes.png": "the swing: the object at a few moments, coloured by its distance from the rigid swing"}
+_IMPACT_HEADER = (
+    "| run | plane | onset [s] | COR | contact [ms] | peak force [N] | compression [mm] | contact diameter [mm] |\n"
+    "|---|---|---:|---:|---:|---:|---:|---:|"
+)
+_RUN_FIGURES = (
+    ("preview.gif", "the run: faces coloured by membrane strain, contact dark; time, contact force, gauge pressure"),
+    ("figures/closeup.png", "the largest contact patch, seen through the plane"),
+    ("figures/max_deformation.png", "free and most deformed cross-sections"),
+    ("figures/contact_force.png", "contact force"),
+    ("figures/energies.png", "energies"),
+    ("figures/trajectory.png", "centre of mass against time"),
+)
+_SCENARIO_FIGURES = {
+    "max_deformation.png": "the most deformed cross-section of every run, overlaid with the free shape",
+    "trajectory.png": "the centre of mass's trajectory with the planes",
+    "keyframes.png": "the swing: the object at a few moments, coloured by its distance from the rigid swing",
+}
 
 
 def _relative(path: str, root: Path) -> str:
@@ -159,26 +204,41 @@ def _relative(path: str, root: Path) -> str:
 def scenario_markdown(summary: dict, out: Path) -> str:
     """``report.md`` of ``shelljax simulate``: parameters, impacts, the scenario's and every run's figures."""
     p = summary["parameters"]
-    lines = [f"# Scenario `{summary['name']}`", "", f"Config `{summary['scenario']}`; parameters: {summary['object'].get('parameters', '')}; "
-             "everything in numbers: [scenario.json](scenario.json).", "",
-             "| P_g [Pa] | E [Pa] | ν | h [mm] | m [kg] | gas | faces | Δt [s] | scheme | contact damping [N·s/m] |",
-             "|---:|---:|---:|---:|---:|---|---:|---:|---|---:|",
-             f"| {p['gauge_pressure_Pa']:.5g} | {p['youngs_modulus_Pa']:.4g} | {p['poisson_ratio']:.3g} | {1e3 * p['thickness_m']:.3g} | "
-             f"{p['mass_kg']:.4g} | {p['gas']} | {p['mesh_faces']} | {p['dt_s']:.3g} | {p['scheme']} | {summary['contact_damping_N_s_per_m']:.4g} |", ""]  # fmt: skip
+    lines = [
+        f"# Scenario `{summary['name']}`",
+        "",
+        f"Config `{summary['scenario']}`; parameters: {summary['object'].get('parameters', '')}; "
+        "everything in numbers: [scenario.json](scenario.json).",
+        "",
+        "| P_g [Pa] | E [Pa] | ν | h [mm] | m [kg] | gas | faces | Δt [s] | scheme | contact damping [N·s/m] |",
+        "|---:|---:|---:|---:|---:|---|---:|---:|---|---:|",
+        f"| {p['gauge_pressure_Pa']:.5g} | {p['youngs_modulus_Pa']:.4g} | {p['poisson_ratio']:.3g} | {1e3 * p['thickness_m']:.3g} | "
+        f"{p['mass_kg']:.4g} | {p['gas']} | {p['mesh_faces']} | {p['dt_s']:.3g} | {p['scheme']} | {summary['contact_damping_N_s_per_m']:.4g} |",
+        "",
+    ]
     if summary.get("calibration"):
         c = summary["calibration"]
-        lines += [f"Contact damping calibrated to COR {c['target_cor']} (got {c['cor']:.4f}) in {len(c['evaluations'])} drops.", ""]
+        lines += [
+            f"Contact damping calibrated to COR {c['target_cor']} (got {c['cor']:.4f}) in {len(c['evaluations'])} drops.",
+            "",
+        ]
     lines += ["## Impacts", "", _IMPACT_HEADER]
     notes = []
     for run in summary["runs"]:
         label = f"drop {run['drop_height_m']:.3g} m" if "drop_height_m" in run else "swing"
         for m in run["impacts"]:
-            lines.append(f"| {label} | {m['plane']} | {m['onset_s']:.4f} | {m['cor']:.4f} | {1e3 * m['contact_time_s']:.2f} | "
-                         f"{m['peak_force_N']:.4g} | {1e3 * m['max_compression_m']:.2f} | {1e3 * m['max_contact_diameter_m']:.1f} |")  # fmt: skip
+            lines.append(
+                f"| {label} | {m['plane']} | {m['onset_s']:.4f} | {m['cor']:.4f} | {1e3 * m['contact_time_s']:.2f} | "
+                f"{m['peak_force_N']:.4g} | {1e3 * m['max_compression_m']:.2f} | {1e3 * m['max_contact_diameter_m']:.1f} |"
+            )
         if "max_deviation_from_rigid_m" in run:
-            notes += ["", f"Swing: held vertices on the schedule to {run['held_error_m']:.2g} m; largest departure from the rigid "
-                      f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm at t = {run['time_of_max_deviation_s']:.3f} s; "
-                      f"peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa.", ""]  # fmt: skip
+            notes += [
+                "",
+                f"Swing: held vertices on the schedule to {run['held_error_m']:.2g} m; largest departure from the rigid "
+                f"swing {1e3 * run['max_deviation_from_rigid_m']:.1f} mm at t = {run['time_of_max_deviation_s']:.3f} s; "
+                f"peak gauge pressure {run['peak_gas_pressure_Pa']:.5g} Pa.",
+                "",
+            ]
     if not any(run["impacts"] for run in summary["runs"]):
         lines.append("| (no impact: nothing left a plane within the run) | | | | | | | |")
     lines += notes
@@ -189,7 +249,9 @@ def scenario_markdown(summary: dict, out: Path) -> str:
         label = f"drop {run['drop_height_m']:.3g} m" if "drop_height_m" in run else "swing"
         rel = _relative(run["directory"], out)
         lines += [f"## {label}", "", f"[results.json]({rel}/results.json)", ""]
-        lines += [_image(f"{rel}/{f}", caption) for f, caption in _RUN_FIGURES if (Path(run["directory"]) / f).is_file()]
+        lines += [
+            _image(f"{rel}/{f}", caption) for f, caption in _RUN_FIGURES if (Path(run["directory"]) / f).is_file()
+        ]
     return "\n".join(lines) + "\n"
 
 

@@ -120,9 +120,17 @@ def random_graded_shell(thickness: float, n_triangles: int, seed: int = 0):
     from . import shell3d as s3
 
     def mesh(top, smoothing_iterations=25):
-        return s3.ShellMesh.sphere(RADIUS, layout="random", top_spacing=top, max_spacing=RANDOM_MESH_MAX_SPACING,
-                                   bottom_spacing=min(2.0 * top, RANDOM_MESH_MAX_SPACING), refined_arc=RANDOM_MESH_REFINED_ARC,
-                                   growth=0.15, seed=seed, smoothing_iterations=smoothing_iterations)  # fmt: skip
+        return s3.ShellMesh.sphere(
+            RADIUS,
+            layout="random",
+            top_spacing=top,
+            max_spacing=RANDOM_MESH_MAX_SPACING,
+            bottom_spacing=min(2.0 * top, RANDOM_MESH_MAX_SPACING),
+            refined_arc=RANDOM_MESH_REFINED_ARC,
+            growth=0.15,
+            seed=seed,
+            smoothing_iterations=smoothing_iterations,
+        )
 
     # F = 2V − 4 is fixed before the smoothing, so the search skips it.
     low, high = np.log(3e-4), np.log(RANDOM_MESH_MAX_SPACING)
@@ -131,8 +139,10 @@ def random_graded_shell(thickness: float, n_triangles: int, seed: int = 0):
         low, high = (mid, high) if mesh(np.exp(mid), 0).n_faces > n_triangles else (low, mid)
     shell = s3.Shell(mesh(np.exp(0.5 * (low + high))), thickness)
     if abs(shell.mesh.n_faces / n_triangles - 1.0) > 0.1:
-        raise SystemExit(f"random mesh: {n_triangles} faces is out of reach with edges of "
-                         f"{RANDOM_MESH_MAX_SPACING * 1e3:g} mm away from the poles (got {shell.mesh.n_faces})")
+        raise SystemExit(
+            f"random mesh: {n_triangles} faces is out of reach with edges of "
+            f"{RANDOM_MESH_MAX_SPACING * 1e3:g} mm away from the poles (got {shell.mesh.n_faces})"
+        )
     return shell
 
 
@@ -153,16 +163,22 @@ def _level_record(sim, shell, reference, top, band, q) -> dict:
     from . import shell3d as s3
 
     x = q[:-3].reshape(-1, 3)
-    spectrum = s3.wrinkle_spectrum(reference, x, shell.mesh.faces, reference[top], max_radius=WRINKLE_RINGS[0],
-                                   ring_width=WRINKLE_RINGS[1])  # fmt: skip
+    spectrum = s3.wrinkle_spectrum(
+        reference, x, shell.mesh.faces, reference[top], max_radius=WRINKLE_RINGS[0], ring_width=WRINKLE_RINGS[1]
+    )
     obs = s3.observables(sim, q, sim.params_at(q))
-    return {"force": float(obs["force"]), "w0": local_dimple_depth(reference, x, top, band),
-            "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "D_l_mesh", "d")},
-            "wrinkle_mode": spectrum.count, "wrinkle_amplitude": spectrum.count_amplitude,
-            # per mode, summed in quadrature over the rings (what ``count`` maximises)
-            "mode_amplitude": np.sqrt(np.nansum(spectrum.amplitude**2, axis=0)).tolist(),
-            "modes": spectrum.modes.tolist(), "top_drop": float(reference[top, 2] - x[top, 2]),
-            "travel": float(sim.touch_center[2] - q[-1])}  # fmt: skip
+    return {
+        "force": float(obs["force"]),
+        "w0": local_dimple_depth(reference, x, top, band),
+        "observables": {k: float(obs[k]) for k in ("w0", "H", "D_u", "D_l", "D_l_mesh", "d")},
+        "wrinkle_mode": spectrum.count,
+        "wrinkle_amplitude": spectrum.count_amplitude,
+        # per mode, summed in quadrature over the rings (what ``count`` maximises)
+        "mode_amplitude": np.sqrt(np.nansum(spectrum.amplitude**2, axis=0)).tolist(),
+        "modes": spectrum.modes.tolist(),
+        "top_drop": float(reference[top, 2] - x[top, 2]),
+        "travel": float(sim.touch_center[2] - q[-1]),
+    }
 
 
 def _make_shell(mesh: str, thickness: float, n_triangles: int, pole_refinement: float):
@@ -176,9 +192,17 @@ def _make_shell(mesh: str, thickness: float, n_triangles: int, pole_refinement: 
     return random_graded_shell(thickness, n_triangles)
 
 
-def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: SolvedLevelStore | None = None,
-                forces: tuple[float, ...] = PAPER_FORCES, travels: tuple[float, ...] | None = None,
-                force_tolerance: float | None = None, mesh: str = "ball", max_newton_iterations: int = 60) -> dict:
+def solve_curve(
+    params,
+    n_triangles: int,
+    pole_refinement: float,
+    checkpoint: SolvedLevelStore | None = None,
+    forces: tuple[float, ...] = PAPER_FORCES,
+    travels: tuple[float, ...] | None = None,
+    force_tolerance: float | None = None,
+    mesh: str = "ball",
+    max_newton_iterations: int = 60,
+) -> dict:
     """3D force curve of one parameter set (P_g [Pa], E [Pa], h [m]) at ``forces`` [N] (each
     within ``FORCE_MATCH``), or, when ``travels`` [m] are given, at those indenter travels (both
     displacement-controlled); ``force_tolerance`` [N]: Newton's (None: the engine's default);
@@ -189,13 +213,24 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: So
     pg, e, h = params
     shell = _make_shell(mesh, h, n_triangles, pole_refinement)
     t0 = time.perf_counter()
-    properties = ShellProperties(gauge_pressure=pg, young_modulus=e, thickness=shell.thickness,
-                                 poisson_ratio=DEFAULT_POISSON_RATIO)
-    sim = s3.Indentation(shell, properties, gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True,
-                         progress=False, force_tolerance=force_tolerance, max_newton_iterations=max_newton_iterations)  # fmt: skip
+    properties = ShellProperties(
+        gauge_pressure=pg, young_modulus=e, thickness=shell.thickness, poisson_ratio=DEFAULT_POISSON_RATIO
+    )
+    sim = s3.Indentation(
+        shell,
+        properties,
+        gas="prescribed",
+        indenter_radius=PAPER_INDENTER_RADIUS,
+        ground=True,
+        progress=False,
+        force_tolerance=force_tolerance,
+        max_newton_iterations=max_newton_iterations,
+    )
     reference = sim.q_reference[:-3].reshape(-1, 3)
     faces = shell.mesh.faces
-    edge_len = np.linalg.norm(shell.mesh.vertices[faces[:, [0, 1, 2]]] - shell.mesh.vertices[faces[:, [1, 2, 0]]], axis=-1)
+    edge_len = np.linalg.norm(
+        shell.mesh.vertices[faces[:, [0, 1, 2]]] - shell.mesh.vertices[faces[:, [1, 2, 0]]], axis=-1
+    )
     pole_edge = float(edge_len[np.any(faces == sim.top, axis=1)].mean())
     band = 0.6 * float(np.median(edge_len))
     if travels is None:
@@ -204,18 +239,39 @@ def solve_curve(params, n_triangles: int, pole_refinement: float, checkpoint: So
         solved = travel_levels(sim, travels, checkpoint)
     out = [_level_record(sim, shell, reference, sim.top, band, q) for _, q in solved]
     return {
-        "gauge_pressure": pg, "young_modulus": e, "thickness": h, "radius": RADIUS,
-        "poisson_ratio": DEFAULT_POISSON_RATIO, "tau": float(tau(pg, RADIUS, e, h, DEFAULT_POISSON_RATIO)),
-        "gas": "prescribed", "indenter_radius": PAPER_INDENTER_RADIUS,
-        "n_faces": int(faces.shape[0]), "n_vertices": int(shell.mesh.n_vertices),
-        "mesh": mesh, "pole_refinement": pole_refinement if mesh == "ball" else 1.0, "pole_edge": pole_edge,
-        "median_edge": float(np.median(edge_len)), "equator_band": band,
-        **{key: [c[key] for c in out] for key in ("force", "w0", "top_drop", "travel", "wrinkle_mode",
-                                                  "wrinkle_amplitude", "observables", "mode_amplitude")},
+        "gauge_pressure": pg,
+        "young_modulus": e,
+        "thickness": h,
+        "radius": RADIUS,
+        "poisson_ratio": DEFAULT_POISSON_RATIO,
+        "tau": float(tau(pg, RADIUS, e, h, DEFAULT_POISSON_RATIO)),
+        "gas": "prescribed",
+        "indenter_radius": PAPER_INDENTER_RADIUS,
+        "n_faces": int(faces.shape[0]),
+        "n_vertices": int(shell.mesh.n_vertices),
+        "mesh": mesh,
+        "pole_refinement": pole_refinement if mesh == "ball" else 1.0,
+        "pole_edge": pole_edge,
+        "median_edge": float(np.median(edge_len)),
+        "equator_band": band,
+        **{
+            key: [c[key] for c in out]
+            for key in (
+                "force",
+                "w0",
+                "top_drop",
+                "travel",
+                "wrinkle_mode",
+                "wrinkle_amplitude",
+                "observables",
+                "mode_amplitude",
+            )
+        },
         "modes": out[0]["modes"] if out else [],
-        "force_tolerance": sim.atol, "solve_seconds": time.perf_counter() - t0,
+        "force_tolerance": sim.atol,
+        "solve_seconds": time.perf_counter() - t0,
         "machine": f"{platform.machine()} ({platform.system()})",
-    }  # fmt: skip
+    }
 
 
 def load_curves(path: Path = CURVES_PATH) -> list[dict]:
@@ -226,8 +282,11 @@ def load_curves(path: Path = CURVES_PATH) -> list[dict]:
 # --- sessions -----------------------------------------------------------------------------------
 def _true_count(curve: dict) -> float:
     """Vella et al.'s wrinkle count of the curve's ball (continuous)."""
-    return float(scaling_wrinkle_count(curve["gauge_pressure"], curve["radius"], curve["young_modulus"],
-                                       curve["thickness"], curve["poisson_ratio"]))  # fmt: skip
+    return float(
+        scaling_wrinkle_count(
+            curve["gauge_pressure"], curve["radius"], curve["young_modulus"], curve["thickness"], curve["poisson_ratio"]
+        )
+    )
 
 
 def _session(curve: dict, force, depth, counts, *, name: str, notes: str, manometer: bool = False):
@@ -235,13 +294,21 @@ def _session(curve: dict, force, depth, counts, *, name: str, notes: str, manome
 
     trial = np.repeat(np.arange(1, N_TRIALS + 1), len(curve["force"]))
     return Session(
-        source=Path(f"virtual/{name or 'session'}.toml"), object_name=name or "virtual ball",
-        radius=curve["radius"], radius_std=0.0, thickness=curve["thickness"], thickness_std=0.0,
-        poisson_ratio=curve["poisson_ratio"], trial=trial, force=force, depth=depth,
-        wrinkle_counts=counts, manometer_gauge_pressure=curve["gauge_pressure"] if manometer else None,
+        source=Path(f"virtual/{name or 'session'}.toml"),
+        object_name=name or "virtual ball",
+        radius=curve["radius"],
+        radius_std=0.0,
+        thickness=curve["thickness"],
+        thickness_std=0.0,
+        poisson_ratio=curve["poisson_ratio"],
+        trial=trial,
+        force=force,
+        depth=depth,
+        wrinkle_counts=counts,
+        manometer_gauge_pressure=curve["gauge_pressure"] if manometer else None,
         notes=f"virtual (3D engine, {curve['n_faces']} faces); truth P_g={curve['gauge_pressure']} Pa, "
-              f"E={curve['young_modulus']} Pa; {notes}",
-    )  # fmt: skip
+        f"E={curve['young_modulus']} Pa; {notes}",
+    )
 
 
 def draw_session(curve: dict, depth_noise: float, seed: int, *, manometer: bool = False, name: str = ""):
@@ -256,8 +323,9 @@ def draw_session(curve: dict, depth_noise: float, seed: int, *, manometer: bool 
     force = np.round((level + rng.normal(0.0, FORCE_NOISE, level.size)) / FORCE_ROUNDING) * FORCE_ROUNDING
     depth = np.round((w + rng.normal(0.0, depth_noise, w.size)) / DEPTH_ROUNDING) * DEPTH_ROUNDING
     counts = np.round(_true_count(curve) + rng.normal(0.0, COUNT_NOISE, N_TRIALS))
-    return _session(curve, force, depth, counts, name=name, manometer=manometer,
-                    notes=f"depth noise {depth_noise} m; seed {seed}")
+    return _session(
+        curve, force, depth, counts, name=name, manometer=manometer, notes=f"depth noise {depth_noise} m; seed {seed}"
+    )
 
 
 def noise_free_session(curve: dict, *, name: str = ""):
@@ -278,14 +346,26 @@ def _draws(curves: list[dict], realisations: int, base_seed: int):
             for r in range(realisations):
                 seed = base_seed + 1000 * k + 100 * j + r
                 name = f"set{k}_noise{sigma * 1e3:.1f}mm_r{r}"
-                yield c, {"set": k, "depth_noise": sigma, "realisation": r, "seed": seed, "name": name,
-                          "gauge_pressure": c["gauge_pressure"], "young_modulus": c["young_modulus"]}  # fmt: skip
+                yield (
+                    c,
+                    {
+                        "set": k,
+                        "depth_noise": sigma,
+                        "realisation": r,
+                        "seed": seed,
+                        "name": name,
+                        "gauge_pressure": c["gauge_pressure"],
+                        "young_modulus": c["young_modulus"],
+                    },
+                )
 
 
 def draw_sessions(curves: list[dict], *, realisations: int = 2, base_seed: int = 2026) -> list[tuple[dict, object]]:
     """Test sessions: every curve × ``NOISE_LEVELS`` × ``realisations``; list of (truth, Session)."""
-    return [(truth, draw_session(c, truth["depth_noise"], truth["seed"], name=truth["name"]))
-            for c, truth in _draws(curves, realisations, base_seed)]  # fmt: skip
+    return [
+        (truth, draw_session(c, truth["depth_noise"], truth["seed"], name=truth["name"]))
+        for c, truth in _draws(curves, realisations, base_seed)
+    ]
 
 
 def write_drawn_session(curve: dict, truth: dict, path: str, *, seed: int) -> dict:
@@ -294,14 +374,32 @@ def write_drawn_session(curve: dict, truth: dict, path: str, *, seed: int) -> di
     from .session import write_session
 
     s = draw_session(curve, truth["depth_noise"], seed, name=truth["name"])
-    write_session(path, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
-                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
-                  wrinkle_counts=s.wrinkle_counts.astype(int), poisson_ratio=s.poisson_ratio, notes=s.notes)  # fmt: skip
+    write_session(
+        path,
+        object_name=s.object_name,
+        radius=s.radius,
+        radius_std=s.radius_std,
+        thickness=s.thickness,
+        thickness_std=s.thickness_std,
+        trial=s.trial,
+        force=s.force,
+        depth=s.depth,
+        wrinkle_counts=s.wrinkle_counts.astype(int),
+        poisson_ratio=s.poisson_ratio,
+        notes=s.notes,
+    )
     return {**truth, "path": str(path), "units": {"gauge_pressure": "Pa", "young_modulus": "Pa", "depth_noise": "m"}}
 
 
-def write_sessions(curves: list[dict], out_dir: str | Path, *, realisations: int = 2, base_seed: int = 2026,
-                   executor=None, progress: bool | None = None) -> list[dict]:  # fmt: skip
+def write_sessions(
+    curves: list[dict],
+    out_dir: str | Path,
+    *,
+    realisations: int = 2,
+    base_seed: int = 2026,
+    executor=None,
+    progress: bool | None = None,
+) -> list[dict]:
     """Write :func:`draw_sessions`' sessions (the same seeds and names) to ``out_dir/<name>.toml``,
     one work item each (``shelljax.executor``; ``executor``: an ``ExecutorOptions``, None for
     in-process), with ``out_dir/items/`` holding each finished one's record and
@@ -313,21 +411,35 @@ def write_sessions(curves: list[dict], out_dir: str | Path, *, realisations: int
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     draws = list(_draws(curves, realisations, base_seed))
-    items = [WorkItem(truth["name"], write_drawn_session, (c, truth, str(out / f"{truth['name']}.toml")), seed=truth["seed"])
-             for c, truth in draws]  # fmt: skip
+    items = [
+        WorkItem(truth["name"], write_drawn_session, (c, truth, str(out / f"{truth['name']}.toml")), seed=truth["seed"])
+        for c, truth in draws
+    ]
     results = run_items(items, run_dir=out, options=executor, progress=progress, desc="drawing sessions")
-    index = [{**truth, "status": r.status, **({"path": r.value["path"]} if r.status == "done" else {"error": r.error})}
-             for (_, truth), r in zip(draws, results)]  # fmt: skip
-    atomic_write_text(out / "sessions.json", json.dumps({"description": "virtual sessions drawn from shelljax.virtual's curves "
-                                                          "(SI: gauge_pressure, young_modulus [Pa], depth_noise [m])",
-                                                          "sessions": index}, indent=1))  # fmt: skip
+    index = [
+        {**truth, "status": r.status, **({"path": r.value["path"]} if r.status == "done" else {"error": r.error})}
+        for (_, truth), r in zip(draws, results)
+    ]
+    atomic_write_text(
+        out / "sessions.json",
+        json.dumps(
+            {
+                "description": "virtual sessions drawn from shelljax.virtual's curves "
+                "(SI: gauge_pressure, young_modulus [Pa], depth_noise [m])",
+                "sessions": index,
+            },
+            indent=1,
+        ),
+    )
     return index
 
 
 def draw_calibration_sessions(curves: list[dict], *, base_seed: int = 7000) -> list:
     """One calibration session (manometer = true P_g, 1 mm depth noise) per curve."""
-    return [draw_session(c, 1.0e-3, base_seed + c.get("set", i), manometer=True, name=f"calib_set{c.get('set', i)}")
-            for i, c in enumerate(curves)]  # fmt: skip
+    return [
+        draw_session(c, 1.0e-3, base_seed + c.get("set", i), manometer=True, name=f"calib_set{c.get('set', i)}")
+        for i, c in enumerate(curves)
+    ]
 
 
 def summarise(rows: list[dict], method: str) -> dict:
@@ -343,7 +455,12 @@ def summarise(rows: list[dict], method: str) -> dict:
             continue
         err = np.array([x["rel_error"] for x in recs])
         cov = np.array([x["covered"] for x in recs])
-        out[q] = {"n": int(err.size), "bias": float(err.mean()), "median_abs": float(np.median(np.abs(err))),
-                  "rms": float(np.sqrt(np.mean(err**2))), "coverage95": float(cov.mean())}  # fmt: skip
+        out[q] = {
+            "n": int(err.size),
+            "bias": float(err.mean()),
+            "median_abs": float(np.median(np.abs(err))),
+            "rms": float(np.sqrt(np.mean(err**2))),
+            "coverage95": float(cov.mean()),
+        }
     out["failed"] = sum(1 for r in rows if isinstance(r.get(method), dict) and "error" in r[method])
     return out

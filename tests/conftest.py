@@ -59,8 +59,12 @@ def programs_group(path: Path) -> str | None:
     except (OSError, SyntaxError, UnicodeDecodeError):  # pytest reports the file's own error
         return None
     for node in tree.body:
-        if (isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == GROUP_ATTRIBUTE for t in node.targets)
-                and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):  # fmt: skip
+        if (
+            isinstance(node, ast.Assign)
+            and any(isinstance(t, ast.Name) and t.id == GROUP_ATTRIBUTE for t in node.targets)
+            and isinstance(node.value, ast.Constant)
+            and isinstance(node.value.value, str)
+        ):
             return node.value.value
     return None
 

@@ -21,13 +21,38 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "shelljax"
 LAYERS = {  # rank: a module may import ranks ≤ its own
-    "paper": 0, "_errors": 0, "_toml": 0, "_files": 0, "_arguments": 0, "_options": 0,
-    "physics": 1, "_solution": 1, "session": 1, "geometry": 1, "sensing": 1, "executor": 1,
-    "axisym": 2, "shell3d": 2, "_parallel": 2, "_programs": 2,
-    "estimate": 3, "diagnose": 3, "rig": 3, "virtual": 3, "dynamics": 3, "realtime": 3,
-    "cli": 4, "runner": 4, "config": 4, "plots": 4, "report": 4, "scenario": 4, "replica": 4, "object_estimate": 4,
+    "paper": 0,
+    "_errors": 0,
+    "_toml": 0,
+    "_files": 0,
+    "_arguments": 0,
+    "_options": 0,
+    "physics": 1,
+    "_solution": 1,
+    "session": 1,
+    "geometry": 1,
+    "sensing": 1,
+    "executor": 1,
+    "axisym": 2,
+    "shell3d": 2,
+    "_parallel": 2,
+    "_programs": 2,
+    "estimate": 3,
+    "diagnose": 3,
+    "rig": 3,
+    "virtual": 3,
+    "dynamics": 3,
+    "realtime": 3,
+    "cli": 4,
+    "runner": 4,
+    "config": 4,
+    "plots": 4,
+    "report": 4,
+    "scenario": 4,
+    "replica": 4,
+    "object_estimate": 4,
     "viewer": 4,
-}  # fmt: skip
+}
 DATA_LAYER = ("session", "geometry", "sensing")
 MAX_FILE_LINES = 600
 MAX_FUNCTION_LINES = 80
@@ -78,7 +103,9 @@ def test_modules_import_only_their_layer_and_below():
             continue
         for top in _imported_tops(path) - {"__init__", "__version__"}:
             if top in LAYERS and LAYERS[top] > LAYERS[own]:
-                upward.append(f"{path.relative_to(ROOT)} ({own}, layer {LAYERS[own]}) imports {top} (layer {LAYERS[top]})")
+                upward.append(
+                    f"{path.relative_to(ROOT)} ({own}, layer {LAYERS[own]}) imports {top} (layer {LAYERS[top]})"
+                )
     assert not upward, "\n".join(upward)
 
 
@@ -99,15 +126,18 @@ def _tops_reaching_jax() -> frozenset[str]:
 
 
 def test_data_layer_does_not_import_jax():
-    offenders = [str(p.relative_to(ROOT)) for p in _package_files() if _top(p) in DATA_LAYER and JAX_IMPORT.search(p.read_text())]
+    offenders = [
+        str(p.relative_to(ROOT)) for p in _package_files() if _top(p) in DATA_LAYER and JAX_IMPORT.search(p.read_text())
+    ]
     assert not offenders, offenders
 
 
 def test_data_layer_does_not_import_jax_through_other_modules():
     through = {
         str(p.relative_to(ROOT)): sorted(_imported_tops(p) & _tops_reaching_jax())
-        for p in _package_files() if _top(p) in DATA_LAYER
-    }  # fmt: skip
+        for p in _package_files()
+        if _top(p) in DATA_LAYER
+    }
     offenders = {path: tops for path, tops in through.items() if tops}
     assert not offenders, f"these data-layer modules reach JAX through: {offenders}"
 
@@ -118,16 +148,19 @@ def test_the_indirect_jax_check_sees_the_engines():
 
 
 def test_no_package_file_is_over_600_lines():
-    long = {str(p.relative_to(ROOT)): n for p in _package_files() if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES}
+    long = {
+        str(p.relative_to(ROOT)): n for p in _package_files() if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES
+    }
     assert not long, long
 
 
 def test_no_package_function_is_over_80_lines():
     long = [
         f"{p.relative_to(ROOT)}:{n.lineno} {n.name} ({n.end_lineno - n.lineno + 1} lines)"
-        for p in _package_files() for n in ast.walk(ast.parse(p.read_text()))
+        for p in _package_files()
+        for n in ast.walk(ast.parse(p.read_text()))
         if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > MAX_FUNCTION_LINES
-    ]  # fmt: skip
+    ]
     assert not long, "split these into named steps:\n" + "\n".join(long)
 
 
@@ -150,12 +183,16 @@ def test_scripts_and_notebooks_use_public_names_only(path, source):
 
 
 def test_no_test_patches_sys_path():
-    offenders = [p.name for p in (ROOT / "tests").glob("*.py") if p.name != Path(__file__).name and "sys.path" in p.read_text()]
+    offenders = [
+        p.name for p in (ROOT / "tests").glob("*.py") if p.name != Path(__file__).name and "sys.path" in p.read_text()
+    ]
     assert not offenders, offenders
 
 
 def _numbers(path: Path) -> set[float]:
-    return {n.value for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Constant) and type(n.value) is float}
+    return {
+        n.value for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Constant) and type(n.value) is float
+    }
 
 
 @pytest.mark.parametrize(
@@ -176,14 +213,23 @@ def test_the_finger_radius_default_is_the_papers():
     for path in _package_files():
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                args = node.args.args[len(node.args.args) - len(node.args.defaults):] + node.args.kwonlyargs
+                args = node.args.args[len(node.args.args) - len(node.args.defaults) :] + node.args.kwonlyargs
                 defaults = node.args.defaults + node.args.kw_defaults
-                written += [f"{path.relative_to(PACKAGE)}:{node.lineno}" for a, d in zip(args, defaults)
-                            if a.arg == "indenter_radius" and isinstance(d, ast.Constant) and isinstance(d.value, float)]  # fmt: skip
+                written += [
+                    f"{path.relative_to(PACKAGE)}:{node.lineno}"
+                    for a, d in zip(args, defaults)
+                    if a.arg == "indenter_radius" and isinstance(d, ast.Constant) and isinstance(d.value, float)
+                ]
             elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-                if node.target.id == "indenter_radius" and isinstance(node.value, ast.Constant) and isinstance(node.value.value, float):
+                if (
+                    node.target.id == "indenter_radius"
+                    and isinstance(node.value, ast.Constant)
+                    and isinstance(node.value.value, float)
+                ):
                     written.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
-    assert not written, f"indenter_radius defaults written as numbers (use shelljax.paper.PAPER_INDENTER_RADIUS): {written}"
+    assert not written, (
+        f"indenter_radius defaults written as numbers (use shelljax.paper.PAPER_INDENTER_RADIUS): {written}"
+    )
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,5 @@
 """The batched curve API: balance, gas, convergence flags, errors, implicit gradients."""
 
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -87,8 +86,9 @@ def test_a_curve_the_walk_loses_is_solved_again_from_its_cold_start(batch_result
             return out
         lost = jnp.all(_api._rows(properties) == jnp.asarray(PEZZI), axis=1)[:, None]
         losses.append(int(lost.sum()))
-        return eqx.tree_at(lambda r: (r.converged, r.w0), out,
-                           (out.converged & ~lost, jnp.where(lost, jnp.nan, out.w0)))  # fmt: skip
+        return eqx.tree_at(
+            lambda r: (r.converged, r.w0), out, (out.converged & ~lost, jnp.where(lost, jnp.nan, out.w0))
+        )
 
     monkeypatch.setattr(_api, "_curve_result", walk_loses_the_pezzi_ball)
     walked = indentation_curves(shell(three), FORCES, radius=RADIUS, chunk=2, workers=1, **KW)
@@ -145,8 +145,7 @@ def test_sealed_gas_conserves_pv(batch_result):
     p_abs = np.asarray(res.pressure) + shelljax.physics.ATMOSPHERIC_PRESSURE
     v = np.asarray(res.volume)
     # Isothermal ideal gas: p·V is the same at every force level ...
-    np.testing.assert_allclose(p_abs * v, np.broadcast_to(p_abs[:, :1] * v[:, :1], v.shape),
-                               rtol=1e-9)
+    np.testing.assert_allclose(p_abs * v, np.broadcast_to(p_abs[:, :1] * v[:, :1], v.shape), rtol=1e-9)
     # ... and equals p₀V₀ of the inflated sphere (the inscribed polygon of revolution loses
     # ≈ Δθ²/12 ≈ 8e-4 of the volume at 61 elements, hence 2e-3)
     p0v0 = (shelljax.physics.ATMOSPHERIC_PRESSURE + params[:, 0]) * 4.0 / 3.0 * np.pi * RADIUS**3
@@ -164,12 +163,19 @@ def test_non_convergence_is_flagged_and_raised():
 
 @pytest.mark.parametrize(
     "params, forces",
-    [([1300.0, -1.0, 9e-4, 0.4], FORCES), ([1300.0, 2e6, 9e-4, 0.6], FORCES),
-     (PEZZI, (10.0, 5.0)), ([[1300.0, 1300.0], [2e6, 2e6, 2e6], 9e-4, 0.4], FORCES), (PEZZI + [0.2], FORCES)],
+    [
+        ([1300.0, -1.0, 9e-4, 0.4], FORCES),
+        ([1300.0, 2e6, 9e-4, 0.6], FORCES),
+        (PEZZI, (10.0, 5.0)),
+        ([[1300.0, 1300.0], [2e6, 2e6, 2e6], 9e-4, 0.4], FORCES),
+        (PEZZI + [0.2], FORCES),
+    ],
 )
 def test_invalid_input(params, forces):
     if len(params) == 4 and isinstance(params[1], list):  # fields of unequal batches
-        properties = ShellProperties(**dict(zip(("gauge_pressure", "young_modulus", "thickness", "poisson_ratio"), params)))
+        properties = ShellProperties(
+            **dict(zip(("gauge_pressure", "young_modulus", "thickness", "poisson_ratio"), params))
+        )
     elif len(params) == 5:  # a radius that is not the one asked for
         properties = shell(params[:4], radius=params[4])
     else:
@@ -199,7 +205,9 @@ def test_implicit_gradient_matches_central_differences():
     for j in range(3):  # P_g, E, h (ν enters the same way)
         step = 1e-4 * PEZZI[j]
         # θ ± step as one batch of two, as batch_result solves: its compiled program, not another
-        pair = indentation_curves(shell(np.asarray(PEZZI) + np.outer([step, -step], np.eye(4)[j])), FORCES, radius=RADIUS, **KW)
+        pair = indentation_curves(
+            shell(np.asarray(PEZZI) + np.outer([step, -step], np.eye(4)[j])), FORCES, radius=RADIUS, **KW
+        )
         observed = np.stack([np.sum(pair.w0, axis=1) + 0.1 * np.sum(pair.height, axis=1), pair.wrinkle_count[:, 1]])
         fd = (observed[:, 0] - observed[:, 1]) / (2 * step)
         # curve observables: central differences are O(step²) ≈ 1e-8 accurate, plus single

@@ -15,8 +15,14 @@ import numpy as np
 import pytest
 
 import shelljax
-from shelljax.axisym import (CurvePhysics, Setup, gent_sphere_pressure, indentation_curves, indentation_curves_raw,
-                             inflate)
+from shelljax.axisym import (
+    CurvePhysics,
+    Setup,
+    gent_sphere_pressure,
+    indentation_curves,
+    indentation_curves_raw,
+    inflate,
+)
 from shelljax.axisym._energy import split
 from shelljax.physics import (
     ATMOSPHERIC_PRESSURE,
@@ -65,14 +71,17 @@ def test_polytropic_gas_derivatives_through_the_isothermal_exponent(kappa, ratio
     energy = lambda vv, kk: polytropic_gas_energy(vv, V0, PG0, kk)  # noqa: E731
     p_abs = P0 * ratio**-kappa
     # −dΠ/dV is the gauge pressure and d²Π/dV² = κ p_abs / V (the gas's bulk stiffness)
-    np.testing.assert_allclose(-float(jax.grad(energy)(v, k)), float(polytropic_gauge_pressure(v, V0, PG0, k)),
-                               rtol=1e-13, atol=1e-10)
-    np.testing.assert_allclose(float(jax.grad(jax.grad(energy))(v, k)), kappa * p_abs / float(v),
-                               rtol=1e-12, atol=1e-12 * P0 / V0)
+    np.testing.assert_allclose(
+        -float(jax.grad(energy)(v, k)), float(polytropic_gauge_pressure(v, V0, PG0, k)), rtol=1e-13, atol=1e-10
+    )
+    np.testing.assert_allclose(
+        float(jax.grad(jax.grad(energy))(v, k)), kappa * p_abs / float(v), rtol=1e-12, atol=1e-12 * P0 / V0
+    )
     # in κ: ∂²Π/∂V∂κ = −∂P/∂κ = p_abs ln(V/V₀), and ∂Π/∂κ against central differences (step
     # 1e-4: truncation ≈ 1e-8 ∂³Π/∂κ³ ≪ the 1e-6 relative tolerance, round-off ≈ 1e-16·p₀V₀/1e-4)
-    np.testing.assert_allclose(float(jax.grad(jax.grad(energy), argnums=1)(v, k)), p_abs * np.log(ratio),
-                               rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        float(jax.grad(jax.grad(energy), argnums=1)(v, k)), p_abs * np.log(ratio), rtol=1e-12, atol=1e-9
+    )
     step = 1e-4
     fd = (float(energy(v, k + step)) - float(energy(v, k - step))) / (2 * step)
     dk = float(jax.grad(energy, argnums=1)(v, k))
@@ -95,15 +104,21 @@ def test_gent_membrane_is_neo_hookean_at_zero_stiffening():
     rng = np.random.default_rng(0)
     lam = rng.uniform(0.8, 1.3, size=(2, 50))
     trace_c, det_c = jnp.asarray(lam[0] ** 2 + lam[1] ** 2), jnp.asarray((lam[0] * lam[1]) ** 2)
+
     @jax.jit
     def derivatives(t, d):
         # values, gradients and (diagonal) second derivatives in tr C and det C of both laws
         out = []
-        for law in (lambda tt, dd: gent_membrane_invariants(tt, dd, H, E, NU, 0.0),
-                    lambda tt, dd: neo_hookean_membrane_invariants(tt, dd, H, E, NU)):
+        for law in (
+            lambda tt, dd: gent_membrane_invariants(tt, dd, H, E, NU, 0.0),
+            lambda tt, dd: neo_hookean_membrane_invariants(tt, dd, H, E, NU),
+        ):
             total = lambda tt, dd: jnp.sum(law(tt, dd))  # noqa: E731
-            out.append([law(t, d)] + [jax.grad(total, k)(t, d) for k in (0, 1)]
-                       + [jax.grad(lambda tt, dd: jnp.sum(jax.grad(total, k)(tt, dd)), k)(t, d) for k in (0, 1)])
+            out.append(
+                [law(t, d)]
+                + [jax.grad(total, k)(t, d) for k in (0, 1)]
+                + [jax.grad(lambda tt, dd: jnp.sum(jax.grad(total, k)(tt, dd)), k)(t, d) for k in (0, 1)]
+            )
         return out
 
     gent, neo = derivatives(trace_c, det_c)
@@ -127,8 +142,12 @@ def test_gent_derivatives_in_the_stiffening_match_central_differences(stiffening
         np.testing.assert_allclose(slope, np.asarray(invariant) ** 2 / 2, rtol=1e-15)
     # the mixed derivative the implicit differentiation of the engine uses: ∂²/∂I∂s = I/(1 − sI)²
     mixed = jax.vmap(jax.grad(jax.grad(gent_shear_energy, 0), 1), (0, None))(invariant, s)
-    np.testing.assert_allclose(np.asarray(mixed), np.asarray(invariant) / (1 - stiffening * np.asarray(invariant)) ** 2,
-                               rtol=1e-14, atol=1e-300)
+    np.testing.assert_allclose(
+        np.asarray(mixed),
+        np.asarray(invariant) / (1 - stiffening * np.asarray(invariant)) ** 2,
+        rtol=1e-14,
+        atol=1e-300,
+    )
 
 
 def test_gent_locks_with_infinite_energy_and_finite_gradients():
@@ -147,16 +166,18 @@ def test_gent_equibiaxial_stress_is_the_energy_slope(stiffening):
     for stretch in (1.01, 1.2, 1.5):
         invariant = 2 * stretch**2 - 2 - 4 * np.log(stretch)
         # nominal stress resultant per direction [N/m] of the hand-derived law ...
-        stress = H * (beta * (stretch - 1 / stretch) / (1 - stiffening * invariant)
-                      + 0.5 * alpha * (stretch**3 - 1 / stretch))
+        stress = H * (
+            beta * (stretch - 1 / stretch) / (1 - stiffening * invariant) + 0.5 * alpha * (stretch**3 - 1 / stretch)
+        )
         # ... is half the slope dW/dλ of the energy (two directions); central differences of
         # step 1e-6 are good to ≈ 1e-10 relative (truncation 1e-12 W''', round-off 1e-16 W/1e-6)
         step = 1e-6
         up, down = float(_equibiaxial(stretch + step, stiffening)), float(_equibiaxial(stretch - step, stiffening))
         fd = (up - down) / (4 * step)
         np.testing.assert_allclose(fd, stress, rtol=1e-7)
-        np.testing.assert_allclose(0.5 * float(jax.grad(_equibiaxial)(jnp.asarray(stretch), stiffening)), stress,
-                                   rtol=1e-13)
+        np.testing.assert_allclose(
+            0.5 * float(jax.grad(_equibiaxial)(jnp.asarray(stretch), stiffening)), stress, rtol=1e-13
+        )
 
 
 def test_inflated_gent_sphere_follows_the_closed_form():
@@ -189,23 +210,38 @@ def test_inflated_gent_sphere_follows_the_closed_form():
 
 
 def test_assembled_hessian_and_gradient_include_every_effect():
-    from shelljax.axisym._energy import (Config, constrained_mask, enclosed_volume, local_energy, rest_nodes,
-                                         total_energy)
+    from shelljax.axisym._energy import (
+        Config,
+        constrained_mask,
+        enclosed_volume,
+        local_energy,
+        rest_nodes,
+        total_energy,
+    )
     from shelljax.axisym._hessian import hessian_at
     from shelljax.axisym._model import _params
     from test_axisym_solver import _dense
 
     setup = Setup(radius=0.13, n_elements=21)
-    cfg = Config(theta=setup.theta(), gas="polytropic", loading="sphere", ground=True, pin_bottom=False,
-                 relax=True, hoop_capacity=setup.hoop_capacity)
+    cfg = Config(
+        theta=setup.theta(),
+        gas="polytropic",
+        loading="sphere",
+        ground=True,
+        pin_bottom=False,
+        relax=True,
+        hoop_capacity=setup.hoop_capacity,
+    )
     # The rest sphere stretched by 2 %, both contacts engaged by 0.1 mm and every node moved by
     # ~0.1 mm: gas, contact, membrane and bending all have non-zero gradients and curvatures.
     r0 = 0.13 / 1.02
     x = 1.02 * rest_nodes(cfg, r0)
-    effects = CurvePhysics(indenter_radius=6e-3, gas_volume_ratio=1.7, gas_exponent=1.4, stiffening=0.5,
-                           areal_weight=20.0)
-    p = _params(E, H, NU, r0, 1300.0, setup, force=5.0, ref_volume=enclosed_volume(x), ground_z=x[0, 1] + 1e-4,
-                physics=effects)
+    effects = CurvePhysics(
+        indenter_radius=6e-3, gas_volume_ratio=1.7, gas_exponent=1.4, stiffening=0.5, areal_weight=20.0
+    )
+    p = _params(
+        E, H, NU, r0, 1300.0, setup, force=5.0, ref_volume=enclosed_volume(x), ground_z=x[0, 1] + 1e-4, physics=effects
+    )
     y = jnp.concatenate([x.ravel(), (x[-1, 1] + 6e-3 - 1e-4)[None]])
     y = y + 1e-4 * jnp.asarray(np.random.default_rng(1).normal(size=y.shape))
     mask = constrained_mask(cfg)
@@ -300,8 +336,10 @@ def test_polytropic_exponents_one_and_zero_are_the_isothermal_and_prescribed_gas
     cases, _ = walked
     # κ = 1 with a traced finger and gas volume: the isothermal law's own program, its finger the
     # Setup's and its gas volume traced
-    isothermal = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="isothermal", indenter_radius=6e-3),
-                       CurvePhysics(gas_volume_ratio=np.full(1, 2.5)))
+    isothermal = _cold(
+        Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="isothermal", indenter_radius=6e-3),
+        CurvePhysics(gas_volume_ratio=np.full(1, 2.5)),
+    )
     _assert_same_curve(cases["isothermal_override"], isothermal)
     # the named adiabatic gas is the polytropic program at κ = γ, by default
     adiabatic = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="adiabatic"))
@@ -321,8 +359,9 @@ def test_adiabatic_gas_raises_the_pressure_1_4_times_as_much(walked):
     volume_ref = float(p_abs(iso)[0] * iso.volume[0] / (ATMOSPHERIC_PRESSURE + PEZZI[0]))
     for case, kappa in ((iso, 1.0), (adi, 1.4)):
         # p V^κ is conserved (to round-off of the 1e5 Pa absolute pressure) ...
-        np.testing.assert_allclose(p_abs(case) * case.volume**kappa,
-                                   (ATMOSPHERIC_PRESSURE + PEZZI[0]) * volume_ref**kappa, rtol=1e-9)
+        np.testing.assert_allclose(
+            p_abs(case) * case.volume**kappa, (ATMOSPHERIC_PRESSURE + PEZZI[0]) * volume_ref**kappa, rtol=1e-9
+        )
         # ... so ΔP = κ p_abs (−ΔV/V) up to the relative correction (κ + 1)/2 · |ΔV/V|
         shrink = 1.0 - case.volume / volume_ref
         rise = case.pressure - PEZZI[0]
@@ -372,7 +411,7 @@ def test_implicit_gradients_in_every_effect_match_central_differences(walked):
     # same (P_g, E, h, ν), so only the tie-break orders them, and each must keep its own physics.
     assert bool(np.all(cold.converged))
     _assert_same_curve(cases["fd_base"], jax.tree_util.tree_map(lambda v: np.asarray(v)[0], cold))
-    w0 = np.asarray(res.w0)[len(CASES):]
+    w0 = np.asarray(res.w0)[len(CASES) :]
     for j, name in enumerate(FIELDS):
         fd = (w0[2 * j] - w0[2 * j + 1]) / (2 * FD_STEPS[name])
         # 1e-3 of the column's largest entry, as for P_g, E, h (test_axisym_curves.py: nodes
@@ -389,8 +428,9 @@ def test_similar_balls_give_similar_curves(walked):
     radius = 0.15
     scale = radius / RADIUS
     physics = dict(indenter_radius=9e-3, gas_volume_ratio=1.3, gas_exponent=1.4, stiffening=0.2, areal_weight=10.0)
-    big = Setup(radius=radius, n_elements=N_ELEMENTS, gas="polytropic",
-                contact_stiffness=SETUP.contact_stiffness / scale)
+    big = Setup(
+        radius=radius, n_elements=N_ELEMENTS, gas="polytropic", contact_stiffness=SETUP.contact_stiffness / scale
+    )
     at_radius = _cold(big, _physics([physics]))
     reference = _physics([physics]).similar(1.0 / scale)
     rows = _rows()
@@ -401,8 +441,9 @@ def test_similar_balls_give_similar_curves(walked):
     assert bool(np.all(small.converged))
     np.testing.assert_allclose(at_radius.w0, scale * np.asarray(small.w0[0]), rtol=NEWTON_RTOL)
     np.testing.assert_allclose(at_radius.height, scale * np.asarray(small.height[0]), rtol=NEWTON_RTOL)
-    np.testing.assert_allclose(at_radius.ground_reaction, scale**2 * np.asarray(small.ground_reaction[0]),
-                               rtol=NEWTON_RTOL)
+    np.testing.assert_allclose(
+        at_radius.ground_reaction, scale**2 * np.asarray(small.ground_reaction[0]), rtol=NEWTON_RTOL
+    )
     np.testing.assert_allclose(at_radius.pressure, np.asarray(small.pressure[0]), rtol=1e-9)
 
 

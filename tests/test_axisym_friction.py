@@ -58,7 +58,9 @@ def test_zero_friction_is_the_frictionless_curve_exactly(lanes):
     # friction and with nonzero lagged anchors and normal forces: μ λ̂ f₀ adds an exact 0.0 to the
     # energy, gradient and Hessian. Unbatched, the two agree bit for bit; the vmapped program sums
     # in another order (measured 8e-16 relative in w0), hence 1e-13, with identical iterations.
-    plain = jax.tree_util.tree_map(np.asarray, jax.jit(lambda: curve_single(SETUP, shell(THETA), FORCES, return_states=True))())
+    plain = jax.tree_util.tree_map(
+        np.asarray, jax.jit(lambda: curve_single(SETUP, shell(THETA), FORCES, return_states=True))()
+    )
     assert np.any(out["friction_normal_force"][0] > 0)
     for key in ("w0", "contact_diameter", "contact_diameter_mesh", "volume"):
         np.testing.assert_allclose(out[key][0], plain[key], rtol=1e-13, err_msg=key)
@@ -70,8 +72,11 @@ def test_zero_friction_is_the_frictionless_curve_exactly(lanes):
 @jax.vmap
 def _friction_forces(x, anchor, normal, mu):
     """−∂D/∂x [N] (n, 2) of the ground friction at node coordinates x (n, 2) with the given lag."""
-    p = eqx.tree_at(lambda q: (q.friction_coefficient, q.friction_anchor, q.friction_normal_force),
-                    _params(*THETA[1:3], THETA[3], SETUP.radius, THETA[0], SETUP), (mu, anchor, normal))
+    p = eqx.tree_at(
+        lambda q: (q.friction_coefficient, q.friction_anchor, q.friction_normal_force),
+        _params(*THETA[1:3], THETA[3], SETUP.radius, THETA[0], SETUP),
+        (mu, anchor, normal),
+    )
     return -jax.grad(lambda xx: ground_friction_energy(xx, p))(x)
 
 
@@ -81,8 +86,11 @@ def test_friction_force_stays_in_the_coulomb_cone(lanes):
     x = out["state"][:, 1:, : 2 * n].reshape(-1, n, 2)
     normal = out["friction_normal_force"].reshape(-1, n)
     mu = np.repeat(np.asarray(MUS), k)
-    force = np.asarray(_friction_forces(jnp.asarray(x), jnp.asarray(out["friction_anchor"].reshape(-1, n)),
-                                        jnp.asarray(normal), jnp.asarray(mu)))
+    force = np.asarray(
+        _friction_forces(
+            jnp.asarray(x), jnp.asarray(out["friction_anchor"].reshape(-1, n)), jnp.asarray(normal), jnp.asarray(mu)
+        )
+    )
     bound = mu[:, None] * normal
     assert np.all(force[..., 1] == 0.0)  # friction is tangential (radial) only
     # |force| = μ λ̂ f₁ with f₁ ∈ [0, 1]: the cone holds to round-off (1e-12 relative)
@@ -122,18 +130,34 @@ def test_w0_derivative_in_mu_matches_central_differences(lanes):
 
 def test_hessian_friction_entries_match_central_differences(lanes):
     out, _ = lanes
-    cfg = Config(theta=SETUP.theta(), gas=SETUP.gas, loading="sphere", ground=True, pin_bottom=False,
-                 relax=SETUP.relax, hoop_capacity=SETUP.hoop_capacity)
+    cfg = Config(
+        theta=SETUP.theta(),
+        gas=SETUP.gas,
+        loading="sphere",
+        ground=True,
+        pin_bottom=False,
+        relax=SETUP.relax,
+        hoop_capacity=SETUP.hoop_capacity,
+    )
     n = len(SETUP.theta())
     lane, k = 1, 1
     y = jnp.asarray(out["state"][lane, 1 + k])
     eps = SETUP.slip_tolerance()
     # anchors moved so that the contact nodes alternate sticking (|u| < ε) and sliding (|u| > ε)
     offsets = np.where(np.arange(n) % 2 == 0, 0.3 * eps, 3.0 * eps)
-    base = eqx.tree_at(lambda q: q.friction_anchor,
-                       _params(*THETA[1:3], THETA[3], out["rest_radius"][lane], THETA[0], SETUP,
-                               force=FORCES[k], physics=_physics(MUS[lane])),
-                       jnp.asarray(out["state"][lane, 1 + k, 0 : 2 * n : 2] - offsets))
+    base = eqx.tree_at(
+        lambda q: q.friction_anchor,
+        _params(
+            *THETA[1:3],
+            THETA[3],
+            out["rest_radius"][lane],
+            THETA[0],
+            SETUP,
+            force=FORCES[k],
+            physics=_physics(MUS[lane]),
+        ),
+        jnp.asarray(out["state"][lane, 1 + k, 0 : 2 * n : 2] - offsets),
+    )
     p = eqx.tree_at(lambda q: q.friction_normal_force, base, jnp.asarray(out["friction_normal_force"][lane, k]))
     p0 = eqx.tree_at(lambda q: q.friction_coefficient, p, jnp.asarray(0.0))
 
@@ -166,7 +190,9 @@ def test_hessian_friction_entries_match_central_differences(lanes):
     assert scale > 0 and np.max(np.abs(off)) < 1e-6 * scale
     # The FD's truncation is O(step²/ε²) = 1e-6 relative; round-off of gradients of ≈ 1 N over a
     # step of 4e-9 m is ≈ 1e-7 N/m, far below the sticking stiffness 2 μ λ̂/ε ≈ 1e2–1e3 N/m.
-    np.testing.assert_allclose(np.diag(fd[:, 0 : 2 * n : 2])[contact], assembled[contact], rtol=1e-5,
-                               atol=1e-6 * scale)
-    np.testing.assert_allclose(assembled[sticking], (2 * float(MUS[lane]) / eps) * out["friction_normal_force"][lane, k][sticking]
-                               * (1 - 0.3), rtol=1e-10)
+    np.testing.assert_allclose(np.diag(fd[:, 0 : 2 * n : 2])[contact], assembled[contact], rtol=1e-5, atol=1e-6 * scale)
+    np.testing.assert_allclose(
+        assembled[sticking],
+        (2 * float(MUS[lane]) / eps) * out["friction_normal_force"][lane, k][sticking] * (1 - 0.3),
+        rtol=1e-10,
+    )

@@ -133,7 +133,9 @@ def test_sealed_gas_of_another_volume_loses_the_volume_the_wall_sweeps():
         for swept in (-5e-4, 0.0, 2e-4):
             expected = isothermal_gauge_pressure(ratio * v_ref + swept, ratio * v_ref, p0)
             # exact arithmetic up to round-off of the 1e5 Pa absolute pressure
-            assert float(gauge_pressure_at(v_ref + swept, cfg, params)) == pytest.approx(float(expected), rel=1e-12, abs=1e-8)
+            assert float(gauge_pressure_at(v_ref + swept, cfg, params)) == pytest.approx(
+                float(expected), rel=1e-12, abs=1e-8
+            )
     # a larger gas volume stiffens less: the same swept volume raises the pressure less
     cfg = Config(theta=(0.0, 1.0), gas="isothermal")
     small = gauge_pressure_at(v_ref - 5e-4, cfg, eqx.tree_at(lambda p: p.gas_volume_ratio, params, np.float64(1.0)))

@@ -45,7 +45,11 @@ def test_structured_solve_equals_a_dense_solve(blocks):
     hess = StructuredHessian(
         tuple(tuple(jnp.asarray(a[i::4, j::4].diagonal()) for j in range(4)) for i in range(4)),
         tuple(tuple(jnp.asarray(a[i::4, j::4].diagonal(1)) for j in range(4)) for i in range(4)),
-        jnp.asarray(arrow), jnp.asarray(50.0), jnp.asarray(0.3), jnp.asarray(gas_grad))
+        jnp.asarray(arrow),
+        jnp.asarray(50.0),
+        jnp.asarray(0.3),
+        jnp.asarray(gas_grad),
+    )
     dense = np.zeros((n + 1, n + 1))
     dense[:n, :n] = a + 0.3 * np.outer(gas_grad, gas_grad)
     dense[:n, n] = dense[n, :n] = arrow
@@ -102,8 +106,10 @@ _dense_autodiff_hessian = jax.jit(jax.hessian(total_energy), static_argnums=1)
 _assembled_hessian = jax.jit(hessian_at, static_argnums=1)
 
 
-@pytest.mark.parametrize(("loading", "gas"), [("sphere", "isothermal"), ("sphere", "prescribed"),
-                                             ("point", "prescribed"), ("none", "isothermal")])
+@pytest.mark.parametrize(
+    ("loading", "gas"),
+    [("sphere", "isothermal"), ("sphere", "prescribed"), ("point", "prescribed"), ("none", "isothermal")],
+)
 def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     # A wrinkled, indented state (15 N, both contacts active, relaxed hoop stress in the dimple)
     # with a random perturbation, so that every term has a non-zero gradient and curvature. The
@@ -115,10 +121,26 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     curve = _indented_curve(STATES_SETUP)
     states, r0 = curve["state"], curve["rest_radius"]
     x_inflated, _ = split(states[0], len(setup.theta()))
-    cfg = Config(theta=setup.theta(), gas=gas, loading=loading, ground=loading != "none",
-                 pin_bottom=loading == "none", relax=True, hoop_capacity=setup.hoop_capacity)
-    p = _params(2.34e6, 9e-4, 0.4, r0, 1300.0, setup, force=15.0, ref_volume=enclosed_volume(x_inflated),
-                ground_z=x_inflated[0, 1])
+    cfg = Config(
+        theta=setup.theta(),
+        gas=gas,
+        loading=loading,
+        ground=loading != "none",
+        pin_bottom=loading == "none",
+        relax=True,
+        hoop_capacity=setup.hoop_capacity,
+    )
+    p = _params(
+        2.34e6,
+        9e-4,
+        0.4,
+        r0,
+        1300.0,
+        setup,
+        force=15.0,
+        ref_volume=enclosed_volume(x_inflated),
+        ground_z=x_inflated[0, 1],
+    )
     y = states[-1] + 1e-4 * jnp.asarray(np.random.default_rng(0).normal(size=states[-1].shape))
     mask = constrained_mask(cfg)
     reference = np.array(_dense_autodiff_hessian(y, cfg, p))
@@ -141,28 +163,43 @@ def test_contact_springs_model_the_penalty_of_a_node_entering_contact():
     # Hessian test's compiled sphere-prescribed program; the model and the springs are jitted,
     # one program each instead of hundreds of single operations)
     setup = Setup(radius=0.13, n_elements=21)
-    cfg = Config(theta=setup.theta(), gas="prescribed", loading="sphere", ground=True, pin_bottom=False,
-                 relax=True, hoop_capacity=setup.hoop_capacity)
+    cfg = Config(
+        theta=setup.theta(),
+        gas="prescribed",
+        loading="sphere",
+        ground=True,
+        pin_bottom=False,
+        relax=True,
+        hoop_capacity=setup.hoop_capacity,
+    )
     n = cfg.n_nodes
-    hess = jax.tree_util.tree_map(jnp.zeros_like, _assembled_hessian(
-        jnp.concatenate([jnp.ones(2 * n), jnp.zeros(1)]), cfg,
-        _params(2.34e6, 9e-4, 0.4, 0.13, 1300.0, setup, ground_z=-1.0)))
+    hess = jax.tree_util.tree_map(
+        jnp.zeros_like,
+        _assembled_hessian(
+            jnp.concatenate([jnp.ones(2 * n), jnp.zeros(1)]),
+            cfg,
+            _params(2.34e6, 9e-4, 0.4, 0.13, 1300.0, setup, ground_z=-1.0),
+        ),
+    )
     rng = np.random.default_rng(1)
     normal = rng.normal(size=(n, 2))
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     k_indenter, k_ground = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
-    springs = jax.jit(newton._add_contact_springs)(hess, jnp.asarray(k_ground), jnp.asarray(k_indenter),
-                                                   jnp.asarray(normal))
+    springs = jax.jit(newton._add_contact_springs)(
+        hess, jnp.asarray(k_ground), jnp.asarray(k_indenter), jnp.asarray(normal)
+    )
 
     def model(v):  # Σ k/2 (n·Δx − n_z Δz_c)² + Σ k_g/2 Δz²
         dx, dzc = split(v, n)
-        return 0.5 * jnp.sum(k_indenter * (jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) ** 2
-                             + k_ground * dx[:, 1] ** 2)
+        return 0.5 * jnp.sum(
+            k_indenter * (jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) ** 2 + k_ground * dx[:, 1] ** 2
+        )
 
     reference = np.asarray(jax.jit(jax.hessian(model))(jnp.zeros(2 * n + 1)))
     springs = eqx.tree_at(lambda h: h.gas_grad, springs, jnp.zeros_like(springs.gas_grad))
-    np.testing.assert_allclose(_dense(jax.tree_util.tree_map(np.asarray, springs), np.zeros(2 * n + 1, bool)),
-                               reference, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        _dense(jax.tree_util.tree_map(np.asarray, springs), np.zeros(2 * n + 1, bool)), reference, rtol=0, atol=1e-14
+    )
 
 
 def test_step_cap_limits_motion_relative_to_the_indenter():
@@ -179,12 +216,16 @@ def test_step_cap_limits_motion_relative_to_the_indenter():
     together = jnp.asarray(np.concatenate([np.tile([0.0, -0.02], len(theta)), [-0.02]]))
     indenter_only = jnp.zeros_like(y).at[-1].set(-0.02)
     assert float(newton._step_cap(together, y, cfg, p, setup.indenter_radius)) == 1.0
-    np.testing.assert_allclose(float(newton._step_cap(indenter_only, y, cfg, p, setup.indenter_radius)),
-                               setup.indenter_radius / 0.02, rtol=1e-12)
+    np.testing.assert_allclose(
+        float(newton._step_cap(indenter_only, y, cfg, p, setup.indenter_radius)),
+        setup.indenter_radius / 0.02,
+        rtol=1e-12,
+    )
     # under a point load (no indenter) the cap stays on the largest coordinate change
     plane = Config(theta=setup.theta(), loading="point", ground=True, pin_bottom=False)
-    np.testing.assert_allclose(float(newton._step_cap(together, y, plane, p, setup.indenter_radius)),
-                               setup.indenter_radius / 0.02, rtol=1e-12)
+    np.testing.assert_allclose(
+        float(newton._step_cap(together, y, plane, p, setup.indenter_radius)), setup.indenter_radius / 0.02, rtol=1e-12
+    )
 
 
 def _curve(setup):
@@ -202,7 +243,9 @@ def test_ground_active_set_prediction_keeps_the_equilibrium_and_saves_iterations
     # Both satisfy max|∂E/∂y| ≤ 1e-7 N; with a dimple stiffness of ~250 N/m that pins w0 to well
     # below 1e-9 m, so 1e-8 relative on 20–55 mm depths only allows round-off.
     np.testing.assert_allclose(np.asarray(predicted["w0"]), np.asarray(plain["w0"]), rtol=1e-8)
-    np.testing.assert_allclose(np.asarray(predicted["contact_diameter"]), np.asarray(plain["contact_diameter"]), rtol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(predicted["contact_diameter"]), np.asarray(plain["contact_diameter"]), rtol=1e-7
+    )
     # Measured on this ball: 19 vs 50 iterations over the three levels (the plain step crawls each
     # time the ground disc grows by a node). Iteration counts can move by one or two with another
     # CPU's rounding, so require a clear saving (≥ 15 %), not the exact count.
@@ -304,5 +347,13 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
     # not vacuous: with a sealed gas that is at P_g only at 90 % of this volume, the same state is
     # far out of balance (285 N measured)
     sealed = _params(*PEZZI[1:], r0, PEZZI[0], setup, ref_volume=0.9 * enclosed_volume(split(y, 21)[0]))
-    assert float(jnp.max(jnp.abs(force(y, Config(theta=setup.theta(), gas="isothermal", loading="none",
-                                                 pin_bottom=True), sealed)))) > 1.0
+    assert (
+        float(
+            jnp.max(
+                jnp.abs(
+                    force(y, Config(theta=setup.theta(), gas="isothermal", loading="none", pin_bottom=True), sealed)
+                )
+            )
+        )
+        > 1.0
+    )

@@ -23,13 +23,22 @@ FORCE = 5.0  # [N]
 @pytest.fixture(scope="module")
 def both():
     ball = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=H, poisson_ratio=NU)  # one ball, both engines
-    sim = s3.Indentation(s3.ball(radius=R, thickness=H, n_triangles=2000), ball, gas="prescribed",
-                         indenter_radius=0.008, ground=True, progress=False)  # fmt: skip
+    sim = s3.Indentation(
+        s3.ball(radius=R, thickness=H, n_triangles=2000),
+        ball,
+        gas="prescribed",
+        indenter_radius=0.008,
+        ground=True,
+        progress=False,
+    )
     obs3 = sim.solve(force=FORCE).observables()
     # 61 meridian elements are within 0.35 % of 401 on every observable (docs/axisym.md)
     axi = indentation_curves_raw(ball, np.array([FORCE]), Setup(radius=R, n_elements=61, relax=False))
     assert bool(np.all(axi.converged))
-    return obs3, {k: float(np.asarray(getattr(axi, k))[0, 0]) for k in ("top_drop", "height", "sunken_depth", "contact_diameter", "pressure")}
+    return obs3, {
+        k: float(np.asarray(getattr(axi, k))[0, 0])
+        for k in ("top_drop", "height", "sunken_depth", "contact_diameter", "pressure")
+    }
 
 
 def test_engines_agree_on_depth_height_and_dimple(both):

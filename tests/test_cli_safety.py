@@ -55,18 +55,28 @@ def assert_refused(argv: list[str], capsys, root: Path, *names: str) -> str:
 # ------------------------------------------------------------------------------ output paths
 # (how the command is given the path, the option that names it); files: a suffix the path gets
 FILE_OUTPUTS = {
-    "estimate --chain": (lambda p: ["estimate", SESSION, "--method", "bayes", "--chain", p, "--quiet"], "--chain", ".h5"),
+    "estimate --chain": (
+        lambda p: ["estimate", SESSION, "--method", "bayes", "--chain", p, "--quiet"],
+        "--chain",
+        ".h5",
+    ),
     "rig calibrate --out": (lambda p: ["rig", "calibrate", *CALIBRATION, "--out", p, "--quiet"], "--out", ".toml"),
     "play --record": (lambda p: ["play", SESSION, "--headless", "--script", SCRIPT, "--record", p], "--record", ".gif"),
-    "play --records": (lambda p: ["play", SESSION, "--headless", "--script", SCRIPT, "--records", p], "--records", ".json"),
+    "play --records": (
+        lambda p: ["play", SESSION, "--headless", "--script", SCRIPT, "--records", p],
+        "--records",
+        ".json",
+    ),
     "acquire --out": (lambda p: ["acquire", "--emulate-fast", "--yes", "--out", p], "--out", ".toml"),
     "sensor-calibrate --out": (lambda p: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", p], "--out", ".toml"),
 }
 DIR_OUTPUTS = {
     "run --out": (lambda p: ["run", CONFIG, "--out", p, "--quiet"], "--out"),
     "diagnose --out": (lambda p: ["diagnose", *CALIBRATION, "--out", p, "--quiet"], "--out"),
-    "diagnose --study --out": (lambda p: ["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", p,
-                                          "--quiet"], "--out"),
+    "diagnose --study --out": (
+        lambda p: ["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", p, "--quiet"],
+        "--out",
+    ),
     "simulate --out": (lambda p: ["simulate", DROP, "--out", p, "--quiet"], "--out"),
     "replica --out": (lambda p: ["replica", SESSION, "--out", p], "--out"),
 }
@@ -119,34 +129,64 @@ BAD_VALUES = [
     (lambda v: ["estimate", SESSION, "--bootstrap", v], "--bootstrap", _outside(0, integer=True)),
     (lambda v: ["estimate", SESSION, "--seed", v], "--seed", _outside(0, integer=True)),
     (lambda v: ["estimate", SESSION, "--method", "bayes", "--walkers", v], "--walkers", _outside(8, integer=True)),
-    (lambda v: ["estimate", SESSION, "--method", "bayes", "--max-steps", v], "--max-steps", _outside(100, integer=True)),
+    (
+        lambda v: ["estimate", SESSION, "--method", "bayes", "--max-steps", v],
+        "--max-steps",
+        _outside(100, integer=True),
+    ),
     (lambda v: ["estimate", SESSION, "--k-s", v], "--k-s", _outside(0.0, 10.0, low_open=True)),
     (lambda v: ["estimate", SESSION, "--k-s-std", v], "--k-s-std", _outside(0.0)),
-    (lambda v: ["replica", SESSION, "--out", "r", "--mesh-faces", v], "--mesh-faces", _outside(20, 10**6, integer=True)),
+    (
+        lambda v: ["replica", SESSION, "--out", "r", "--mesh-faces", v],
+        "--mesh-faces",
+        _outside(20, 10**6, integer=True),
+    ),
     (lambda v: ["replica", SESSION, "--out", "r", "--cor", v], "--cor", _outside(0.0, 1.0, low_open=True)),
     (lambda v: ["play", SESSION, "--mesh-faces", v], "--mesh-faces", _outside(20, 10**6, integer=True)),
     (lambda v: ["play", SESSION, "--port", v], "--port", _outside(1, 65535, integer=True)),
-    (lambda v: ["rig", "calibrate", *CALIBRATION, "--out", "rig.toml", "--manometer-std", v], "--manometer-std",
-     _outside(0.0, 1.0, low_open=True)),
+    (
+        lambda v: ["rig", "calibrate", *CALIBRATION, "--out", "rig.toml", "--manometer-std", v],
+        "--manometer-std",
+        _outside(0.0, 1.0, low_open=True),
+    ),
     (lambda v: ["run", CONFIG, "--workers", v], "--workers", _outside(1, integer=True)),
     (lambda v: ["simulate", DROP, "--workers", v], "--workers", _outside(1, integer=True)),
-    (lambda v: ["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", "d", "--workers", v], "--workers",
-     _outside(1, integer=True)),
-    (lambda v: [*ACQUIRE, "--radius", v, "--thickness", "0.9", "--thickness-std", "0.05"], "--radius", _outside(0.01, 2.0)),
-    (lambda v: [*ACQUIRE, "--radius", "0.13", "--thickness", v, "--thickness-std", "1e-6"], "--thickness",
-     _outside(0.05, 10.0)),
+    (
+        lambda v: ["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", "d", "--workers", v],
+        "--workers",
+        _outside(1, integer=True),
+    ),
+    (
+        lambda v: [*ACQUIRE, "--radius", v, "--thickness", "0.9", "--thickness-std", "0.05"],
+        "--radius",
+        _outside(0.01, 2.0),
+    ),
+    (
+        lambda v: [*ACQUIRE, "--radius", "0.13", "--thickness", v, "--thickness-std", "1e-6"],
+        "--thickness",
+        _outside(0.05, 10.0),
+    ),
     (lambda v: [*ACQUIRE, "--mass", v], "--mass", _outside(1e-4, 100.0)),
     (lambda v: [*ACQUIRE, "--manometer-pressure", v], "--manometer-pressure", _outside(10.0, 1e5)),
     (lambda v: [*ACQUIRE, "--poisson-ratio", v], "--poisson-ratio", _outside(-1.0, 0.5)),
     (lambda v: [*ACQUIRE, "--trials", v], "--trials", _outside(1, integer=True)),
     (lambda v: [*ACQUIRE, "--tolerance", v], "--tolerance", _outside(0.0, 10.0, low_open=True)),
     (lambda v: [*ACQUIRE, "--forces", f"5,10,{v}"], "--forces", _outside(0.01, 200.0)),
-    (lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--cycles", v], "--cycles",
-     _outside(1, integer=True)),
-    (lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--gravity", v], "--gravity",
-     _outside(9.7, 9.9)),
-    (lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--masses", f"0,1,{v}"], "--masses",
-     _outside(0.0, 20.0)),
+    (
+        lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--cycles", v],
+        "--cycles",
+        _outside(1, integer=True),
+    ),
+    (
+        lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--gravity", v],
+        "--gravity",
+        _outside(9.7, 9.9),
+    ),
+    (
+        lambda v: ["sensor-calibrate", "--emulate-fast", "--yes", "--out", "c.toml", "--masses", f"0,1,{v}"],
+        "--masses",
+        _outside(0.0, 20.0),
+    ),
     (lambda v: ["sensor-emulator", "--duration", v], "--duration", _outside(0.0, low_open=True)),
 ]
 
@@ -177,8 +217,24 @@ def test_validate_names_a_missing_or_wrong_file_in_one_line(workdir, capsys):
 
 # ------------------------------------------------------------------------------ the defects
 def test_acquire_refuses_a_wall_1000x_too_thin_before_recording(workdir, capsys):
-    line = assert_refused(["acquire", "--emulate-fast", "--yes", "--out", "demo/ball.toml", "--radius", "0.13",
-                           "--thickness", "0.0009", "--thickness-std", "0.00005"], capsys, workdir, "--thickness")
+    line = assert_refused(
+        [
+            "acquire",
+            "--emulate-fast",
+            "--yes",
+            "--out",
+            "demo/ball.toml",
+            "--radius",
+            "0.13",
+            "--thickness",
+            "0.0009",
+            "--thickness-std",
+            "0.00005",
+        ],
+        capsys,
+        workdir,
+        "--thickness",
+    )
     assert "0.0009 mm" in line and "--thickness-unit m" in line and "--thickness 0.9" in line
 
 
@@ -211,8 +267,21 @@ def test_a_refused_run_on_an_unreachable_cluster_leaves_no_run_directory(workdir
 
 
 def test_a_refused_diagnosis_on_an_unreachable_cluster_leaves_no_inputs(workdir, capsys):
-    assert_refused(["diagnose", "--study", "bundled:sessions/calib_pezzi_*.toml", "--out", "diag", "--cluster",
-                    "tcp://127.0.0.1:1", "--quiet"], capsys, workdir, "--cluster")
+    assert_refused(
+        [
+            "diagnose",
+            "--study",
+            "bundled:sessions/calib_pezzi_*.toml",
+            "--out",
+            "diag",
+            "--cluster",
+            "tcp://127.0.0.1:1",
+            "--quiet",
+        ],
+        capsys,
+        workdir,
+        "--cluster",
+    )
     assert not (workdir / "diag").exists()
 
 
@@ -225,17 +294,42 @@ def _ideal_rig(path: Path) -> Path:
     from shelljax.rig import write_rig
     from shelljax.rig._calibrate import Rig, RigModel
 
-    model = RigModel(terms=(), parameters=(), mean=np.zeros(0), covariance=np.zeros((0, 0)), fixes={}, elpd=0.0,
-                     elpd_se=0.0, delta=0.0, delta_se=0.0, weight=1.0)
-    rig = Rig(models=(model,), excluded=(), inclusion={}, not_identified=(), gas="isothermal", wrinkle_law="scaling",
-              force_ref=10.0, indenter_radius=0.008, noise=(1e-4, (1e-7, 0.01)), calibration=(), objects=())
+    model = RigModel(
+        terms=(),
+        parameters=(),
+        mean=np.zeros(0),
+        covariance=np.zeros((0, 0)),
+        fixes={},
+        elpd=0.0,
+        elpd_se=0.0,
+        delta=0.0,
+        delta_se=0.0,
+        weight=1.0,
+    )
+    rig = Rig(
+        models=(model,),
+        excluded=(),
+        inclusion={},
+        not_identified=(),
+        gas="isothermal",
+        wrinkle_law="scaling",
+        force_ref=10.0,
+        indenter_radius=0.008,
+        noise=(1e-4, (1e-7, 0.01)),
+        calibration=(),
+        objects=(),
+    )
     return write_rig(rig, path)
 
 
 def test_two_objects_through_a_rig_are_refused_as_an_estimate(workdir, capsys):
     rig = _ideal_rig(workdir / "rig.toml")
-    line = assert_refused(["estimate", SESSION, str(SESSIONS / "yoga.toml"), "--method", "fit", "--rig", str(rig)],
-                          capsys, workdir, "different objects")
+    line = assert_refused(
+        ["estimate", SESSION, str(SESSIONS / "yoga.toml"), "--method", "fit", "--rig", str(rig)],
+        capsys,
+        workdir,
+        "different objects",
+    )
     assert "Fix: estimate --rig one object at a time" in line and "diagnose" not in line
 
 

@@ -21,7 +21,11 @@ TRUTH = re.compile(r"true P_g = (?P<gauge_pressure>[0-9.e+]+) Pa, E = (?P<young_
 
 
 def test_the_defaults_are_the_sealed_gas_and_the_scaling_law():
-    assert (DEFAULT_OPTIONS.forward_model, DEFAULT_OPTIONS.gas, DEFAULT_OPTIONS.wrinkle_law) == ("axisym", "isothermal", "scaling")
+    assert (DEFAULT_OPTIONS.forward_model, DEFAULT_OPTIONS.gas, DEFAULT_OPTIONS.wrinkle_law) == (
+        "axisym",
+        "isothermal",
+        "scaling",
+    )
     assert DEFAULT_OPTIONS == EstimatorOptions()
 
 
@@ -44,8 +48,13 @@ def test_every_command_reads_the_one_set_of_defaults(tmp_path):
     parser = build_parser()
     estimate = vars(parser.parse_args(["estimate", "s.toml"]))
     options = dataclasses.asdict(DEFAULT_OPTIONS)
-    for flag, field in (("bootstrap", "bootstrap_samples"), ("seed", "seed"), ("model", "forward_model"),
-                        ("walkers", "walkers"), ("max_steps", "max_steps")):
+    for flag, field in (
+        ("bootstrap", "bootstrap_samples"),
+        ("seed", "seed"),
+        ("model", "forward_model"),
+        ("walkers", "walkers"),
+        ("max_steps", "max_steps"),
+    ):
         assert estimate[flag] == options[field], flag
     calibrate = parser.parse_args(["rig", "calibrate", "s.toml", "--out", "rig.toml"])
     assert (calibrate.gas, calibrate.wrinkle_law) == (DEFAULT_OPTIONS.gas, DEFAULT_OPTIONS.wrinkle_law)

@@ -24,7 +24,9 @@ from shelljax.diagnose._study import build_study
 from shelljax.session import load_session, write_session
 
 pytestmark = pytest.mark.slow  # diagnoses whole studies: joint fits of every candidate effect
-SHARED_PROGRAMS = "joint diagnosis"  # the sim_to_real notebook's diagnosis is this file's joint fit: one xdist worker (conftest.py)
+SHARED_PROGRAMS = (
+    "joint diagnosis"  # the sim_to_real notebook's diagnosis is this file's joint fit: one xdist worker (conftest.py)
+)
 
 LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)
 PRESSURES = (900.0, 1200.0, 1500.0, 1800.0)  # [Pa]
@@ -38,9 +40,20 @@ def _write(directory, depths, counts, name="ball"):
         trial = np.repeat([1, 2, 3], LEVELS.size)
         force = np.tile(LEVELS, 3) + np.random.default_rng(k).normal(0, 0.05, trial.size)
         path = directory / f"s{k}.toml"
-        write_session(path, object_name=name, radius=0.13, radius_std=0.0026, thickness=0.9e-3, thickness_std=0.045e-3,
-                      trial=trial, force=np.round(force, 2), depth=d, wrinkle_counts=n, manometer_gauge_pressure=p,
-                      mass=0.4)  # fmt: skip
+        write_session(
+            path,
+            object_name=name,
+            radius=0.13,
+            radius_std=0.0026,
+            thickness=0.9e-3,
+            thickness_std=0.045e-3,
+            trial=trial,
+            force=np.round(force, 2),
+            depth=d,
+            wrinkle_counts=n,
+            manometer_gauge_pressure=p,
+            mass=0.4,
+        )
         paths.append(path)
     return paths
 
@@ -73,7 +86,12 @@ def _study(directory, offset: float, seed: int):
 def studies(tmp_path_factory):
     planted = _study(tmp_path_factory.mktemp("offset"), OFFSET, seed=3)
     clean = _study(tmp_path_factory.mktemp("clean"), 0.0, seed=4)
-    return planted, diagnose(planted, effects=EFFECTS, progress=False), clean, diagnose(clean, effects=EFFECTS, progress=False)
+    return (
+        planted,
+        diagnose(planted, effects=EFFECTS, progress=False),
+        clean,
+        diagnose(clean, effects=EFFECTS, progress=False),
+    )
 
 
 def test_a_planted_depth_offset_is_found_and_measured(studies):
@@ -92,7 +110,9 @@ def test_a_planted_depth_offset_is_found_and_measured(studies):
     # leaves is modest, and the winner's is the noise's)
     assert report["gap_after"]["rms_standardized"] < 1.3
     assert report["gap_before"]["rms_standardized"] > report["gap_after"]["rms_standardized"]
-    assert report["shrink"] == pytest.approx(report["gap_before"]["rms_standardized"] / report["gap_after"]["rms_standardized"])
+    assert report["shrink"] == pytest.approx(
+        report["gap_before"]["rms_standardized"] / report["gap_after"]["rms_standardized"]
+    )
     for shift in report["winner"]["gauge_pressure_shift_percent"]:
         assert np.isfinite(shift)
 
@@ -117,7 +137,14 @@ def test_the_json_contract(studies):
         for value in entry.get("parameters", {}).values():
             assert {"value", "ci95", "unit"} <= set(value)
     where = report["where"]
-    assert {"by_observable", "by_regime", "by_force_level", "by_session", "structure_along_force", "misfit_groups"} <= set(where)
+    assert {
+        "by_observable",
+        "by_regime",
+        "by_force_level",
+        "by_session",
+        "structure_along_force",
+        "misfit_groups",
+    } <= set(where)
     assert len(where["by_force_level"]) == LEVELS.size and len(where["by_session"]) == len(PRESSURES)
     # a planted positive offset leaves a positive offset term in the baseline's held-out depth
     # residuals, and a smaller one once the winner models it

@@ -13,8 +13,19 @@ from shelljax.session import write_session
 LEVELS = np.arange(5.0, 20.0 + 1e-9, 2.5)
 
 
-def _session(path, rng, *, trials=3, offset_std=0.0, scatter=0.3e-3, name="ball", thickness=0.9e-3, slope=2e-3,
-             counts=True, manometer=1000.0):  # fmt: skip
+def _session(
+    path,
+    rng,
+    *,
+    trials=3,
+    offset_std=0.0,
+    scatter=0.3e-3,
+    name="ball",
+    thickness=0.9e-3,
+    slope=2e-3,
+    counts=True,
+    manometer=1000.0,
+):
     trial, force, depth = [], [], []
     for t in range(1, trials + 1):
         offset = rng.normal(0.0, offset_std)
@@ -22,17 +33,29 @@ def _session(path, rng, *, trials=3, offset_std=0.0, scatter=0.3e-3, name="ball"
         trial += [t] * f.size
         force += f.tolist()
         depth += (slope * f + offset + rng.normal(0.0, scatter, f.size)).tolist()
-    return write_session(path, object_name=name, radius=0.13, radius_std=0.002, thickness=thickness,
-                         thickness_std=0.05e-3, trial=trial, force=force, depth=depth,
-                         wrinkle_counts=[7] * trials if counts else None, manometer_gauge_pressure=manometer)  # fmt: skip
+    return write_session(
+        path,
+        object_name=name,
+        radius=0.13,
+        radius_std=0.002,
+        thickness=thickness,
+        thickness_std=0.05e-3,
+        trial=trial,
+        force=force,
+        depth=depth,
+        wrinkle_counts=[7] * trials if counts else None,
+        manometer_gauge_pressure=manometer,
+    )
 
 
 def test_noise_model_separates_trial_offsets_from_scatter(tmp_path):
     # 4 sessions × 12 trials × 7 levels: the two-way ANOVA's variance estimates have ≈ 250 (scatter)
     # and 44 (offset) degrees of freedom, so ±25 % on σ and ±35 % on τ are > 3 standard errors.
     rng = np.random.default_rng(1)
-    sessions = [_session(tmp_path / f"s{i}.toml", rng, trials=12, offset_std=0.8e-3, scatter=0.3e-3,
-                         slope=(2 + i) * 1e-3) for i in range(4)]  # fmt: skip
+    sessions = [
+        _session(tmp_path / f"s{i}.toml", rng, trials=12, offset_std=0.8e-3, scatter=0.3e-3, slope=(2 + i) * 1e-3)
+        for i in range(4)
+    ]
     study = build_study(sessions)
     scatter = np.sqrt(study.depth_noise[0] + study.depth_noise[1] * np.mean(study.depth**2))
     assert scatter == pytest.approx(0.3e-3, rel=0.25)
@@ -46,8 +69,12 @@ def test_noise_model_separates_trial_offsets_from_scatter(tmp_path):
 
 
 def test_levels_group_samples_of_one_force_step(tmp_path):
-    study = build_study([_session(tmp_path / "a.toml", np.random.default_rng(0)),
-                         _session(tmp_path / "b.toml", np.random.default_rng(1))])  # fmt: skip
+    study = build_study(
+        [
+            _session(tmp_path / "a.toml", np.random.default_rng(0)),
+            _session(tmp_path / "b.toml", np.random.default_rng(1)),
+        ]
+    )
     for s in range(2):
         levels = study.level[study.depth_session == s]
         assert np.unique(levels).size == LEVELS.size  # 3 trials' forces (±0.05 N) at each of 7 steps
@@ -88,10 +115,22 @@ def test_unknown_effect_names_list_the_valid_ones():
     with pytest.raises(InvalidInputError, match="unknown effect.*'finger_size'.*finger_compliance.*self_weight"):
         check_effect_names(["gas", "finger_size"])
     assert check_effect_names(["gas"]) == ("gas",)
-    required = {"finger_compliance", "depth_offset", "force_sensor_gain", "force_sensor_nonlinearity",
-                "indenter_size", "gas", "material_stiffening", "wall_thickness", "self_weight", "ground_friction"}  # fmt: skip
+    required = {
+        "finger_compliance",
+        "depth_offset",
+        "force_sensor_gain",
+        "force_sensor_nonlinearity",
+        "indenter_size",
+        "gas",
+        "material_stiffening",
+        "wall_thickness",
+        "self_weight",
+        "ground_friction",
+    }
     assert required <= set(EFFECTS)
-    assert all(1 <= len(e.parameters) <= 2 and e.layer in ("measurement", "contact", "physics") for e in EFFECTS.values())
+    assert all(
+        1 <= len(e.parameters) <= 2 and e.layer in ("measurement", "contact", "physics") for e in EFFECTS.values()
+    )
 
 
 def test_leave_one_trial_out_score_equals_refits_of_a_linear_model():
@@ -109,16 +148,34 @@ def test_leave_one_trial_out_score_equals_refits_of_a_linear_model():
     for u, b in enumerate(blocks):
         whitening[np.ix_(depth_unit == u, depth_unit == u)] = b
     constant = np.array([np.sum(np.log(np.diag(b))) - 0.5 * per_unit * np.log(2 * np.pi) for b in blocks])
-    data = SimpleNamespace(depth=np.zeros(depth_unit.size), depth_unit=depth_unit, count_unit=np.arange(n_units),
-                           shape_unit=np.zeros(0, int), whitening=whitening, count=np.zeros(n_units),
-                           shape_std=np.zeros(0), depth_unit_constant=constant, n_units=n_units)  # fmt: skip
+    data = SimpleNamespace(
+        depth=np.zeros(depth_unit.size),
+        depth_unit=depth_unit,
+        count_unit=np.arange(n_units),
+        shape_unit=np.zeros(0, int),
+        whitening=whitening,
+        count=np.zeros(n_units),
+        shape_std=np.zeros(0),
+        depth_unit_constant=constant,
+        n_units=n_units,
+    )
     n_rows = depth_unit.size + n_units + n_prior
     jac = rng.normal(size=(n_rows, n_params))
     y = rng.normal(size=n_rows)
     u_hat = np.linalg.lstsq(jac, y, rcond=None)[0]
     resid = jac @ u_hat - y  # r(u) = J u − y, optimum of ½‖r‖²
-    fit = CandidateFit(data=data, u=u_hat, jacobian=jac, residual=resid, covariance=np.linalg.inv(jac.T @ jac),
-                       chi2=float(resid @ resid), steps=0, converged=True, message="", prediction={})  # fmt: skip
+    fit = CandidateFit(
+        data=data,
+        u=u_hat,
+        jacobian=jac,
+        residual=resid,
+        covariance=np.linalg.inv(jac.T @ jac),
+        chi2=float(resid @ resid),
+        steps=0,
+        converged=True,
+        message="",
+        prediction={},
+    )
     score = loo_score(fit)
     units = np.concatenate([depth_unit, np.arange(n_units), np.full(n_prior, -1)])
     for i in range(n_units):

@@ -23,12 +23,23 @@ def swing_system(wall_x=0.16):
     nodes = nodes + np.array([0.0, 0.0, CENTRE_HEIGHT])
     lowest = int(np.argmin(nodes[:, 2]))
     clamp = np.unique(faces[np.any(faces == lowest, axis=1)])  # the lowest node and its ring
-    schedule = d.PrescribedRotation(nodes[clamp], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.04, 0.12], np.radians([0.0, -30.0, 60.0]))
-    wall = d.Plane([wall_x, 0.0, 0.0], [-1.0, 0.0, 0.0], d.BarrierContact(2e-3, 1e3), friction=0.3, damping=0.2, name="wall")
+    schedule = d.PrescribedRotation(
+        nodes[clamp], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.04, 0.12], np.radians([0.0, -30.0, 60.0])
+    )
+    wall = d.Plane(
+        [wall_x, 0.0, 0.0], [-1.0, 0.0, 0.0], d.BarrierContact(2e-3, 1e3), friction=0.3, damping=0.2, name="wall"
+    )
     system = d.SpringBalloon(
-        nodes, faces, 0.01, 2000.0, [wall], gauge_pressure=0.0, gas_exponent=1.4,
-        prescribed_nodes=tuple(int(i) for i in clamp), prescribed=schedule,
-    )  # fmt: skip
+        nodes,
+        faces,
+        0.01,
+        2000.0,
+        [wall],
+        gauge_pressure=0.0,
+        gas_exponent=1.4,
+        prescribed_nodes=tuple(int(i) for i in clamp),
+        prescribed=schedule,
+    )
     return system, nodes, clamp, schedule
 
 
@@ -78,7 +89,9 @@ def test_point_hessian_blocks_assemble_the_dense_hessian():
 
     @eqx.filter_jit
     def hessians(potential, x):
-        assembled = jnp.diag(potential.inertia_weight) + jax.hessian(potential.system.internal_energy)(x, potential.time)
+        assembled = jnp.diag(potential.inertia_weight) + jax.hessian(potential.system.internal_energy)(
+            x, potential.time
+        )
         blocks = potential.point_hessian_blocks(x)
         assembled = assembled + jax.scipy.linalg.block_diag(*blocks)
         return blocks, assembled, potential.dense_hessian(potential.free(x))
@@ -87,5 +100,7 @@ def test_point_hessian_blocks_assemble_the_dense_hessian():
     assert float(jnp.max(jnp.abs(blocks))) > 0.0
     n = x.shape[0]
     free = np.asarray(potential.free_dofs)
-    np.testing.assert_allclose(dense, assembled[np.ix_(free, free)], rtol=1e-10, atol=1e-8 * float(jnp.max(jnp.abs(dense))))
+    np.testing.assert_allclose(
+        dense, assembled[np.ix_(free, free)], rtol=1e-10, atol=1e-8 * float(jnp.max(jnp.abs(dense)))
+    )
     assert n == 3 * len(nodes)

@@ -137,6 +137,7 @@ def test_bounce_apex_gradient_in_damping_and_stiffness_matches_finite_difference
     touching = np.flatnonzero(np.asarray(record.min_gap_m[:, 0]) < 0.0)
     assert bool(record.converged.all()) and touching[0] > 0 and touching[-1] < 89  # onset and release inside the run
     grad_c, grad_k = jax.jit(jax.grad(lambda c, k: apex(c, k)[0], argnums=(0, 1)))(c0, k0)
+
     def f(c, k):
         return run(c, k)[0]
 
@@ -153,8 +154,17 @@ def test_write_results_json_and_figures(tmp_path):
     trajectory = spring_impact()
     written = d.write_results(trajectory, tmp_path)
     results = json.loads((tmp_path / "results.json").read_text())
-    assert results["summary"]["impacts"][0]["contact_time_s"] == pytest.approx(math.pi * math.sqrt(MASS / K_LINEAR), rel=2e-5)
-    assert {"time_s", "com_position_m", "com_velocity_m_per_s", "contact_force_N", "kinetic_energy_J", "gas_pressure_Pa"} <= set(results["steps"])
+    assert results["summary"]["impacts"][0]["contact_time_s"] == pytest.approx(
+        math.pi * math.sqrt(MASS / K_LINEAR), rel=2e-5
+    )
+    assert {
+        "time_s",
+        "com_position_m",
+        "com_velocity_m_per_s",
+        "contact_force_N",
+        "kinetic_energy_J",
+        "gas_pressure_Pa",
+    } <= set(results["steps"])
     assert all(p.exists() for p in written) and (tmp_path / "figures" / "energies.png").exists()
 
 
@@ -211,7 +221,9 @@ def test_one_plane_class_serves_the_dynamics_and_the_3d_engine():
     assert d.Plane is shelljax.physics.Plane
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 2.0], name="ground")
     # A static setup's planes hash and compare by their numbers (they key compiled programs) ...
-    assert ground == d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground") and ground != d.Plane([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], name="ground")
+    assert ground == d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], name="ground") and ground != d.Plane(
+        [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], name="ground"
+    )
     config = ContactConfig(planes=(((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),))
     assert config.planes == (ground,) and hash(config) == hash(ContactConfig(planes=(ground,)))
     np.testing.assert_array_equal(np.asarray(ground.gap(jnp.array([[1.0, 2.0, 0.5]]))), [0.5])
@@ -275,7 +287,6 @@ def test_contact_diameter_of_a_sphere_cut_by_a_plane(depth):
     assert d.contact_diameter(nodes, edges, gaps + 1.0, normal, depth) == 0.0
 
 
-
 def test_the_most_deformed_step_is_the_flattest_while_touching():
     from shelljax.dynamics._output import most_deformed_step
 
@@ -287,7 +298,11 @@ def test_the_most_deformed_step_is_the_flattest_while_touching():
     positions = np.stack([ball(0.05, 0.2), ball(0.08, 0.0), ball(0.09, 0.0)])
     trajectory = d.Trajectory(
         records={"position_m": positions, "time_s": np.arange(3) * 1e-3, "min_gap_m": np.array([[0.2], [0.0], [0.0]])},
-        plane_names=("ground",), plane_normals=np.array([[0.0, 0.0, 1.0]]), contact_distances_m=np.array([1e-3]),
-        gravity_m_per_s2=np.array([0.0, 0.0, -9.81]), dt_s=1e-3, faces=np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]),
-    )  # fmt: skip
+        plane_names=("ground",),
+        plane_normals=np.array([[0.0, 0.0, 1.0]]),
+        contact_distances_m=np.array([1e-3]),
+        gravity_m_per_s2=np.array([0.0, 0.0, -9.81]),
+        dt_s=1e-3,
+        faces=np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]),
+    )
     assert most_deformed_step(trajectory) == (1, 0)

@@ -124,7 +124,11 @@ def test_free_vertices_are_not_prescribed(swing, tmp_path):
         (("angles_deg = [0.0, 5.0]", "angles_deg = [0.0, 5.0, 10.0]"), "prescribed.angles_deg", "one angle"),
         (('select = "lowest"', 'select = "top"'), "prescribed.select", "unknown selection"),
         (('select = "lowest"', "select = [0, 100000]"), "prescribed.select", "not in the"),
-        (("axis_direction = [0.0, 1.0, 0.0]", "axis_direction = [0.0, 0.0, 0.0]"), "prescribed.axis_direction", "nonzero"),
+        (
+            ("axis_direction = [0.0, 1.0, 0.0]", "axis_direction = [0.0, 0.0, 0.0]"),
+            "prescribed.axis_direction",
+            "nonzero",
+        ),
         (("[prescribed]", "[prescribed]\nspin = 1"), "prescribed.spin", "unknown key"),
         (("[outputs]", "[initial]\ndrop_heights_m = [0.1]\n[outputs]"), "initial.drop_heights_m", "not dropped"),
     ],

@@ -262,9 +262,16 @@ def synthetic_drop(chatter: bool, second_bounce: bool = False) -> d.Trajectory:
     if chatter:
         k = int(round((t0 + 0.005) / dt))
         gap[k : k + 3] = 2e-3
-    records = {"time_s": t, "com_position_m": np.stack([0 * t, 0 * t, h], axis=1), "com_velocity_m_per_s": np.stack([0 * t, 0 * t, v], axis=1),
-               "min_gap_m": gap[:, None], "contact_force_N": np.zeros((len(t), 1, 3))}  # fmt: skip
-    return d.Trajectory(records, ("ground",), np.array([[0.0, 0.0, 1.0]]), np.array([1e-3]), np.array([0.0, 0.0, -g]), dt)
+    records = {
+        "time_s": t,
+        "com_position_m": np.stack([0 * t, 0 * t, h], axis=1),
+        "com_velocity_m_per_s": np.stack([0 * t, 0 * t, v], axis=1),
+        "min_gap_m": gap[:, None],
+        "contact_force_N": np.zeros((len(t), 1, 3)),
+    }
+    return d.Trajectory(
+        records, ("ground",), np.array([[0.0, 0.0, 1.0]]), np.array([1e-3]), np.array([0.0, 0.0, -g]), dt
+    )
 
 
 def test_measured_cor_merges_chatter_into_one_impact_but_not_real_bounces():

@@ -72,7 +72,9 @@ def test_inflated_state_is_in_equilibrium_and_free_falls_exactly(system):
 def test_bounce_conserves_energy_without_damping(system):
     height = 0.02
     # Δt must resolve the shell's membrane waves (~1 ms here): at 0.5 ms Newmark gains 50 % of m g H on the rebound.
-    traj = d.simulate(system, _impact_state(system, height), 2.5e-4, 0.05, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
+    traj = d.simulate(
+        system, _impact_state(system, height), 2.5e-4, 0.05, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK
+    )
     impact = d.measured_cor(traj)[0]
     e = traj["total_energy_J"]
     drift = np.max(np.abs(e - e[0])) / (MASS * G * height)
@@ -125,7 +127,9 @@ def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_
     pattern = PATTERNS[system.pattern_key]
     assert _pattern_key(dataclasses.replace(pattern, free=~pattern.free)) != system.pattern_key
     newton = d.SparseNewton(reuse_matrix=False)
-    traj = d.simulate(adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, 50 * 2.5e-4, minimiser=newton, progress=False, chunk=CHUNK)
+    traj = d.simulate(
+        adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, 50 * 2.5e-4, minimiser=newton, progress=False, chunk=CHUNK
+    )
     # Quadratic Newton (a fresh matrix every iteration): the stall against round-off in Φ_inc ran into max_steps = 50.
     assert np.max(traj["newton_iterations"]) <= 8
     volume, pressure = traj["gas_volume_m3"], traj["gas_pressure_Pa"]
@@ -140,8 +144,19 @@ def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_
 
 def test_kept_newton_matrix_gives_the_same_bounce_with_fewer_factorisations(system):
     state, n_steps, tolerance = _impact_state(system, 0.02), 50, 1e-10
-    runs = {reuse: d.simulate(system, state, 1e-3, n_steps * 1e-3, integrator=d.BackwardEuler(), progress=False, chunk=CHUNK,
-                              minimiser=d.SparseNewton(step_tolerance=tolerance, reuse_matrix=reuse)) for reuse in (True, False)}  # fmt: skip
+    runs = {
+        reuse: d.simulate(
+            system,
+            state,
+            1e-3,
+            n_steps * 1e-3,
+            integrator=d.BackwardEuler(),
+            progress=False,
+            chunk=CHUNK,
+            minimiser=d.SparseNewton(step_tolerance=tolerance, reuse_matrix=reuse),
+        )
+        for reuse in (True, False)
+    }
     kept, fresh = runs[True], runs[False]
     assert np.max(kept["min_gap_m"]) > GHAT > np.min(kept["min_gap_m"])  # the run lands and leaves
     # Each step ends within about the tolerance of its minimiser under either matrix, and backward
@@ -155,14 +170,24 @@ def test_a_wild_acceleration_changes_newtons_start_not_the_step(system):
     # Backward Euler's step does not depend on aₙ; Newton's start does (x̂ + Δt²aₙ when that lowers
     # Φ_inc). An initial state far from equilibrium can carry aₙ ~ 1e5 m/s², metres at Δt = 10 ms.
     state = _impact_state(system, 0.02)
-    kick = np.abs(np.random.default_rng(0).standard_normal(state.acceleration.shape))  # every component positive: upward, off the ground
+    kick = np.abs(
+        np.random.default_rng(0).standard_normal(state.acceleration.shape)
+    )  # every component positive: upward, off the ground
     wild = eqx.tree_at(lambda s: s.acceleration, state, jnp.asarray(1e5 * kick))
     ends = []
     # One chunk of the module's backward-Euler runs (their compiled program, not one of its own);
     # its first step is the one from each start.
     for start in (state, wild):
-        traj = d.simulate(system, start, 1e-2, CHUNK * 1e-2, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(), progress=False,
-                          chunk=CHUNK)  # fmt: skip
+        traj = d.simulate(
+            system,
+            start,
+            1e-2,
+            CHUNK * 1e-2,
+            integrator=d.BackwardEuler(),
+            minimiser=d.SparseNewton(),
+            progress=False,
+            chunk=CHUNK,
+        )
         assert bool(traj["converged"][1])
         ends.append(traj["position_m"][1])
     # Both end within about Newton's 1e-10 m step tolerance of the same minimiser: 2e-10 apart at most, 1e-9 with margin.
@@ -178,8 +203,19 @@ def test_contact_damping_is_one_dashpot_on_the_centre_of_mass(system):
 
 
 def test_replica_round_trip(shell, tmp_path):
-    written = write_replica(tmp_path, shell, {"gauge_pressure_Pa": (P_G, 150.0), "youngs_modulus_Pa": (E, 1e5), "poisson_ratio": NU,
-                                              "thickness_m": (THICKNESS, 2e-5), "mass_kg": MASS, "cor": 0.75}, gas="adiabatic")  # fmt: skip
+    written = write_replica(
+        tmp_path,
+        shell,
+        {
+            "gauge_pressure_Pa": (P_G, 150.0),
+            "youngs_modulus_Pa": (E, 1e5),
+            "poisson_ratio": NU,
+            "thickness_m": (THICKNESS, 2e-5),
+            "mass_kg": MASS,
+            "cor": 0.75,
+        },
+        gas="adiabatic",
+    )
     assert [p.name for p in written] == ["replica.glb", "replica.json"]
     system, replica = load_replica(tmp_path)
     assert replica["gauge_pressure_Pa"] == {"value": P_G, "std": 150.0}
@@ -232,8 +268,14 @@ def test_cli_simulate_tiny_config(tmp_path, capsys):
     results = json.loads((run / "results.json").read_text())
     # Backward Euler at 2 ms damps a 2 mm drop to rest: the check is that it lands and everything is written.
     assert max(step[0][2] for step in results["steps"]["contact_force_N"]) > 0.5 * MASS * G
-    for name in ("figures/trajectory.png", "figures/energies.png", "figures/contact_force.png", "figures/max_deformation.png",
-                 "frames/frame_0000.ply", "preview.gif"):
+    for name in (
+        "figures/trajectory.png",
+        "figures/energies.png",
+        "figures/contact_force.png",
+        "figures/max_deformation.png",
+        "frames/frame_0000.ply",
+        "preview.gif",
+    ):
         assert (run / name).is_file() and (run / name).stat().st_size > 1_000, name  # written and holding data
     summary = json.loads((tmp_path / "out" / "scenario.json").read_text())
     assert summary["parameters"]["mesh_faces"] == 210  # the remesher's nearest to 200
@@ -244,7 +286,12 @@ def test_scenario_calibrates_the_cor_even_past_critical_damping(tmp_path):
     # The bracket's top, 60 N·s/m, is past critical damping 2√(2πR P_g m) = 25 N·s/m: the ball
     # may not leave the ground there, which must read as COR ≈ 0, not fail the calibration.
     config = tmp_path / "calibrated.toml"
-    config.write_text(TINY.replace("contact_damping_N_s_per_m = 1.0\n", "cor = 0.6\ncalibration_bracket_N_s_per_m = [0.0, 60.0]\ncalibration_height_m = 0.02\n"))
+    config.write_text(
+        TINY.replace(
+            "contact_damping_N_s_per_m = 1.0\n",
+            "cor = 0.6\ncalibration_bracket_N_s_per_m = [0.0, 60.0]\ncalibration_height_m = 0.02\n",
+        )
+    )
     assert main(["simulate", str(config), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     calibration = json.loads((tmp_path / "out" / "scenario.json").read_text())["calibration"]
     # The issue's criterion: the calibrated drop's √(h/H) within 2 % of the target.
@@ -260,15 +307,19 @@ def test_scenario_calibrates_the_cor_even_past_critical_damping(tmp_path):
         (("drop_heights_m = [0.002]", "drop_heights_m = [-0.5]"), "initial.drop_heights_m"),
         (("dt_s = 2e-3", "dt_s = 0.01"), "integrator.dt_s"),
         (("youngs_modulus_Pa = 2e6\n", ""), "object.gauge_pressure_Pa"),
-        (("scheme = \"backward-euler\"", "scheme = \"leapfrog\""), "integrator.scheme"),
+        (('scheme = "backward-euler"', 'scheme = "leapfrog"'), "integrator.scheme"),
         (("[dissipation]\n", "[dissipation]\ncor = 1.5\n"), "dissipation.cor"),
-        (("[integrator]\n", "[estimators]\nwrinkle_law = \"guess\"\n[integrator]\n"), "estimators.wrinkle_law"),
-        (("[integrator]\n", "[estimators]\nmethods = [\"fit\"]\n[integrator]\n"), "estimators.methods"),
+        (("[integrator]\n", '[estimators]\nwrinkle_law = "guess"\n[integrator]\n'), "estimators.wrinkle_law"),
+        (("[integrator]\n", '[estimators]\nmethods = ["fit"]\n[integrator]\n'), "estimators.methods"),
     ],
 )
 def test_bad_configs_name_file_field_and_fix(tmp_path, change, field):
     config = tmp_path / "bad.toml"
-    config.write_text(TINY.replace(*change).replace("contact_damping_N_s_per_m = 1.0\n", "" if "cor" in change[1] else "contact_damping_N_s_per_m = 1.0\n"))
+    config.write_text(
+        TINY.replace(*change).replace(
+            "contact_damping_N_s_per_m = 1.0\n", "" if "cor" in change[1] else "contact_damping_N_s_per_m = 1.0\n"
+        )
+    )
     with pytest.raises(InvalidInputError) as err:
         from shelljax.scenario import resolve_object, run_scenario
 
@@ -289,12 +340,18 @@ def test_scenario_estimates_the_object_with_its_estimators_table(tmp_path):
     session_path = bundled_data_dir() / "sessions" / "pezzi.toml"
     config = tmp_path / "estimated.toml"
     given = "gauge_pressure_Pa = 5000.0\nyoungs_modulus_Pa = 2e6\nradius_m = 0.05\n"
-    config.write_text(TINY.replace(given, f'session = "{session_path}"\nestimate = "fit"\n').replace("[integrator]\n", '[estimators]\nforward_model = "scaling"\n[integrator]\n'))
+    config.write_text(
+        TINY.replace(given, f'session = "{session_path}"\nestimate = "fit"\n').replace(
+            "[integrator]\n", '[estimators]\nforward_model = "scaling"\n[integrator]\n'
+        )
+    )
     scenario = load_scenario(config)
     # A sealed object is estimated with a sealed (isothermal) gas unless [estimators] says otherwise.
     assert scenario.estimator_options["gas"] == "isothermal"
     obj = resolve_object(scenario)
-    expected = run_estimator("fit", load_session(session_path), EstimatorOptions(forward_model="scaling", gas="isothermal"))
+    expected = run_estimator(
+        "fit", load_session(session_path), EstimatorOptions(forward_model="scaling", gas="isothermal")
+    )
     assert obj.gauge_pressure == expected.estimates["gauge_pressure"].value
     assert obj.young_modulus == expected.estimates["young_modulus"].value
     assert obj.source["estimator_options"]["forward_model"] == "scaling"
@@ -308,8 +365,16 @@ def test_contact_damping_calibrates_to_0_75_and_rejects_a_cor_above_the_numerics
     def cor(c):
         damped = system.with_planes([eqx_replace_damping(system.planes[0], c)])
         # 50 steps hold the 42 ms contact and its release; the apex is extrapolated ballistically.
-        traj = d.simulate(damped, _impact_state(damped, height), dt, 0.05, integrator=d.BackwardEuler(), minimiser=d.SparseNewton(),
-                          progress=False, chunk=CHUNK)  # fmt: skip
+        traj = d.simulate(
+            damped,
+            _impact_state(damped, height),
+            dt,
+            0.05,
+            integrator=d.BackwardEuler(),
+            minimiser=d.SparseNewton(),
+            progress=False,
+            chunk=CHUNK,
+        )
         first = d.measured_cor(traj)[0]
         return math.sqrt(first.bounce_height_m / (first.speed_in_m_per_s**2 / (2 * G)))
 

@@ -11,13 +11,7 @@ import pytest
 
 from shelljax import InvalidInputError
 from shelljax.config import bundled_data_dir
-from shelljax.estimate import (
-    Estimate,
-    calibrate_ks,
-    estimate_session,
-    modulus_from_wrinkles,
-    regress_force_on_depth,
-)
+from shelljax.estimate import Estimate, calibrate_ks, estimate_session, modulus_from_wrinkles, regress_force_on_depth
 from shelljax.paper import PAPER_KS
 from shelljax.physics import bending_stiffness, tau
 from shelljax.session import Session, load_session
@@ -26,18 +20,27 @@ FORCE_LEVELS = np.arange(5.0, 20.01, 2.5)
 EXACT_KS = Estimate.lognormal(PAPER_KS, 0.0, "1", "exact")
 
 
-def synthetic_session(gauge_pressure, radius=0.13, k_s=PAPER_KS, *, depth_noise=0.0, rng=None,
-                      counts=None, manometer=None, trials=3) -> Session:  # fmt: skip
+def synthetic_session(
+    gauge_pressure, radius=0.13, k_s=PAPER_KS, *, depth_noise=0.0, rng=None, counts=None, manometer=None, trials=3
+) -> Session:
     force = np.tile(FORCE_LEVELS, trials)
     depth = force / (math.pi * k_s * radius * gauge_pressure)
     if depth_noise:
         depth = depth + rng.normal(0.0, depth_noise, depth.size)
     return Session(
-        source=Path("synthetic.toml"), object_name="synthetic", radius=radius, radius_std=0.0,
-        thickness=0.9e-3, thickness_std=0.0, poisson_ratio=0.4,
-        trial=np.repeat(np.arange(1, trials + 1), FORCE_LEVELS.size), force=force, depth=depth,
-        wrinkle_counts=None if counts is None else np.asarray(counts), manometer_gauge_pressure=manometer,
-    )  # fmt: skip
+        source=Path("synthetic.toml"),
+        object_name="synthetic",
+        radius=radius,
+        radius_std=0.0,
+        thickness=0.9e-3,
+        thickness_std=0.0,
+        poisson_ratio=0.4,
+        trial=np.repeat(np.arange(1, trials + 1), FORCE_LEVELS.size),
+        force=force,
+        depth=depth,
+        wrinkle_counts=None if counts is None else np.asarray(counts),
+        manometer_gauge_pressure=manometer,
+    )
 
 
 def test_regression_recovers_exact_line_and_band_brackets_it():

@@ -34,16 +34,27 @@ MODEL = ScalingLawModel(poisson_ratio=0.4, k_s=0.64)
 
 
 def synthetic(depth_noise=0.0, seed=0, counts=None, radius_std=0.0026, thickness_std=4.5e-5) -> Session:
-    pred = MODEL(TRUTH["gauge_pressure"], TRUTH["young_modulus"], TRUTH["thickness"], TRUTH["radius"], jnp.asarray(FORCES))
+    pred = MODEL(
+        TRUTH["gauge_pressure"], TRUTH["young_modulus"], TRUTH["thickness"], TRUTH["radius"], jnp.asarray(FORCES)
+    )
     rng = np.random.default_rng(seed)
-    depth = np.asarray(pred.depth) + rng.normal(0.0, depth_noise, FORCES.size) if depth_noise else np.asarray(pred.depth)
+    depth = (
+        np.asarray(pred.depth) + rng.normal(0.0, depth_noise, FORCES.size) if depth_noise else np.asarray(pred.depth)
+    )
     n = float(pred.wrinkle_count)
     return Session(
-        source=Path(f"synthetic-{seed}.toml"), object_name="synthetic", radius=TRUTH["radius"],
-        radius_std=radius_std, thickness=TRUTH["thickness"], thickness_std=thickness_std,
-        poisson_ratio=0.4, trial=np.repeat([1, 2, 3], 7), force=FORCES.copy(), depth=depth,
+        source=Path(f"synthetic-{seed}.toml"),
+        object_name="synthetic",
+        radius=TRUTH["radius"],
+        radius_std=radius_std,
+        thickness=TRUTH["thickness"],
+        thickness_std=thickness_std,
+        poisson_ratio=0.4,
+        trial=np.repeat([1, 2, 3], 7),
+        force=FORCES.copy(),
+        depth=depth,
         wrinkle_counts=np.array(counts if counts is not None else [round(n)] * 3),
-    )  # fmt: skip
+    )
 
 
 def test_fit_recovers_exact_pressure():
@@ -98,7 +109,9 @@ def test_chain_file_is_the_chain_in_emcees_layout(tmp_path):
 
     fit = fit_session(synthetic(depth_noise=1e-3, seed=6), MODEL)
     path = tmp_path / "chain.h5"
-    options = dict(n_walkers=16, max_steps=620, check_every=310, seed=3, progress=False)  # 620: not a multiple of the 250-step block
+    options = dict(
+        n_walkers=16, max_steps=620, check_every=310, seed=3, progress=False
+    )  # 620: not a multiple of the 250-step block
     with pytest.warns(ConvergenceWarning):
         in_memory = sample_posterior(fit, **options)
     with pytest.warns(ConvergenceWarning):
@@ -125,7 +138,9 @@ def test_failed_forward_solves_are_counted_not_fatal():
     model = _FailsAbovePressure(poisson_ratio=0.4, k_s=0.64, limit=1.02 * TRUTH["gauge_pressure"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        post = sample_posterior(fit_session(s, model, raise_on_failure=False), n_walkers=16, max_steps=500, check_every=250, progress=False)
+        post = sample_posterior(
+            fit_session(s, model, raise_on_failure=False), n_walkers=16, max_steps=500, check_every=250, progress=False
+        )
     assert post.failed_forward > 0
     assert np.all(post.samples["gauge_pressure"] < model.limit)
 
@@ -184,7 +199,9 @@ def test_fit_out_of_steps_at_a_verified_optimum_is_converged():
     exhausted = fit_session(s, MODEL, rtol=0.0, atol=0.0)
     normal = fit_session(s, MODEL)
     assert exhausted.converged and exhausted.steps == 200
-    assert exhausted.estimates["gauge_pressure"].value == pytest.approx(normal.estimates["gauge_pressure"].value, rel=1e-6)
+    assert exhausted.estimates["gauge_pressure"].value == pytest.approx(
+        normal.estimates["gauge_pressure"].value, rel=1e-6
+    )
 
 
 def test_every_estimator_answers_in_one_protocol():
@@ -222,9 +239,12 @@ def test_padded_log_posterior_is_the_posterior_of_the_session():
         pred = MODEL(pressure, modulus, thickness, TRUTH["radius"], jnp.asarray(s.force))
         depth = np.asarray(pred.depth) + offset
         n = float(pred.wrinkle_count)
-        expected = (np.sum(norm.logpdf(s.depth, depth, noise)) + 0.5 * s.depth.size * math.log(2 * math.pi)
-                    + np.sum(np.log(norm.cdf(s.wrinkle_counts + 0.5 - n) - norm.cdf(s.wrinkle_counts - 0.5 - n)))
-                    - 0.5 * ((thickness - s.thickness) / s.thickness_std) ** 2)
+        expected = (
+            np.sum(norm.logpdf(s.depth, depth, noise))
+            + 0.5 * s.depth.size * math.log(2 * math.pi)
+            + np.sum(np.log(norm.cdf(s.wrinkle_counts + 0.5 - n) - norm.cdf(s.wrinkle_counts - 0.5 - n)))
+            - 0.5 * ((thickness - s.thickness) / s.thickness_std) ** 2
+        )
         log_p, converged = padded.log_posterior(jnp.asarray(u))
         # the same sums in another order: round-off only
         assert bool(converged) and float(log_p) == pytest.approx(expected, rel=1e-10, abs=1e-8)

@@ -84,11 +84,18 @@ def test_fit_recovers_parameters_of_its_own_model(model):
     rng = np.random.default_rng(0)
     counts = np.full(3, int(round(float(pred.wrinkle_count))))
     session = Session(
-        source=Path("axisym-synthetic.toml"), object_name="synthetic", radius=r, radius_std=0.02 * r,
-        thickness=h, thickness_std=0.05 * h, poisson_ratio=0.4, trial=np.repeat([1, 2, 3], 7),
-        force=np.asarray(FORCES), depth=np.asarray(pred.depth) + rng.normal(0, 1e-3, FORCES.size),
+        source=Path("axisym-synthetic.toml"),
+        object_name="synthetic",
+        radius=r,
+        radius_std=0.02 * r,
+        thickness=h,
+        thickness_std=0.05 * h,
+        poisson_ratio=0.4,
+        trial=np.repeat([1, 2, 3], 7),
+        force=np.asarray(FORCES),
+        depth=np.asarray(pred.depth) + rng.normal(0, 1e-3, FORCES.size),
         wrinkle_counts=counts,
-    )  # fmt: skip
+    )
     result = fit_session(session, model)
     est = result.estimates["gauge_pressure"]
     # The truth must lie within the 95 % Laplace interval (a failure here is a 1-in-20 event only

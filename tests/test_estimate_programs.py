@@ -101,10 +101,18 @@ def test_the_default_experiments_fit_program_is_shipped_for_these_sources():
     config = load_config(ROOT / "configs" / "paper.toml")
     options = config.estimator_options
     session = load_session(config.sessions[0])
-    problem = build_problem(session, options_forward_model(session, options), start_pressure=1e3,
-                            start_modulus=1e6, depth_noise=None, nuisance=options.nuisance)  # fmt: skip
+    problem = build_problem(
+        session,
+        options_forward_model(session, options),
+        start_pressure=1e3,
+        start_modulus=1e6,
+        depth_noise=None,
+        nuisance=options.nuisance,
+    )
     padded, _, _ = padded_problem(problem)
-    key = _programs.program_key(_solve.__qualname__, (padded, jnp.zeros(len(ALL_NAMES)), 1e-8, 1e-8), {"max_steps": 200})
+    key = _programs.program_key(
+        _solve.__qualname__, (padded, jnp.zeros(len(ALL_NAMES)), 1e-8, 1e-8), {"max_steps": 200}
+    )
     path = _programs.SHIPPED_DIR / (key + _programs.SUFFIX)
     assert path.is_file(), f"{path.name} is not shipped: run python tools/ship_programs.py"
     exported = jax.export.deserialize(bytearray(path.read_bytes()))

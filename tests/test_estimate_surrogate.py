@@ -46,8 +46,9 @@ def test_surrogate_reproduces_an_analytic_model_to_spectral_accuracy():
     # nodes over z ± w errs by at most (a w)^n e^(a w) / (2^(n−1) n!) relative per axis
     # (dominated here by R: 3 nodes over ±0.1, 4.6e-5); the tensor product multiplies each
     # axis's error by at most the Lebesgue constant of the others (< 2.3 for ≤ 7 nodes).
-    bound = 2.3 * sum((w**n) * math.exp(w) / (2 ** (n - 1) * math.factorial(n))
-                      for w, n in zip(half.values(), (7, 7, 5, 3)))  # fmt: skip
+    bound = 2.3 * sum(
+        (w**n) * math.exp(w) / (2 ** (n - 1) * math.factorial(n)) for w, n in zip(half.values(), (7, 7, 5, 3))
+    )
     rng = np.random.default_rng(0)
     points = np.exp(rng.uniform(lower, upper, size=(64, 4)))
     forces = rng.uniform(5.0, 20.0, size=(64, FORCES.size))
@@ -58,8 +59,13 @@ def test_surrogate_reproduces_an_analytic_model_to_spectral_accuracy():
     np.testing.assert_allclose(np.asarray(got.wrinkle_count), np.asarray(want.wrinkle_count), rtol=bound)
     assert bound < 2e-4  # the check is tight enough to catch a wrong transform
     # outside the box it reports a failed forward solve (bayes maps it to log p = −∞)
-    outside = surrogate(CENTER["gauge_pressure"] * 1.3, CENTER["young_modulus"], CENTER["thickness"],
-                        CENTER["radius"], jnp.asarray(FORCES))  # fmt: skip
+    outside = surrogate(
+        CENTER["gauge_pressure"] * 1.3,
+        CENTER["young_modulus"],
+        CENTER["thickness"],
+        CENTER["radius"],
+        jnp.asarray(FORCES),
+    )
     assert not bool(outside.converged)
 
 

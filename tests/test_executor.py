@@ -10,15 +10,7 @@ import pytest
 from distributed import LocalCluster
 
 from shelljax import InvalidInputError
-from shelljax.executor import (
-    ExecutorOptions,
-    ItemResult,
-    WorkItem,
-    item_path,
-    read_item,
-    run_items,
-    write_item,
-)
+from shelljax.executor import ExecutorOptions, ItemResult, WorkItem, item_path, read_item, run_items, write_item
 
 # the workers cannot import this test module: its functions travel by value
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -52,8 +44,9 @@ def scheduler():
     """A 2-process LocalCluster, reached by address as a user's own scheduler would be."""
     import logging
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.CRITICAL) as cluster:  # fmt: skip
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.CRITICAL
+    ) as cluster:
         yield cluster.scheduler_address
 
 

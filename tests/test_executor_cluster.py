@@ -29,23 +29,31 @@ from shelljax.session import load_session
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 # test_dynamics_shell.py's tiny ball, shorter, without figures, at two pressures
-TINY_SWEEP = (TINY.replace("duration_s = 0.08", "duration_s = 0.05").replace("figures = true", "figures = false")
-              .replace("max_frames = 3", "max_frames = 2").replace("preview_gif = true", "preview_gif = false")
-              + '[sweep]\nparameter = "object.gauge_pressure_Pa"\nvalues = [4000.0, 6000.0]\n')  # fmt: skip
+TINY_SWEEP = (
+    TINY.replace("duration_s = 0.08", "duration_s = 0.05")
+    .replace("figures = true", "figures = false")
+    .replace("max_frames = 3", "max_frames = 2")
+    .replace("preview_gif = true", "preview_gif = false")
+    + '[sweep]\nparameter = "object.gauge_pressure_Pa"\nvalues = [4000.0, 6000.0]\n'
+)
 
 
 @pytest.fixture(scope="module")
 def cluster():
     """A 2-process LocalCluster, reached by address as a user's own scheduler would be."""
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.CRITICAL) as local:  # fmt: skip
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.CRITICAL
+    ) as local:
         yield ExecutorOptions(cluster=local.scheduler_address)
 
 
 def _without_wall_times(tree):
     if isinstance(tree, dict):
-        return {k: _without_wall_times(v) for k, v in tree.items()
-                if k not in ("seconds", "wall_seconds", "worker", "executor", "compilation", "directory", "resumed")}  # fmt: skip
+        return {
+            k: _without_wall_times(v)
+            for k, v in tree.items()
+            if k not in ("seconds", "wall_seconds", "worker", "executor", "compilation", "directory", "resumed")
+        }
     if isinstance(tree, list):
         return [_without_wall_times(v) for v in tree]
     return tree
@@ -53,7 +61,10 @@ def _without_wall_times(tree):
 
 def cache_settings() -> dict:
     """Where a worker's JAX keeps compiled programs, and from which compile time [s] on."""
-    return {"directory": jax.config.jax_compilation_cache_dir, "min_seconds": jax.config.jax_persistent_cache_min_compile_time_secs}
+    return {
+        "directory": jax.config.jax_compilation_cache_dir,
+        "min_seconds": jax.config.jax_persistent_cache_min_compile_time_secs,
+    }
 
 
 def test_the_workers_keep_every_program_they_compile_in_the_shared_cache(cluster):
@@ -77,25 +88,35 @@ def test_a_sweep_runs_one_scenario_per_value_and_the_cluster_gives_the_serial_va
     assert all(v["worker"].startswith("tcp://") for v in remote["values"]), "the values ran on the workers"
     assert _without_wall_times(remote["values"]) == _without_wall_times(serial["values"])
     for name in ("gauge_pressure_Pa_4000", "gauge_pressure_Pa_6000"):  # each value's trajectory, bit for bit
-        a, b = (json.loads((tmp_path / run / name / "h0.00m" / "results.json").read_text()) for run in ("serial", "cluster"))
+        a, b = (
+            json.loads((tmp_path / run / name / "h0.00m" / "results.json").read_text()) for run in ("serial", "cluster")
+        )
         assert a["steps"] == b["steps"]
-        assert json.loads(item_path(tmp_path / "serial", f"value00{name.endswith('6000'):d}-{name}").read_text())["status"] == "done"
+        assert (
+            json.loads(item_path(tmp_path / "serial", f"value00{name.endswith('6000'):d}-{name}").read_text())["status"]
+            == "done"
+        )
     # resuming a finished sweep runs nothing again; resuming it after the config changed is refused
     assert main(["simulate", str(config), "--resume", str(tmp_path / "serial"), "--quiet"]) == 0
     resumed = json.loads((tmp_path / "serial" / "sweep.json").read_text())["values"]
-    assert [v["resumed"] for v in resumed] == [True, True] and _without_wall_times(resumed) == _without_wall_times(serial["values"])
+    assert [v["resumed"] for v in resumed] == [True, True] and _without_wall_times(resumed) == _without_wall_times(
+        serial["values"]
+    )
     config.write_text(TINY_SWEEP.replace("dt_s = 2e-3", "dt_s = 1e-3"))
     with pytest.raises(InvalidInputError, match=r"started with other config_sha256.*Fix"):
         run_sweep(load_scenario(config), tmp_path / "serial", progress=False, resume=True)
 
 
-@pytest.mark.parametrize(("table", "pattern"), [
-    ('parameter = "object.radius"\nvalues = [1.0, 2.0]', r"sweep\.parameter.*unknown sweep parameter"),
-    ('parameter = "initial.drop_heights_m"\nvalues = 0.5', r"sweep\.values.*non-empty list"),
-    ('parameter = "initial.drop_heights_m"\nvalues = [0.5, 0.5]', r"sweep\.values.*repeated"),
-    ('parameter = "object.gauge_pressure_Pa"\nvalues = [4000.0, -1.0]', r"object\.gauge_pressure_Pa"),
-    ('parameter = "dissipation.cor"\nvalues = [0.5, 1.5]', r"dissipation\.cor.*at most 1"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("table", "pattern"),
+    [
+        ('parameter = "object.radius"\nvalues = [1.0, 2.0]', r"sweep\.parameter.*unknown sweep parameter"),
+        ('parameter = "initial.drop_heights_m"\nvalues = 0.5', r"sweep\.values.*non-empty list"),
+        ('parameter = "initial.drop_heights_m"\nvalues = [0.5, 0.5]', r"sweep\.values.*repeated"),
+        ('parameter = "object.gauge_pressure_Pa"\nvalues = [4000.0, -1.0]', r"object\.gauge_pressure_Pa"),
+        ('parameter = "dissipation.cor"\nvalues = [0.5, 1.5]', r"dissipation\.cor.*at most 1"),
+    ],
+)
 def test_the_sweep_table_is_checked_value_by_value(tmp_path, table, pattern):
     config = tmp_path / "bad.toml"
     config.write_text(TINY_SWEEP.partition("[sweep]")[0] + f"[sweep]\n{table}\n")
@@ -106,7 +127,9 @@ def test_the_sweep_table_is_checked_value_by_value(tmp_path, table, pattern):
 
 def test_a_sweep_value_is_its_own_scenario_and_workers_need_a_sweep(tmp_path, capsys):
     config = tmp_path / "tiny.toml"
-    config.write_text(TINY_SWEEP.replace('"object.gauge_pressure_Pa"', '"dissipation.cor"').replace("[4000.0, 6000.0]", "[0.5, 0.7]"))
+    config.write_text(
+        TINY_SWEEP.replace('"object.gauge_pressure_Pa"', '"dissipation.cor"').replace("[4000.0, 6000.0]", "[0.5, 0.7]")
+    )
     one = load_scenario(config, value=0.7)
     # the swept COR replaces the config's damping (calibrated to it), and the value's scenario sweeps nothing
     assert one.cor == 0.7 and one.contact_damping is None and one.sweep is None
@@ -141,8 +164,17 @@ def test_curve_sets_are_work_items_merged_in_order_and_a_rerun_skips_the_solved(
 
     # one set on a 150-face sphere: about 50 s of 3D solves, the cheapest that runs the real tool
     out = tmp_path / "curves.json"
-    command = [sys.executable, str(Path(__file__).resolve().parents[1] / "tools" / "make_virtual_sessions.py"),
-               "--curves", "--sets", "0", "--n-triangles", "150", "--out", str(out)]  # fmt: skip
+    command = [
+        sys.executable,
+        str(Path(__file__).resolve().parents[1] / "tools" / "make_virtual_sessions.py"),
+        "--curves",
+        "--sets",
+        "0",
+        "--n-triangles",
+        "150",
+        "--out",
+        str(out),
+    ]
     first = subprocess.run(command, capture_output=True, text=True, check=True)
     assert "set0: solved" in first.stdout
     curves = json.loads(out.read_text())["curves"]
@@ -162,10 +194,19 @@ def _fake_diagnosis(paths, **options):
     if any(name in str(paths[0]) for name in FAILING):
         raise NoConvergenceError("the baseline fit stopped short", [1.0])
     estimate = {"value": 2.3e6, "ci95": [2.1e6, 2.5e6], "unit": "Pa"}
-    report = {"verdict": "none", "shrink": 1.0, "gap_before": {"rms_standardized": 1.1}, "gap_after": {"rms_standardized": 1.1},
-              "winner": None, "baseline": {"estimates": {"young_modulus": estimate}}, "misfit_p_value": 0.4,
-              "ranking": [{"effect": "baseline", "status": "ok"},
-                          {"effect": options["effects"][0], "status": "ok", "delta": -0.5, "delta_se": 0.2}]}  # fmt: skip
+    report = {
+        "verdict": "none",
+        "shrink": 1.0,
+        "gap_before": {"rms_standardized": 1.1},
+        "gap_after": {"rms_standardized": 1.1},
+        "winner": None,
+        "baseline": {"estimates": {"young_modulus": estimate}},
+        "misfit_p_value": 0.4,
+        "ranking": [
+            {"effect": "baseline", "status": "ok"},
+            {"effect": options["effects"][0], "status": "ok", "delta": -0.5, "delta_se": 0.2},
+        ],
+    }
     return type("Diagnosis", (), {"report": report, "sessions": list(paths)})()
 
 
@@ -180,9 +221,21 @@ def test_diagnose_over_studies_writes_each_one_and_records_a_failure(tmp_path, m
     monkeypatch.setattr(shelljax.diagnose, "diagnose", _fake_diagnosis)
     monkeypatch.setattr(shelljax.report, "write_diagnosis", _fake_write)
     studies = ["bundled:sessions/calib_pezzi_*.toml", "bundled:sessions/calib_yoga_*.toml", "bundled:sessions/rig"]
-    assert [(name, len(files)) for name, files in study_groups(studies)] == [("calib_pezzi", 6), ("calib_yoga", 4), ("rig", 8)]
+    assert [(name, len(files)) for name, files in study_groups(studies)] == [
+        ("calib_pezzi", 6),
+        ("calib_yoga", 4),
+        ("rig", 8),
+    ]
     out = tmp_path / "diag"
-    argv = ["diagnose", *[a for s in studies for a in ("--study", s)], "--effects", "depth_offset", "--out", str(out), "--quiet"]
+    argv = [
+        "diagnose",
+        *[a for s in studies for a in ("--study", s)],
+        "--effects",
+        "depth_offset",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(argv) == 0
     table = capsys.readouterr().out
     assert "calib_pezzi" in table and "FAILED: NoConvergenceError: the baseline fit stopped short" in table
@@ -190,7 +243,9 @@ def test_diagnose_over_studies_writes_each_one_and_records_a_failure(tmp_path, m
     assert [s["status"] for s in summary["studies"]] == ["done", "failed", "done"]
     done = summary["studies"][0]
     assert done["young_modulus"]["unit"] == "Pa" and done["best_candidate"]["effect"] == "depth_offset"
-    assert json.loads((out / "calib_pezzi" / "diagnosis.json").read_text())["sessions"][0].endswith("calib_pezzi_0900Pa.toml")
+    assert json.loads((out / "calib_pezzi" / "diagnosis.json").read_text())["sessions"][0].endswith(
+        "calib_pezzi_0900Pa.toml"
+    )
     assert json.loads(item_path(out, "study001-calib_yoga").read_text())["status"] == "failed"
     assert summary["options"]["effects"] == ["depth_offset"] and summary["executor"] == {"backend": "in-process"}
     # resumed once the cause is fixed: only the failed study runs again
@@ -199,21 +254,31 @@ def test_diagnose_over_studies_writes_each_one_and_records_a_failure(tmp_path, m
     assert main([*argv[:-3], "--resume", str(out), "--quiet"]) == 0
     assert CALLS == ["calib_yoga_0800Pa"]
     summary = json.loads((out / "diagnoses.json").read_text())
-    assert [s["status"] for s in summary["studies"]] == ["done"] * 3 and [s["resumed"] for s in summary["studies"]] == [True, False, True]
+    assert [s["status"] for s in summary["studies"]] == ["done"] * 3 and [s["resumed"] for s in summary["studies"]] == [
+        True,
+        False,
+        True,
+    ]
     capsys.readouterr()
     assert main([*argv[:-3], "--effects", "gas", "--resume", str(out), "--quiet"]) == 2  # other options: refused
     assert "was started with other options" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["a.toml", "--study", "bundled:sessions/calib_yoga_*.toml", "--out", "x"], "both given"),
-    (["--study", "bundled:sessions/calib_yoga_*.toml"], "--study needs --out"),
-    (["--study", "no/such/dir", "--out", "x"], "no session file there"),
-    (["--study", "bundled:sessions/calib_yoga_*.toml", "--out", "x", "--effects", "finger_size"], "unknown effect"),
-    (["bundled.toml", "--workers", "2"], "--workers/--cluster/--resume run many studies"),
-    (["--study", "bundled:sessions/calib_yoga_*.toml", "--resume", "x"], "not a diagnosis of many studies shelljax can resume"),
-    ([], "no sessions given"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["a.toml", "--study", "bundled:sessions/calib_yoga_*.toml", "--out", "x"], "both given"),
+        (["--study", "bundled:sessions/calib_yoga_*.toml"], "--study needs --out"),
+        (["--study", "no/such/dir", "--out", "x"], "no session file there"),
+        (["--study", "bundled:sessions/calib_yoga_*.toml", "--out", "x", "--effects", "finger_size"], "unknown effect"),
+        (["bundled.toml", "--workers", "2"], "--workers/--cluster/--resume run many studies"),
+        (
+            ["--study", "bundled:sessions/calib_yoga_*.toml", "--resume", "x"],
+            "not a diagnosis of many studies shelljax can resume",
+        ),
+        ([], "no sessions given"),
+    ],
+)
 def test_diagnose_over_studies_refuses_bad_input_before_running(tmp_path, monkeypatch, capsys, argv, message):
     monkeypatch.chdir(tmp_path)
     assert main(["diagnose", *argv, "--quiet"]) == 2

@@ -115,8 +115,7 @@ def test_load_errors_name_file_problem_and_fix(tmp_path):
         load_mesh(tmp_path / "nope.stl")
     text = tmp_path / "ball.txt"
     text.write_text("not a mesh")
-    with pytest.raises(InvalidInputError,
-                       match=r"ball\.txt: unsupported mesh format '\.txt'.*\.glb"):
+    with pytest.raises(InvalidInputError, match=r"ball\.txt: unsupported mesh format '\.txt'.*\.glb"):
         load_mesh(text)
     garbage = tmp_path / "garbage.stl"
     garbage.write_bytes(b"\x00\x01 certainly not an STL")
@@ -140,8 +139,11 @@ def test_load_rejects_holes_with_edge_count_and_fix(tmp_path):
     keep = np.setdiff1d(np.arange(len(ball.faces)), [0, second])
     path = tmp_path / "holey.obj"
     trimesh.Trimesh(ball.vertices, ball.faces[keep], process=False).export(path)
-    with pytest.raises(InvalidInputError, match=r"holey\.obj: mesh is not watertight: 6 boundary"
-                       r" edge.*trimesh\.repair\.fill_holes"):
+    with pytest.raises(
+        InvalidInputError,
+        match=r"holey\.obj: mesh is not watertight: 6 boundary"
+        r" edge.*trimesh\.repair\.fill_holes",
+    ):
         load_mesh(path)
     # Opting out returns the open mesh as is (e.g. for display).
     assert not load_mesh(path, require_watertight=False).is_watertight
@@ -171,8 +173,7 @@ def test_glb_scene_round_trip(tmp_path):
     # loader must flatten the scene and merge the seam vertices to close the surface again.
     upper = ball.triangles_center[:, 2] > 0.0
     scene = trimesh.Scene(
-        [ball.submesh([np.flatnonzero(upper)], append=True),
-         ball.submesh([np.flatnonzero(~upper)], append=True)]
+        [ball.submesh([np.flatnonzero(upper)], append=True), ball.submesh([np.flatnonzero(~upper)], append=True)]
     )
     path = tmp_path / "ball.glb"
     scene.export(path)
@@ -254,8 +255,7 @@ def test_radius_std_matches_monte_carlo_scatter():
     rng = np.random.default_rng(7)
     fits = []
     for _ in range(40):
-        noisy = trimesh.Trimesh(unit * (radius + rng.normal(0.0, sigma, (len(unit), 1))),
-                                ball.faces, process=False)
+        noisy = trimesh.Trimesh(unit * (radius + rng.normal(0.0, sigma, (len(unit), 1))), ball.faces, process=False)
         fits.append(_no_warnings(fit_local_sphere, noisy, [0.0, 0.0, radius], fit_radius=0.1))
     radii = np.array([f.radius for f in fits])
     predicted = np.mean([f.radius_std for f in fits])
@@ -269,11 +269,13 @@ def test_radius_std_matches_monte_carlo_scatter():
 
 def test_fit_errors_name_problem_and_fix():
     ball = make_ball_mesh(0.1, 3)
-    with pytest.raises(InvalidInputError,
-                       match=r"is 0\.1 m from the mesh surface.*off the surface"):
+    with pytest.raises(InvalidInputError, match=r"is 0\.1 m from the mesh surface.*off the surface"):
         fit_local_sphere(ball, [0.0, 0.0, 0.2])
-    with pytest.raises(InvalidInputError, match=r"only \d mesh vertices lie within fit_radius.*"
-                       r"increase fit_radius or refine the mesh"):
+    with pytest.raises(
+        InvalidInputError,
+        match=r"only \d mesh vertices lie within fit_radius.*"
+        r"increase fit_radius or refine the mesh",
+    ):
         fit_local_sphere(ball, [0.0, 0.0, 0.1], fit_radius=0.01)
     with pytest.raises(InvalidInputError, match="fit_radius = -0.01 m must be a positive length"):
         fit_local_sphere(ball, [0.0, 0.0, 0.1], fit_radius=-0.01)
@@ -314,7 +316,10 @@ def _hammer_analytic_volume():
     # Handle cylinder (z < −small) inside the head cylinder y² + z² < big².
     inside, _ = integrate.dblquad(
         lambda y, x: np.sqrt(big**2 - y**2) - small,
-        -small, small, lambda x: -np.sqrt(small**2 - x**2), lambda x: np.sqrt(small**2 - x**2),
+        -small,
+        small,
+        lambda x: -np.sqrt(small**2 - x**2),
+        lambda x: np.sqrt(small**2 - x**2),
     )
     return head + handle - top_cap - inside
 

@@ -8,7 +8,9 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-SHARED_PROGRAMS = "joint diagnosis"  # the sim_to_real notebook runs test_diagnose's joint fit: one xdist worker (conftest.py)
+SHARED_PROGRAMS = (
+    "joint diagnosis"  # the sim_to_real notebook runs test_diagnose's joint fit: one xdist worker (conftest.py)
+)
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
 

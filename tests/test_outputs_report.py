@@ -44,28 +44,51 @@ def _ball(steps=8, squash=0.3, wall: bool = False, dx: float = 0.0) -> d.Traject
         positions.append(x.ravel())
     positions = np.array(positions)
     n_planes = 2 if wall else 1
-    gaps = np.stack([positions.reshape(steps, -1, 3)[:, :, 2].min(axis=1)] + ([0.3 - positions.reshape(steps, -1, 3)[:, :, 0].max(axis=1)] if wall else []), axis=1)
+    gaps = np.stack(
+        [positions.reshape(steps, -1, 3)[:, :, 2].min(axis=1)]
+        + ([0.3 - positions.reshape(steps, -1, 3)[:, :, 0].max(axis=1)] if wall else []),
+        axis=1,
+    )
     force = np.zeros((steps, n_planes, 3))
     force[:, 0, 2] = 50.0 * flat
     com = positions.reshape(steps, -1, 3).mean(axis=1)
     records = {
-        "time_s": t, "com_position_m": com, "com_velocity_m_per_s": np.gradient(com, t, axis=0), "contact_force_N": force,
-        "min_gap_m": gaps, "gas_pressure_Pa": 1000.0 + 2000.0 * flat, "gas_volume_m3": np.full(steps, 4e-4),
-        "position_m": positions, "converged": np.ones(steps, bool), "feasible_start": np.ones(steps, bool),
-        "newton_iterations": np.ones(steps, int), "newton_matrices": np.ones(steps, int),
+        "time_s": t,
+        "com_position_m": com,
+        "com_velocity_m_per_s": np.gradient(com, t, axis=0),
+        "contact_force_N": force,
+        "min_gap_m": gaps,
+        "gas_pressure_Pa": 1000.0 + 2000.0 * flat,
+        "gas_volume_m3": np.full(steps, 4e-4),
+        "position_m": positions,
+        "converged": np.ones(steps, bool),
+        "feasible_start": np.ones(steps, bool),
+        "newton_iterations": np.ones(steps, int),
+        "newton_matrices": np.ones(steps, int),
         "residual_history_N": np.zeros((steps, 2)),
         **{f"{k}_energy_J": np.zeros(steps) for k in ("kinetic", "elastic", "gas", "gravity", "contact", "total")},
-    }  # fmt: skip
+    }
     normals = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])[:n_planes]
-    return d.Trajectory(records=records, plane_names=("ground", "wall")[:n_planes], plane_normals=normals,
-                        contact_distances_m=np.full(n_planes, 1e-3), gravity_m_per_s2=np.array([0.0, 0.0, -9.81]),
-                        dt_s=1e-3, faces=faces)  # fmt: skip
+    return d.Trajectory(
+        records=records,
+        plane_names=("ground", "wall")[:n_planes],
+        plane_normals=normals,
+        contact_distances_m=np.full(n_planes, 1e-3),
+        gravity_m_per_s2=np.array([0.0, 0.0, -9.81]),
+        dt_s=1e-3,
+        faces=faces,
+    )
 
 
 @pytest.mark.parametrize("mesh_format", ["ply", "glb"])
 def test_frames_carry_strain_colours_and_the_pictures_are_written(tmp_path, mesh_format):
     written = d.write_results(_ball(), tmp_path, max_frames=4, mesh_format=mesh_format)
-    for name in ("preview.gif", "figures/closeup.png", "figures/max_deformation.png", f"frames/frame_0000.{mesh_format}"):
+    for name in (
+        "preview.gif",
+        "figures/closeup.png",
+        "figures/max_deformation.png",
+        f"frames/frame_0000.{mesh_format}",
+    ):
         assert tmp_path / name in written and (tmp_path / name).stat().st_size > 2_000, name
     frames = sorted((tmp_path / "frames").glob(f"*.{mesh_format}"))
     meshes = [trimesh.load(f, force="mesh", process=False) for f in frames]
@@ -90,7 +113,12 @@ def test_scenario_figures_of_drops_a_wall_and_a_swing(tmp_path):
     assert len(steps) >= 4
     run = digest(swing, "swing")
     run.frames.update({int(k): positions[k] for k in steps})
-    assert keyframes_figure(run, {int(k): rigid[k] for k in steps}, np.array([0.0, 1.0, 0.0]), tmp_path / "k.png").stat().st_size > 10_000
+    assert (
+        keyframes_figure(run, {int(k): rigid[k] for k in steps}, np.array([0.0, 1.0, 0.0]), tmp_path / "k.png")
+        .stat()
+        .st_size
+        > 10_000
+    )
 
 
 def _links(markdown: str) -> list[str]:
@@ -102,26 +130,56 @@ def test_the_scenario_report_links_files_that_exist(tmp_path):
     d.write_results(_ball(), run_dir, max_frames=3)
     drops = [digest(_ball(), "drop 0.5 m")]
     max_deformation_figure(drops, tmp_path / "max_deformation.png")
-    impact = {"plane": "ground", "onset_s": 0.01, "cor": 0.6, "contact_time_s": 0.02, "peak_force_N": 40.0,
-              "max_compression_m": 0.01, "max_contact_diameter_m": 0.05}  # fmt: skip
-    summary = {"name": "synthetic", "scenario": "x.toml", "object": {"parameters": "given"}, "contact_damping_N_s_per_m": 1.0,
-               "parameters": {"gauge_pressure_Pa": 1e3, "youngs_modulus_Pa": 2e6, "poisson_ratio": 0.4, "thickness_m": 1e-3,
-                              "mass_kg": 0.1, "gas": "adiabatic", "mesh_faces": 320, "dt_s": 1e-3, "scheme": "backward-euler"},
-               "calibration": None, "figures": ["max_deformation.png"],
-               "runs": [{"drop_height_m": 0.5, "directory": str(run_dir), "impacts": [impact]}]}  # fmt: skip
+    impact = {
+        "plane": "ground",
+        "onset_s": 0.01,
+        "cor": 0.6,
+        "contact_time_s": 0.02,
+        "peak_force_N": 40.0,
+        "max_compression_m": 0.01,
+        "max_contact_diameter_m": 0.05,
+    }
+    summary = {
+        "name": "synthetic",
+        "scenario": "x.toml",
+        "object": {"parameters": "given"},
+        "contact_damping_N_s_per_m": 1.0,
+        "parameters": {
+            "gauge_pressure_Pa": 1e3,
+            "youngs_modulus_Pa": 2e6,
+            "poisson_ratio": 0.4,
+            "thickness_m": 1e-3,
+            "mass_kg": 0.1,
+            "gas": "adiabatic",
+            "mesh_faces": 320,
+            "dt_s": 1e-3,
+            "scheme": "backward-euler",
+        },
+        "calibration": None,
+        "figures": ["max_deformation.png"],
+        "runs": [{"drop_height_m": 0.5, "directory": str(run_dir), "impacts": [impact]}],
+    }
     markdown = scenario_markdown(summary, tmp_path)
     links = _links(markdown)
-    assert {"max_deformation.png", "h0.50m/preview.gif", "h0.50m/figures/closeup.png", "h0.50m/results.json"} <= set(links)
+    assert {"max_deformation.png", "h0.50m/preview.gif", "h0.50m/figures/closeup.png", "h0.50m/results.json"} <= set(
+        links
+    )
     assert all((tmp_path / link).is_file() for link in links if link != "scenario.json"), links
     assert "| drop 0.5 m | ground | 0.0100 | 0.6000 |" in markdown
 
 
 def test_the_diagnosis_report_has_the_verdict_and_its_figure():
     gap = {"rms_standardized": 2.0, "by_observable": {"depth": {"rms": 1e-3, "unit": "m", "rms_percent": 5.0}}}
-    report = {"verdict": "depth_offset", "ranking": [{"effect": "depth_offset", "status": "ok", "score": -10.0, "score_se": 1.0,
-                                                      "delta": 5.0, "delta_se": 1.0}],
-              "gap_before": gap, "gap_after": gap, "shrink": 1.0,
-              "where": {"misfit_groups": [], "misfit_threshold_p": 0.01}}  # fmt: skip
+    report = {
+        "verdict": "depth_offset",
+        "ranking": [
+            {"effect": "depth_offset", "status": "ok", "score": -10.0, "score_se": 1.0, "delta": 5.0, "delta_se": 1.0}
+        ],
+        "gap_before": gap,
+        "gap_after": gap,
+        "shrink": 1.0,
+        "where": {"misfit_groups": [], "misfit_threshold_p": 0.01},
+    }
     markdown = diagnosis_markdown(report)
     assert "**Verdict:** depth_offset" in markdown and {"diagnosis.png", "diagnosis.json"} <= set(_links(markdown))
 

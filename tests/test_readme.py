@@ -85,8 +85,11 @@ def readme_commands() -> list[str]:
 
     commands = []
     for kind, body in re.findall(r"```(console|bash)\n(.*?)```", _text(), re.S):
-        lines = [line.removeprefix("$ ") for line in body.replace("\\\n", " ").splitlines()
-                 if kind == "bash" or line.startswith("$ ")]
+        lines = [
+            line.removeprefix("$ ")
+            for line in body.replace("\\\n", " ").splitlines()
+            if kind == "bash" or line.startswith("$ ")
+        ]
         for line in lines:
             for part in line.split("&&"):
                 words = shlex.split(part, comments=True)
@@ -97,8 +100,10 @@ def readme_commands() -> list[str]:
 
 def test_every_readme_command_is_run_or_parsed_and_says_why():
     commands = set(readme_commands())
-    assert commands == RUN | set(PARSED_ONLY), (sorted(commands - RUN - set(PARSED_ONLY)),
-                                                sorted((RUN | set(PARSED_ONLY)) - commands))
+    assert commands == RUN | set(PARSED_ONLY), (
+        sorted(commands - RUN - set(PARSED_ONLY)),
+        sorted((RUN | set(PARSED_ONLY)) - commands),
+    )
 
 
 def test_every_readme_command_parses_with_the_real_parser():

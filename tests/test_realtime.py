@@ -16,12 +16,7 @@ import pytest
 from shelljax import realtime as rt
 from shelljax._errors import InvalidInputError, NoConvergenceError, ShelljaxError
 from shelljax.dynamics import BarrierContact
-from shelljax.physics import (
-    Plane,
-    ShellProperties,
-    barrier_energy,
-    isothermal_gauge_pressure,
-)
+from shelljax.physics import Plane, ShellProperties, barrier_energy, isothermal_gauge_pressure
 from shelljax.realtime import _contact as rt_contact
 from shelljax.realtime import _kernels as K
 from shelljax.shell3d import Shell, ShellMesh
@@ -47,11 +42,17 @@ def _kernel_gradient(x, mesh, geo, bending):
     alpha, beta = E * NU / (1 - NU**2), E / (2 * (1 + NU))
     force = np.zeros_like(x)
     e = K.elastic_forces_serial(
-        np.ascontiguousarray(x), np.asarray(mesh.stencil, dtype=np.int64),
+        np.ascontiguousarray(x),
+        np.asarray(mesh.stencil, dtype=np.int64),
         np.ascontiguousarray(np.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], 1)),
         np.ascontiguousarray(np.stack([rb[:, 0, 0], rb[:, 0, 1], rb[:, 1, 1]], 1)),
-        np.asarray(geo.rest_area), H, alpha, beta, bending, force,
-    )  # fmt: skip
+        np.asarray(geo.rest_area),
+        H,
+        alpha,
+        beta,
+        bending,
+        force,
+    )
     return e, -force
 
 
@@ -70,7 +71,8 @@ def test_membrane_gradient_matches_jax_grad_of_shell3d(deformed):
 
     def energy(y):
         per_face = jax.vmap(membrane_energy, in_axes=(0, 0, 0, None, None, None))(
-            y[geo.stencil], geo.rest_metric, geo.rest_area, H, E, NU)
+            y[geo.stencil], geo.rest_metric, geo.rest_area, H, E, NU
+        )
         return jnp.sum(per_face)
 
     e_ref = float(energy(jnp.asarray(x)))
@@ -87,7 +89,8 @@ def test_bending_gradient_matches_jax_grad_of_shell3d(deformed):
 
     def energy(y):
         per_face = jax.vmap(bending_energy, in_axes=(0, 0, 0, 0, None, None, None))(
-            y[geo.stencil], geo.rest_metric, geo.rest_curvature, geo.rest_area, H, E, NU)
+            y[geo.stencil], geo.rest_metric, geo.rest_curvature, geo.rest_area, H, E, NU
+        )
         return jnp.sum(per_face)
 
     e_ref = float(energy(jnp.asarray(x)))
@@ -116,8 +119,9 @@ def test_gas_volume_and_pressure_force_on_a_sphere():
     cos = np.sum(force * radial, axis=1) / np.linalg.norm(force, axis=1)
     assert cos.min() > 0.999
     # P ∂V/∂xᵢ = P Σ_{f ∋ i} A_f n_f / 3: a third of the vector area of the faces around vertex i.
-    area_vectors = 0.5 * np.cross(ball.x[ball.faces[:, 1]] - ball.x[ball.faces[:, 0]],
-                                  ball.x[ball.faces[:, 2]] - ball.x[ball.faces[:, 0]])
+    area_vectors = 0.5 * np.cross(
+        ball.x[ball.faces[:, 1]] - ball.x[ball.faces[:, 0]], ball.x[ball.faces[:, 2]] - ball.x[ball.faces[:, 0]]
+    )
     share = np.zeros_like(ball.x)
     np.add.at(share, ball.faces, area_vectors[:, None, :] / 3.0)
     np.testing.assert_allclose(force, P_G * share, atol=1e-12 * np.abs(force).max())
@@ -237,7 +241,9 @@ def test_collider_pushes_the_shell_and_feels_the_reaction():
     assert frame.collider_force_N[2] < 0.0  # the force on the shell: pushed down (the hand feels −F)
     _, v1 = ball.com()
     # No gravity, no planes: the collider's impulse is the shell's whole momentum change.
-    np.testing.assert_allclose(ball.total_mass * (v1 - v0), frame.collider_force_N * frame.time_s, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(
+        ball.total_mass * (v1 - v0), frame.collider_force_N * frame.time_s, rtol=1e-9, atol=1e-15
+    )
 
 
 @pytest.mark.parametrize(
@@ -284,8 +290,14 @@ def test_replica_round_trip(tmp_path):
     from shelljax.replica import write_replica
 
     shell = Shell(mesh=ShellMesh.sphere(R, 200, pole_refinement=1.0), thickness=H)
-    quantities = {"gauge_pressure_Pa": P_G, "youngs_modulus_Pa": E, "poisson_ratio": NU, "thickness_m": H,
-                  "mass_kg": MASS, "cor": None}  # fmt: skip
+    quantities = {
+        "gauge_pressure_Pa": P_G,
+        "youngs_modulus_Pa": E,
+        "poisson_ratio": NU,
+        "thickness_m": H,
+        "mass_kg": MASS,
+        "cor": None,
+    }
     write_replica(tmp_path, shell, quantities, gas="adiabatic")
     ball = rt.RealtimeShell.from_replica(tmp_path, rest_shape="small-strain")
     assert ball.total_mass == pytest.approx(MASS)
@@ -310,8 +322,9 @@ def test_parallel_kernel_equals_the_serial_one():
     args = (ball.stencil, ball.rest_inv, ball.rest_b, ball.rest_area, ball.h, ball.alpha, ball.beta, True)
     serial, parallel = np.zeros_like(x), np.zeros_like(x)
     e_s = K.elastic_forces_serial(x, *args, serial, True)
-    e_p = K.elastic_forces_parallel(x, *args, parallel, ball._face_grad, ball._face_energy, ball._incidence_ptr,
-                                    ball._incidence, True)  # fmt: skip
+    e_p = K.elastic_forces_parallel(
+        x, *args, parallel, ball._face_grad, ball._face_energy, ball._incidence_ptr, ball._incidence, True
+    )
     assert e_p == pytest.approx(e_s, rel=1e-12)
     np.testing.assert_allclose(parallel, serial, rtol=0, atol=1e-12 * np.abs(serial).max())
 
@@ -339,8 +352,9 @@ def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
     centre = np.array([0.0, 0.0, top + 0.04])
     speed = 0.6  # m/s down, 12 frames: 0.12 m of travel, 0.08 m into the ball
     # (a fist: a capsule thinner than the 300-face mesh's spacing slips between its contact points)
-    ball.set_collider(rt.Collider(a=tuple(centre), b=tuple(centre + [0.0, 0.0, 0.05]), radius=0.04,
-                                  velocity=(0.0, 0.0, -speed)))  # fmt: skip
+    ball.set_collider(
+        rt.Collider(a=tuple(centre), b=tuple(centre + [0.0, 0.0, 0.05]), radius=0.04, velocity=(0.0, 0.0, -speed))
+    )
     for _ in range(12):
         frame = ball.frame()
     np.testing.assert_allclose(ball.collider[2], centre[2] - speed * frame.time_s, atol=1e-12)  # it moved
@@ -377,8 +391,9 @@ def test_display_embedding_follows_rigid_motion_and_inflation():
     rot, shift = _rotation(4), np.array([0.3, -1.2, 0.7])
     np.testing.assert_allclose(display.positions(coarse @ rot.T + shift), fine @ rot.T + shift, rtol=0, atol=1e-12)
     centre, scale = np.array([0.05, 0.02, -0.4]), 1.37
-    np.testing.assert_allclose(display.positions(centre + scale * (coarse - centre)), centre + scale * (fine - centre),
-                               rtol=0, atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        display.positions(centre + scale * (coarse - centre)), centre + scale * (fine - centre), rtol=0, atol=1e-12
+    )
 
 
 def test_display_embedding_rides_on_a_bouncing_ball():
@@ -418,9 +433,11 @@ def test_impact_is_measured_below_the_vertex_chatter():
     t2, depth = 1.25 * t1, 4 * t1 / np.pi
     t = np.arange(0.0, 0.2, dt)
     s1, s2 = (t - t0) / t1, (t - t0 - t1) / t2
-    height = np.select([t < t0, t < t0 + t1, t < t0 + t1 + t2],
-                       [rest + 2.0 * (t0 - t), rest - depth * np.sin(np.pi * s1 / 2), rest - depth * np.cos(np.pi * s2 / 2)],
-                       rest + 1.6 * (t - t0 - t1 - t2))  # fmt: skip
+    height = np.select(
+        [t < t0, t < t0 + t1, t < t0 + t1 + t2],
+        [rest + 2.0 * (t0 - t), rest - depth * np.sin(np.pi * s1 / 2), rest - depth * np.cos(np.pi * s2 / 2)],
+        rest + 1.6 * (t - t0 - t1 - t2),
+    )
     speed = np.gradient(height, dt)
     on = (t >= t0) & (t <= t0 + t1 + t2)
     pulse = np.where(on, f0 * np.sin(np.pi * (t - t0) / (t1 + t2)), 0.0)
@@ -448,19 +465,31 @@ def test_barrier_plane_is_the_references_law_continued_by_the_spring():
     ball.drop(0.05)
     # twelve vertices placed at gaps from 1.5 mm (beyond ĝ) through the clamp to 0.4 mm behind the plane
     lowest = np.argsort(ball.x[:, 2])[:12]
-    ball.x[lowest, 2] = np.concatenate([np.linspace(-0.4e-3, 0.5e-3, 6), np.linspace(0.75e-3, 0.98e-3, 4), [1.2e-3, 1.5e-3]])
+    ball.x[lowest, 2] = np.concatenate(
+        [np.linspace(-0.4e-3, 0.5e-3, 6), np.linspace(0.75e-3, 0.98e-3, 4), [1.2e-3, 1.5e-3]]
+    )
     gap = ball.x[:, 2].copy()
     k, clamp = ball.k_contact, ball._clamps[0, :, 0]
     energy = jax.vmap(lambda g: barrier_energy(g, reach, kappa))
     force = jax.vmap(jax.grad(lambda g: -barrier_energy(g, reach, kappa)))
     stiffness = jax.vmap(jax.grad(jax.grad(lambda g: barrier_energy(g, reach, kappa))))
-    np.testing.assert_allclose(stiffness(jnp.asarray(clamp)), rt_contact.BARRIER_CLAMP_FRACTION * k, rtol=1e-9)  # bisection to 2⁻⁸⁰ of ĝ
+    np.testing.assert_allclose(
+        stiffness(jnp.asarray(clamp)), rt_contact.BARRIER_CLAMP_FRACTION * k, rtol=1e-9
+    )  # bisection to 2⁻⁸⁰ of ĝ
     f_clamp, e_clamp = np.asarray(force(jnp.asarray(clamp))), np.asarray(energy(jnp.asarray(clamp)))
     safe = np.clip(gap, 1e-9, None)
-    expected_f = np.where(gap >= reach, 0.0, np.where(gap >= clamp, np.asarray(force(jnp.asarray(safe))),
-                                                      f_clamp + k * (clamp - gap)))  # fmt: skip
-    expected_e = np.where(gap >= reach, 0.0, np.where(gap >= clamp, np.asarray(energy(jnp.asarray(safe))),
-                                                      e_clamp + f_clamp * (clamp - gap) + 0.5 * k * (clamp - gap) ** 2))  # fmt: skip
+    expected_f = np.where(
+        gap >= reach, 0.0, np.where(gap >= clamp, np.asarray(force(jnp.asarray(safe))), f_clamp + k * (clamp - gap))
+    )
+    expected_e = np.where(
+        gap >= reach,
+        0.0,
+        np.where(
+            gap >= clamp,
+            np.asarray(energy(jnp.asarray(safe))),
+            e_clamp + f_clamp * (clamp - gap) + 0.5 * k * (clamp - gap) ** 2,
+        ),
+    )
     assert np.sum(gap < clamp) >= 3 and np.sum((gap >= clamp) & (gap < reach)) >= 3 and np.sum(gap < 0) >= 1
     planes, _ = ball.contact_forces()
     assert planes[0, 2] == pytest.approx(float(expected_f.sum()), rel=1e-10)

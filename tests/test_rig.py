@@ -49,10 +49,20 @@ def _write_padded(path, directory, manometer=True):
     reading when ``manometer`` is False (a session to estimate, whose P_g nobody measured)."""
     s = _padded(path)
     out = directory / path.name
-    write_session(out, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
-                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
-                  wrinkle_counts=s.wrinkle_counts, manometer_gauge_pressure=s.manometer_gauge_pressure if manometer else None,
-                  poisson_ratio=s.poisson_ratio)  # fmt: skip
+    write_session(
+        out,
+        object_name=s.object_name,
+        radius=s.radius,
+        radius_std=s.radius_std,
+        thickness=s.thickness,
+        thickness_std=s.thickness_std,
+        trial=s.trial,
+        force=s.force,
+        depth=s.depth,
+        wrinkle_counts=s.wrinkle_counts,
+        manometer_gauge_pressure=s.manometer_gauge_pressure if manometer else None,
+        poisson_ratio=s.poisson_ratio,
+    )
     return out
 
 
@@ -71,7 +81,9 @@ def test_calibration_switches_the_pad_on_and_recovers_its_compliance(calibrated)
     best = rig.models[0]
     assert "pad_linear" in best.terms
     i = best.parameters.index("finger_compliance")
-    value, std = physical_parameter("finger_compliance", best.mean[i], math.sqrt(best.covariance[i, i]), rig.indenter_radius)
+    value, std = physical_parameter(
+        "finger_compliance", best.mean[i], math.sqrt(best.covariance[i, i]), rig.indenter_radius
+    )
     # within 3 std (a Laplace interval of 4 sessions' worth of data), and never off by 30 %
     assert abs(value - PAD) < 3 * std and abs(value / PAD - 1) < 0.3, (value, std)
     assert abs(sum(m.weight for m in rig.models) - 1) < 1e-9
@@ -107,14 +119,20 @@ def test_rig_file_round_trip_keeps_every_model(calibrated):
     assert len(again.calibration) == 4 and all(len(c["sha256"]) == 64 for c in again.calibration)
 
 
-@pytest.mark.parametrize("edit, field", [
-    (lambda t: t.replace("format = 1", "format = 7"), "format"),
-    (lambda t: t.replace('shelljax_version = "0.1.0"', 'shelljax_version = "9.0.0"'), "shelljax_version"),
-    (lambda t: t.replace("weight = ", "weight = -", 1), "weight"),
-    (lambda t: t.replace('gas = "isothermal"', 'gas = "helium"'), "forward_model"),
-    (lambda t: t.replace('[[model]]\nterms = [\n    "pad_linear"', '[[model]]\nterms = [\n    "pad_tofu"', 1), "terms"),
-    (lambda t: t.replace("force_ref = ", "force_ref = -", 1), "reference.force_ref"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda t: t.replace("format = 1", "format = 7"), "format"),
+        (lambda t: t.replace('shelljax_version = "0.1.0"', 'shelljax_version = "9.0.0"'), "shelljax_version"),
+        (lambda t: t.replace("weight = ", "weight = -", 1), "weight"),
+        (lambda t: t.replace('gas = "isothermal"', 'gas = "helium"'), "forward_model"),
+        (
+            lambda t: t.replace('[[model]]\nterms = [\n    "pad_linear"', '[[model]]\nterms = [\n    "pad_tofu"', 1),
+            "terms",
+        ),
+        (lambda t: t.replace("force_ref = ", "force_ref = -", 1), "reference.force_ref"),
+    ],
+)
 @pytest.mark.slow  # calibrates the rig (the module's fixture)
 def test_a_rig_file_edited_into_nonsense_is_refused_naming_the_field(calibrated, tmp_path, edit, field):
     _, path, _ = calibrated
@@ -156,7 +174,9 @@ def test_a_calibration_object_of_loosely_stated_radius_is_warned_about():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         _hint_radius(taped)
-    with pytest.warns(RigWarning, match=r"toy_2200Pa\.toml: field 'radius_std'.*±2\.0 %.*Fix: measure its circumference"):
+    with pytest.warns(
+        RigWarning, match=r"toy_2200Pa\.toml: field 'radius_std'.*±2\.0 %.*Fix: measure its circumference"
+    ):
         _hint_radius([load_session(SESSIONS / "rig" / "toy_2200Pa.toml")])
 
 
@@ -200,13 +220,17 @@ def test_cli_rig_calibrate_and_estimate(calibrated, tmp_path, capsys):
 def test_config_rig_table_names_the_rig_and_refuses_contradictions(calibrated, tmp_path):
     _, path, _ = calibrated
     config = tmp_path / "exp.toml"
-    config.write_text(f'[estimators]\nmethods = ["fit"]\n[rig]\npath = "{path}"\n[sessions]\n'
-                      'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
+    config.write_text(
+        f'[estimators]\nmethods = ["fit"]\n[rig]\npath = "{path}"\n[sessions]\n'
+        'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n'
+    )
     loaded = load_config(config)
     options = loaded.estimator_options
     assert loaded.rig == path and options.gas == "isothermal" and options.wrinkle_law == "scaling"
-    config.write_text(f'[estimators]\nmethods = ["fit"]\ngas = "prescribed"\n[rig]\npath = "{path}"\n[sessions]\n'
-                      'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n')  # fmt: skip
+    config.write_text(
+        f'[estimators]\nmethods = ["fit"]\ngas = "prescribed"\n[rig]\npath = "{path}"\n[sessions]\n'
+        'paths = ["bundled:sessions/heldout_pezzi_1100Pa.toml"]\n'
+    )
     with pytest.raises(InvalidInputError, match="estimators.gas"):
         load_config(config)
 
@@ -219,9 +243,19 @@ def test_replica_and_scenario_take_the_rig(calibrated, tmp_path):
     _, path, directory = calibrated
     s = _padded(SESSIONS / "heldout_pezzi_1100Pa.toml")
     session = tmp_path / "ball.toml"
-    write_session(session, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
-                  thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
-                  wrinkle_counts=s.wrinkle_counts, mass=0.4)  # fmt: skip
+    write_session(
+        session,
+        object_name=s.object_name,
+        radius=s.radius,
+        radius_std=s.radius_std,
+        thickness=s.thickness,
+        thickness_std=s.thickness_std,
+        trial=s.trial,
+        force=s.force,
+        depth=s.depth,
+        wrinkle_counts=s.wrinkle_counts,
+        mass=0.4,
+    )
     export_replica(session, tmp_path / "replica", rig=path, mesh_faces=200)
     replica = json.loads((tmp_path / "replica" / "replica.json").read_text())
     direct = estimate_with_rig(session, load_rig(path)).estimates["gauge_pressure"].value
@@ -231,8 +265,11 @@ def test_replica_and_scenario_take_the_rig(calibrated, tmp_path):
     config = tmp_path / "drop.toml"
     config.write_text(drop.replace("[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'))
     assert load_scenario(config).rig == path
-    config.write_text(drop.replace('wrinkle_law = "scaling"', 'wrinkle_law = "mechanics"')
-                      .replace("[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'))  # fmt: skip
+    config.write_text(
+        drop.replace('wrinkle_law = "scaling"', 'wrinkle_law = "mechanics"').replace(
+            "[integrator]", f'[rig]\npath = "{path}"\n\n[integrator]'
+        )
+    )
     with pytest.raises(InvalidInputError, match="estimators.wrinkle_law"):
         load_scenario(config)
 
@@ -243,8 +280,9 @@ def _press(directory, rng, compliance=PAD, offset=0.0):
     trial = np.repeat([1, 2, 3], 7)
     force = np.tile(np.arange(5.0, 20.1, 2.5), 3) + rng.normal(0, 0.05, 21)
     depth = compliance * force + offset + np.repeat(rng.normal(0, 0.1e-3, 3), 7) + rng.normal(0, 0.05e-3, 21)
-    return write_rigid_press(directory / "press.toml", object_name="table", trial=trial, force=np.round(force, 2),
-                             depth=depth)  # fmt: skip
+    return write_rigid_press(
+        directory / "press.toml", object_name="table", trial=trial, force=np.round(force, 2), depth=depth
+    )
 
 
 def test_a_press_alone_measures_the_pad_and_the_depth_zero(tmp_path):
@@ -253,8 +291,10 @@ def test_a_press_alone_measures_the_pad_and_the_depth_zero(tmp_path):
     press = _press(tmp_path, np.random.default_rng(5), offset=1e-3)
     data = press_data([press])
     fit = fit_press(data, ("pad_linear", "depth_offset"), 10.0)
-    c, delta = (physical_parameter(n, u, math.sqrt(fit.covariance[i, i]), 0.008)
-                for i, (n, u) in enumerate(zip(fit.parameters, fit.mean)))  # fmt: skip
+    c, delta = (
+        physical_parameter(n, u, math.sqrt(fit.covariance[i, i]), 0.008)
+        for i, (n, u) in enumerate(zip(fit.parameters, fit.mean))
+    )
     # within 3 std of the planted values (a linear least-squares problem: the Laplace std is exact)
     assert abs(c[0] - PAD) < 3 * c[1] and abs(delta[0] - 1e-3) < 3 * delta[1]
     # a press with a pad is badly predicted by a rig without one: its trials lose density
@@ -282,15 +322,21 @@ def test_cli_rig_calibrate_writes_the_rig_or_nothing(calibrated, tmp_path, capsy
     press = _press(tmp_path, np.random.default_rng(7))
     calibration = [str(p) for p in sorted(directory.glob("calib_pezzi_*.toml"))]
     out = tmp_path / "rig.toml"
-    assert main(["rig", "calibrate", *calibration, str(press.source), "--terms", "pad_linear", "--out", str(out),
-                 "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            ["rig", "calibrate", *calibration, str(press.source), "--terms", "pad_linear", "--out", str(out), "--quiet"]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "pad_linear" in printed and f"written: {out}" in printed
     assert load_rig(out).models[0].terms == ("pad_linear",)
     assert main(["validate", str(press.source)]) == 0
     assert "rigid-surface press" in capsys.readouterr().out
     refused = tmp_path / "refused.toml"
-    assert main(["rig", "calibrate", calibration[0], str(SESSIONS / "pezzi.toml"), "--out", str(refused), "--quiet"]) == 2
+    assert (
+        main(["rig", "calibrate", calibration[0], str(SESSIONS / "pezzi.toml"), "--out", str(refused), "--quiet"]) == 2
+    )
     assert "manometer_gauge_pressure" in capsys.readouterr().err and not refused.exists()
 
 
@@ -301,10 +347,20 @@ def test_mixed_rigs_are_refused_in_a_calibration_and_in_an_estimate(calibrated, 
     for k, p in enumerate((900, 1200)):
         s = load_session(SESSIONS / f"calib_pezzi_{p:04d}Pa.toml")
         paths.append(tmp_path / f"s{k}.toml")
-        write_session(paths[-1], object_name=s.object_name, radius=s.radius, radius_std=s.radius_std, thickness=s.thickness,
-                      thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
-                      wrinkle_counts=s.wrinkle_counts, manometer_gauge_pressure=s.manometer_gauge_pressure,
-                      rig_name=("alice-index", "bob-thumb")[k])  # fmt: skip
+        write_session(
+            paths[-1],
+            object_name=s.object_name,
+            radius=s.radius,
+            radius_std=s.radius_std,
+            thickness=s.thickness,
+            thickness_std=s.thickness_std,
+            trial=s.trial,
+            force=s.force,
+            depth=s.depth,
+            wrinkle_counts=s.wrinkle_counts,
+            manometer_gauge_pressure=s.manometer_gauge_pressure,
+            rig_name=("alice-index", "bob-thumb")[k],
+        )
     with pytest.raises(InvalidInputError, match="different rigs.*alice-index.*bob-thumb"):
         calibrate_rig(paths, progress=False)
     named = write_rig(dataclasses.replace(rig, name="alice-index"), tmp_path / "alice.toml")
@@ -323,7 +379,9 @@ def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrate
     result = estimate_with_rig(held_out, unsure)
     assert isinstance(result, RigEstimate)
     rows = {s["term"]: s for s in result.to_dict()["separating"]}
-    assert "rigid-surface press" in rows["pad_linear"]["measurement"] and "weights" in rows["sensor_gain"]["measurement"]
+    assert (
+        "rigid-surface press" in rows["pad_linear"]["measurement"] and "weights" in rows["sensor_gain"]["measurement"]
+    )
     # one model: the mixture is that model, and settling the terms would change nothing
     assert rows["pad_linear"]["young_modulus_interval_shrink"] == pytest.approx(1.0, rel=1e-3)
 
@@ -332,8 +390,22 @@ def test_an_estimate_says_what_would_separate_the_terms_not_identified(calibrate
 def test_diagnose_with_the_rig_as_baseline(calibrated, tmp_path, capsys):
     _, path, directory = calibrated
     calibration = [str(p) for p in sorted(directory.glob("calib_pezzi_*.toml"))]
-    assert main(["diagnose", *calibration, "--rig", str(path), "--effects", "finger_compliance", "depth_offset",
-                 "--json", "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "diagnose",
+                *calibration,
+                "--rig",
+                str(path),
+                "--effects",
+                "finger_compliance",
+                "depth_offset",
+                "--json",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     report = json.loads(capsys.readouterr().out)
     # the rig's pad is the baseline: its own candidate is left out, and the rest find nothing more
     assert report["baseline"]["measurement"] == "pad_linear"
@@ -356,7 +428,9 @@ def test_a_model_whose_fit_fails_is_reported_not_dropped(calibrated, tmp_path, m
         return dataclasses.replace(fit, converged=False, message="forced") if "sensor_gain" in terms else fit
 
     monkeypatch.setattr(calibrate, "fit_model", failing_gain)
-    rig = calibrate_rig(sorted(directory.glob("calib_pezzi_*.toml")), terms=("pad_linear", "sensor_gain"), progress=False)
+    rig = calibrate_rig(
+        sorted(directory.glob("calib_pezzi_*.toml")), terms=("pad_linear", "sensor_gain"), progress=False
+    )
     # the gain alone, then the pad with the gain: each reported with its reason
     assert [f["terms"] for f in rig.failed] == [["sensor_gain"], ["pad_linear", "sensor_gain"]]
     assert all("forced" in f["message"] for f in rig.failed)

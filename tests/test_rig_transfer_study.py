@@ -11,20 +11,37 @@ from _scripts import load_script
 
 
 def _model(terms, p_ratio, e_ratio, weight, truth_p, truth_e, std=0.05):
-    return {"terms": terms, "weight": weight, "status": "ok",
-            "estimates": {"gauge_pressure": {"value": truth_p * p_ratio, "relative_std": std, "unit": "Pa"},
-                          "young_modulus": {"value": truth_e * e_ratio, "relative_std": std, "unit": "Pa"}}}  # fmt: skip
+    return {
+        "terms": terms,
+        "weight": weight,
+        "status": "ok",
+        "estimates": {
+            "gauge_pressure": {"value": truth_p * p_ratio, "relative_std": std, "unit": "Pa"},
+            "young_modulus": {"value": truth_e * e_ratio, "relative_std": std, "unit": "Pa"},
+        },
+    }
 
 
 def _rig(index, families, sessions):
-    return {"rig": index, "truth": {family: {} for family in families}, "families": sorted(families), "calibration_seconds": 1.0,
-            "selected": [], "not_identified": [], "sessions": sessions}  # fmt: skip
+    return {
+        "rig": index,
+        "truth": {family: {} for family in families},
+        "families": sorted(families),
+        "calibration_seconds": 1.0,
+        "selected": [],
+        "not_identified": [],
+        "sessions": sessions,
+    }
 
 
 def _session(p_error, models, truth_p=1000.0, truth_e=2e6):
     fit = {"p_error": p_error, "p_covered": True, "e_error": 0.0, "e_covered": True, "seconds": 1.0}
-    return {"radius": 0.1, "pressure": truth_p, "young_modulus": truth_e,
-            "results": {"fit": fit, "fit+rig": fit, "rig_models": models}}  # fmt: skip
+    return {
+        "radius": 0.1,
+        "pressure": truth_p,
+        "young_modulus": truth_e,
+        "results": {"fit": fit, "fit+rig": fit, "rig_models": models},
+    }
 
 
 def test_model_of_the_true_families_is_picked_by_family_not_by_weight():
@@ -32,9 +49,11 @@ def test_model_of_the_true_families_is_picked_by_family_not_by_weight():
     terms' families are exactly {pad, depth} (pad_power + depth_offset) gives the row, whatever its
     weight; its interval is value × exp(±1.96 σ), so a 12 % error with σ = 5 % is not covered."""
     study = load_script("experiments", "rig_transfer_study")
-    models = [_model(["sensor_gain"], 1.30, 1.0, 0.7, 1000.0, 2e6),
-              _model(["pad_power", "depth_offset"], 1.12, 0.95, 0.2, 1000.0, 2e6),
-              _model(["pad_hertz"], 0.5, 1.0, 0.1, 1000.0, 2e6)]  # fmt: skip
+    models = [
+        _model(["sensor_gain"], 1.30, 1.0, 0.7, 1000.0, 2e6),
+        _model(["pad_power", "depth_offset"], 1.12, 0.95, 0.2, 1000.0, 2e6),
+        _model(["pad_hertz"], 0.5, 1.0, 0.1, 1000.0, 2e6),
+    ]
     rig = study._with_true_families(_rig(0, ["pad", "depth"], [_session(3.0, models)]))
     row = rig["sessions"][0]["results"][study.TRUE_FAMILIES]
     assert row["p_error"] == pytest.approx(12.0) and row["e_error"] == pytest.approx(-5.0)

@@ -47,9 +47,11 @@ def paper_run(tmp_path_factory):
 def _truth(session_path: str) -> dict[str, float]:
     """True P_g [Pa], E [Pa] and the engine's noise-free k_s [-] from a bundled session's notes."""
     notes = tomllib.loads(Path(session_path).read_text())["notes"]
-    return {"gauge_pressure": float(re.search(r"P_g = ([\d.]+) Pa", notes).group(1)),
-            "young_modulus": float(re.search(r"E = ([\d.e+]+) Pa", notes).group(1)),
-            "k_s": float(re.search(r"noise-free k_s = ([\d.]+)", notes).group(1))}  # fmt: skip
+    return {
+        "gauge_pressure": float(re.search(r"P_g = ([\d.]+) Pa", notes).group(1)),
+        "young_modulus": float(re.search(r"E = ([\d.e+]+) Pa", notes).group(1)),
+        "k_s": float(re.search(r"noise-free k_s = ([\d.]+)", notes).group(1)),
+    }
 
 
 def test_default_experiment_runs_all_three_estimators():
@@ -84,8 +86,9 @@ def test_closed_form_held_out_errors_are_the_k_s_mismatch(paper_run):
     # held-out pressure by k_s(session)/k_s(calibrated) − 1: the error the fit removes.
     _, results = paper_run
     k_cal = results["calibration"]["k_s"]["value"]
-    held_out = [e for e in results["sessions"]
-                if "gauge_pressure_relative_error_vs_manometer" in e["estimates"]["closed-form"]]  # fmt: skip
+    held_out = [
+        e for e in results["sessions"] if "gauge_pressure_relative_error_vs_manometer" in e["estimates"]["closed-form"]
+    ]
     assert len(held_out) == 4 and len(results["calibration"]["points"]) == 10
     truths = [_truth(e["session"])["k_s"] for e in held_out]
     assert min(truths) < k_cal < max(truths)
@@ -176,14 +179,24 @@ def test_cli_reports_bad_input_without_traceback(tmp_path, capsys):
     "text, pattern",
     [
         ('[sessions]\npaths = ["nope/*.toml"]\n', r"sessions.paths'.*matches no file"),
-        ('[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n[estimators]\nmethods = ["magic"]\n', r"unknown method 'magic'"),
-        ('colour = 1\n[sessions]\npaths = []\n', r"field 'colour': unknown key"),
-        ('[estimators]\nbootstrap_samples = -1\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n', r"bootstrap_samples"),
+        (
+            '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n[estimators]\nmethods = ["magic"]\n',
+            r"unknown method 'magic'",
+        ),
+        ("colour = 1\n[sessions]\npaths = []\n", r"field 'colour': unknown key"),
+        (
+            '[estimators]\nbootstrap_samples = -1\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
+            r"bootstrap_samples",
+        ),
         ('name = "x"\n', r"sessions.paths'.*missing"),
-        ('[estimators]\nwrinkle_law = "folklore"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
-         r"estimators.wrinkle_law'.*unknown wrinkle law 'folklore'"),
-        ('[estimators]\nbayes_surrogate = "yes"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
-         r"estimators.bayes_surrogate'.*not true/false"),
+        (
+            '[estimators]\nwrinkle_law = "folklore"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
+            r"estimators.wrinkle_law'.*unknown wrinkle law 'folklore'",
+        ),
+        (
+            '[estimators]\nbayes_surrogate = "yes"\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n',
+            r"estimators.bayes_surrogate'.*not true/false",
+        ),
     ],
 )
 def test_bad_config_is_named(tmp_path, text, pattern):
@@ -194,22 +207,31 @@ def test_bad_config_is_named(tmp_path, text, pattern):
 
 
 def test_console_script_entry_point_runs():
-    proc = subprocess.run([sys.executable, "-m", "shelljax.cli", "validate",
-                           str(bundled_data_dir() / "sessions" / "hammer.toml")],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "shelljax.cli", "validate", str(bundled_data_dir() / "sessions" / "hammer.toml")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "inflatable-hammer" in proc.stdout
 
 
 def test_config_carries_the_forward_model_options(tmp_path):
     path = tmp_path / "c.toml"
-    path.write_text('[estimators]\nmethods = ["fit"]\ngas = "isothermal"\nwrinkle_law = "scaling"\nbayes_surrogate = false\n'
-                    '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')  # fmt: skip
+    path.write_text(
+        '[estimators]\nmethods = ["fit"]\ngas = "isothermal"\nwrinkle_law = "scaling"\nbayes_surrogate = false\n'
+        '[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n'
+    )
     options = load_config(path).estimator_options
     assert (options.gas, options.wrinkle_law, options.surrogate) == ("isothermal", "scaling", False)
     path.write_text('[estimators]\nmethods = ["fit"]\n[sessions]\npaths = ["bundled:sessions/pezzi.toml"]\n')
     defaults = load_config(path).estimator_options
-    assert (defaults.gas, defaults.wrinkle_law, defaults.surrogate) == ("isothermal", "scaling", True)  # DEFAULT_OPTIONS
+    assert (defaults.gas, defaults.wrinkle_law, defaults.surrogate) == (
+        "isothermal",
+        "scaling",
+        True,
+    )  # DEFAULT_OPTIONS
 
 
 def test_version_and_plain_text_help(capsys):

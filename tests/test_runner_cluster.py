@@ -102,7 +102,9 @@ def test_a_failed_session_is_recorded_with_its_error_and_the_others_kept(tmp_pat
         run_dir = run_experiment(config, output_dir=tmp_path, progress=False)
     results = _results(run_dir)
     failed = results["sessions"][1]
-    assert failed["error"] == "RuntimeError: the sensor's cable came loose" and failed["inputs"]["radius"]["unit"] == "m"
+    assert (
+        failed["error"] == "RuntimeError: the sensor's cable came loose" and failed["inputs"]["radius"]["unit"] == "m"
+    )
     assert "gauge_pressure" in results["sessions"][0]["estimates"]["closed-form"]
     assert [i["status"] for i in results["items"]] == ["done", "failed"]
     assert "failed" in summary_table(results).splitlines()[3]
@@ -120,12 +122,15 @@ def test_resume_refuses_what_it_cannot_resume(tmp_path):
         run_experiment()
 
 
-@pytest.mark.parametrize(("table", "pattern"), [
-    ("workers = 0", r"executor\.workers.*integer >= 1"),
-    ('workers = 2\ncluster = "tcp://h:8786"', "both workers and cluster"),
-    ('cluster = "h:8786"', r"executor\.cluster.*not a scheduler address"),
-    ("threads = 2", "threads"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("table", "pattern"),
+    [
+        ("workers = 0", r"executor\.workers.*integer >= 1"),
+        ('workers = 2\ncluster = "tcp://h:8786"', "both workers and cluster"),
+        ('cluster = "h:8786"', r"executor\.cluster.*not a scheduler address"),
+        ("threads = 2", "threads"),
+    ],
+)
 def test_the_executor_table_is_checked(tmp_path, table, pattern):
     config = paper_variant(tmp_path, ["closed-form"], HELD_OUT[:1])
     config.write_text(config.read_text() + f"\n[executor]\n{table}\n")

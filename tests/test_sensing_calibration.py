@@ -130,9 +130,13 @@ def test_save_load_round_trip(tmp_path):
 
 @pytest.mark.parametrize(
     "field, value, match",
-    [("kind", "something-else", "field 'kind'"), ("exponent", -1.0, "exponent"),
-     ("model", "cubic", "field 'model'"), ("covariance", [[1.0]], "field 'covariance'")],
-)  # fmt: skip
+    [
+        ("kind", "something-else", "field 'kind'"),
+        ("exponent", -1.0, "exponent"),
+        ("model", "cubic", "field 'model'"),
+        ("covariance", [[1.0]], "field 'covariance'"),
+    ],
+)
 def test_bad_calibration_files_name_the_field(tmp_path, field, value, match):
     data = fit_calibration(synthetic_loads(np.random.default_rng(3))).to_dict()
     data[field] = value
@@ -146,5 +150,11 @@ def test_fit_refuses_underdetermined_data():
     with pytest.raises(InvalidInputError, match="distinct loads"):
         fit_calibration([LoadPoint(0.0, 0.1, 0.0, 1), LoadPoint(5.0, 1.0, 0.0, 1), LoadPoint(5.0, 1.1, 0.0, 1)])
     with pytest.raises(InvalidInputError, match="not above the unloaded"):
-        fit_calibration([LoadPoint(0.0, 1.0, 0.0, 1), LoadPoint(5.0, 0.9, 0.0, 1),
-                         LoadPoint(10.0, 2.0, 0.0, 1), LoadPoint(15.0, 3.0, 0.0, 1)])  # fmt: skip
+        fit_calibration(
+            [
+                LoadPoint(0.0, 1.0, 0.0, 1),
+                LoadPoint(5.0, 0.9, 0.0, 1),
+                LoadPoint(10.0, 2.0, 0.0, 1),
+                LoadPoint(15.0, 3.0, 0.0, 1),
+            ]
+        )

@@ -12,8 +12,9 @@ from shelljax.sensing import EmulatedDevice, Faults, PtyLink, SerialSensor, form
 
 
 def virtual_driver(device: EmulatedDevice, **kwargs) -> SerialSensor:
-    return SerialSensor(opener=device.open_port, clock=device.clock, sleep=device.sleep,
-                        wallclock=device.clock, **kwargs)  # fmt: skip
+    return SerialSensor(
+        opener=device.open_port, clock=device.clock, sleep=device.sleep, wallclock=device.clock, **kwargs
+    )
 
 
 def read_for(driver: SerialSensor, seconds: float):

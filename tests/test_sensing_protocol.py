@@ -51,8 +51,10 @@ def test_hello_round_trip_and_values():
         (b"S,01,2*" + b"%02X" % reduce(lambda a, b: a ^ b, b"S,01,2", 0) + b"\n", "bad sample fields"),
         (b"S,1,2,3,4*" + b"%02X" % reduce(lambda a, b: a ^ b, b"S,1,2,3,4", 0) + b"\n", "bad sample fields"),
         (b"S,1,65536*" + b"%02X" % reduce(lambda a, b: a ^ b, b"S,1,65536", 0) + b"\n", "sample value out of range"),
-        (b"S,4294967296,1*" + b"%02X" % reduce(lambda a, b: a ^ b, b"S,4294967296,1", 0) + b"\n",
-         "sample value out of range"),
+        (
+            b"S,4294967296,1*" + b"%02X" % reduce(lambda a, b: a ^ b, b"S,4294967296,1", 0) + b"\n",
+            "sample value out of range",
+        ),
         (b"S," + b"1" * MAX_LINE_BYTES + b"*00\n", "line too long"),
     ],
 )
@@ -64,7 +66,9 @@ def test_rejected_lines(line, reason):
 
 def test_lowercase_checksum_rejected():
     # Strict uppercase: a case flip in the checksum is a corrupted byte, not an equivalent line.
-    line = next(format_sample(t, (1,)) for t in range(100) if any(c in b"ABCDEF" for c in format_sample(t, (1,))[-3:-1]))
+    line = next(
+        format_sample(t, (1,)) for t in range(100) if any(c in b"ABCDEF" for c in format_sample(t, (1,))[-3:-1])
+    )
     with pytest.raises(MalformedLine):
         parse_line(line[:-3] + line[-3:-1].lower() + b"\n")
 

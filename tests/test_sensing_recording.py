@@ -41,16 +41,24 @@ META = {
 
 
 def fast_driver(device):
-    return SerialSensor(opener=device.open_port, clock=device.clock, sleep=device.sleep,
-                        wallclock=device.clock, reconnect_interval=0.1)  # fmt: skip
+    return SerialSensor(
+        opener=device.open_port, clock=device.clock, sleep=device.sleep, wallclock=device.clock, reconnect_interval=0.1
+    )
 
 
 def test_emulated_acquisition_to_estimate(tmp_path):
     faults = Faults(garbage_rate=0.01, corrupt_rate=0.01, split_rate=0.05)
     device = EmulatedDevice(faults=faults, seed=11)
     out = tmp_path / "ball.toml"
-    result = acquire(fast_driver(device), out, AutoConsole(), calibration=CAL, plan=AcquisitionPlan(),
-                     meta=META, operator=EmulatedOperator(device))  # fmt: skip
+    result = acquire(
+        fast_driver(device),
+        out,
+        AutoConsole(),
+        calibration=CAL,
+        plan=AcquisitionPlan(),
+        meta=META,
+        operator=EmulatedOperator(device),
+    )
     assert result.completed_trials == 3 and result.levels == 21 and result.malformed > 0
     session = load_session(out)
     ball = device.ball
@@ -80,10 +88,10 @@ def test_baseline_drift_is_tared_away_and_reported(tmp_path):
     device = EmulatedDevice(sensor=FilmSensor(drift=0.004, placement_scatter=0.0), seed=19)
     console = AutoConsole()
     out = tmp_path / "drift.toml"
-    plan = AcquisitionPlan(depth_source="channel", depth_scale=1 / device.depth_gauge.counts_per_m,
-                           ask_level_wrinkles=False)  # fmt: skip
-    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META,
-            operator=EmulatedOperator(device))  # fmt: skip
+    plan = AcquisitionPlan(
+        depth_source="channel", depth_scale=1 / device.depth_gauge.counts_per_m, ask_level_wrinkles=False
+    )
+    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META, operator=EmulatedOperator(device))
     events = [json.loads(line) for line in RecordingPaths.for_session(out).events.read_text().splitlines()]
     shifts = [e["shift_N_at_min_force"] for e in events if e["event"] == "tare"]
     assert shifts[0] < 0.2 and shifts[-1] > 0.5  # what an untared trial 3 would be off by
@@ -118,8 +126,16 @@ def test_unplug_and_crash_lose_no_received_sample_and_resume_completes(tmp_path)
 
     console = ScriptedConsole([answer_then_crash] * 100)
     with pytest.raises(KeyboardInterrupt):
-        acquire(driver, out, console, calibration=CAL, plan=AcquisitionPlan(), meta=META,
-                operator=EmulatedOperator(device), on_batch=on_batch)  # fmt: skip
+        acquire(
+            driver,
+            out,
+            console,
+            calibration=CAL,
+            plan=AcquisitionPlan(),
+            meta=META,
+            operator=EmulatedOperator(device),
+            on_batch=on_batch,
+        )
     assert len(checks) > 100 and all(checks)
     assert driver.stats.n_reconnects == 1
     log = read_sample_log(paths.samples)
@@ -134,8 +150,9 @@ def test_unplug_and_crash_lose_no_received_sample_and_resume_completes(tmp_path)
     assert len(load_session(out).wrinkle_counts) == 1
     rows_before = log["row"].size
 
-    result = acquire(fast_driver(device), out, ScriptedConsole([""] * 100), resume=True,
-                     operator=EmulatedOperator(device))  # fmt: skip
+    result = acquire(
+        fast_driver(device), out, ScriptedConsole([""] * 100), resume=True, operator=EmulatedOperator(device)
+    )
     assert result.completed_trials == 3
     session = load_session(out)
     assert session.force.size == 21 and len(session.wrinkle_counts) == 3
@@ -153,8 +170,7 @@ def test_typed_answers_are_validated_and_stored(tmp_path):
     answers = ["abc", "4.5", "-1", "6.25", "8", "many", "11"]
     console = ScriptedConsole(answers)
     plan = AcquisitionPlan(forces=(5.0, 7.5, 10.0), trials=1, ask_level_wrinkles=False, depth_unit="mm")
-    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META,
-            operator=EmulatedOperator(device))  # fmt: skip
+    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META, operator=EmulatedOperator(device))
     session = load_session(out)
     np.testing.assert_allclose(session.depth, [4.5e-3, 6.25e-3, 8e-3])
     assert list(session.wrinkle_counts) == [11]
@@ -167,11 +183,15 @@ def test_typed_answers_are_validated_and_stored(tmp_path):
 def test_depth_from_second_channel(tmp_path):
     device = EmulatedDevice(seed=14)
     out = tmp_path / "ch2.toml"
-    plan = AcquisitionPlan(forces=(5.0, 10.0, 15.0, 20.0), trials=1, depth_source="channel",
-                           depth_scale=1 / device.depth_gauge.counts_per_m, ask_level_wrinkles=False)  # fmt: skip
+    plan = AcquisitionPlan(
+        forces=(5.0, 10.0, 15.0, 20.0),
+        trials=1,
+        depth_source="channel",
+        depth_scale=1 / device.depth_gauge.counts_per_m,
+        ask_level_wrinkles=False,
+    )
     console = ScriptedConsole(["12"])  # only the trial's wrinkle count is asked
-    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META,
-            operator=EmulatedOperator(device))  # fmt: skip
+    acquire(fast_driver(device), out, console, calibration=CAL, plan=plan, meta=META, operator=EmulatedOperator(device))
     session = load_session(out)
     true_depth = np.array([device.ball.depth(f) for f in session.force])
     # The gauge is exact up to 0.7-count noise (35 µm, averaged); the stored force carries the
@@ -199,14 +219,21 @@ def test_level_that_cannot_be_reached_can_be_skipped(tmp_path):
 def test_refusals(tmp_path):
     device = EmulatedDevice(seed=16)
     with pytest.raises(InvalidInputError, match="calibrated range"):
-        acquire(fast_driver(device), tmp_path / "a.toml", AutoConsole(), calibration=CAL,
-                plan=AcquisitionPlan(forces=(5.0, 15.0, 30.0)), meta=META)  # fmt: skip
+        acquire(
+            fast_driver(device),
+            tmp_path / "a.toml",
+            AutoConsole(),
+            calibration=CAL,
+            plan=AcquisitionPlan(forces=(5.0, 15.0, 30.0)),
+            meta=META,
+        )
     with pytest.raises(InvalidInputError, match="--resume"):
         acquire(fast_driver(device), tmp_path / "b.toml", AutoConsole(), resume=True)
     (tmp_path / "c.samples.csv").write_text("row\n")
     with pytest.raises(InvalidInputError, match="already exist"):
-        acquire(fast_driver(device), tmp_path / "c.toml", AutoConsole(), calibration=CAL,
-                plan=AcquisitionPlan(), meta=META)  # fmt: skip
+        acquire(
+            fast_driver(device), tmp_path / "c.toml", AutoConsole(), calibration=CAL, plan=AcquisitionPlan(), meta=META
+        )
 
 
 def cli(argv):
@@ -221,8 +248,23 @@ def test_cli_calibrate_then_acquire_emulated(tmp_path):
     assert cli(["sensor-calibrate", "--emulate-fast", "--yes", "--out", str(cal), "--cycles", "1"]) == 0
     assert SensorCalibration.load(cal).force_max == pytest.approx(2.5 * 9.80665)
     out = tmp_path / "demo.toml"
-    code = cli(["acquire", "--emulate-fast", "--yes", "--emulate-faults", "--out", str(out), "--calibration", str(cal),
-                "--trials", "2", "--forces", "5:15:2.5", "--no-level-wrinkles"])  # fmt: skip
+    code = cli(
+        [
+            "acquire",
+            "--emulate-fast",
+            "--yes",
+            "--emulate-faults",
+            "--out",
+            str(out),
+            "--calibration",
+            str(cal),
+            "--trials",
+            "2",
+            "--forces",
+            "5:15:2.5",
+            "--no-level-wrinkles",
+        ]
+    )
     assert code == 0
     session = load_session(out)
     assert session.force.size == 10 and session.object_name == "emulated-ball"
@@ -235,16 +277,43 @@ def test_killed_process_keeps_every_received_sample(tmp_path):
     out = tmp_path / "killed.toml"
     paths = RecordingPaths.for_session(out)
     with PtyLink(device) as link:
-        argv = ["acquire", "--port", link.port, "--out", str(out),
-                "--calibration", str(sensing_cli.emulated_calibration_path()), "--object", "ball",
-                "--radius", "0.13", "--thickness", "0.9", "--thickness-std", "0.05", "--trials", "1",
-                "--forces", "5:10:2.5", "--depth-from-channel", "--depth-scale", "5e-5",
-                "--no-level-wrinkles", "--yes"]  # fmt: skip
-        code = "import sys; from shelljax.sensing._cli import register; import argparse; " \
-               "p = argparse.ArgumentParser(); register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
-               "sys.exit(a.func(a))"  # fmt: skip
-        proc = subprocess.Popen([sys.executable, "-c", code, *argv], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+        argv = [
+            "acquire",
+            "--port",
+            link.port,
+            "--out",
+            str(out),
+            "--calibration",
+            str(sensing_cli.emulated_calibration_path()),
+            "--object",
+            "ball",
+            "--radius",
+            "0.13",
+            "--thickness",
+            "0.9",
+            "--thickness-std",
+            "0.05",
+            "--trials",
+            "1",
+            "--forces",
+            "5:10:2.5",
+            "--depth-from-channel",
+            "--depth-scale",
+            "5e-5",
+            "--no-level-wrinkles",
+            "--yes",
+        ]
+        code = (
+            "import sys; from shelljax.sensing._cli import register; import argparse; "
+            "p = argparse.ArgumentParser(); register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); "
+            "sys.exit(a.func(a))"
+        )
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code, *argv],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             deadline = time.monotonic() + 30
             while time.monotonic() < deadline:

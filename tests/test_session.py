@@ -86,7 +86,10 @@ def test_trials_from_csv_beside_the_toml(tmp_path):
         ({"indentation__depth": [math.inf] + BASE["indentation"]["depth"][1:]}, r"indentation.depth\[0\]'.*not finite"),
         ({"wall__thickness": math.nan}, r"wall.thickness'.*not finite"),
         ({"indentation__force": [-5.0] + FORCES[1:] + FORCES}, r"indentation.force\[0\]'.*must be positive"),
-        ({"indentation__depth": [0.0] + BASE["indentation"]["depth"][1:]}, r"indentation.depth\[0\]'.*must be positive"),
+        (
+            {"indentation__depth": [0.0] + BASE["indentation"]["depth"][1:]},
+            r"indentation.depth\[0\]'.*must be positive",
+        ),
         ({"indentation__force": [5.0, 10.0] * 7}, r"only 2 distinct force level"),
         ({"indentation__depth_unit": "m"}, r"millimetres written as metres: set depth_unit"),
         ({"wrinkles__counts": [8.5, 9]}, r"wrinkles.counts\[0\]'.*not a non-negative integer"),
@@ -114,24 +117,41 @@ _DEPTH = BASE["indentation"]["depth"]
     "changes, pattern",
     [
         # the issue's wall 1000x too thin: 0.0009 written in mm, meant in m
-        ({"wall__thickness": 0.0009, "wall__thickness_std": 0.00005},
-         r"wall.thickness' = 0.0009: 0.0009 mm is implausibly small for a wall thickness \(0.05–10 mm\).*thickness_unit = \"m\""),
-        ({"wall__thickness": 2.0, "wall__thickness_std": 0.1, "wall__thickness_unit": "um"},
-         r"wall.thickness' = 2.0: 2 um is implausibly small for a wall thickness.*thickness_unit = \"mm\""),
+        (
+            {"wall__thickness": 0.0009, "wall__thickness_std": 0.00005},
+            r"wall.thickness' = 0.0009: 0.0009 mm is implausibly small for a wall thickness \(0.05–10 mm\).*thickness_unit = \"m\"",
+        ),
+        (
+            {"wall__thickness": 2.0, "wall__thickness_std": 0.1, "wall__thickness_unit": "um"},
+            r"wall.thickness' = 2.0: 2 um is implausibly small for a wall thickness.*thickness_unit = \"mm\"",
+        ),
         ({"wall__thickness_std": 1.5}, r"wall.thickness_std' = 1.5: 1.5 mm is not smaller than the thickness 0.9 mm"),
-        ({"geometry__radius": 13000.0}, r"geometry.radius' = 13000.0: 13000 mm is implausibly large for a radius.*length_unit"),
-        ({"geometry__radius": 5.0, "geometry__radius_std": 0.1, "indentation__depth": [d / 20 for d in _DEPTH]},
-         r"geometry.radius' = 5.0: 5 mm is implausibly small for a radius of curvature \(0.01–2 m\)"),
-        ({"indentation__force": [f * 1000 for f in FORCES * 2]},
-         r"indentation.force\[0\]' = 5000.0: 5000 N is implausibly large for a finger's force.*force_unit = \"mN\""),
-        ({"indentation__depth": [d / 1000 for d in _DEPTH]},
-         r"indentation.depth\[0\]' = 0.015: 0.015 mm is implausibly small for an indentation depth.*depth_unit = \"m\""),
-        ({"manometer_gauge_pressure": 130.0, "pressure_unit": "kPa"},
-         r"manometer_gauge_pressure' = 130.0: 130 kPa is implausibly large for an inflated object's gauge pressure"),
+        (
+            {"geometry__radius": 13000.0},
+            r"geometry.radius' = 13000.0: 13000 mm is implausibly large for a radius.*length_unit",
+        ),
+        (
+            {"geometry__radius": 5.0, "geometry__radius_std": 0.1, "indentation__depth": [d / 20 for d in _DEPTH]},
+            r"geometry.radius' = 5.0: 5 mm is implausibly small for a radius of curvature \(0.01–2 m\)",
+        ),
+        (
+            {"indentation__force": [f * 1000 for f in FORCES * 2]},
+            r"indentation.force\[0\]' = 5000.0: 5000 N is implausibly large for a finger's force.*force_unit = \"mN\"",
+        ),
+        (
+            {"indentation__depth": [d / 1000 for d in _DEPTH]},
+            r"indentation.depth\[0\]' = 0.015: 0.015 mm is implausibly small for an indentation depth.*depth_unit = \"m\"",
+        ),
+        (
+            {"manometer_gauge_pressure": 130.0, "pressure_unit": "kPa"},
+            r"manometer_gauge_pressure' = 130.0: 130 kPa is implausibly large for an inflated object's gauge pressure",
+        ),
         ({"mass": 800.0}, r"mass' = 800.0: 800 kg is implausibly large.*mass_unit = \"g\""),
         # one depth of trial 1 changed from 45 to 12 mm: it runs backwards while the force rises
-        ({"indentation__depth": _DEPTH[:4] + [12.0] + _DEPTH[5:]},
-         r"indentation.depth\[4\]' = 12.0: trial 1 runs backwards: 12 mm at 15 N after 37.5 mm at 12.5 N \(sample 3\)"),
+        (
+            {"indentation__depth": _DEPTH[:4] + [12.0] + _DEPTH[5:]},
+            r"indentation.depth\[4\]' = 12.0: trial 1 runs backwards: 12 mm at 15 N after 37.5 mm at 12.5 N \(sample 3\)",
+        ),
     ],
 )
 def test_implausible_values_are_refused_with_the_unit_written(tmp_path, changes, pattern):
@@ -146,8 +166,11 @@ def test_a_backwards_depth_in_a_csv_names_its_line_and_a_fix(tmp_path):
     rows = "".join(f"1,{f},{f * 3}\n" for f in FORCES).replace("1,17.5,52.5", "1,17.5,12")
     (tmp_path / "t.csv").write_text("trial,force,depth\n" + rows)
     path = write(tmp_path, variant(indentation={"depth_unit": "mm", "trials_csv": "t.csv"}, wrinkles={"counts": [8]}))
-    with pytest.raises(InvalidInputError, match=r"indentation.depth\[5\]' = 12.0: \(in t.csv, line 7\) trial 1 runs backwards"
-                       r".*Fix: re-measure or delete that sample"):
+    with pytest.raises(
+        InvalidInputError,
+        match=r"indentation.depth\[5\]' = 12.0: \(in t.csv, line 7\) trial 1 runs backwards"
+        r".*Fix: re-measure or delete that sample",
+    ):
         load_session(path)
 
 
@@ -238,8 +261,13 @@ def test_shape_from_csv_keeps_missing_cells_as_nan(tmp_path):
 
 
 def test_shape_inline_with_a_subset_of_observables(tmp_path):
-    shape = {"length_unit": "cm", "force_unit": "mN", "trial": [1, 2], "force": [5000.0, 10000.0],
-             "contact_diameter": [6.0, 7.0]}  # fmt: skip
+    shape = {
+        "length_unit": "cm",
+        "force_unit": "mN",
+        "trial": [1, 2],
+        "force": [5000.0, 10000.0],
+        "contact_diameter": [6.0, 7.0],
+    }
     s = load_session(shape_session(tmp_path, shape))
     np.testing.assert_array_equal(s.shape_trial, [1, 2])
     np.testing.assert_allclose(s.shape_force, [5.0, 10.0])
@@ -266,9 +294,15 @@ _INLINE = {"trial": [1, 2], "force": [5.0, 10.0], "height": [0.25, 0.24]}
         ({"force": [5.0], "height": [0.2]}, r"field 'shape.trial': missing"),
         ({**_INLINE, "height": [0.25, math.nan]}, r"field 'shape.height\[1\]'.*value nan is not finite"),
         ({**_INLINE, "height": [0.25, 0.0]}, r"field 'shape.height\[1\]'.*value 0.0 must be positive"),
-        ({**_INLINE, "sunken_depth": [0.0, -0.01]}, r"field 'shape.sunken_depth\[1\]'.*value -0.01 must be non-negative"),
+        (
+            {**_INLINE, "sunken_depth": [0.0, -0.01]},
+            r"field 'shape.sunken_depth\[1\]'.*value -0.01 must be non-negative",
+        ),
         ({**_INLINE, "force": [5.0, -10.0]}, r"field 'shape.force\[1\]'.*value -10.0 must be positive"),
-        ({**_INLINE, "trial": [1, 3]}, r"field 'shape.trial\[1\]'.*trial id 3 is not among the \[indentation\] trial ids \[1, 2\]"),
+        (
+            {**_INLINE, "trial": [1, 3]},
+            r"field 'shape.trial\[1\]'.*trial id 3 is not among the \[indentation\] trial ids \[1, 2\]",
+        ),
         ({**_INLINE, "trial": [1, 1.5]}, r"field 'shape.trial\[1\]'.*trial id 1.5 is not an integer"),
         ({**_INLINE, "height": [250.0, 240.0]}, r"field 'shape.height\[0\]'.*250 m is implausibly large.*length_unit"),
         ({**_INLINE, "length_unit": "inch"}, r"field 'shape.length_unit'.*unknown length unit 'inch'"),
@@ -298,7 +332,10 @@ def test_bad_shape_is_named(tmp_path, shape, pattern):
             "trial,force,height,sunken_depth\n1,5,250,2\n1,10,,\n",
             r"field 'shape\[1\]'.*line 3.*\(trial 1, force 10\) has no measured observable",
         ),
-        ("trial,force,height\n1,5,250\n1,10,nan\n", r"field 'shape.height\[1\]'.*\(in shape.csv, line 3\) value nan is not finite"),
+        (
+            "trial,force,height\n1,5,250\n1,10,nan\n",
+            r"field 'shape.height\[1\]'.*\(in shape.csv, line 3\) value nan is not finite",
+        ),
         ("trial,force,height\n1,5,250\n7,10,240\n", r"field 'shape.trial\[1\]'.*line 3.*trial id 7 is not among"),
         ("trial,force,height\n", r"no shape points"),
     ],
@@ -314,23 +351,44 @@ def _written_session_arguments() -> dict:
     rng = np.random.default_rng(0)
     forces = np.array(FORCES * 2)
     return dict(
-        object_name="written-ball", radius=0.13, radius_std=0.002, thickness=0.9e-3,
-        thickness_std=5e-5, trial=np.repeat([1, 2], 7), force=forces,
-        depth=forces * 3e-3 * (1 + 0.01 * rng.standard_normal(forces.size)), wrinkle_counts=[8, 9],
-        manometer_gauge_pressure=1300.0, mass=0.85, poisson_ratio=0.45, notes="written by a test",
-    )  # fmt: skip
+        object_name="written-ball",
+        radius=0.13,
+        radius_std=0.002,
+        thickness=0.9e-3,
+        thickness_std=5e-5,
+        trial=np.repeat([1, 2], 7),
+        force=forces,
+        depth=forces * 3e-3 * (1 + 0.01 * rng.standard_normal(forces.size)),
+        wrinkle_counts=[8, 9],
+        manometer_gauge_pressure=1300.0,
+        mass=0.85,
+        poisson_ratio=0.45,
+        notes="written by a test",
+    )
 
 
 def test_write_session_round_trips_with_shape(tmp_path):
     args = _written_session_arguments()
-    shape = {"trial": [1, 1, 2], "force": [5.0, 10.0, 10.0], "height": [0.2505, 0.2480, 0.2475],
-             "sunken_depth": [2e-3, np.nan, 0.0]}  # fmt: skip
+    shape = {
+        "trial": [1, 1, 2],
+        "force": [5.0, 10.0, 10.0],
+        "height": [0.2505, 0.2480, 0.2475],
+        "sunken_depth": [2e-3, np.nan, 0.0],
+    }
     written = write_session(tmp_path / "w.toml", **args, shape=shape)
     s = load_session(tmp_path / "w.toml")
     assert (tmp_path / "w_shape.csv").is_file() and str(tmp_path / "w_shape.csv") in s.input_files
     assert s.source == written.source == tmp_path / "w.toml"
-    for name in ("radius", "radius_std", "thickness", "thickness_std", "manometer_gauge_pressure", "mass",
-                 "poisson_ratio", "notes"):  # fmt: skip
+    for name in (
+        "radius",
+        "radius_std",
+        "thickness",
+        "thickness_std",
+        "manometer_gauge_pressure",
+        "mass",
+        "poisson_ratio",
+        "notes",
+    ):
         assert getattr(s, name) == args[name], name
     assert s.object_name == args["object_name"]
     np.testing.assert_array_equal(s.trial, args["trial"])
@@ -355,8 +413,10 @@ def test_write_session_without_shape_writes_no_csv(tmp_path):
         ({"trial": [1], "force": [5.0], "hieght": [0.2]}, r"argument 'shape': unknown key 'hieght'"),
         ({"trial": [1], "force": [5.0]}, r"argument 'shape': no observable"),
         ({"trial": [1, 2], "force": [5.0], "height": [0.2, 0.2]}, r"argument 'shape': arrays differ in length"),
-        ({"trial": [1, 1], "force": [5.0, 10.0], "height": [0.2, np.nan], "sunken_depth": [0.0, np.nan]},
-         r"field 'shape\[1\]'.*has no measured observable"),
+        (
+            {"trial": [1, 1], "force": [5.0, 10.0], "height": [0.2, np.nan], "sunken_depth": [0.0, np.nan]},
+            r"field 'shape\[1\]'.*has no measured observable",
+        ),
         ({"trial": [3], "force": [5.0], "height": [0.2]}, r"field 'shape.trial\[0\]'.*trial id 3 is not among"),
     ],
 )

@@ -96,8 +96,14 @@ def test_write_rigid_press_round_trips_exactly_in_si(tmp_path):
     rng = np.random.default_rng(1)
     force = np.array([5.0, 10.0, 15.0, 20.0] * 2)
     depth = 1e-4 * force + 1e-5 * rng.standard_normal(force.size) - 8e-4  # a negative zero error
-    written = write_rigid_press(tmp_path / "sub" / "w.toml", object_name="table", trial=np.repeat([1, 2], 4),
-                                force=force, depth=depth, notes="written by a test")  # fmt: skip
+    written = write_rigid_press(
+        tmp_path / "sub" / "w.toml",
+        object_name="table",
+        trial=np.repeat([1, 2], 4),
+        force=force,
+        depth=depth,
+        notes="written by a test",
+    )
     p = load_rigid_press(tmp_path / "sub" / "w.toml")
     assert p.source == written.source == tmp_path / "sub" / "w.toml"
     assert p.object_name == "table" and p.notes == "written by a test"
@@ -128,11 +134,13 @@ def test_write_rigid_press_rejects_bad_input_and_writes_nothing(tmp_path, argume
 
 
 def test_write_rigid_press_keeps_the_old_file_when_the_new_one_is_invalid(tmp_path):
-    good = write_rigid_press(tmp_path / "w.toml", object_name="table", trial=[1, 1], force=[5.0, 10.0],
-                             depth=[1e-3, 2e-3])  # fmt: skip
+    good = write_rigid_press(
+        tmp_path / "w.toml", object_name="table", trial=[1, 1], force=[5.0, 10.0], depth=[1e-3, 2e-3]
+    )
     with pytest.raises(InvalidInputError, match="not finite"):
-        write_rigid_press(tmp_path / "w.toml", object_name="table", trial=[1, 1], force=[5.0, math.inf],
-                          depth=[1e-3, 2e-3])  # fmt: skip
+        write_rigid_press(
+            tmp_path / "w.toml", object_name="table", trial=[1, 1], force=[5.0, math.inf], depth=[1e-3, 2e-3]
+        )
     assert file_sha256(tmp_path / "w.toml") == good.sha256
     assert list(tmp_path.iterdir()) == [tmp_path / "w.toml"]
 
@@ -140,22 +148,43 @@ def test_write_rigid_press_keeps_the_old_file_when_the_new_one_is_invalid(tmp_pa
 @pytest.mark.parametrize(
     "changes, pattern",
     [
-        ({"kind": "rigid_pres"}, r"field 'kind': unknown session kind 'rigid_pres'.*Fix:.*'indentation', 'rigid_press'"),
-        ({"wall": {"thickness": 0.9, "thickness_std": 0.05}}, r"field 'wall':.*rigid-surface press.*has no \[wall\] table"),
+        (
+            {"kind": "rigid_pres"},
+            r"field 'kind': unknown session kind 'rigid_pres'.*Fix:.*'indentation', 'rigid_press'",
+        ),
+        (
+            {"wall": {"thickness": 0.9, "thickness_std": 0.05}},
+            r"field 'wall':.*rigid-surface press.*has no \[wall\] table",
+        ),
         ({"geometry": {"radius": 0.13}}, r"field 'geometry':.*has no \[geometry\] table.*Fix: delete the \[geometry\]"),
         ({"wrinkles": {"counts": [8, 9]}}, r"field 'wrinkles':.*has no \[wrinkles\] table"),
         ({"shape": {"shape_csv": "s.csv"}}, r"field 'shape':.*has no \[shape\] table"),
         ({"mass": 0.85}, r"field 'mass':.*has no 'mass' key.*Fix: delete the 'mass' key"),
-        ({"manometer_gauge_pressure": 1300.0}, r"field 'manometer_gauge_pressure':.*has no 'manometer_gauge_pressure' key"),
+        (
+            {"manometer_gauge_pressure": 1300.0},
+            r"field 'manometer_gauge_pressure':.*has no 'manometer_gauge_pressure' key",
+        ),
         ({"colour": "red"}, r"field 'colour': unknown key"),
         ({"object": None}, r"field 'object': missing"),
         ({"indentation": None}, r"field 'indentation': missing table"),
         ({"indentation__depthunit": "mm"}, r"field 'indentation.depthunit': unknown key"),
         ({"indentation__depth_unit": "inch"}, r"unknown length unit 'inch'"),
-        ({"indentation__depth": [math.nan, 0.0, 1.3, 0.9, 1.2, 1.6]}, r"'indentation.depth\[0\]'.*value nan is not finite"),
-        ({"indentation__depth": [0.1, 0.0, 1.3, 0.9, math.inf, 1.6]}, r"'indentation.depth\[4\]'.*value inf is not finite"),
-        ({"indentation__force": [5000.0, 0.0, 1.0, 2.0, 3.0, 4.0]}, r"'indentation.force\[1\]'.*value 0.0 must be positive"),
-        ({"indentation__depth_unit": "m"}, r"'indentation.depth\[5\]'.*1.6 m is more than a finger pad compresses.*depth_unit"),
+        (
+            {"indentation__depth": [math.nan, 0.0, 1.3, 0.9, 1.2, 1.6]},
+            r"'indentation.depth\[0\]'.*value nan is not finite",
+        ),
+        (
+            {"indentation__depth": [0.1, 0.0, 1.3, 0.9, math.inf, 1.6]},
+            r"'indentation.depth\[4\]'.*value inf is not finite",
+        ),
+        (
+            {"indentation__force": [5000.0, 0.0, 1.0, 2.0, 3.0, 4.0]},
+            r"'indentation.force\[1\]'.*value 0.0 must be positive",
+        ),
+        (
+            {"indentation__depth_unit": "m"},
+            r"'indentation.depth\[5\]'.*1.6 m is more than a finger pad compresses.*depth_unit",
+        ),
         ({"indentation__trial": [1, 1, 1, 2, 2, 2.5]}, r"'indentation.trial\[5\]'.*trial id 2.5 is not an integer"),
         ({"indentation__trial": [1, 2]}, r"arrays differ in length"),
         ({"schema_version": 2}, r"field 'schema_version': unsupported version 2"),
@@ -171,7 +200,9 @@ def test_bad_press_is_named(tmp_path, changes, pattern):
 def test_press_csv_nan_depth_names_the_csv(tmp_path):
     (tmp_path / "press.csv").write_text("trial,force,depth\n1,5,0.8\n1,10,nan\n")
     path = write(tmp_path, press_variant(indentation={"depth_unit": "mm", "trials_csv": "press.csv"}))
-    with pytest.raises(InvalidInputError, match=r"'indentation.depth\[1\]'.*\(in press.csv, line 3\) value nan is not finite"):
+    with pytest.raises(
+        InvalidInputError, match=r"'indentation.depth\[1\]'.*\(in press.csv, line 3\) value nan is not finite"
+    ):
         load_rigid_press(path)
 
 
@@ -195,7 +226,9 @@ def test_load_rigid_press_on_an_indentation_session_is_refused(tmp_path, kind):
     doc = SESSION if kind is None else {**SESSION, "kind": kind}
     path = write(tmp_path, doc)
     assert load_session(path).object_name == "ball"  # a valid session, explicit kind or not
-    with pytest.raises(InvalidInputError, match=r"field 'kind'.*an indentation session of an object, not a rigid") as info:
+    with pytest.raises(
+        InvalidInputError, match=r"field 'kind'.*an indentation session of an object, not a rigid"
+    ) as info:
         load_rigid_press(path)
     assert str(path) in str(info.value) and "load_session" in str(info.value).split("Fix:")[1]
 
@@ -204,8 +237,17 @@ def test_session_kind_of_both_kinds(tmp_path):
     assert session_kind(write(tmp_path, PRESS, "press.toml")) == "rigid_press"
     assert session_kind(write(tmp_path, SESSION, "session.toml")) == "indentation"
     assert session_kind(write(tmp_path, {**SESSION, "kind": "indentation"}, "explicit.toml")) == "indentation"
-    written = write_session(tmp_path / "w.toml", object_name="ball", radius=0.13, radius_std=0.0, thickness=9e-4,
-                            thickness_std=5e-5, trial=[1, 1, 1], force=[5.0, 10.0, 15.0], depth=[0.01, 0.02, 0.03])  # fmt: skip
+    written = write_session(
+        tmp_path / "w.toml",
+        object_name="ball",
+        radius=0.13,
+        radius_std=0.0,
+        thickness=9e-4,
+        thickness_std=5e-5,
+        trial=[1, 1, 1],
+        force=[5.0, 10.0, 15.0],
+        depth=[0.01, 0.02, 0.03],
+    )
     assert session_kind(written.source) == "indentation"
 
 

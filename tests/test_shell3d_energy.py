@@ -145,7 +145,9 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
 
     rng = np.random.default_rng(3)
     mesh = s3.ShellMesh.sphere(1.0, 120)
-    contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
+    contact = ContactConfig(
+        indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05
+    )
     cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact)
     fixed = np.zeros(3 * mesh.n_vertices + 3, dtype=bool)
     model = ShellModel(mesh, mesh.vertices, cfg, fixed)
@@ -188,7 +190,9 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     mesh = s3.ShellMesh.sphere(1.0, 120)  # 134 faces, the other tests' mesh: 4 chunks of 34
     n_chunks = -(-mesh.n_faces // 35)
     assert n_chunks * -(-mesh.n_faces // n_chunks) > mesh.n_faces  # the last chunk overlaps its predecessor
-    contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05)
+    contact = ContactConfig(
+        indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05
+    )
     cfg = ModelConfig(mesh.n_vertices, contact=contact)
     model = ShellModel(mesh, mesh.vertices, cfg, np.zeros(3 * mesh.n_vertices + 3, dtype=bool))
     x = _random_state(mesh, rng)
@@ -203,8 +207,12 @@ def test_chunked_hessian_assembly_matches_dense_autodiff(monkeypatch):
     model_module.hessian_values.clear_cache()
     # Reference: every face's Hessian from one unchunked vmap, scattered at once.
     hp = model.host_params(params)
-    faces = np.asarray(model_module.face_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config, 0, mesh.n_faces))
-    blocks = [faces] + [np.asarray(b) for b in model_module.contact_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config)]
+    faces = np.asarray(
+        model_module.face_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config, 0, mesh.n_faces)
+    )
+    blocks = [faces] + [
+        np.asarray(b) for b in model_module.contact_hessians(jnp.asarray(q), hp, model.geometry, model.jit_config)
+    ]
     exact = model.pattern.matrix(model.pattern.assemble_values([jnp.asarray(b) for b in blocks])).toarray()
     scale = np.abs(exact).max()
     # The same numbers summed in another order: equal to round-off of the largest entry. A face
@@ -233,8 +241,12 @@ def test_element_energy_derivatives_match_central_differences():
     eps = 1e-6
     for i in range(18):
         e = jnp.zeros(18).at[i].set(eps)
-        np.testing.assert_allclose(g[i], (f(y + e) - f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-9 * float(jnp.abs(g).max()))
-        np.testing.assert_allclose(hess[:, i], (grad_f(y + e) - grad_f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-7 * float(jnp.abs(hess).max()))
+        np.testing.assert_allclose(
+            g[i], (f(y + e) - f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-9 * float(jnp.abs(g).max())
+        )
+        np.testing.assert_allclose(
+            hess[:, i], (grad_f(y + e) - grad_f(y - e)) / (2 * eps), rtol=1e-5, atol=1e-7 * float(jnp.abs(hess).max())
+        )
 
 
 def _ipc_barrier_derivatives(gap, ghat, kappa):
@@ -254,7 +266,9 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     rng = np.random.default_rng(11)
     mesh = s3.ShellMesh.sphere(1.0, 120)
     ghat, ground = 0.05, -1.02
-    contact = ContactConfig(indenter_radius=0.3, planes=(((0.0, 0.0, ground), (0.0, 0.0, 1.0)),), activation_distance=ghat)
+    contact = ContactConfig(
+        indenter_radius=0.3, planes=(((0.0, 0.0, ground), (0.0, 0.0, 1.0)),), activation_distance=ghat
+    )
     cfg = ModelConfig(mesh.n_vertices, contact=contact)
     model = ShellModel(mesh, mesh.vertices, cfg, np.zeros(3 * mesh.n_vertices + 3, dtype=bool))
     x = _random_state(mesh, rng)
@@ -287,7 +301,9 @@ def test_newton_matrix_softens_overpressed_ground_barrier_and_matches_its_produc
     # At equilibrium (zero gradient) Newton's matrix is the Hessian, to the assembly's round-off:
     # 4 ulp of each row's largest entry (two programs, each rounded as XLA fuses it).
     at_equilibrium = model.host_hessian(q, params, gradient=np.zeros_like(g))[0].toarray()
-    assert np.all(np.abs(at_equilibrium - hessian) <= 4 * np.finfo(float).eps * np.abs(hessian).max(axis=1, keepdims=True))
+    assert np.all(
+        np.abs(at_equilibrium - hessian) <= 4 * np.finfo(float).eps * np.abs(hessian).max(axis=1, keepdims=True)
+    )
     # CG's products (stored linearization, and jvp above the face threshold) apply the same matrix.
     v = rng.normal(size=q.size)
     for max_faces in (mesh.n_faces, mesh.n_faces - 1):
@@ -307,8 +323,13 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     # (500 faces, 1 cm indenter, the scan as rest shape): one set of compiled model programs
     # serves both files (SHARED_PROGRAMS).
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=500)
-    sim = s3.Indentation(ball, ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4),
-                         indenter_radius=0.01, rest_shape="scan", progress=False)  # fmt: skip
+    sim = s3.Indentation(
+        ball,
+        ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4),
+        indenter_radius=0.01,
+        rest_shape="scan",
+        progress=False,
+    )
     state = sim.solve(depth=0.005)
     model, params = sim.model, sim.params_at(state.q)
     x = state.vertices.copy()
@@ -317,13 +338,16 @@ def test_newton_crosses_an_overpressed_ground_barrier_in_a_few_iterations():
     x[touching, 2] *= 1e-4
     start = np.concatenate([x.ravel(), state.indenter_center])
     softened = model.equilibrium(start, params, atol=sim.atol)
-    plain = newton(EquilibriumProblem(model, model.host_params(params), barrier_aids=False), start,
-                   atol=sim.atol, max_steps=60)  # fmt: skip
+    plain = newton(
+        EquilibriumProblem(model, model.host_params(params), barrier_aids=False), start, atol=sim.atol, max_steps=60
+    )
     # Same equilibrium: all three stop at max |force| ≤ atol ≈ 5.5e-6 N, which the softest
     # stiffness of a vertex (its membrane's, E h ≈ 2e3 N/m) turns into ≤ 3e-9 m.
     np.testing.assert_allclose(softened.value, plain.value, rtol=0, atol=1e-8)
     np.testing.assert_allclose(softened.value, state.q, rtol=0, atol=1e-8)
-    print(f"Newton iterations from 1e-4 of the ground gaps: {plain.iterations} with the Hessian, "
-          f"{softened.iterations} with the softened matrix")
+    print(
+        f"Newton iterations from 1e-4 of the ground gaps: {plain.iterations} with the Hessian, "
+        f"{softened.iterations} with the softened matrix"
+    )
     assert plain.iterations >= 10, plain.iterations  # the crawl this guards against is there
     assert softened.iterations <= plain.iterations // 2, (softened.iterations, plain.iterations)

@@ -41,7 +41,9 @@ def sealed(ball):
 
 def test_bad_inputs_raise_clear_errors(ball):
     with pytest.raises(InvalidInputError, match="young_modulus"):
-        s3.Indentation(ball, ShellProperties(gauge_pressure=PG, young_modulus=-1.0, thickness=ball.thickness, poisson_ratio=NU))
+        s3.Indentation(
+            ball, ShellProperties(gauge_pressure=PG, young_modulus=-1.0, thickness=ball.thickness, poisson_ratio=NU)
+        )
     with pytest.raises(InvalidInputError, match="gas"):
         s3.Indentation(ball, PEZZI, gas="steam", rest_shape="scan")
     with pytest.raises(InvalidInputError, match="max_newton_iterations"):
@@ -55,8 +57,9 @@ def test_bad_inputs_raise_clear_errors(ball):
 def test_newton_iteration_limit_is_the_users(ball):
     # One Newton iteration cannot converge a 4 mm poke from the unloaded shell: the error must say
     # so with the limit the user set, not the default 60 (the rest state is not limited by it).
-    sim = s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
-                         progress=False, max_newton_iterations=1)  # fmt: skip
+    sim = s3.Indentation(
+        ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False, max_newton_iterations=1
+    )
     with pytest.raises(NoConvergenceError, match="after 1 iterations"):
         sim.solve(depth=0.004)
 
@@ -104,8 +107,9 @@ def test_force_control_reproduces_displacement_control(ball):
     # state matches the prescribed one to atol (the residual on the indenter's dof): 1e-8 N here,
     # well inside the 1e-6 relative (≈ 7e-7 N) asserted. With the default atol (5.5e-6 N) this
     # check passed or failed with the Newton path (a kept preconditioner from earlier solves).
-    sim = s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan",
-                         force_tolerance=1e-8, progress=False)  # fmt: skip
+    sim = s3.Indentation(
+        ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", force_tolerance=1e-8, progress=False
+    )
     st = sim.solve(depth=0.006)
     force = st.observables()["force"]
     st_f = sim.solve(force=force, steps=3)
@@ -133,8 +137,7 @@ def test_export_and_plot(sealed, tmp_path):
 def test_equilibrium_force_gradients_match_central_differences(ball):
     # Central differences of F need primal solves far below the default force tolerance (≈ 5e-6 N
     # here, about the F difference of a 1e-3 relative step × 2e-3): 1e-10 N.
-    sim = s3.Indentation(ball, PEZZI, indenter_radius=0.01, rest_shape="scan", progress=False,
-                         force_tolerance=1e-10)  # fmt: skip
+    sim = s3.Indentation(ball, PEZZI, indenter_radius=0.01, rest_shape="scan", progress=False, force_tolerance=1e-10)
     force = sim.force_function(depth=0.005)
     theta = {"gauge_pressure": jnp.asarray(PG), "young_modulus": jnp.asarray(E), "thickness": jnp.asarray(H)}
     grad = jax.grad(force)(theta)
@@ -158,8 +161,9 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     stopped before the volume could move; the rest solve now tightens it to the volume target."""
     from shelljax.geometry import signed_volume
 
-    sim = s3.Indentation(ball, PEZZI, gas="prescribed", indenter_radius=0.01, progress=False,
-                         force_tolerance=force_tolerance)  # fmt: skip
+    sim = s3.Indentation(
+        ball, PEZZI, gas="prescribed", indenter_radius=0.01, progress=False, force_tolerance=force_tolerance
+    )
     scan_volume = signed_volume(ball.mesh.vertices, ball.mesh.faces)
     assert float(sim.model.volume(sim.q_reference)) == pytest.approx(scan_volume, rel=1e-6)
     # DESIGN.md's small-strain rest radius R0 = R / (1 + P R (1−ν) / (2 E h)); strain ε = 0.024 here,

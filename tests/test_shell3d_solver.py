@@ -106,7 +106,9 @@ def test_projected_assembly_sums_clamped_element_matrices(monkeypatch):
     # PSD elements pass through unchanged
     spd = np.einsum("eij,ekj->eik", values, values)
     exact = pattern.matrix(pattern.assemble_values([jnp.asarray(spd)])).toarray()
-    np.testing.assert_allclose(pattern.matrix(pattern.assemble_projected([spd])).toarray(), exact, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(
+        pattern.matrix(pattern.assemble_projected([spd])).toarray(), exact, rtol=1e-10, atol=1e-9
+    )
 
 
 def test_sherman_morrison_matches_dense_solve():
@@ -208,7 +210,12 @@ def test_preconditioned_inexact_newton_keeps_one_factorization_and_reaches_the_s
     # Handed to a nearby problem (5 % more load), it is all that problem needs either.
     shifted = lambda x: grad(x) - 0.05 * b  # noqa: E731
     energy_shifted = lambda x: energy(x) - 0.05 * b @ x  # noqa: E731
-    again = newton(_problem(energy_shifted, shifted, hess, free, hessian_operator=operator), inexact.value, atol=1e-12, factorization=inexact.state)  # fmt: skip
+    again = newton(
+        _problem(energy_shifted, shifted, hess, free, hessian_operator=operator),
+        inexact.value,
+        atol=1e-12,
+        factorization=inexact.state,
+    )
     assert np.max(np.abs(shifted(again.value))) <= 1e-12
     assert again.stats["factorizations"] == 0 and again.state is inexact.state
 
@@ -260,7 +267,9 @@ def test_newton_line_search_projection_keeps_trial_points_feasible_and_the_minim
     plain = newton(_problem(energy, grad, hess, free), start, atol=1e-10, reuse_factorization=False)
     assert len(infeasible) > 0
     infeasible.clear()
-    projected = newton(_problem(energy, grad, hess, free, project=keep_gap), start, atol=1e-10, reuse_factorization=False)
+    projected = newton(
+        _problem(energy, grad, hess, free, project=keep_gap), start, atol=1e-10, reuse_factorization=False
+    )
     assert infeasible == [] and len(trials) >= projected.iterations
     for res in (plain, projected):
         assert np.max(np.abs(grad(res.value))) <= 1e-10
@@ -352,7 +361,9 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
         gc.enable()
     # The first pattern still solves (its analysis is rebuilt).
     b = np.ones(30)
-    np.testing.assert_allclose(SparseSolver(first, symmetric=True).apply_inverse(b), np.linalg.solve(first.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(
+        SparseSolver(first, symmetric=True).apply_inverse(b), np.linalg.solve(first.toarray(), b), rtol=1e-10
+    )
     # release_factorizations frees the kept analysis too (the 3D engine calls it once its free
     # shell is solved); a solver made before still solves, and a new one rebuilds the analysis.
     kept = SparseSolver(second, symmetric=True)
@@ -363,7 +374,9 @@ def test_an_evicted_cholesky_analysis_is_freed_without_the_cycle_collector():
     np.testing.assert_allclose(kept.apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
     del kept
     assert analysis() is None
-    np.testing.assert_allclose(SparseSolver(second, symmetric=True).apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10)
+    np.testing.assert_allclose(
+        SparseSolver(second, symmetric=True).apply_inverse(b), np.linalg.solve(second.toarray(), b), rtol=1e-10
+    )
 
 
 def test_one_call_releases_every_kept_factorization():
@@ -401,7 +414,9 @@ def test_nodal_pattern_build_equals_the_entrywise_one():
         k = blk.shape[1]
         np.testing.assert_array_equal(element_positions(*ref, k), element_positions(*new, k))
         assert ref[0].shape == (len(blk), k, k) and new[0].shape == (len(blk), k // 3, k // 3)
-        np.testing.assert_array_equal(np.asarray(element_positions(*map(jnp.asarray, new), k)), element_positions(*new, k))
+        np.testing.assert_array_equal(
+            np.asarray(element_positions(*map(jnp.asarray, new), k)), element_positions(*new, k)
+        )
     # A node in no element (here the last one, pinned) still gets its unit pivots.
     free = np.ones(n_dofs + 3, dtype=bool)
     free[-3:] = False
@@ -433,7 +448,8 @@ def test_implicit_equilibrium_forward_and_reverse_match_finite_differences():
                 lambda x, p: _fold(lap + sp.diags(3 * x**2), free),
                 free,
             ),
-            np.zeros(n), atol=1e-13,
+            np.zeros(n),
+            atol=1e-13,
         ).value
 
     def hessian_host(x, th):

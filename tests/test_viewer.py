@@ -103,8 +103,9 @@ def test_records_carry_units_and_write_as_json(scene, tmp_path):
 def test_the_gif_is_written_with_one_frame_per_kept_shape(scene, tmp_path):
     from PIL import Image
 
-    s = dataclasses.replace(scene, script=viewer.InteractionScript(duration=0.5, gif_fps=10.0,
-                                                                   actions=(A("drop", 0.0, height=0.05),)))  # fmt: skip
+    s = dataclasses.replace(
+        scene, script=viewer.InteractionScript(duration=0.5, gif_fps=10.0, actions=(A("drop", 0.0, height=0.05),))
+    )
     r = viewer.replay(s)
     assert r.shape_frames.tolist() == [0, 6, 12, 18, 24]  # every 6th of 30 frames at 60 fps: 10 per second
     path = viewer.write_gif(r, tmp_path / "replay.gif", hand_radius=0.03, gif_fps=10.0, dpi=40)
@@ -122,8 +123,11 @@ def test_a_replay_records_into_folders_that_do_not_exist_yet(scene, tmp_path):
 def test_a_replay_into_a_path_it_cannot_write_is_refused_before_it_runs(scene, tmp_path, monkeypatch):
     monkeypatch.setattr(viewer._play, "replay", lambda *a, **k: pytest.fail("replayed before the paths were checked"))
     (tmp_path / "taken").mkdir()
-    for record, records, option in ((tmp_path / "taken", None, "--record"), (tmp_path / "r.png", None, "--record"),
-                                    (None, tmp_path / "taken", "--records")):
+    for record, records, option in (
+        (tmp_path / "taken", None, "--record"),
+        (tmp_path / "r.png", None, "--record"),
+        (None, tmp_path / "taken", "--records"),
+    ):
         with pytest.raises(InvalidInputError, match=f"{option} .*Fix:"):
             viewer.play_headless(scene, record=record, records_json=records)
 
@@ -160,32 +164,51 @@ duration_s = 0.5
 def test_the_shipped_example_and_a_good_script_load():
     script = viewer.load_script("configs/interaction.toml")
     assert [a.kind for a in script.actions] == ["drop", "poke", "throw", "drop"]
-    assert script.planes[0].name == "ground" and script.hand.radius > 0 and script.n_frames == round(script.duration * 60)
+    assert (
+        script.planes[0].name == "ground" and script.hand.radius > 0 and script.n_frames == round(script.duration * 60)
+    )
 
 
-@pytest.mark.parametrize("edit, field, fix", [
-    (lambda t: t.replace("duration_s = 2.0", ""), "'duration_s'", "duration_s = 4.0"),
-    (lambda t: t.replace("duration_s = 2.0", "duraton_s = 2.0"), "'duraton_s'", "fix its spelling"),
-    (lambda t: t.replace('kind = "poke"', 'kind = "kick"'), "'actions[1].kind'", "drop, poke, throw, wait"),
-    (lambda t: t.replace("depth_m = 0.02", "depth_m = -0.02"), "'actions[1].depth_m'", "depth_m = 0.03"),
-    (lambda t: t.replace("direction = [0, 0, -1]", "direction = [0, 0, 0]"), "'actions[1].direction'", "[0, 0, -1]"),
-    (lambda t: t.replace("direction = [0, 0, -1]", "direction = [0, -1]"), "'actions[1].direction'", "[0.0, 0.0, 0.0]"),
-    (lambda t: t.replace("at_s = 0.5", "at_s = 2.5"), "'actions[1].at_s'", "raise duration_s"),
-    (lambda t: t + '[[actions]]\nat_s = 0.7\nkind = "wait"\nduration_s = 0.1\n', "'actions[2].at_s'", "at_s >= 1"),
-    (lambda t: t.replace("height_m = 0.2", 'height_m = "high"'), "'actions[0].height_m'", "height_m = 0.3"),
-    (lambda t: t + "[hand]\nradius_m = 0\n", "'hand.radius_m'", "radius_m = 0.03"),
-    (lambda t: t + "[[planes]]\npoint_m = [0, 0, 0]\nnormal = [0, 0, 0]\n", "'planes[0].normal'", "[0, 0, 1]"),
-    (lambda t: "gif_fps = 100\n" + t, "'gif_fps'", "gif_fps <= 60"),
-    (lambda t: t.replace('kind = "drop"\nheight_m = 0.2', 'kind = "throw"\nhold_s = 0.2'), "'actions[0].velocity_m_per_s'", "[0.0, 0.0, 0.0]"),
-    (lambda t: t + "[[actions]\n", "not valid TOML", "correct the syntax"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "edit, field, fix",
+    [
+        (lambda t: t.replace("duration_s = 2.0", ""), "'duration_s'", "duration_s = 4.0"),
+        (lambda t: t.replace("duration_s = 2.0", "duraton_s = 2.0"), "'duraton_s'", "fix its spelling"),
+        (lambda t: t.replace('kind = "poke"', 'kind = "kick"'), "'actions[1].kind'", "drop, poke, throw, wait"),
+        (lambda t: t.replace("depth_m = 0.02", "depth_m = -0.02"), "'actions[1].depth_m'", "depth_m = 0.03"),
+        (
+            lambda t: t.replace("direction = [0, 0, -1]", "direction = [0, 0, 0]"),
+            "'actions[1].direction'",
+            "[0, 0, -1]",
+        ),
+        (
+            lambda t: t.replace("direction = [0, 0, -1]", "direction = [0, -1]"),
+            "'actions[1].direction'",
+            "[0.0, 0.0, 0.0]",
+        ),
+        (lambda t: t.replace("at_s = 0.5", "at_s = 2.5"), "'actions[1].at_s'", "raise duration_s"),
+        (lambda t: t + '[[actions]]\nat_s = 0.7\nkind = "wait"\nduration_s = 0.1\n', "'actions[2].at_s'", "at_s >= 1"),
+        (lambda t: t.replace("height_m = 0.2", 'height_m = "high"'), "'actions[0].height_m'", "height_m = 0.3"),
+        (lambda t: t + "[hand]\nradius_m = 0\n", "'hand.radius_m'", "radius_m = 0.03"),
+        (lambda t: t + "[[planes]]\npoint_m = [0, 0, 0]\nnormal = [0, 0, 0]\n", "'planes[0].normal'", "[0, 0, 1]"),
+        (lambda t: "gif_fps = 100\n" + t, "'gif_fps'", "gif_fps <= 60"),
+        (
+            lambda t: t.replace('kind = "drop"\nheight_m = 0.2', 'kind = "throw"\nhold_s = 0.2'),
+            "'actions[0].velocity_m_per_s'",
+            "[0.0, 0.0, 0.0]",
+        ),
+        (lambda t: t + "[[actions]\n", "not valid TOML", "correct the syntax"),
+    ],
+)
 def test_bad_scripts_fail_in_one_line_naming_field_and_fix(tmp_path, edit, field, fix):
     path = tmp_path / "bad.toml"
     path.write_text(edit(GOOD))
     with pytest.raises(InvalidInputError) as caught:
         viewer.load_script(path)
     message = str(caught.value)
-    assert "\n" not in message and str(path) in message and field in message and "Fix:" in message and fix in message, message
+    assert "\n" not in message and str(path) in message and field in message and "Fix:" in message and fix in message, (
+        message
+    )
 
 
 def test_cli_reports_a_bad_script_and_a_bad_source_in_one_line(tmp_path, capsys):
@@ -206,14 +229,34 @@ def test_cli_replays_a_replica_headless_into_a_gif_and_records(tmp_path, capsys)
     from shelljax.replica import write_replica
 
     shell = Shell(mesh=ShellMesh.sphere(R, 300, pole_refinement=1.0), thickness=H)
-    quantities = {"gauge_pressure_Pa": 1300.0, "youngs_modulus_Pa": 2.34e6, "poisson_ratio": 0.4, "thickness_m": H,
-                  "mass_kg": MASS, "cor": None}  # fmt: skip
+    quantities = {
+        "gauge_pressure_Pa": 1300.0,
+        "youngs_modulus_Pa": 2.34e6,
+        "poisson_ratio": 0.4,
+        "thickness_m": H,
+        "mass_kg": MASS,
+        "cor": None,
+    }
     write_replica(tmp_path / "replica", shell, quantities, gas="adiabatic")
     script = tmp_path / "script.toml"
-    script.write_text(GOOD.replace("duration_s = 2.0", "duration_s = 0.6\ngif_fps = 10").replace("at_s = 0.5", "at_s = 0.3")
-                      .replace("duration_s = 0.5", "duration_s = 0.2"))  # fmt: skip
-    code = main(["play", str(tmp_path / "replica"), "--headless", "--script", str(script), "--record", str(tmp_path / "r.gif"),
-                 "--records", str(tmp_path / "r.json")])  # fmt: skip
+    script.write_text(
+        GOOD.replace("duration_s = 2.0", "duration_s = 0.6\ngif_fps = 10")
+        .replace("at_s = 0.5", "at_s = 0.3")
+        .replace("duration_s = 0.5", "duration_s = 0.2")
+    )
+    code = main(
+        [
+            "play",
+            str(tmp_path / "replica"),
+            "--headless",
+            "--script",
+            str(script),
+            "--record",
+            str(tmp_path / "r.gif"),
+            "--records",
+            str(tmp_path / "r.json"),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and "replica replica: P_g 1300 Pa" in out and "36 frames" in out and "peak hand force" in out
     with Image.open(tmp_path / "r.gif") as gif:
@@ -245,11 +288,11 @@ def _decode(raw: bytes) -> list[dict]:
     import zstandard
 
     size, packed = int.from_bytes(raw[:8], "little"), int.from_bytes(raw[8:16], "little")
-    body = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(raw[16:16 + packed], max_output_size=size))
+    body = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(raw[16 : 16 + packed], max_output_size=size))
     buffers, offset = [], 16 + packed
     for length in body["binaryBufferLengths"]:
         offset += (8 - offset % 8) % 8
-        buffers.append(raw[offset:offset + length])
+        buffers.append(raw[offset : offset + length])
         offset += length
 
     def restore(value):
@@ -272,7 +315,9 @@ async def _session(port: int, seconds: float, send=()) -> list[dict]:
     import websockets
 
     received = []
-    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None) as ws:
+    async with websockets.connect(
+        f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None
+    ) as ws:
         start = time.monotonic()
         pending = sorted(send, key=lambda pair: pair[0])
         while time.monotonic() - start < seconds:
@@ -290,13 +335,22 @@ def _drag(phase: str) -> dict:
 
 
 def _move(position) -> dict:
-    return {"type": "TransformControlsUpdateMessage", "name": "/pointer", "wxyz": [1.0, 0.0, 0.0, 0.0],
-            "position": [float(c) for c in position], "owner": ""}  # fmt: skip
+    return {
+        "type": "TransformControlsUpdateMessage",
+        "name": "/pointer",
+        "wxyz": [1.0, 0.0, 0.0, 0.0],
+        "position": [float(c) for c in position],
+        "owner": "",
+    }
 
 
 def _gui_values(messages, label):
     uuid = next(m["uuid"] for m in messages if m["type"] == "GuiNumberMessage" and m["props"]["label"] == label)
-    return [m["updates"]["value"] for m in messages if m["type"] == "GuiUpdateMessage" and m["uuid"] == uuid and "value" in m["updates"]]
+    return [
+        m["updates"]["value"]
+        for m in messages
+        if m["type"] == "GuiUpdateMessage" and m["uuid"] == uuid and "value" in m["updates"]
+    ]
 
 
 def test_the_live_server_streams_the_mesh_and_readouts_and_takes_the_hand(scene):
@@ -314,8 +368,18 @@ def test_the_live_server_streams_the_mesh_and_readouts_and_takes_the_hand(scene)
     finally:
         app.stop()
     types = {m["type"] for m in messages}
-    assert {"MeshMessage", "SceneNodeUpdateMessage", "TransformControlsMessage", "GuiNumberMessage", "GuiButtonMessage"} <= types
-    shells = [m["updates"]["vertices"] for m in messages if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]]
+    assert {
+        "MeshMessage",
+        "SceneNodeUpdateMessage",
+        "TransformControlsMessage",
+        "GuiNumberMessage",
+        "GuiButtonMessage",
+    } <= types
+    shells = [
+        m["updates"]["vertices"]
+        for m in messages
+        if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]
+    ]
     assert len(shells) > 20 and shells[0].size == live.ball.x.size  # the mesh updates frame after frame …
     assert np.abs(shells[-1] - shells[0]).max() > 0.01  # … and moves (the drop)
     labels = {m["props"]["label"] for m in messages if m["type"] == "GuiNumberMessage"}
@@ -363,7 +427,11 @@ def test_the_live_server_grabs_and_throws_through_a_drag(scene):
         messages = asyncio.run(_session(app.port, 2.0, send=path))
     finally:
         app.stop()
-    shells = [m["updates"]["vertices"].reshape(-1, 3) for m in messages if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]]
+    shells = [
+        m["updates"]["vertices"].reshape(-1, 3)
+        for m in messages
+        if m["type"] == "SceneNodeUpdateMessage" and "vertices" in m["updates"]
+    ]
     lowest = np.array([x[:, 2].min() for x in shells])
     assert lowest.max() > 0.08  # carried up (the pointer rose 0.2 m; the hold lags it: measured 0.17-0.25 m)
     assert lowest[-1] < lowest.max() - 0.05  # let go: it falls back

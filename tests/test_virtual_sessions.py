@@ -114,7 +114,9 @@ def test_wrinkling_relaxation_matches_held_out_3d_curve(curves):
     w3d = np.asarray(c["w0"])
 
     def error(**kw):
-        res = indentation_curves(shell(params), c["force"], radius=c["radius"], indenter_radius=c["indenter_radius"], **kw)
+        res = indentation_curves(
+            shell(params), c["force"], radius=c["radius"], indenter_radius=c["indenter_radius"], **kw
+        )
         return np.asarray(res.w0[0]) / w3d - 1.0
 
     # 2 %: issue 6's cross-validation target; measured ≤ 1.4 % at every level of 5–20 N (−1.4 % at

@@ -36,9 +36,11 @@ def main() -> None:
     for name, mesh in [("hammer.stl", make_hammer_mesh()), ("beach_ball.ply", beach_ball())]:
         path = OUT / name
         mesh.export(path)
-        print(f"{path}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
-              f"{path.stat().st_size / 1e3:.0f} kB, watertight={mesh.is_watertight}, "
-              f"volume={mesh.volume:.6g} m^3")
+        print(
+            f"{path}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
+            f"{path.stat().st_size / 1e3:.0f} kB, watertight={mesh.is_watertight}, "
+            f"volume={mesh.volume:.6g} m^3"
+        )
 
 
 if __name__ == "__main__":

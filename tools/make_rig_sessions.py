@@ -21,8 +21,11 @@ from shelljax.session import load_session, write_session
 
 write_object = load_experiment("rig_transfer_study").write_object
 
-RIG = {"pad": {"kind": "hertz", "compression_at_20N": 4e-3, "f0": 8.0}, "finger": {"radius": 15e-3},
-       "sensor": {"kind": "gain", "gain": 1.08, "exponent": 1.0, "beta": 0.0}}  # fmt: skip
+RIG = {
+    "pad": {"kind": "hertz", "compression_at_20N": 4e-3, "f0": 8.0},
+    "finger": {"radius": 15e-3},
+    "sensor": {"kind": "gain", "gain": 1.08, "exponent": 1.0, "beta": 0.0},
+}
 OBJECTS = {  # name: radius [m], its stated relative std [-], thickness [m], E [Pa], pressures [Pa], manometer
     "calib_ball": (0.15, 0.003, 1.0e-3, 2.0e6, (1000.0, 1300.0, 1650.0, 2000.0), True),  # R by a tape round it
     "toy": (0.09, 0.02, 0.8e-3, 3.0e6, (2200.0, 3500.0), False),  # R from a photogrammetry mesh
@@ -38,13 +41,26 @@ def main():
         obj = dict(radius=radius, radius_std=radius_std, thickness=thickness, young_modulus=young)
         for path, pressure in zip(write_object(rng, obj, RIG, pressures, out, name, manometer), pressures):
             s = load_session(path)
-            truth = (f"virtual session (tools/make_rig_sessions.py): truth P_g = {pressure:.1f} Pa, E = {young:.4g} Pa; "
-                     "rig: Hertzian pad 4 mm at 20 N, 15 mm finger, force sensor reading 8 % low")  # fmt: skip
+            truth = (
+                f"virtual session (tools/make_rig_sessions.py): truth P_g = {pressure:.1f} Pa, E = {young:.4g} Pa; "
+                "rig: Hertzian pad 4 mm at 20 N, 15 mm finger, force sensor reading 8 % low"
+            )
             target = out / f"{name}_{pressure:04.0f}Pa.toml"
-            write_session(target, object_name=s.object_name, radius=s.radius, radius_std=s.radius_std,
-                          thickness=s.thickness, thickness_std=s.thickness_std, trial=s.trial, force=s.force, depth=s.depth,
-                          wrinkle_counts=s.wrinkle_counts, manometer_gauge_pressure=s.manometer_gauge_pressure,
-                          poisson_ratio=s.poisson_ratio, notes=truth)  # fmt: skip
+            write_session(
+                target,
+                object_name=s.object_name,
+                radius=s.radius,
+                radius_std=s.radius_std,
+                thickness=s.thickness,
+                thickness_std=s.thickness_std,
+                trial=s.trial,
+                force=s.force,
+                depth=s.depth,
+                wrinkle_counts=s.wrinkle_counts,
+                manometer_gauge_pressure=s.manometer_gauge_pressure,
+                poisson_ratio=s.poisson_ratio,
+                notes=truth,
+            )
             path.unlink()
             print(f"written: {target}")
     return 0

@@ -40,12 +40,23 @@ def _parse(argv=None):
     ap.add_argument("--sets", default="", help="comma-separated indices (default: all)")
     ap.add_argument("--out", type=Path, default=virtual.CURVES_PATH)
     ap.add_argument("--restarts", type=int, default=10, help="child restarts per set after a wedged run")
-    ap.add_argument("--watchdog", type=float, default=600.0,
-                    help="seconds without a solved level before a child is restarted (raise it for fine meshes)")
+    ap.add_argument(
+        "--watchdog",
+        type=float,
+        default=600.0,
+        help="seconds without a solved level before a child is restarted (raise it for fine meshes)",
+    )
     ap.add_argument("--child", action="store_true", help="(internal) solve the given sets in this process")
-    ap.add_argument("--one-set", action="store_true", help="(internal) one set's work item: its watched child, restarted")
-    ap.add_argument("--sessions", type=Path, default=None, metavar="DIR",
-                    help="draw the noisy test sessions of the curves in --out into session files in DIR")
+    ap.add_argument(
+        "--one-set", action="store_true", help="(internal) one set's work item: its watched child, restarted"
+    )
+    ap.add_argument(
+        "--sessions",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="draw the noisy test sessions of the curves in --out into session files in DIR",
+    )
     ap.add_argument("--realisations", type=int, default=2, help="--sessions: noise draws per curve and noise level")
     ap.add_argument("--base-seed", type=int, default=2026, help="--sessions: seed of the first draw (each has its own)")
     add_executor_arguments(ap, resume=False)
@@ -57,8 +68,14 @@ def _parse(argv=None):
 
 def _write_sessions(args) -> None:
     """Draw every test session of the curves in ``args.out`` into ``args.sessions``, one work item each."""
-    index = virtual.write_sessions(virtual.load_curves(args.out), args.sessions, realisations=args.realisations,
-                                   base_seed=args.base_seed, executor=executor_options(args), progress=True)  # fmt: skip
+    index = virtual.write_sessions(
+        virtual.load_curves(args.out),
+        args.sessions,
+        realisations=args.realisations,
+        base_seed=args.base_seed,
+        executor=executor_options(args),
+        progress=True,
+    )
     failed = [entry for entry in index if entry["status"] != "done"]
     print(f"{len(index) - len(failed)} sessions written to {args.sessions} (index: {args.sessions / 'sessions.json'})")
     for entry in failed:
@@ -68,16 +85,25 @@ def _write_sessions(args) -> None:
 def _solve_sets(args, sets) -> None:
     """Solve ``sets`` in this process and append each finished curve to ``args.out``."""
     watchdog = long_runs.Watchdog(args.watchdog).start()
-    data = json.loads(args.out.read_text()) if args.out.exists() else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
+    data = (
+        json.loads(args.out.read_text())
+        if args.out.exists()
+        else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
+    )
     done = {(c["gauge_pressure"], c["young_modulus"], c["thickness"], c["n_faces"]) for c in data["curves"]}
     for i in sets:
         p = virtual.PARAMETER_SETS[i]
         t0 = time.perf_counter()
         checkpoint = long_runs.Checkpoint(Path(f"/tmp/shelljax_virtual_set{i}_{args.n_triangles}_travel.npz"), watchdog)
         try:
-            c = virtual.solve_curve(p, args.n_triangles, args.pole_refinement, checkpoint,
-                                    force_tolerance=virtual.FORCE_TOLERANCE,
-                                    max_newton_iterations=virtual.NEWTON_ITERATIONS)  # fmt: skip
+            c = virtual.solve_curve(
+                p,
+                args.n_triangles,
+                args.pole_refinement,
+                checkpoint,
+                force_tolerance=virtual.FORCE_TOLERANCE,
+                max_newton_iterations=virtual.NEWTON_ITERATIONS,
+            )
         except Exception as err:  # record and continue: one failed set must not lose the others
             print(f"set {i} {p}: FAILED ({type(err).__name__}: {str(err)[:200]})", flush=True)
             continue
@@ -87,8 +113,11 @@ def _solve_sets(args, sets) -> None:
         data["curves"].append(c)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(data, indent=1))
-        print(f"set {i} {p}: tau={c['tau']:.0f} faces={c['n_faces']} pole_edge={c['pole_edge'] * 1e3:.2f} mm "
-              f"w0={[round(w * 1e3, 1) for w in c['w0']]} mm ({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
+        print(
+            f"set {i} {p}: tau={c['tau']:.0f} faces={c['n_faces']} pole_edge={c['pole_edge'] * 1e3:.2f} mm "
+            f"w0={[round(w * 1e3, 1) for w in c['w0']]} mm ({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
 
 
 def main(argv=None):
@@ -113,9 +142,24 @@ def main(argv=None):
 
 def _command(args, index: int, out: Path, mode: str) -> list[str]:
     """This tool on set ``index`` alone, into ``out``, as ``mode`` (--child or --one-set)."""
-    return [sys.executable, str(Path(__file__).resolve()), "--curves", mode, "--sets", str(index), "--out", str(out),
-            "--n-triangles", str(args.n_triangles), "--pole-refinement", str(args.pole_refinement),
-            "--watchdog", str(args.watchdog), "--restarts", str(args.restarts)]  # fmt: skip
+    return [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--curves",
+        mode,
+        "--sets",
+        str(index),
+        "--out",
+        str(out),
+        "--n-triangles",
+        str(args.n_triangles),
+        "--pole-refinement",
+        str(args.pole_refinement),
+        "--watchdog",
+        str(args.watchdog),
+        "--restarts",
+        str(args.restarts),
+    ]
 
 
 def solve_set(command: list[str], part: str) -> dict:
@@ -136,11 +180,20 @@ def _solve_on_executor(args, sets) -> None:
 
     parts = args.out.with_name(args.out.name + ".parts")
     parts.mkdir(parents=True, exist_ok=True)
-    items = [WorkItem(f"set{i}", solve_set, (_command(args, i, parts / f"set{i}.json", "--one-set"), str(parts / f"set{i}.json")))
-             for i in sets]  # fmt: skip
-    results = run_items(items, run_dir=parts, resume=True, options=executor_options(args), progress=True,
-                        desc="curve sets")  # fmt: skip
-    data = json.loads(args.out.read_text()) if args.out.exists() else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
+    items = [
+        WorkItem(
+            f"set{i}", solve_set, (_command(args, i, parts / f"set{i}.json", "--one-set"), str(parts / f"set{i}.json"))
+        )
+        for i in sets
+    ]
+    results = run_items(
+        items, run_dir=parts, resume=True, options=executor_options(args), progress=True, desc="curve sets"
+    )
+    data = (
+        json.loads(args.out.read_text())
+        if args.out.exists()
+        else {"description": virtual.CURVES_DESCRIPTION, "curves": []}
+    )
     key = ("gauge_pressure", "young_modulus", "thickness", "n_faces")
     have = {tuple(c[k] for k in key) for c in data["curves"]}
     data["curves"] += [r.value for r in results if r.status == "done" and tuple(r.value[k] for k in key) not in have]

@@ -70,5 +70,6 @@ def main() -> None:
         shutil.rmtree(cache, ignore_errors=True)
         shutil.rmtree(previous.parent, ignore_errors=True)
 
+
 if __name__ == "__main__":
     main()

@@ -66,10 +66,8 @@ def _one(setup: Setup, theta, forces, physics: CurvePhysics, nearby_guesses=None
     inflation residual [N])) of one parameter set and its (scalar) physics."""
     young, thick, nu = theta[1], theta[2], theta[3]
     properties = ShellProperties(gauge_pressure=theta[0], young_modulus=young, thickness=thick, poisson_ratio=nu)
-    out = curve_single(setup, properties, forces, return_states=True,
-                       nearby_guesses=nearby_guesses, physics=physics)
-    n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"],
-                      setup.radius, young, thick, nu)
+    out = curve_single(setup, properties, forces, return_states=True, nearby_guesses=nearby_guesses, physics=physics)
+    n = wrinkle_count(out["compressive_inner_radius"], out["compressive_outer_radius"], setup.radius, young, thick, nu)
     fields = {key: out[key] for key in CurveResult.__annotations__ if key in out}
     fields.update(
         force=forces,
@@ -122,8 +120,9 @@ def _curves(params, forces, physics: CurvePhysics, cold, *, setup: Setup, chunk:
         delta = here[:, None, :] - anchors
         predicted = states + jnp.einsum("lkyc,lkc->lky", slopes, delta)
         guesses = jnp.where(cold, jnp.nan, jnp.stack([states, predicted], axis=2))
-        fields, (solved, inflation_residual) = jax.vmap(
-            lambda theta, f, ph, nearby: _one(setup, theta, f, ph, nearby))(thetas, force_rows, physics_rows, guesses)
+        fields, (solved, inflation_residual) = jax.vmap(lambda theta, f, ph, nearby: _one(setup, theta, f, ph, nearby))(
+            thetas, force_rows, physics_rows, guesses
+        )
         solved = jax.lax.stop_gradient(solved)  # the walk only guesses: no derivative through it
         inflated = (inflation_residual <= setup.atol)[:, None]
         good = jnp.concatenate([inflated, fields["converged"]], axis=1)[..., None]
@@ -136,13 +135,15 @@ def _curves(params, forces, physics: CurvePhysics, cold, *, setup: Setup, chunk:
         return (states, anchors, slopes), fields
 
     n_levels, n_unknowns = 1 + forces.shape[1], 2 * len(setup.theta()) + 1
-    start = (jnp.full((chunk, n_levels, n_unknowns), jnp.nan), jnp.zeros((chunk, n_levels, 4)),
-             jnp.zeros((chunk, n_levels, n_unknowns, 4)))
+    start = (
+        jnp.full((chunk, n_levels, n_unknowns), jnp.nan),
+        jnp.zeros((chunk, n_levels, 4)),
+        jnp.zeros((chunk, n_levels, n_unknowns, 4)),
+    )
     walked_physics = jax.tree_util.tree_map(lanes, physics)
     _, out = jax.lax.scan(solve_step, start, (lanes(params), lanes(coords), lanes(forces), walked_physics))
     unwalk = jnp.zeros(b, order.dtype).at[order].set(jnp.arange(b, dtype=order.dtype))
-    return jax.tree_util.tree_map(
-        lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
+    return jax.tree_util.tree_map(lambda v: v.swapaxes(0, 1).reshape((chunk * steps,) + v.shape[2:])[unwalk], out)
 
 
 _batched = jax.jit(_curves, static_argnames=("setup", "chunk"))
@@ -157,8 +158,9 @@ def _rows(properties: ShellProperties) -> Float[Array, "b 4"]:
     return jnp.atleast_2d(jnp.stack(columns, axis=-1))
 
 
-def indentation_curves_raw(properties: ShellProperties, forces, setup: Setup, chunk: int = 0,
-                           physics: CurvePhysics | None = None, cold=False) -> CurveResult:
+def indentation_curves_raw(
+    properties: ShellProperties, forces, setup: Setup, chunk: int = 0, physics: CurvePhysics | None = None, cold=False
+) -> CurveResult:
     """Traceable batched curves (no input checks, no raising): jit/vmap/grad friendly.
 
     ``properties``: :class:`shelljax.physics.ShellProperties` whose P_g [Pa], E [Pa], h [m], ν [-]
@@ -227,8 +229,14 @@ def _check(properties, forces, radius):
     if radius is None:
         raise InvalidInputError("indentation_curves: no radius. Fix: set properties.radius or pass radius= [m]")
     f = np.asarray(forces, dtype=float)
-    if f.ndim not in (1, 2) or f.size == 0 or f.ndim == 2 and f.shape[0] != p.shape[0] or np.any(f <= 0) \
-            or np.any(np.diff(f, axis=-1) <= 0):
+    if (
+        f.ndim not in (1, 2)
+        or f.size == 0
+        or f.ndim == 2
+        and f.shape[0] != p.shape[0]
+        or np.any(f <= 0)
+        or np.any(np.diff(f, axis=-1) <= 0)
+    ):
         raise InvalidInputError(
             f"indentation_curves: forces must be an increasing array of positive values [N], (k,) or one row "
             f"per curve ({p.shape[0]}, k); got {forces!r}."
@@ -241,9 +249,15 @@ def _check(properties, forces, radius):
 
 
 # (lowest allowed value, whether it is excluded) of each CurvePhysics field
-_PHYSICS_BOUNDS = {"indenter_radius": (0.0, True), "gas_volume_ratio": (0.0, True),
-                   "gas_exponent": (0.0, False), "stiffening": (-np.inf, False), "areal_weight": (0.0, False),
-                   "friction_coefficient": (0.0, False), "contact_stiffness": (0.0, True)}
+_PHYSICS_BOUNDS = {
+    "indenter_radius": (0.0, True),
+    "gas_volume_ratio": (0.0, True),
+    "gas_exponent": (0.0, False),
+    "stiffening": (-np.inf, False),
+    "areal_weight": (0.0, False),
+    "friction_coefficient": (0.0, False),
+    "contact_stiffness": (0.0, True),
+}
 
 
 def _check_physics(physics: CurvePhysics, batch: int, setup: Setup) -> np.ndarray:
@@ -284,10 +298,18 @@ def _retry_from_cold_starts(res: CurveResult, rows, solve, workers, rows_per_cal
     return jax.tree_util.tree_map(retried, res, again)
 
 
-def indentation_curves(properties: ShellProperties, forces=PAPER_FORCES, *, radius: float | None = None,
-                       raise_on_failure: bool = True,
-                       chunk: int = 8, workers: int | None = None, physics: CurvePhysics | None = None,
-                       rows_per_call: int | None = None, **setup_kwargs) -> CurveResult:
+def indentation_curves(
+    properties: ShellProperties,
+    forces=PAPER_FORCES,
+    *,
+    radius: float | None = None,
+    raise_on_failure: bool = True,
+    chunk: int = 8,
+    workers: int | None = None,
+    physics: CurvePhysics | None = None,
+    rows_per_call: int | None = None,
+    **setup_kwargs,
+) -> CurveResult:
     """Force-controlled F → w(0) curves of inflated balls, batched over parameter sets.
 
     ``properties``: :class:`shelljax.physics.ShellProperties` of fields () or (batch,): P_g [Pa],

@@ -218,10 +218,12 @@ def membrane_density(lam_s, lam_t, p: Params, relax: bool, hoop_capacity: float 
         collapse = jnp.minimum(jnp.log(lam_t_sq / COLLAPSE_HOOP_STRETCH**2), 0.0) ** 2
         wrinkle_work = wrinkle_work + jnp.where(upper, p.thickness * beta * collapse, 0.0)
         lam_t_sq = jnp.where(upper, relaxed, lam_t_sq)
-    dens = gent_membrane_invariants(
-        lam_s_sq + lam_t_sq, lam_s_sq * lam_t_sq, p.thickness, p.young_modulus, p.poisson_ratio,
-        p.stiffening,
-    ) + wrinkle_work
+    dens = (
+        gent_membrane_invariants(
+            lam_s_sq + lam_t_sq, lam_s_sq * lam_t_sq, p.thickness, p.young_modulus, p.poisson_ratio, p.stiffening
+        )
+        + wrinkle_work
+    )
     # λ_θ = r / r0 < 0 means a node crossed the axis (an inverted, folded meridian); det C
     # only sees λ_θ², so forbid it explicitly: the line search rejects infinite energies.
     return jnp.where(lam_t > 0.0, dens, jnp.inf)
@@ -276,9 +278,7 @@ def bending_changes(x, x0):
 def bending_energy(x, x0, p: Params):
     """Σ_nodes rest dual area × bending density [J]."""
     m_ss, m_tt = bending_changes(x, x0)
-    dens = bending_density_invariants(
-        m_ss + m_tt, m_ss**2 + m_tt**2, p.thickness, p.young_modulus, p.poisson_ratio
-    )
+    dens = bending_density_invariants(m_ss + m_tt, m_ss**2 + m_tt**2, p.thickness, p.young_modulus, p.poisson_ratio)
     return p.bending_scale * jnp.sum(node_rest_areas(x0) * dens)
 
 
@@ -296,8 +296,9 @@ def gas_energy(volume, cfg: Config, p: Params):
     # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
     gas_volume = p.gas_volume_ratio * p.reference_volume
     if cfg.gas == "polytropic":
-        sealed = polytropic_gas_energy(volume - p.reference_volume + gas_volume, gas_volume,
-                                       p.gauge_pressure, p.gas_exponent)
+        sealed = polytropic_gas_energy(
+            volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure, p.gas_exponent
+        )
     else:
         sealed = isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
     # the gas is sealed once the ball is inflated at its gauge pressure
@@ -364,8 +365,7 @@ def ground_friction_energy(x, p: Params):
     force is ≤ μ λ̂_i per node (the Coulomb cone) and a spring 2 μ λ̂_i / ε while |u_i| < ε.
     """
     slip = ground_slip(x, p)[:, None]
-    return jnp.sum(friction_energy(slip, p.friction_normal_force, p.friction_coefficient,
-                                   p.friction_slip_tolerance))
+    return jnp.sum(friction_energy(slip, p.friction_normal_force, p.friction_coefficient, p.friction_slip_tolerance))
 
 
 def local_energy(y, cfg: Config, p: Params):

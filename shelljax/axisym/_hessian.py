@@ -67,6 +67,7 @@ def _computed_once(*arrays):
 
 # --- struct-of-arrays algebra: None is an exact zero (skipped at trace time) -------------------
 
+
 def _sum(*terms):
     terms = [t for t in terms if t is not None]
     if not terms:
@@ -126,8 +127,11 @@ def _node_pattern(weights, vec):
 def _pair_pattern(weights, block):
     """Node weights (k, k) ⊗ a 2×2 block → a 2k × 2k matrix."""
     k = len(weights)
-    return [[_scale(float(weights[i][j]), block[ci][cj]) for j in range(k) for cj in range(2)]
-            for i in range(k) for ci in range(2)]
+    return [
+        [_scale(float(weights[i][j]), block[ci][cj]) for j in range(k) for cj in range(2)]
+        for i in range(k)
+        for ci in range(2)
+    ]
 
 
 def _length_derivatives(t_r, t_z):
@@ -139,6 +143,7 @@ def _length_derivatives(t_r, t_z):
 
 
 # --- element and hinge Hessians ----------------------------------------------------------------
+
 
 def _membrane_and_gas_entries(x, x0, cfg: Config, p: Params, d_gas):
     """Element 4×4 Hessians [N/m] of membrane + linearised gas, dofs (r_e, z_e, r_e+1, z_e+1)."""
@@ -159,25 +164,39 @@ def _membrane_and_gas_entries(x, x0, cfg: Config, p: Params, d_gas):
     # λ_θ = ((1 − ξ) r_e + ξ r_e+1) / r0 per Gauss point is linear in the dofs (no Hessian)
     r0_g = [(1.0 - s) * r0[:-1] + s * r0[1:] for s in xi]
     shapes = [(1.0 - s, s) for s in xi]
-    cross = _vector_sum(*[[h_st[g] * a / r0_g[g], None, h_st[g] * b / r0_g[g], None]
-                          for g, (a, b) in enumerate(shapes)])
+    cross = _vector_sum(
+        *[[h_st[g] * a / r0_g[g], None, h_st[g] * b / r0_g[g], None] for g, (a, b) in enumerate(shapes)]
+    )
     hoop = [h_tt[g] / r0_g[g] ** 2 for g in range(2)]
-    hoop_block = [[_sum(*[hoop[g] * shapes[g][i] * shapes[g][j] for g in range(2)]) for j in range(2)]
-                  for i in range(2)]
-    hess_hoop = [[hoop_block[i // 2][j // 2] if i % 2 == 0 and j % 2 == 0 else None for j in range(4)]
-                 for i in range(4)]
+    hoop_block = [
+        [_sum(*[hoop[g] * shapes[g][i] * shapes[g][j] for g in range(2)]) for j in range(2)] for i in range(2)
+    ]
+    hess_hoop = [
+        [hoop_block[i // 2][j // 2] if i % 2 == 0 and j % 2 == 0 else None for j in range(4)] for i in range(4)
+    ]
     # Volume V_e = π Δz (r_a² + r_a r_b + r_b²)/3 times the gas pressure slope dΠ/dV
     ra, rb = r[:-1], r[1:]
     dz, sa, sb = z[1:] - z[:-1], 2.0 * ra + rb, ra + 2.0 * rb
     c = d_gas * jnp.pi / 3.0
-    volume = [[2.0 * c * dz, -c * sa, c * dz, c * sa], [-c * sa, None, -c * sb, None],
-              [c * dz, -c * sb, 2.0 * c * dz, c * sb], [c * sa, None, c * sb, None]]
-    return _symmetrized(_matrix_sum(
-        _matrix_scale(h_ss[0] + h_ss[1], _outer(grad_s, grad_s)), _symmetric_outer(grad_s, cross),
-        hess_hoop, _matrix_scale((g_s[0] + g_s[1]) / seg0, hess_s), volume))
+    volume = [
+        [2.0 * c * dz, -c * sa, c * dz, c * sa],
+        [-c * sa, None, -c * sb, None],
+        [c * dz, -c * sb, 2.0 * c * dz, c * sb],
+        [c * sa, None, c * sb, None],
+    ]
+    return _symmetrized(
+        _matrix_sum(
+            _matrix_scale(h_ss[0] + h_ss[1], _outer(grad_s, grad_s)),
+            _symmetric_outer(grad_s, cross),
+            hess_hoop,
+            _matrix_scale((g_s[0] + g_s[1]) / seg0, hess_s),
+            volume,
+        )
+    )
 
 
 # --- hinge Hessians as arrays of 6×6 blocks (smaller programs than entry-wise: docs/axisym.md) ---
+
 
 def _block_outer(u, v):
     return u[..., :, None] * v[..., None, :]
@@ -228,13 +247,21 @@ def _hinge_measures(xe):
     turning = jnp.arctan2(t1[:, 0] * t2[:, 1] - t1[:, 1] * t2[:, 0], jnp.sum(t1 * t2, axis=-1))
     dual = 0.5 * (len1 + len2)
     grad_dual = 0.5 * (_block_node_pattern(u1, first) + _block_node_pattern(u2, second))
-    hess_dual = 0.5 * (_block_pair_pattern(c1, np.outer(first, first)) + _block_pair_pattern(c2, np.outer(second, second)))
+    hess_dual = 0.5 * (
+        _block_pair_pattern(c1, np.outer(first, first)) + _block_pair_pattern(c2, np.outer(second, second))
+    )
     bisector = jnp.arctan2(t1[:, 1], t1[:, 0]) + 0.5 * turning
     return dict(
-        turning=turning, grad_turning=grad_a2 - grad_a1, hess_turning=hess_a2 - hess_a1,
-        dual=dual, grad_dual=grad_dual, hess_dual=hess_dual,
-        sin=jnp.sin(bisector), cos=jnp.cos(bisector),
-        grad_bisector=0.5 * (grad_a1 + grad_a2), hess_bisector=0.5 * (hess_a1 + hess_a2),
+        turning=turning,
+        grad_turning=grad_a2 - grad_a1,
+        hess_turning=hess_a2 - hess_a1,
+        dual=dual,
+        grad_dual=grad_dual,
+        hess_dual=hess_dual,
+        sin=jnp.sin(bisector),
+        cos=jnp.cos(bisector),
+        grad_bisector=0.5 * (grad_a1 + grad_a2),
+        hess_bisector=0.5 * (hess_a1 + hess_a2),
     )
 
 
@@ -246,18 +273,26 @@ def _bending_blocks(x, x0, p: Params):
     m_ss = (h["turning"] * h["dual"] / dual0 - h0["turning"]) / dual0
     grad_ss = (h["dual"][:, None] * h["grad_turning"] + h["turning"][:, None] * h["grad_dual"]) / (dual0**2)[:, None]
     cross = _block_outer(h["grad_turning"], h["grad_dual"])
-    hess_ss = (cross + jnp.swapaxes(cross, -1, -2) + h["dual"][:, None, None] * h["hess_turning"]
-               + h["turning"][:, None, None] * h["hess_dual"]) / (dual0**2)[:, None, None]
+    hess_ss = (
+        cross
+        + jnp.swapaxes(cross, -1, -2)
+        + h["dual"][:, None, None] * h["hess_turning"]
+        + h["turning"][:, None, None] * h["hess_dual"]
+    ) / (dual0**2)[:, None, None]
     # M_θθ = (r sin ψ − r0 sin ψ0)/r0² with r the hinge node's radius (local dof 2)
     r, r0 = x[:, 0], x0[:, 0]
     safe_r0 = jnp.where(r0 > 0.0, r0, 1.0)
     e_r = jnp.zeros(6).at[2].set(1.0)
     grad_sin = h["cos"][:, None] * h["grad_bisector"]
-    hess_sin = (-h["sin"][:, None, None] * _block_outer(h["grad_bisector"], h["grad_bisector"])
-                + h["cos"][:, None, None] * h["hess_bisector"])
+    hess_sin = (
+        -h["sin"][:, None, None] * _block_outer(h["grad_bisector"], h["grad_bisector"])
+        + h["cos"][:, None, None] * h["hess_bisector"]
+    )
     m_tt = (r * h["sin"] - r0 * h0["sin"]) / safe_r0**2
     grad_tt = (h["sin"][:, None] * e_r + r[:, None] * grad_sin) / (safe_r0**2)[:, None]
-    hess_tt = (_block_outer(e_r, grad_sin) + _block_outer(grad_sin, e_r) + r[:, None, None] * hess_sin) / (safe_r0**2)[:, None, None]
+    hess_tt = (_block_outer(e_r, grad_sin) + _block_outer(grad_sin, e_r) + r[:, None, None] * hess_sin) / (safe_r0**2)[
+        :, None, None
+    ]
     # poles: M_θθ = M_ss by isotropy
     interior = jnp.asarray(np.r_[False, np.ones(x0.shape[0] - 2, bool), False])
     m_tt = jnp.where(interior, m_tt, m_ss)
@@ -271,9 +306,13 @@ def _bending_blocks(x, x0, p: Params):
 
     g_ss, g_tt, h_aa, h_ab, h_bb = _pointwise_second_derivatives(density_sum, m_ss, m_tt)
     cross = _block_outer(grad_ss, grad_tt)
-    return (h_aa[:, None, None] * _block_outer(grad_ss, grad_ss) + h_ab[:, None, None] * (cross + jnp.swapaxes(cross, -1, -2))
-            + h_bb[:, None, None] * _block_outer(grad_tt, grad_tt)
-            + g_ss[:, None, None] * hess_ss + g_tt[:, None, None] * hess_tt)
+    return (
+        h_aa[:, None, None] * _block_outer(grad_ss, grad_ss)
+        + h_ab[:, None, None] * (cross + jnp.swapaxes(cross, -1, -2))
+        + h_bb[:, None, None] * _block_outer(grad_tt, grad_tt)
+        + g_ss[:, None, None] * hess_ss
+        + g_tt[:, None, None] * hess_tt
+    )
 
 
 def _penalty_derivatives(gaps, stiffness):
@@ -285,6 +324,7 @@ def _penalty_derivatives(gaps, stiffness):
 def _friction_stiffness(x, p: Params):
     """∂²D/∂r_i² [N/m] of the ground friction per node: D is a sum of per-node functions of the
     radii alone, so its Hessian is this diagonal (2 μ λ̂/ε while sticking, 0 once sliding)."""
+
     def energy_of_radii(r):
         return ground_friction_energy(jnp.stack([r, x[:, 1]], -1), p)
 
@@ -292,6 +332,7 @@ def _friction_stiffness(x, p: Params):
 
 
 # --- assembly into node bands and 4×4 blocks ---------------------------------------------------
+
 
 def _pad(a, before, after):
     return None if a is None else jnp.pad(a, (before, after))
@@ -304,8 +345,18 @@ def _node_block(matrix, i, j):
 
 def _band_sum(blocks_and_offsets, length):
     """Σ 2×2 blocks of (k,) entries placed at ``offset`` in bands of ``length`` (zero-padded)."""
-    return [[_sum(*[_pad(block[a][b], offset, length - offset - block[a][b].shape[0])
-                    for block, offset in blocks_and_offsets]) for b in range(2)] for a in range(2)]
+    return [
+        [
+            _sum(
+                *[
+                    _pad(block[a][b], offset, length - offset - block[a][b].shape[0])
+                    for block, offset in blocks_and_offsets
+                ]
+            )
+            for b in range(2)
+        ]
+        for a in range(2)
+    ]
 
 
 def _fold_ghosts(d0, d1, d2):
@@ -321,21 +372,29 @@ def _fold_ghosts(d0, d1, d2):
 
     lo, hi, d1_lo, d1_hi, d2_lo, d2_hi = at(d0, 0), at(d0, -1), at(d1, 0), at(d1, -1), at(d2, 0), at(d2, -1)
     # bottom ghost g = P x_1: couples to itself, node 0 (d1_lo = H(g, x_0)) and node 1 (d2_lo = H(g, x_1))
-    add_d0_lo = [[sign[a] * sign[b] * lo[a][b] + sign[a] * d2_lo[a][b] + d2_lo[b][a] * sign[b]
-                  for b in range(2)] for a in range(2)]
+    add_d0_lo = [
+        [sign[a] * sign[b] * lo[a][b] + sign[a] * d2_lo[a][b] + d2_lo[b][a] * sign[b] for b in range(2)]
+        for a in range(2)
+    ]
     add_d1_lo = [[d1_lo[b][a] * sign[b] for b in range(2)] for a in range(2)]
     # top ghost g = P x_n−2: d1_hi = H(x_n−1, g), d2_hi = H(x_n−2, g)
-    add_d0_hi = [[sign[a] * sign[b] * hi[a][b] + d2_hi[a][b] * sign[b] + sign[a] * d2_hi[b][a]
-                  for b in range(2)] for a in range(2)]
+    add_d0_hi = [
+        [sign[a] * sign[b] * hi[a][b] + d2_hi[a][b] * sign[b] + sign[a] * d2_hi[b][a] for b in range(2)]
+        for a in range(2)
+    ]
     add_d1_hi = [[sign[a] * d1_hi[b][a] for b in range(2)] for a in range(2)]
     inner0 = [[d0[a][b][1:-1] for b in range(2)] for a in range(2)]
     inner1 = [[d1[a][b][1:-1] for b in range(2)] for a in range(2)]
     n = inner0[0][0].shape[0]
     one_hot = lambda k, m: jnp.asarray(np.eye(m)[k])  # noqa: E731
-    d0 = [[inner0[a][b] + add_d0_lo[a][b] * one_hot(1, n) + add_d0_hi[a][b] * one_hot(n - 2, n)
-           for b in range(2)] for a in range(2)]
-    d1 = [[inner1[a][b] + add_d1_lo[a][b] * one_hot(0, n - 1) + add_d1_hi[a][b] * one_hot(n - 2, n - 1)
-           for b in range(2)] for a in range(2)]
+    d0 = [
+        [inner0[a][b] + add_d0_lo[a][b] * one_hot(1, n) + add_d0_hi[a][b] * one_hot(n - 2, n) for b in range(2)]
+        for a in range(2)
+    ]
+    d1 = [
+        [inner1[a][b] + add_d1_lo[a][b] * one_hot(0, n - 1) + add_d1_hi[a][b] * one_hot(n - 2, n - 1) for b in range(2)]
+        for a in range(2)
+    ]
     d2 = [[d2[a][b][1:-1] for b in range(2)] for a in range(2)]
     return d0, d1, d2
 
@@ -346,10 +405,12 @@ def _blocks_from_bands(d0, d1, d2):
     even = lambda a: a[0::2]  # noqa: E731
     odd = lambda a: a[1::2]  # noqa: E731
     zero = jnp.zeros_like(even(d2[0][0]))
-    diag = ([[even(d0[a][0]), even(d0[a][1]), even(d1[a][0]), even(d1[a][1])] for a in range(2)]
-            + [[even(d1[0][a]), even(d1[1][a]), odd(d0[a][0]), odd(d0[a][1])] for a in range(2)])
-    upper = ([[even(d2[a][0]), even(d2[a][1]), zero, zero] for a in range(2)]
-             + [[odd(d1[a][0]), odd(d1[a][1]), odd(d2[a][0]), odd(d2[a][1])] for a in range(2)])
+    diag = [[even(d0[a][0]), even(d0[a][1]), even(d1[a][0]), even(d1[a][1])] for a in range(2)] + [
+        [even(d1[0][a]), even(d1[1][a]), odd(d0[a][0]), odd(d0[a][1])] for a in range(2)
+    ]
+    upper = [[even(d2[a][0]), even(d2[a][1]), zero, zero] for a in range(2)] + [
+        [odd(d1[a][0]), odd(d1[a][1]), odd(d2[a][0]), odd(d2[a][1])] for a in range(2)
+    ]
     return diag, upper
 
 
@@ -385,8 +446,9 @@ def hessian_at(y, cfg: Config, p: Params) -> StructuredHessian:
     blocks = jnp.tensordot(_bending_blocks(x, x0, p), jnp.eye(6), axes=1)
     hinge = [[blocks[:, i, j] for j in range(6)] for i in range(6)]
     # ghosted node bands: hinge i couples ghosted nodes i, i + 1, i + 2
-    hinge_d0 = _band_sum([(_node_block(hinge, 0, 0), 0), (_node_block(hinge, 1, 1), 1),
-                          (_node_block(hinge, 2, 2), 2)], n + 2)
+    hinge_d0 = _band_sum(
+        [(_node_block(hinge, 0, 0), 0), (_node_block(hinge, 1, 1), 1), (_node_block(hinge, 2, 2), 2)], n + 2
+    )
     hinge_d1 = _band_sum([(_node_block(hinge, 0, 1), 0), (_node_block(hinge, 1, 2), 1)], n + 1)
     b0, b1, b2 = _fold_ghosts(hinge_d0, hinge_d1, _node_block(hinge, 0, 2))
     diag, upper = _blocks_from_bands(_matrix_sum(d0, b0), _matrix_sum(d1, b1), b2)
@@ -394,10 +456,16 @@ def hessian_at(y, cfg: Config, p: Params) -> StructuredHessian:
     mask = fixed_mask(cfg, p)
     free = (~mask).astype(y.dtype)
     free_entry = [(~mask[i:-1:4]).astype(y.dtype) for i in range(4)]  # (m,) per dof of a block
-    diag = tuple(tuple(diag[i][j] * (free_entry[i] * free_entry[j]) + (1.0 - free_entry[i]) if i == j
-                       else diag[i][j] * (free_entry[i] * free_entry[j]) for j in range(4)) for i in range(4))
-    upper = tuple(tuple(upper[i][j] * (free_entry[i][:-1] * free_entry[j][1:]) for j in range(4))
-                  for i in range(4))
+    diag = tuple(
+        tuple(
+            diag[i][j] * (free_entry[i] * free_entry[j]) + (1.0 - free_entry[i])
+            if i == j
+            else diag[i][j] * (free_entry[i] * free_entry[j])
+            for j in range(4)
+        )
+        for i in range(4)
+    )
+    upper = tuple(tuple(upper[i][j] * (free_entry[i][:-1] * free_entry[j][1:]) for j in range(4)) for i in range(4))
     arrow = jnp.stack(arrow, -1).ravel() * free[:-1] * free[-1]
     corner = jnp.where(mask[-1], 1.0, corner)
     return StructuredHessian(diag, upper, arrow, corner, d2_gas, grad_volume * free[:-1])

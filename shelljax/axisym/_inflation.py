@@ -16,30 +16,37 @@ import jax.numpy as jnp
 from ..physics import bending_density_invariants, gent_membrane_invariants, lame_constants_2d
 
 
-def uniform_stretch_density(stretch, rest_radius, thickness, young_modulus, poisson_ratio,
-                            bending_scale=1.0, stiffening=0.0):
+def uniform_stretch_density(
+    stretch, rest_radius, thickness, young_modulus, poisson_ratio, bending_scale=1.0, stiffening=0.0
+):
     """Energy per rest area [J/m²] of a sphere of rest radius R0 [m] under uniform stretch λ [-]
     (Gent ``stiffening`` s [-], 0: Neo-Hookean)."""
     lam2 = stretch**2
-    membrane = gent_membrane_invariants(
-        2.0 * lam2, lam2**2, thickness, young_modulus, poisson_ratio, stiffening
-    )
+    membrane = gent_membrane_invariants(2.0 * lam2, lam2**2, thickness, young_modulus, poisson_ratio, stiffening)
     m = (stretch - 1.0) / rest_radius
-    bending = bending_density_invariants(2.0 * m, 2.0 * m**2, thickness, young_modulus,
-                                         poisson_ratio)
+    bending = bending_density_invariants(2.0 * m, 2.0 * m**2, thickness, young_modulus, poisson_ratio)
     return membrane + bending_scale * bending
 
 
-def inflation_stretch(gauge_pressure, radius, young_modulus, thickness, poisson_ratio,
-                      bending_scale=1.0, iterations: int = 30, stiffening=0.0):
+def inflation_stretch(
+    gauge_pressure,
+    radius,
+    young_modulus,
+    thickness,
+    poisson_ratio,
+    bending_scale=1.0,
+    iterations: int = 30,
+    stiffening=0.0,
+):
     """Uniform stretch λ = R / R0 [-] of a Neo-Hookean sphere of E [Pa], h [m], ν [-] inflated to
     radius R [m] by P_g [Pa] (Gent-stiffened by ``stiffening`` s [-]; 0: Neo-Hookean). The shell's
     parameters come in the one order of ``physics.ShellProperties``: P_g, R, E, h, ν."""
 
     def residual(lam):
         r0 = radius / lam
-        dw = jax.grad(uniform_stretch_density)(lam, r0, thickness, young_modulus,
-                                               poisson_ratio, bending_scale, stiffening)
+        dw = jax.grad(uniform_stretch_density)(
+            lam, r0, thickness, young_modulus, poisson_ratio, bending_scale, stiffening
+        )
         return dw - gauge_pressure * radius * lam
 
     # Small-strain start: λ − 1 ≈ P R (1 − ν) / (2 E h).
@@ -61,9 +68,7 @@ def neo_hookean_sphere_pressure(stretch, rest_radius, young_modulus, thickness, 
     alpha = young_modulus * poisson_ratio / (1.0 - poisson_ratio**2)
     beta = young_modulus / (2.0 * (1.0 + poisson_ratio))
     lam = stretch
-    return thickness * (2.0 * beta * (lam - 1.0 / lam) + alpha * (lam**3 - 1.0 / lam)) / (
-        rest_radius * lam**2
-    )
+    return thickness * (2.0 * beta * (lam - 1.0 / lam) + alpha * (lam**3 - 1.0 / lam)) / (rest_radius * lam**2)
 
 
 def gent_sphere_pressure(stretch, rest_radius, young_modulus, thickness, poisson_ratio, stiffening):
@@ -77,6 +82,8 @@ def gent_sphere_pressure(stretch, rest_radius, young_modulus, thickness, poisson
     alpha, beta = lame_constants_2d(young_modulus, poisson_ratio)
     lam = stretch
     invariant = 2.0 * lam**2 - 2.0 - 4.0 * jnp.log(lam)
-    return thickness * (
-        2.0 * beta * (lam - 1.0 / lam) / (1.0 - stiffening * invariant) + alpha * (lam**3 - 1.0 / lam)
-    ) / (rest_radius * lam**2)
+    return (
+        thickness
+        * (2.0 * beta * (lam - 1.0 / lam) / (1.0 - stiffening * invariant) + alpha * (lam**3 - 1.0 / lam))
+        / (rest_radius * lam**2)
+    )

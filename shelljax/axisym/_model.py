@@ -166,8 +166,10 @@ class CurvePhysics(eqx.Module):
         # the prescribed and isothermal programs never read κ: they keep the polytropic default, 1
         kappa = GAS_EXPONENTS["adiabatic"] if setup.gas == "adiabatic" else GAS_EXPONENTS["isothermal"]
         filled = dataclasses.replace(
-            self, indenter_radius=setup.indenter_radius if self.indenter_radius is None else self.indenter_radius,
-            gas_exponent=kappa if self.gas_exponent is None else self.gas_exponent)  # fmt: skip
+            self,
+            indenter_radius=setup.indenter_radius if self.indenter_radius is None else self.indenter_radius,
+            gas_exponent=kappa if self.gas_exponent is None else self.gas_exponent,
+        )
 
         def array(v):
             v = jnp.asarray(v, jnp.float64)
@@ -190,16 +192,42 @@ class CurvePhysics(eqx.Module):
         return eqx.tree_at(lambda c: c.contact_stiffness, out, self.contact_stiffness / scale)
 
 
-def _params(young, thick, nu, rest_radius, pressure, setup, *, force=0.0, ref_volume=1.0,
-            ground_z=0.0, bending_scale=1.0, physics: CurvePhysics | None = None):
+def _params(
+    young,
+    thick,
+    nu,
+    rest_radius,
+    pressure,
+    setup,
+    *,
+    force=0.0,
+    ref_volume=1.0,
+    ground_z=0.0,
+    bending_scale=1.0,
+    physics: CurvePhysics | None = None,
+):
     f = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
     physics = CurvePhysics.defaults(setup) if physics is None else physics.resolved(setup)
     stiffness = setup.contact_stiffness if physics.contact_stiffness is None else physics.contact_stiffness
-    return Params(f(young), f(thick), f(nu), f(rest_radius), f(pressure), f(ref_volume),
-                  f(force), f(physics.indenter_radius), f(ground_z), f(stiffness),
-                  f(bending_scale), f(physics.gas_volume_ratio), f(physics.gas_exponent),
-                  f(physics.stiffening), f(physics.areal_weight), f(physics.friction_coefficient),
-                  friction_slip_tolerance=f(setup.slip_tolerance()))
+    return Params(
+        f(young),
+        f(thick),
+        f(nu),
+        f(rest_radius),
+        f(pressure),
+        f(ref_volume),
+        f(force),
+        f(physics.indenter_radius),
+        f(ground_z),
+        f(stiffness),
+        f(bending_scale),
+        f(physics.gas_volume_ratio),
+        f(physics.gas_exponent),
+        f(physics.stiffening),
+        f(physics.areal_weight),
+        f(physics.friction_coefficient),
+        friction_slip_tolerance=f(setup.slip_tolerance()),
+    )
 
 
 def _shell(properties: ShellProperties, setup: Setup, caller: str):
@@ -212,8 +240,10 @@ def _shell(properties: ShellProperties, setup: Setup, caller: str):
         )
     if properties.radius is not None and not isinstance(properties.radius, jax.Array):
         if np.any(np.asarray(properties.radius, dtype=float) != float(setup.radius)):
-            raise InvalidInputError(f"{caller}: properties.radius = {properties.radius!r} m is not the Setup's radius "
-                                    f"{setup.radius!r} m. Fix: leave it None or pass Setup(radius=…) the same value")
+            raise InvalidInputError(
+                f"{caller}: properties.radius = {properties.radius!r} m is not the Setup's radius "
+                f"{setup.radius!r} m. Fix: leave it None or pass Setup(radius=…) the same value"
+            )
     return properties.gauge_pressure, properties.young_modulus, properties.thickness, properties.poisson_ratio
 
 
@@ -246,10 +276,23 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
     r0 = setup.radius / lam
     far = 10.0 * setup.radius
     # (the sealed gas's reference volume is not used while inflating; the ball's keeps it finite)
-    p = _params(young, thick, nu, r0, pressure, setup, ground_z=-far, bending_scale=bending_scale, physics=physics,
-                ref_volume=4.0 / 3.0 * jnp.pi * setup.radius**3)
-    p = eqx.tree_at(lambda c: (c.contact_stiffness, c.areal_weight, c.friction_coefficient, c.inflating), p,
-                    (jnp.zeros(()), jnp.zeros(()), jnp.zeros(()), jnp.asarray(True)))
+    p = _params(
+        young,
+        thick,
+        nu,
+        r0,
+        pressure,
+        setup,
+        ground_z=-far,
+        bending_scale=bending_scale,
+        physics=physics,
+        ref_volume=4.0 / 3.0 * jnp.pi * setup.radius**3,
+    )
+    p = eqx.tree_at(
+        lambda c: (c.contact_stiffness, c.areal_weight, c.friction_coefficient, c.inflating),
+        p,
+        (jnp.zeros(()), jnp.zeros(()), jnp.zeros(()), jnp.asarray(True)),
+    )
     y0 = jnp.concatenate([lam * rest_nodes(_indentation_config(setup), r0).ravel(), jnp.full(1, far)])
     return r0, y0, p
 
@@ -257,8 +300,15 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
 def _indentation_config(setup: Setup) -> Config:
     # the adiabatic gas is the polytropic program, its κ traced (``CurvePhysics.resolved``)
     gas = "polytropic" if setup.gas == "adiabatic" else setup.gas
-    return Config(theta=setup.theta(), gas=gas, loading="sphere", ground=True,
-                  pin_bottom=False, relax=setup.relax, hoop_capacity=setup.hoop_capacity)
+    return Config(
+        theta=setup.theta(),
+        gas=gas,
+        loading="sphere",
+        ground=True,
+        pin_bottom=False,
+        relax=setup.relax,
+        hoop_capacity=setup.hoop_capacity,
+    )
 
 
 def _load_schedule(setup: Setup, forces: Float[Array, " k"]) -> tuple[Float[Array, " s"], Float[Array, ""]]:
@@ -352,8 +402,15 @@ def _levels(obs, n_ramp: int, m: int):
     return out
 
 
-def curve_single(setup: Setup, properties: ShellProperties, forces, bending_scale=1.0,
-                 return_states: bool = False, nearby_guesses=None, physics: CurvePhysics | None = None):
+def curve_single(
+    setup: Setup,
+    properties: ShellProperties,
+    forces,
+    bending_scale=1.0,
+    return_states: bool = False,
+    nearby_guesses=None,
+    physics: CurvePhysics | None = None,
+):
     """One force-controlled curve (unbatched, traceable) of ``properties`` (scalar P_g, E, h, ν;
     the radius is ``setup.radius``). ``forces`` (k,) [N], increasing.
 
@@ -392,8 +449,18 @@ def curve_single(setup: Setup, properties: ShellProperties, forces, bending_scal
         inflated state y_inf [m]."""
         x_inf, _ = split(y_inf, cfg.n_nodes)
         zc_contact = x_inf[-1, 1] + physics.indenter_radius
-        base = _params(young, thick, nu, r0, pressure, setup, ref_volume=enclosed_volume(x_inf),
-                       ground_z=x_inf[0, 1], bending_scale=bending_scale, physics=physics)
+        base = _params(
+            young,
+            thick,
+            nu,
+            r0,
+            pressure,
+            setup,
+            ref_volume=enclosed_volume(x_inf),
+            ground_z=x_inf[0, 1],
+            bending_scale=bending_scale,
+            physics=physics,
+        )
         y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
         return zc_contact, base, _initial_carry(y_start, cfg, base, load)
 

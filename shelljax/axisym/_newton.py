@@ -69,12 +69,15 @@ def _add_contact_springs(hess: StructuredHessian, ground, indenter, normal):
     node = [[indenter * normal[:, a] * normal[:, b] for b in range(2)] for a in range(2)]
     node[1][1] = node[1][1] + ground
     # block k holds nodes 2k (dofs 0, 1) and 2k + 1 (dofs 2, 3)
-    diag = tuple(tuple(entry + node[i % 2][j % 2][i // 2 :: 2] if i // 2 == j // 2 else entry
-                       for j, entry in enumerate(row)) for i, row in enumerate(hess.diag))
+    diag = tuple(
+        tuple(entry + node[i % 2][j % 2][i // 2 :: 2] if i // 2 == j // 2 else entry for j, entry in enumerate(row))
+        for i, row in enumerate(hess.diag)
+    )
     arrow = -(indenter * normal[:, 1])[:, None] * normal  # ∂(x − c)/∂z_c = (0, −1)
     corner = jnp.sum(indenter * normal[:, 1] ** 2)
-    return eqx.tree_at(lambda h: (h.diag, h.arrow, h.corner), hess,
-                       (diag, hess.arrow + arrow.ravel(), hess.corner + corner))
+    return eqx.tree_at(
+        lambda h: (h.diag, h.arrow, h.corner), hess, (diag, hess.arrow + arrow.ravel(), hess.corner + corner)
+    )
 
 
 def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
@@ -106,8 +109,7 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         # leave the ball's vertical rigid mode unrestrained (singular H) near first contact.
         dx, dzc = split(d, n)
         ground_hit = ((ground_gap + dx[:, 1]) < 0.0) & ~(ground_gap < 0.0)
-        indenter_hit = (((indenter_gap + jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) < 0.0)
-                        & ~(indenter_gap < 0.0))
+        indenter_hit = ((indenter_gap + jnp.sum(normal * dx, -1) - normal[:, 1] * dzc) < 0.0) & ~(indenter_gap < 0.0)
         return ground_hit, indenter_hit
 
     def repredict(d, hits):
@@ -119,8 +121,7 @@ def _contact_active_set_step(hess, g, y, cfg: Config, p: Params, free):
         node_force = jnp.stack([zero, pull_ground], -1) + pull_indenter[:, None] * normal
         zc_force = -jnp.sum(pull_indenter * normal[:, 1])
         force = jnp.concatenate([node_force.ravel(), zc_force[None]]) * free
-        springs = _add_contact_springs(hess, k_ground * free_z, k_indenter * free[-1],
-                                       normal * free_node)
+        springs = _add_contact_springs(hess, k_ground * free_z, k_indenter * free[-1], normal * free_node)
         d_pred = structured_solve(springs, -(g + force)) * free
         # The model's pull k·gap on a node still clear of contact is not in the true gradient,
         # and can cancel a node's load: keep the direction only if it still descends the true
@@ -178,17 +179,21 @@ def _jacobi_diagonal(hess: StructuredHessian):
 
 def _shift(hess: StructuredHessian, mu):
     """H + μ |diag H| (Levenberg shift, Jacobi-scaled so it is unit-free)."""
-    diag = tuple(tuple(entry + mu * jnp.abs(entry) if i == j else entry for j, entry in enumerate(row))
-                 for i, row in enumerate(hess.diag))
-    return eqx.tree_at(lambda h: (h.diag, h.corner), hess,
-                       (diag, hess.corner + mu * jnp.abs(hess.corner)))
+    diag = tuple(
+        tuple(entry + mu * jnp.abs(entry) if i == j else entry for j, entry in enumerate(row))
+        for i, row in enumerate(hess.diag)
+    )
+    return eqx.tree_at(lambda h: (h.diag, h.corner), hess, (diag, hess.corner + mu * jnp.abs(hess.corner)))
 
 
 def _levenberg(mu, descends, accepted, backtracks):
     """Next Levenberg shift μ [-]: ×100 (at least 1e-4) after a non-descent direction or a step
     the line search could not accept, ÷10 after a full step, else unchanged."""
-    return jnp.where(~descends | ~accepted, jnp.maximum(100.0 * mu, 1e-4),
-                     jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu))
+    return jnp.where(
+        ~descends | ~accepted,
+        jnp.maximum(100.0 * mu, 1e-4),
+        jnp.where(backtracks == 0, jnp.where(mu > 1e-8, 0.1 * mu, 0.0), mu),
+    )
 
 
 def _direction(hess, g, y, cfg: Config, p: Params, free):
@@ -208,8 +213,9 @@ def _gas_energy_scale(cfg: Config, p: Params):
     """Size [J] of a sealed gas's p_abs·V energy, whose round-off the line search must tolerate."""
     if cfg.gas not in ("isothermal", "polytropic"):
         return 0.0
-    scale = ((ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume)
-             * jnp.abs(p.gas_volume_ratio))
+    scale = (
+        (ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * jnp.abs(p.gas_volume_ratio)
+    )
     return jnp.where(p.inflating, 0.0, scale)  # an inflating ball's gas is held at its pressure
 
 
@@ -291,8 +297,9 @@ def _equilibrium_jvp(cfg, opts, primals, tangents):
     out = _equilibrium(cfg, opts, p, y0)
     y = out[0]
     hess = hessian_at(y, cfg, p)
-    dy = implicit_tangent(lambda yy, pp: residual(yy, cfg, pp), y, p, dp, _free(cfg, p, y.dtype),
-                          lambda b: structured_solve(hess, b))  # fmt: skip
+    dy = implicit_tangent(
+        lambda yy, pp: residual(yy, cfg, pp), y, p, dp, _free(cfg, p, y.dtype), lambda b: structured_solve(hess, b)
+    )
     zeros = tuple(jnp.zeros_like(o) for o in out[1:])
     return out, (dy,) + zeros
 
@@ -308,8 +315,11 @@ def equilibrium(cfg: Config, opts: SolverOptions, p: Params, y0) -> Solution:
     flows through the guess).
     """
     y, res, it, hist = _equilibrium(cfg, opts, p, y0)
-    result = RESULTS.where(res <= opts.atol, RESULTS.successful,
-                           RESULTS.where(jnp.isfinite(res), RESULTS.max_steps_reached, RESULTS.nonfinite))  # fmt: skip
+    result = RESULTS.where(
+        res <= opts.atol,
+        RESULTS.successful,
+        RESULTS.where(jnp.isfinite(res), RESULTS.max_steps_reached, RESULTS.nonfinite),
+    )
     return Solution(y, result, it, hist, {"residual": res})
 
 

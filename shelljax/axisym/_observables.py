@@ -95,8 +95,9 @@ def _contact_radius(x: Float[Array, "n 2"], gaps: Float[Array, " n"]) -> Float[A
     return jnp.where(jnp.any(inside), r_edge, 0.0)
 
 
-def compressive_annulus(x: Float[Array, "n 2"], n_theta: Float[Array, "2 e"],
-                        r_gauss: Float[Array, "2 e"]) -> tuple[Float[Array, ""], Float[Array, ""]]:
+def compressive_annulus(
+    x: Float[Array, "n 2"], n_theta: Float[Array, "2 e"], r_gauss: Float[Array, "2 e"]
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """(r_in, r_out) [m] of the compressive-hoop annulus in the upper half (0, 0 if none).
 
     Edges are linear interpolations of the sign changes of the unrelaxed hoop tension
@@ -123,8 +124,9 @@ def compressive_annulus(x: Float[Array, "n 2"], n_theta: Float[Array, "2 e"],
     return jnp.where(any_comp, r_in, 0.0), jnp.where(any_comp, r_out, 0.0)
 
 
-def observables(cfg: Config, p: Params, y: Float[Array, " ny"], y_inflated: Float[Array, " ny"],
-                zc_contact: Float[Array, ""]) -> dict[str, Float[Array, ""]]:
+def observables(
+    cfg: Config, p: Params, y: Float[Array, " ny"], y_inflated: Float[Array, " ny"], zc_contact: Float[Array, ""]
+) -> dict[str, Float[Array, ""]]:
     """The observables documented in the module docstring for one state ``y`` [m], given the
     inflated state [m] and the indenter height at first contact ``zc_contact`` [m]."""
     n = cfg.n_nodes
@@ -147,18 +149,14 @@ def observables(cfg: Config, p: Params, y: Float[Array, " ny"], y_inflated: Floa
         travel=zc_contact - zc,
         height=z_max - p.ground_z,
         upper_diameter=2.0 * r_max,
-        contact_diameter=2.0 * jnp.sqrt(
-            jnp.sum(k_node * jnp.maximum(-gaps, 0.0)) / (jnp.pi * disc_pressure)
-        ),
+        contact_diameter=2.0 * jnp.sqrt(jnp.sum(k_node * jnp.maximum(-gaps, 0.0)) / (jnp.pi * disc_pressure)),
         contact_diameter_mesh=2.0 * _contact_radius(x, gaps),
         sunken_depth=z_max - x[-1, 1],
         wall_gap=x[-1, 1] - x[0, 1],
         pressure=gauge_pressure_at(volume, cfg, p),
         volume=volume,
         ground_reaction=jnp.sum(k_node * jnp.maximum(-gaps, 0.0)),
-        min_hoop_tension=jnp.min(
-            jnp.where(jnp.arange(n_theta.shape[1]) >= n_theta.shape[1] // 2, n_theta, jnp.inf)
-        ),
+        min_hoop_tension=jnp.min(jnp.where(jnp.arange(n_theta.shape[1]) >= n_theta.shape[1] // 2, n_theta, jnp.inf)),
         compressive_inner_radius=annulus[0],
         compressive_outer_radius=annulus[1],
     )

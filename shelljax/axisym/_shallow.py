@@ -34,8 +34,7 @@ def pinch_setup(n_elements=201, grading=0.9, radius=0.1):
 
 
 def pinch_config(setup: Setup, relax=False) -> Config:
-    return Config(theta=setup.theta(), gas="prescribed", loading="point", ground=False,
-                  pin_bottom=True, relax=relax)
+    return Config(theta=setup.theta(), gas="prescribed", loading="point", ground=False, pin_bottom=True, relax=relax)
 
 
 def pinch_state(setup: Setup, properties: ShellProperties, force, bending_scale=1.0, guess=None, relax=False):
@@ -44,8 +43,7 @@ def pinch_state(setup: Setup, properties: ShellProperties, force, bending_scale=
     pressure, young, thick, nu = _shell(properties, setup, "pinch_state")
     r0, y_inf, _, _ = inflate(setup, properties, bending_scale)
     cfg = pinch_config(setup, relax)
-    p = _params(young, thick, nu, r0, pressure, setup, force=force,
-                bending_scale=bending_scale)
+    p = _params(young, thick, nu, r0, pressure, setup, force=force, bending_scale=bending_scale)
     opts = SolverOptions(setup.atol, 200, 30, 0.05 * setup.radius)
     sol = equilibrium(cfg, opts, p, y_inf if guess is None else guess)
     return sol.value, y_inf, p, sol.stats["residual"]

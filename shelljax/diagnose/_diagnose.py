@@ -94,11 +94,16 @@ def _session_estimates(fit: CandidateFit) -> dict:
     for i in range(s):
         _, std = laplace_interval(fit, i)
         value = float(phys["gauge_pressure"][i])
-        out["gauge_pressure"].append({"value": value, "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)],
-                                      "unit": "Pa"})  # fmt: skip
+        out["gauge_pressure"].append(
+            {"value": value, "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)], "unit": "Pa"}
+        )
     _, std = laplace_interval(fit, s + GLOBAL_PARAMETERS.index("young_modulus"))
     value = float(phys["young_modulus"])
-    out["young_modulus"] = {"value": value, "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)], "unit": "Pa"}
+    out["young_modulus"] = {
+        "value": value,
+        "ci95": [value * math.exp(-1.96 * std), value * math.exp(1.96 * std)],
+        "unit": "Pa",
+    }
     return out
 
 
@@ -108,16 +113,28 @@ def _points(study: Study, score: LooScore, regime: np.ndarray) -> dict:
     (independent N(0, 1) under the model) and LOO-PIT."""
     observed = np.concatenate([study.depth, study.count, study.shape_value])
     rows = {
-        "observable": np.array(["depth"] * study.depth.size + ["wrinkle_count"] * study.count.size
-                               + [SHAPE_OBSERVABLES[k] for k in study.shape_kind]),
+        "observable": np.array(
+            ["depth"] * study.depth.size
+            + ["wrinkle_count"] * study.count.size
+            + [SHAPE_OBSERVABLES[k] for k in study.shape_kind]
+        ),
         "session": np.concatenate([study.depth_session, study.count_session, study.shape_session]),
         "level": np.concatenate([study.level, np.full(study.count.size, np.nan), study.shape_force]),
-        "regime": np.concatenate([np.where(regime, "after_onset", "before_onset"),
-                                  np.full(study.count.size, "top_force"), np.full(study.shape_value.size, "shape")]),
+        "regime": np.concatenate(
+            [
+                np.where(regime, "after_onset", "before_onset"),
+                np.full(study.count.size, "top_force"),
+                np.full(study.shape_value.size, "shape"),
+            ]
+        ),
         "force": np.concatenate([study.force, np.full(study.count.size, np.nan), study.shape_force]),
-        "observed": observed, "residual": score.residual, "std": score.std, "z": score.residual / score.std,
-        "whitened": score.whitened, "pit": score.pit,
-    }  # fmt: skip
+        "observed": observed,
+        "residual": score.residual,
+        "std": score.std,
+        "z": score.residual / score.std,
+        "whitened": score.whitened,
+        "pit": score.pit,
+    }
     return rows
 
 
@@ -138,7 +155,9 @@ def _group(points: dict, mask: np.ndarray, unit: str | None = None) -> dict:
     if unit is not None:
         resid = points["residual"][mask]
         rel = resid / np.where(points["observed"][mask] != 0, points["observed"][mask], np.nan)
-        out.update(rms=float(np.sqrt(np.mean(resid**2))), unit=unit, rms_percent=float(100 * np.sqrt(np.nanmean(rel**2))))
+        out.update(
+            rms=float(np.sqrt(np.mean(resid**2))), unit=unit, rms_percent=float(100 * np.sqrt(np.nanmean(rel**2)))
+        )
     out["misfit"] = out["p_value"] < MISFIT_P
     return out
 
@@ -157,33 +176,54 @@ def _structure(study: Study, points: dict) -> dict:
         coef, *_ = np.linalg.lstsq(a, resid[mask] / std[mask], rcond=None)
         cov = np.linalg.pinv(a.T @ a)
         se = np.sqrt(np.diag(cov))
-        return {name: {"value": float(c), "std": float(e), "z": float(c / e) if e > 0 else 0.0, "unit": "m"}
-                for name, c, e in zip(("offset", "slope", "curvature"), coef, se)}  # fmt: skip
+        return {
+            name: {"value": float(c), "std": float(e), "z": float(c / e) if e > 0 else 0.0, "unit": "m"}
+            for name, c, e in zip(("offset", "slope", "curvature"), coef, se)
+        }
 
-    out = {"basis": "Legendre polynomials of the force scaled to [-1, 1] over the study's forces",
-           "pooled": fit(np.ones(f.size, bool))}  # fmt: skip
+    out = {
+        "basis": "Legendre polynomials of the force scaled to [-1, 1] over the study's forces",
+        "pooled": fit(np.ones(f.size, bool)),
+    }
     out["by_session"] = [fit(study.depth_session == s) for s in range(study.n_sessions)]
     return out
 
 
 def _where(study: Study, points: dict) -> dict:
     units = {"depth": "m", "wrinkle_count": "1", **{k: "m" for k in SHAPE_OBSERVABLES}}
-    by_obs = {name: _group(points, points["observable"] == name, units[name])
-              for name in OBSERVABLES if np.any(points["observable"] == name)}  # fmt: skip
-    by_regime = {name: _group(points, points["regime"] == name)
-                 for name in ("before_onset", "after_onset") if np.any(points["regime"] == name)}  # fmt: skip
+    by_obs = {
+        name: _group(points, points["observable"] == name, units[name])
+        for name in OBSERVABLES
+        if np.any(points["observable"] == name)
+    }
+    by_regime = {
+        name: _group(points, points["regime"] == name)
+        for name in ("before_onset", "after_onset")
+        if np.any(points["regime"] == name)
+    }
     depth = points["observable"] == "depth"
-    by_level = [{"force": float(lv), "unit": "N", **_group(points, depth & np.isclose(points["level"], lv))}
-                for lv in np.unique(study.level)]  # fmt: skip
-    by_session = [{"session": str(s.source), **_group(points, points["session"] == i)}
-                  for i, s in enumerate(study.sessions)]  # fmt: skip
-    groups = ([f"observable:{k}" for k, v in by_obs.items() if v["misfit"]]
-              + [f"regime:{k}" for k, v in by_regime.items() if v["misfit"]]
-              + [f"force:{v['force']:.3g} N" for v in by_level if v["misfit"]]
-              + [f"session:{v['session']}" for v in by_session if v["misfit"]])  # fmt: skip
-    return {"by_observable": by_obs, "by_regime": by_regime, "by_force_level": by_level, "by_session": by_session,
-            "structure_along_force": _structure(study, points), "misfit_groups": groups,
-            "misfit_threshold_p": MISFIT_P}  # fmt: skip
+    by_level = [
+        {"force": float(lv), "unit": "N", **_group(points, depth & np.isclose(points["level"], lv))}
+        for lv in np.unique(study.level)
+    ]
+    by_session = [
+        {"session": str(s.source), **_group(points, points["session"] == i)} for i, s in enumerate(study.sessions)
+    ]
+    groups = (
+        [f"observable:{k}" for k, v in by_obs.items() if v["misfit"]]
+        + [f"regime:{k}" for k, v in by_regime.items() if v["misfit"]]
+        + [f"force:{v['force']:.3g} N" for v in by_level if v["misfit"]]
+        + [f"session:{v['session']}" for v in by_session if v["misfit"]]
+    )
+    return {
+        "by_observable": by_obs,
+        "by_regime": by_regime,
+        "by_force_level": by_level,
+        "by_session": by_session,
+        "structure_along_force": _structure(study, points),
+        "misfit_groups": groups,
+        "misfit_threshold_p": MISFIT_P,
+    }
 
 
 def _gap(points: dict) -> dict:
@@ -246,12 +286,16 @@ def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessio
     report_progress("baseline")
     fit = fit_candidate(candidate_data(base, None, baseline_free), wrinkle_law, np.zeros(base.free.shape[0]))
     if not fit.converged:
-        raise NoConvergenceError(f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
-                                 f"{fit.message}. Fix: check the sessions with `shelljax validate`")  # fmt: skip
+        raise NoConvergenceError(
+            f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
+            f"{fit.message}. Fix: check the sessions with `shelljax validate`"
+        )
     fits["baseline"], scores["baseline"] = fit, loo_score(fit)
     for effect in effects:
         report_progress(effect)
-        fit = _fit_candidate_restarted(candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u, effect)
+        fit = _fit_candidate_restarted(
+            candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u, effect
+        )
         fits[effect] = fit
         if fit.converged:
             scores[effect] = loo_score(fit)
@@ -274,13 +318,25 @@ def _ranking(fits: dict, scores: dict, effects) -> tuple[list[dict], str]:
             sc = scores[name]
             diff = sc.elpd - base_score.elpd
             n = diff.size
-            entry.update(score=sc.total, score_se=float(math.sqrt(n * np.var(sc.elpd))), delta=float(diff.sum()),
-                         delta_se=float(math.sqrt(n * np.var(diff))), chi2=fit.chi2, steps=fit.steps)  # fmt: skip
+            entry.update(
+                score=sc.total,
+                score_se=float(math.sqrt(n * np.var(sc.elpd))),
+                delta=float(diff.sum()),
+                delta_se=float(math.sqrt(n * np.var(diff))),
+                chi2=fit.chi2,
+                steps=fit.steps,
+            )
         ranking.append(entry)
     ok = [e for e in ranking if e["status"] == "ok"]
     ranking = sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
-    winners = [e for e in ranking if e["status"] == "ok" and e["effect"] != "baseline" and e["delta"] >= WIN_NATS
-               and e["delta"] >= WIN_SE * e["delta_se"]]  # fmt: skip
+    winners = [
+        e
+        for e in ranking
+        if e["status"] == "ok"
+        and e["effect"] != "baseline"
+        and e["delta"] >= WIN_NATS
+        and e["delta"] >= WIN_SE * e["delta_se"]
+    ]
     return ranking, winners[0]["effect"] if winners else "baseline"
 
 
@@ -288,33 +344,55 @@ def _winner_record(chosen: str, fits: dict, before_est: dict, after_est: dict) -
     if chosen == "baseline":
         return None
     return {
-        "effect": chosen, "description": EFFECTS[chosen].description, "layer": EFFECTS[chosen].layer,
+        "effect": chosen,
+        "description": EFFECTS[chosen].description,
+        "layer": EFFECTS[chosen].layer,
         "parameters": _parameter_report(fits[chosen], EFFECTS[chosen].parameters),
-        "estimates_before": before_est, "estimates_after": after_est,
-        "gauge_pressure_shift_percent": [100 * (a["value"] / b["value"] - 1) for a, b in
-                                         zip(after_est["gauge_pressure"], before_est["gauge_pressure"])],
-        "young_modulus_shift_percent": 100 * (after_est["young_modulus"]["value"]
-                                              / before_est["young_modulus"]["value"] - 1),
-    }  # fmt: skip
+        "estimates_before": before_est,
+        "estimates_after": after_est,
+        "gauge_pressure_shift_percent": [
+            100 * (a["value"] / b["value"] - 1)
+            for a, b in zip(after_est["gauge_pressure"], before_est["gauge_pressure"])
+        ],
+        "young_modulus_shift_percent": 100
+        * (after_est["young_modulus"]["value"] / before_est["young_modulus"]["value"] - 1),
+    }
 
 
-def _baseline_record(baseline: str, gas: str, wrinkle_law: str, base: StudyArrays, baseline_free, before_est: dict,
-                     study: Study) -> dict:  # fmt: skip
-    return {"name": baseline, "gas": gas, "wrinkle_law": wrinkle_law, "engine": "axisym",
-            "indenter_radius": {"value": float(base.indenter_radius), "unit": "m"},
-            "free": list(baseline_free), "estimates": before_est,
-            "noise": {"depth_scatter_a": {"value": study.depth_noise[0], "unit": "m^2"},
-                      "depth_scatter_b": {"value": study.depth_noise[1], "unit": "1"},
-                      "trial_offset_std": {"value": study.trial_offset_std, "unit": "m"}}}  # fmt: skip
+def _baseline_record(
+    baseline: str, gas: str, wrinkle_law: str, base: StudyArrays, baseline_free, before_est: dict, study: Study
+) -> dict:
+    return {
+        "name": baseline,
+        "gas": gas,
+        "wrinkle_law": wrinkle_law,
+        "engine": "axisym",
+        "indenter_radius": {"value": float(base.indenter_radius), "unit": "m"},
+        "free": list(baseline_free),
+        "estimates": before_est,
+        "noise": {
+            "depth_scatter_a": {"value": study.depth_noise[0], "unit": "m^2"},
+            "depth_scatter_b": {"value": study.depth_noise[1], "unit": "1"},
+            "trial_offset_std": {"value": study.trial_offset_std, "unit": "m"},
+        },
+    }
 
 
 def _sessions_record(study: Study) -> list[dict]:
-    return [{"path": str(s.source), "object": s.object_name, "radius": {"value": s.radius, "unit": "m"},
-             "manometer_gauge_pressure": None if s.manometer_gauge_pressure is None else
-             {"value": s.manometer_gauge_pressure, "unit": "Pa"},
-             "trials": int(s.trial_ids.size), "samples": int(s.depth.size),
-             "shape_points": int(np.sum(study.shape_session == i))}
-            for i, s in enumerate(study.sessions)]  # fmt: skip
+    return [
+        {
+            "path": str(s.source),
+            "object": s.object_name,
+            "radius": {"value": s.radius, "unit": "m"},
+            "manometer_gauge_pressure": None
+            if s.manometer_gauge_pressure is None
+            else {"value": s.manometer_gauge_pressure, "unit": "Pa"},
+            "trials": int(s.trial_ids.size),
+            "samples": int(s.depth.size),
+            "shape_points": int(np.sum(study.shape_session == i)),
+        }
+        for i, s in enumerate(study.sessions)
+    ]
 
 
 def diagnose(
@@ -366,8 +444,9 @@ def diagnose(
     verdict = "unexplained" if misfit_p < MISFIT_P else ("none" if chosen == "baseline" else chosen)
     before_est, after_est = _session_estimates(fits["baseline"]), _session_estimates(fits[chosen])
     kept = not_excluded(ranking, scores, WIN_NATS, WIN_SE)
-    robust = robust_range(kept, {name: _session_estimates(fits[name]) for name in {k["effect"] for k in kept} | {chosen}},
-                          chosen)
+    robust = robust_range(
+        kept, {name: _session_estimates(fits[name]) for name in {k["effect"] for k in kept} | {chosen}}, chosen
+    )
     report = {
         "verdict": verdict,
         "ranking": ranking,
@@ -381,15 +460,22 @@ def diagnose(
         "separating": separating(kept, chosen, robust),
         "winner": _winner_record(chosen, fits, before_est, after_est),
         "misfit_p_value": misfit_p,
-        "decision": {"win_se": WIN_SE, "win_nats": WIN_NATS, "misfit_p": MISFIT_P,
-                     "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum"},  # fmt: skip
-        "baseline": {**_baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
-                     "measurement": None if measurement is None else measurement.name,
-                     "effects_in_measurement": list(in_baseline)},
+        "decision": {
+            "win_se": WIN_SE,
+            "win_nats": WIN_NATS,
+            "misfit_p": MISFIT_P,
+            "score": "leave-one-trial-out elpd, exact for the model linearised at each optimum",
+        },
+        "baseline": {
+            **_baseline_record(baseline, gas, wrinkle_law, base, baseline_free, before_est, study),
+            "measurement": None if measurement is None else measurement.name,
+            "effects_in_measurement": list(in_baseline),
+        },
         "sessions": _sessions_record(study),
     }
-    return Diagnosis(report=report, study=study, fits=fits, scores=scores, points_before=points_before,
-                     points_after=points_after)
+    return Diagnosis(
+        report=report, study=study, fits=fits, scores=scores, points_before=points_before, points_after=points_after
+    )
 
 
 def _progress_reporter(progress, total: int):

@@ -34,27 +34,72 @@ import numpy as np
 from .._errors import InvalidInputError
 
 GLOBAL_PARAMETERS = (
-    "young_modulus", "thickness", "radius", "finger_compliance", "depth_offset", "force_gain",
-    "force_exponent", "indenter_radius", "gas_exponent", "stiffening", "body_mass", "friction_coefficient", "pad_exponent",
-)  # fmt: skip
+    "young_modulus",
+    "thickness",
+    "radius",
+    "finger_compliance",
+    "depth_offset",
+    "force_gain",
+    "force_exponent",
+    "indenter_radius",
+    "gas_exponent",
+    "stiffening",
+    "body_mass",
+    "friction_coefficient",
+    "pad_exponent",
+)
 UNITS = {
-    "gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
-    "finger_compliance": "m/N", "depth_offset": "m", "force_gain": "1", "force_exponent": "1",
-    "indenter_radius": "m", "gas_exponent": "1", "stiffening": "1", "body_mass": "kg", "friction_coefficient": "1",
+    "gauge_pressure": "Pa",
+    "young_modulus": "Pa",
+    "thickness": "m",
+    "radius": "m",
+    "finger_compliance": "m/N",
+    "depth_offset": "m",
+    "force_gain": "1",
+    "force_exponent": "1",
+    "indenter_radius": "m",
+    "gas_exponent": "1",
+    "stiffening": "1",
+    "body_mass": "kg",
+    "friction_coefficient": "1",
     "pad_exponent": "1",
-}  # fmt: skip
-LOG_PARAMETERS = frozenset({"gauge_pressure", "young_modulus", "thickness", "radius", "force_gain",
-                            "indenter_radius", "body_mass", "friction_coefficient"})  # fmt: skip
+}
+LOG_PARAMETERS = frozenset(
+    {
+        "gauge_pressure",
+        "young_modulus",
+        "thickness",
+        "radius",
+        "force_gain",
+        "indenter_radius",
+        "body_mass",
+        "friction_coefficient",
+    }
+)
 # the finger never shrinks below half its nominal radius: a fingertip is no needle, and a contact
 # patch smaller than the engine's elements makes the depth a kinked function of the radius, on
 # which Levenberg–Marquardt stalls (docs/rig.md)
 MIN_INDENTER_FRACTION = 0.5
 # (scale of u, prior std of u) of the effect parameters that are linear in u
-LINEAR_SCALE = {"finger_compliance": 1e-4, "depth_offset": 1e-3, "force_exponent": 0.1, "gas_exponent": 0.5,
-                "stiffening": 10.0, "pad_exponent": 0.1}  # fmt: skip
-PRIOR_STD = {"finger_compliance": 10.0, "depth_offset": 10.0, "force_gain": 0.3, "force_exponent": 3.0,
-             "indenter_radius": 1.0, "gas_exponent": 2.0, "stiffening": 3.0, "friction_coefficient": 1.5,
-             "pad_exponent": 4.0}  # fmt: skip
+LINEAR_SCALE = {
+    "finger_compliance": 1e-4,
+    "depth_offset": 1e-3,
+    "force_exponent": 0.1,
+    "gas_exponent": 0.5,
+    "stiffening": 10.0,
+    "pad_exponent": 0.1,
+}
+PRIOR_STD = {
+    "finger_compliance": 10.0,
+    "depth_offset": 10.0,
+    "force_gain": 0.3,
+    "force_exponent": 3.0,
+    "indenter_radius": 1.0,
+    "gas_exponent": 2.0,
+    "stiffening": 3.0,
+    "friction_coefficient": 1.5,
+    "pad_exponent": 4.0,
+}
 FRICTION_REFERENCE = 0.5  # [-] μ at u = 0: rubber on a table
 FREE_THICKNESS_STD = 0.5  # [-] prior std of log h under ``wall_thickness``: h within ×/÷ 2.7 at 2σ
 WEIGHED_MASS_STD = 0.1  # [-] prior std of log m when the session states the mass
@@ -77,32 +122,75 @@ class Effect:
     description: str
 
 
-EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect("finger_compliance", "measurement", ("finger_compliance",),
-           "the finger pad compresses by c·F, and the depth read from the finger includes it: "
-           "depth = w0 + c F [c in m/N] (a linear pad; a rig may give it a power law, shelljax.rig)"),
-    Effect("depth_offset", "measurement", ("depth_offset",),
-           "a zero-point error of the depth reading, the same for every sample: depth = w0 + δ [m]"),
-    Effect("force_sensor_gain", "measurement", ("force_gain",),
-           "the thin-film sensor's calibration is off by a factor: F_true = g F_recorded"),
-    Effect("force_sensor_nonlinearity", "measurement", ("force_exponent",),
-           "the thin-film sensor responds as a power law about the mid force F_ref: "
-           "F_true = F_ref (F_recorded / F_ref)^p"),
-    Effect("indenter_size", "contact", ("indenter_radius",),
-           "the finger's contact radius a differs from the assumed 8 mm sphere"),
-    Effect("gas", "physics", ("gas_exponent",),
-           "the gas law: p V^κ constant, κ = 0 a prescribed pressure, 1 isothermal, 1.4 adiabatic"),
-    Effect("material_stiffening", "physics", ("stiffening",),
-           "a Gent wall instead of Neo-Hookean: the shear energy −μ/(2s) ln(1 − s I₁) stiffens with "
-           "stretch, s = 1/J_m"),
-    Effect("wall_thickness", "physics", ("thickness",),
-           "the wall thickness h is off its calliper value (the calliper prior is widened to ×/÷ 1.6 at 1σ)"),
-    Effect("self_weight", "physics", ("body_mass",),
-           "gravity on the object: its weight m g, spread over the wall, presses it on the ground"),
-    Effect("ground_friction", "contact", ("friction_coefficient",),
-           "Coulomb friction μ between the object and the ground (lagged, smoothed): the contact disc "
-           "cannot slide freely as it grows"),
-)}  # fmt: skip
+EFFECTS: dict[str, Effect] = {
+    e.name: e
+    for e in (
+        Effect(
+            "finger_compliance",
+            "measurement",
+            ("finger_compliance",),
+            "the finger pad compresses by c·F, and the depth read from the finger includes it: "
+            "depth = w0 + c F [c in m/N] (a linear pad; a rig may give it a power law, shelljax.rig)",
+        ),
+        Effect(
+            "depth_offset",
+            "measurement",
+            ("depth_offset",),
+            "a zero-point error of the depth reading, the same for every sample: depth = w0 + δ [m]",
+        ),
+        Effect(
+            "force_sensor_gain",
+            "measurement",
+            ("force_gain",),
+            "the thin-film sensor's calibration is off by a factor: F_true = g F_recorded",
+        ),
+        Effect(
+            "force_sensor_nonlinearity",
+            "measurement",
+            ("force_exponent",),
+            "the thin-film sensor responds as a power law about the mid force F_ref: "
+            "F_true = F_ref (F_recorded / F_ref)^p",
+        ),
+        Effect(
+            "indenter_size",
+            "contact",
+            ("indenter_radius",),
+            "the finger's contact radius a differs from the assumed 8 mm sphere",
+        ),
+        Effect(
+            "gas",
+            "physics",
+            ("gas_exponent",),
+            "the gas law: p V^κ constant, κ = 0 a prescribed pressure, 1 isothermal, 1.4 adiabatic",
+        ),
+        Effect(
+            "material_stiffening",
+            "physics",
+            ("stiffening",),
+            "a Gent wall instead of Neo-Hookean: the shear energy −μ/(2s) ln(1 − s I₁) stiffens with "
+            "stretch, s = 1/J_m",
+        ),
+        Effect(
+            "wall_thickness",
+            "physics",
+            ("thickness",),
+            "the wall thickness h is off its calliper value (the calliper prior is widened to ×/÷ 1.6 at 1σ)",
+        ),
+        Effect(
+            "self_weight",
+            "physics",
+            ("body_mass",),
+            "gravity on the object: its weight m g, spread over the wall, presses it on the ground",
+        ),
+        Effect(
+            "ground_friction",
+            "contact",
+            ("friction_coefficient",),
+            "Coulomb friction μ between the object and the ground (lagged, smoothed): the contact disc "
+            "cannot slide freely as it grows",
+        ),
+    )
+}
 
 
 def check_effect_names(names) -> tuple[str, ...]:

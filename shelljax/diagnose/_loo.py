@@ -61,16 +61,22 @@ def fit_candidate(data: StudyArrays, wrinkle_law: str, u_start: np.ndarray, max_
     for _ in range(RESTARTS + 1):
         # A restart from where LM stopped gets a fresh trust region: one that shrank on the engine's
         # round-off far from the optimum then takes full steps again.
-        out, converged, finite, promised = solve_least_squares(problem, u, FIT_TOLERANCE, FIT_TOLERANCE, max_steps,
-                                                               OPTIMALITY_TOLERANCE)  # fmt: skip
+        out, converged, finite, promised = solve_least_squares(
+            problem, u, FIT_TOLERANCE, FIT_TOLERANCE, max_steps, OPTIMALITY_TOLERANCE
+        )
         if converged or not finite:
             break
         u = out["u"]
     free = np.asarray(data.free)
     jac = np.asarray(out["jacobian"])[:, free]
-    message = "" if converged else (
-        f"Levenberg-Marquardt stopped after {int(out['steps'])} steps without converging (forward model finite: "
-        f"{finite}, χ² a Gauss-Newton step would still remove: {promised:.3g})")  # fmt: skip
+    message = (
+        ""
+        if converged
+        else (
+            f"Levenberg-Marquardt stopped after {int(out['steps'])} steps without converging (forward model finite: "
+            f"{finite}, χ² a Gauss-Newton step would still remove: {promised:.3g})"
+        )
+    )
     covariance = np.full((free.sum(), free.sum()), np.nan)
     if converged:
         try:
@@ -79,9 +85,18 @@ def fit_candidate(data: StudyArrays, wrinkle_law: str, u_start: np.ndarray, max_
             converged, message = False, "the fitted parameters are not identified by the data (singular Jacobian)"
     residual = np.asarray(out["residual"])
     pred = jax.tree_util.tree_map(np.asarray, out["prediction"][0])
-    return CandidateFit(data=data, u=np.asarray(out["u"]), jacobian=jac, residual=residual, covariance=covariance,
-                        chi2=float(residual @ residual), steps=int(out["steps"]), converged=converged,
-                        message=message, prediction=pred)  # fmt: skip
+    return CandidateFit(
+        data=data,
+        u=np.asarray(out["u"]),
+        jacobian=jac,
+        residual=residual,
+        covariance=covariance,
+        chi2=float(residual @ residual),
+        steps=int(out["steps"]),
+        converged=converged,
+        message=message,
+        prediction=pred,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,8 +128,9 @@ def _row_layout(data: StudyArrays):
     raw[n_d:, n_d:] = np.diag(np.concatenate([np.ones(data.count.shape[0]), np.asarray(data.shape_std)]))
     log_jac = np.asarray(data.depth_unit_constant)
     shape_unit = np.asarray(data.shape_unit)
-    log_jac = log_jac - np.bincount(shape_unit, weights=np.log(np.asarray(data.shape_std)) + 0.5 * math.log(2 * math.pi),
-                                    minlength=log_jac.size)  # fmt: skip
+    log_jac = log_jac - np.bincount(
+        shape_unit, weights=np.log(np.asarray(data.shape_std)) + 0.5 * math.log(2 * math.pi), minlength=log_jac.size
+    )
     log_jac = log_jac - 0.5 * math.log(2 * math.pi) * np.bincount(np.asarray(data.count_unit), minlength=log_jac.size)
     return units, raw, log_jac
 

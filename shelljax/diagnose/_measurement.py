@@ -35,11 +35,14 @@ class MeasurementPrior:
 
 def widened_grid(data: StudyArrays, forces_true, span: tuple[float, float]) -> StudyArrays:
     """``data`` with its engine force grid [N] (reference frame) covering ``forces_true`` [N] by ``span``."""
-    return eqx.tree_at(lambda d: d.grid, data, jnp.linspace(*engine_force_bounds(data.radius, forces_true, span), N_GRID))
+    return eqx.tree_at(
+        lambda d: d.grid, data, jnp.linspace(*engine_force_bounds(data.radius, forces_true, span), N_GRID)
+    )
 
 
-def with_measurement(data: StudyArrays, *, free: tuple[str, ...] = (), fixes: dict | None = None,
-                     prior: tuple | None = None) -> StudyArrays:
+def with_measurement(
+    data: StudyArrays, *, free: tuple[str, ...] = (), fixes: dict | None = None, prior: tuple | None = None
+) -> StudyArrays:
     """``data`` with the global parameters ``free`` freed (the gauge pressures stay free), the scaled
     values ``fixes`` (name → u) set, and ``prior`` = (parameters, mean u, covariance) as a correlated
     normal prior replacing the weak one of those parameters (which are freed too)."""
@@ -58,13 +61,17 @@ def with_measurement(data: StudyArrays, *, free: tuple[str, ...] = (), fixes: di
         whitening[np.ix_(index, index)] = np.linalg.cholesky(np.linalg.inv(cov)).T
         mean[index] = mean_u
         std[index] = np.inf  # the chain's prior replaces the diagnosis's weak one
-    return eqx.tree_at(lambda d: (d.free, d.u_base, d.rig_whitening, d.rig_mean, d.prior_std), data,
-                       tuple(jnp.asarray(v) for v in (mask, u_base, whitening, mean, std)))  # fmt: skip
+    return eqx.tree_at(
+        lambda d: (d.free, d.u_base, d.rig_whitening, d.rig_mean, d.prior_std),
+        data,
+        tuple(jnp.asarray(v) for v in (mask, u_base, whitening, mean, std)),
+    )
 
 
 def measured_baseline(data: StudyArrays, measurement: MeasurementPrior | None) -> StudyArrays:
     """``data`` with ``measurement``'s chain as its baseline (unchanged when None)."""
     if measurement is None:
         return data
-    return with_measurement(data, fixes=measurement.fixes,
-                            prior=(measurement.parameters, measurement.mean, measurement.covariance))
+    return with_measurement(
+        data, fixes=measurement.fixes, prior=(measurement.parameters, measurement.mean, measurement.covariance)
+    )

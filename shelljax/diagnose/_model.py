@@ -104,8 +104,14 @@ class StudyArrays(eqx.Module):
     n_units: int = eqx.field(static=True)
 
 
-def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: float = PAPER_INDENTER_RADIUS,
-                 force_ref: float | None = None, manometer_std: float = MANOMETER_STD) -> StudyArrays:
+def study_arrays(
+    study: Study,
+    *,
+    gas: str = "isothermal",
+    indenter_radius: float = PAPER_INDENTER_RADIUS,
+    force_ref: float | None = None,
+    manometer_std: float = MANOMETER_STD,
+) -> StudyArrays:
     """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only).
 
     ``force_ref`` [N]: the force about which the sensor's and the pad's power laws are written
@@ -135,19 +141,40 @@ def study_arrays(study: Study, *, gas: str = "isothermal", indenter_radius: floa
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
     i = lambda v: jnp.asarray(v, jnp.int32)  # noqa: E731
     return StudyArrays(
-        depth_session=i(study.depth_session), depth_unit=i(study.depth_unit), force=f(study.force),
-        depth=f(study.depth), whitening=f(study.whitening), count_session=i(study.count_session),
-        count_unit=i(study.count_unit), count=f(study.count), shape_session=i(study.shape_session),
-        shape_unit=i(study.shape_unit), shape_kind=i(study.shape_kind), shape_force=f(study.shape_force),
-        shape_value=f(study.shape_value), shape_std=f(study.shape_std), depth_unit_constant=f(constant),
-        radius=f(study.radius), start_pressure=f(study.start_pressure), start_modulus=f(study.start_modulus),
-        thickness=f(study.thickness), poisson_ratio=f(study.poisson_ratio),
-        mass_ref=f(study.mass if study.mass is not None else UNWEIGHED_MASS), indenter_radius=f(indenter_radius),
-        gas_exponent=f(GAS_EXPONENTS[gas]), gas_volume_ratio=f(study.gas_volume_ratio),
-        force_ref=f(force_ref), grid=f(np.linspace(*engine_force_bounds(study.radius, study.force, GRID_SPAN), N_GRID)),
-        prior_mean=f(mean), prior_std=f(std), free=jnp.asarray(np.arange(n_u) < s), u_base=f(np.zeros(n_u)),
-        rig_whitening=f(np.zeros((n_u, n_u))), rig_mean=f(np.zeros(n_u)), n_units=study.n_units,
-    )  # fmt: skip
+        depth_session=i(study.depth_session),
+        depth_unit=i(study.depth_unit),
+        force=f(study.force),
+        depth=f(study.depth),
+        whitening=f(study.whitening),
+        count_session=i(study.count_session),
+        count_unit=i(study.count_unit),
+        count=f(study.count),
+        shape_session=i(study.shape_session),
+        shape_unit=i(study.shape_unit),
+        shape_kind=i(study.shape_kind),
+        shape_force=f(study.shape_force),
+        shape_value=f(study.shape_value),
+        shape_std=f(study.shape_std),
+        depth_unit_constant=f(constant),
+        radius=f(study.radius),
+        start_pressure=f(study.start_pressure),
+        start_modulus=f(study.start_modulus),
+        thickness=f(study.thickness),
+        poisson_ratio=f(study.poisson_ratio),
+        mass_ref=f(study.mass if study.mass is not None else UNWEIGHED_MASS),
+        indenter_radius=f(indenter_radius),
+        gas_exponent=f(GAS_EXPONENTS[gas]),
+        gas_volume_ratio=f(study.gas_volume_ratio),
+        force_ref=f(force_ref),
+        grid=f(np.linspace(*engine_force_bounds(study.radius, study.force, GRID_SPAN), N_GRID)),
+        prior_mean=f(mean),
+        prior_std=f(std),
+        free=jnp.asarray(np.arange(n_u) < s),
+        u_base=f(np.zeros(n_u)),
+        rig_whitening=f(np.zeros((n_u, n_u))),
+        rig_mean=f(np.zeros(n_u)),
+        n_units=study.n_units,
+    )
 
 
 def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array, "..."]]:
@@ -156,17 +183,24 @@ def physical(u: Float[Array, " u"], data: StudyArrays) -> dict[str, Float[Array,
     s = data.start_pressure.shape[0]
     get = {name: u[s + i] for i, name in enumerate(GLOBAL_PARAMETERS)}
     out = {"gauge_pressure": data.start_pressure * jnp.exp(u[:s])}
-    refs = {"young_modulus": data.start_modulus, "thickness": data.thickness, "radius": 1.0, "force_gain": 1.0,
-            "indenter_radius": data.indenter_radius, "body_mass": data.mass_ref,
-            "friction_coefficient": FRICTION_REFERENCE}  # fmt: skip
+    refs = {
+        "young_modulus": data.start_modulus,
+        "thickness": data.thickness,
+        "radius": 1.0,
+        "force_gain": 1.0,
+        "indenter_radius": data.indenter_radius,
+        "body_mass": data.mass_ref,
+        "friction_coefficient": FRICTION_REFERENCE,
+    }
     for name in GLOBAL_PARAMETERS:
         if name in LOG_PARAMETERS:
             out[name] = refs[name] * jnp.exp(get[name])
         else:
             out[name] = LINEAR_SCALE[name] * get[name]
     out["radius"] = data.radius * out["radius"]  # per session
-    out["indenter_radius"] = data.indenter_radius * (MIN_INDENTER_FRACTION + (1 - MIN_INDENTER_FRACTION) * jnp.exp(
-        get["indenter_radius"]))  # fmt: skip
+    out["indenter_radius"] = data.indenter_radius * (
+        MIN_INDENTER_FRACTION + (1 - MIN_INDENTER_FRACTION) * jnp.exp(get["indenter_radius"])
+    )
     out["force_exponent"] = 1.0 + out["force_exponent"]
     out["pad_exponent"] = 1.0 + out["pad_exponent"]
     out["gas_exponent"] = data.gas_exponent + out["gas_exponent"]
@@ -200,17 +234,23 @@ def engine_inputs(phys, data: StudyArrays):
     """The engine's ShellProperties (fields (s,): P_g, E, h/scale, ν) and the CurvePhysics of every session."""
     similarity = Similarity.between(phys["radius"], R_REF)
     pressure, young, thick, nu = phys["gauge_pressure"], phys["young_modulus"], phys["thickness"], data.poisson_ratio
-    shell = ShellProperties(gauge_pressure=pressure, young_modulus=jnp.broadcast_to(young, pressure.shape),
-                            thickness=similarity.length_to_engine(thick), poisson_ratio=jnp.broadcast_to(nu, pressure.shape))  # fmt: skip
+    shell = ShellProperties(
+        gauge_pressure=pressure,
+        young_modulus=jnp.broadcast_to(young, pressure.shape),
+        thickness=similarity.length_to_engine(thick),
+        poisson_ratio=jnp.broadcast_to(nu, pressure.shape),
+    )
     stretch = jax.vmap(lambda p, r: inflation_stretch(p, r, young, thick, nu))(pressure, phys["radius"])
     rest_area = 4.0 * jnp.pi * (phys["radius"] / stretch) ** 2
     ones = jnp.ones_like(pressure)
     physics = CurvePhysics(
-        indenter_radius=similarity.length_to_engine(phys["indenter_radius"]), gas_volume_ratio=data.gas_volume_ratio * ones,
-        gas_exponent=phys["gas_exponent"] * ones, stiffening=phys["stiffening"] * ones,
+        indenter_radius=similarity.length_to_engine(phys["indenter_radius"]),
+        gas_volume_ratio=data.gas_volume_ratio * ones,
+        gas_exponent=phys["gas_exponent"] * ones,
+        stiffening=phys["stiffening"] * ones,
         areal_weight=phys["body_mass"] * STANDARD_GRAVITY / rest_area,
         friction_coefficient=phys["friction_coefficient"] * ones,
-    )  # fmt: skip
+    )
     return shell, physics
 
 
@@ -243,15 +283,19 @@ def predict(u, data: StudyArrays, curves, wrinkle_law: str):
     n_sessions = phys["radius"].shape[0]
     top = jax.ops.segment_max(f_ref, data.depth_session, num_segments=n_sessions)
     if wrinkle_law == "scaling":
-        per_session = scaling_wrinkle_count(phys["gauge_pressure"], phys["radius"], phys["young_modulus"],
-                                            phys["thickness"], data.poisson_ratio)  # fmt: skip
+        per_session = scaling_wrinkle_count(
+            phys["gauge_pressure"], phys["radius"], phys["young_modulus"], phys["thickness"], data.poisson_ratio
+        )
     else:
         per_session = jax.vmap(lambda n, f: jnp.interp(f, data.grid, n))(curves.wrinkle_count, top)
     count = per_session[data.count_session]
     shape_fields = jnp.stack([curves.height, curves.upper_diameter, curves.contact_diameter, curves.sunken_depth])
     shape_ref = at_shape.force_to_engine(true_force(data.shape_force, phys, data))
-    shape = at_shape.length_from_engine(jax.vmap(
-        lambda k, s, f: jnp.interp(f, data.grid, shape_fields[k, s]))(data.shape_kind, data.shape_session, shape_ref))
+    shape = at_shape.length_from_engine(
+        jax.vmap(lambda k, s, f: jnp.interp(f, data.grid, shape_fields[k, s]))(
+            data.shape_kind, data.shape_session, shape_ref
+        )
+    )
     # every grid level up to one above the largest force a session needs must have converged
     needed = jnp.maximum(top, jax.ops.segment_max(shape_ref, data.shape_session, num_segments=n_sessions))
     step = data.grid[1] - data.grid[0]
@@ -270,8 +314,11 @@ def prior_residuals(u, data: StudyArrays):
 
 def data_residuals(pred, data: StudyArrays):
     """Whitened residuals: depth (W r, by trial), counts (σ_n = 1), shape (r / σ)."""
-    return (data.whitening @ (pred["depth"] - data.depth), pred["count"] - data.count,
-            (pred["shape"] - data.shape_value) / data.shape_std)
+    return (
+        data.whitening @ (pred["depth"] - data.depth),
+        pred["count"] - data.count,
+        (pred["shape"] - data.shape_value) / data.shape_std,
+    )
 
 
 def unit_log_likelihood(pred, data: StudyArrays):
@@ -279,8 +326,9 @@ def unit_log_likelihood(pred, data: StudyArrays):
     depth_white, _, shape_white = data_residuals(pred, data)
     ll = jax.ops.segment_sum(-0.5 * depth_white**2, data.depth_unit, num_segments=data.n_units)
     ll = ll + data.depth_unit_constant
-    ll = ll + jax.ops.segment_sum(count_log_likelihood(data.count, pred["count"]), data.count_unit,
-                                  num_segments=data.n_units)  # fmt: skip
+    ll = ll + jax.ops.segment_sum(
+        count_log_likelihood(data.count, pred["count"]), data.count_unit, num_segments=data.n_units
+    )
     shape_ll = -0.5 * shape_white**2 - jnp.log(data.shape_std) - 0.5 * math.log(2 * math.pi)
     return ll + jax.ops.segment_sum(shape_ll, data.shape_unit, num_segments=data.n_units)
 

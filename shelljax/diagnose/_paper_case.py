@@ -116,8 +116,15 @@ def reconcile(scans_by_ball: dict, effects=tuple(KS_SCANS)) -> list[dict]:
             continue
         misfit = {u: float(np.sqrt(np.mean(np.log(np.asarray(ks) / PAPER_KS) ** 2))) for u, ks in full.items()}
         best = min(misfit, key=misfit.get)
-        result.append({"effect": effect, "best_u": best, "rms_log_error": misfit[best],
-                       "k_s_at_best": full[best], "k_s_range_at_best": [min(full[best]), max(full[best])]})  # fmt: skip
+        result.append(
+            {
+                "effect": effect,
+                "best_u": best,
+                "rms_log_error": misfit[best],
+                "k_s_at_best": full[best],
+                "k_s_range_at_best": [min(full[best]), max(full[best])],
+            }
+        )
     return sorted(result, key=lambda r: r["rms_log_error"])
 
 
@@ -125,13 +132,21 @@ def reconciliation_table(title: str, table: list[dict]) -> str:
     """:func:`reconcile`'s result as lines of text under ``title``."""
     lines = [title, f"{'effect':>26s} {'best u':>7s} {'rms |log k_s/0.64|':>19s}  k_s range at best"]
     for r in table:
-        lines.append(f"{r['effect']:>26s} {r['best_u']:7.2f} {r['rms_log_error']:19.3f}  "
-                     f"{r['k_s_range_at_best'][0]:.3f} … {r['k_s_range_at_best'][1]:.3f}")  # fmt: skip
+        lines.append(
+            f"{r['effect']:>26s} {r['best_u']:7.2f} {r['rms_log_error']:19.3f}  "
+            f"{r['k_s_range_at_best'][0]:.3f} … {r['k_s_range_at_best'][1]:.3f}"
+        )
     return "\n".join(lines)
 
 
-def shape_sensitivity(pressure=1300.0, force=20.0, radius=0.13, thickness=0.9e-3, young_modulus=2.34e6,
-                      poisson_ratio=DEFAULT_POISSON_RATIO) -> list[dict]:  # fmt: skip
+def shape_sensitivity(
+    pressure=1300.0,
+    force=20.0,
+    radius=0.13,
+    thickness=0.9e-3,
+    young_modulus=2.34e6,
+    poisson_ratio=DEFAULT_POISSON_RATIO,
+) -> list[dict]:
     """Change [%] of H, D_u, D_l and d of a ball (P_g [Pa], R [m], h [m], E [Pa], ν [-]) at
     ``force`` [N] under each of :data:`SHAPE_VARIANTS`, with the values [m]."""
     from ..axisym import CurvePhysics, indentation_curves, inflation_stretch
@@ -144,14 +159,20 @@ def shape_sensitivity(pressure=1300.0, force=20.0, radius=0.13, thickness=0.9e-3
         weight = change.get("body_mass", 0.0) * STANDARD_GRAVITY / (4 * math.pi * (radius / stretch) ** 2)
         physics = CurvePhysics(
             indenter_radius=np.array([change.get("indenter_radius", PAPER_INDENTER_RADIUS)]),
-            gas_volume_ratio=np.ones(1), gas_exponent=np.array([change.get("gas_exponent", 1.0)]),
-            stiffening=np.array([change.get("stiffening", 0.0)]), areal_weight=np.array([weight]),
+            gas_volume_ratio=np.ones(1),
+            gas_exponent=np.array([change.get("gas_exponent", 1.0)]),
+            stiffening=np.array([change.get("stiffening", 0.0)]),
+            areal_weight=np.array([weight]),
             friction_coefficient=np.array([change.get("friction_coefficient", 0.0)]),
-        )  # fmt: skip
-        shell = ShellProperties(gauge_pressure=pressure, young_modulus=young_modulus, thickness=h,
-                                poisson_ratio=poisson_ratio, radius=radius)
-        curve = indentation_curves(shell, np.array([5.0, force * factor]), gas="polytropic",
-                                   physics=physics, workers=1)  # fmt: skip
+        )
+        shell = ShellProperties(
+            gauge_pressure=pressure,
+            young_modulus=young_modulus,
+            thickness=h,
+            poisson_ratio=poisson_ratio,
+            radius=radius,
+        )
+        curve = indentation_curves(shell, np.array([5.0, force * factor]), gas="polytropic", physics=physics, workers=1)
         rows.append({"label": label, "values_m": {k: float(getattr(curve, k)[0, -1]) for k in keys}})
     base = rows[0]["values_m"]
     for row in rows:

@@ -55,20 +55,30 @@ def robust_range(kept: list[dict], estimates: dict, chosen: str) -> dict:
         lo, hi = min(v["ci95"][0] for v in values), max(v["ci95"][1] for v in values)
         points = [v["value"] for v in values]
         own = get(estimates[chosen])
-        return {"range95": [lo, hi], "values": dict(zip(names, points)),
-                "spread_percent": 100.0 * (max(points) / min(points) - 1.0), "chosen_ci95": own["ci95"], "unit": "Pa"}
+        return {
+            "range95": [lo, hi],
+            "values": dict(zip(names, points)),
+            "spread_percent": 100.0 * (max(points) / min(points) - 1.0),
+            "chosen_ci95": own["ci95"],
+            "unit": "Pa",
+        }
 
     n_sessions = len(estimates[chosen]["gauge_pressure"])
-    out = {"gauge_pressure": [span(lambda e, i=i: e["gauge_pressure"][i]) for i in range(n_sessions)],
-           "young_modulus": span(lambda e: e["young_modulus"])}
+    out = {
+        "gauge_pressure": [span(lambda e, i=i: e["gauge_pressure"][i]) for i in range(n_sessions)],
+        "young_modulus": span(lambda e: e["young_modulus"]),
+    }
     e = out["young_modulus"]
     width = math.log(e["range95"][1] / e["range95"][0])
     own = math.log(e["chosen_ci95"][1] / e["chosen_ci95"][0])
     out["young_modulus"]["width_ratio"] = width / own if own > 0 else math.inf
-    out["warning"] = (f"E is not pinned down by this study: over the {len(names)} models it cannot exclude, E's 95 % range "
-                      f"is {e['range95'][0]:.4g}-{e['range95'][1]:.4g} Pa ({width / own:.1f}x the chosen model's "
-                      f"interval; point values spread {e['spread_percent']:.0f} %)"
-                      if width > SPREAD_WARNING * own else None)  # fmt: skip
+    out["warning"] = (
+        f"E is not pinned down by this study: over the {len(names)} models it cannot exclude, E's 95 % range "
+        f"is {e['range95'][0]:.4g}-{e['range95'][1]:.4g} Pa ({width / own:.1f}x the chosen model's "
+        f"interval; point values spread {e['spread_percent']:.0f} %)"
+        if width > SPREAD_WARNING * own
+        else None
+    )
     return out
 
 
@@ -76,5 +86,12 @@ def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
     """For each kept model besides the chosen: the measurement that separates it, and the factor E's
     95 % interval would shrink by once the study could exclude every model but the chosen one."""
     ratio = robust["young_modulus"]["width_ratio"]
-    return [{"effect": k["effect"], "measurement": SEPARATING_MEASUREMENT.get(k["effect"], "a measurement it moves"),
-             "young_modulus_interval_shrink": ratio} for k in kept if k["effect"] != chosen]  # fmt: skip
+    return [
+        {
+            "effect": k["effect"],
+            "measurement": SEPARATING_MEASUREMENT.get(k["effect"], "a measurement it moves"),
+            "young_modulus_interval_shrink": ratio,
+        }
+        for k in kept
+        if k["effect"] != chosen
+    ]

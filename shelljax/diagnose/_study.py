@@ -146,8 +146,9 @@ def _anova(sessions, levels):
         resid = full - full.mean(axis=1, keepdims=True) - full.mean(axis=0, keepdims=True) + full.mean()
         n_t, n_l = full.shape
         scale = n_t * n_l / ((n_t - 1) * (n_l - 1))  # E[resid²] = σ² (n_t−1)(n_l−1)/(n_t n_l)
-        cells += [(m, r * r * scale) for m, r in zip(np.broadcast_to(full.mean(axis=0), full.shape).ravel(),
-                                                     resid.ravel())]  # fmt: skip
+        cells += [
+            (m, r * r * scale) for m, r in zip(np.broadcast_to(full.mean(axis=0), full.shape).ravel(), resid.ravel())
+        ]
         trial_means = full.mean(axis=1)
         trial_ms += n_l * np.sum((trial_means - trial_means.mean()) ** 2)
         trial_dof += n_t - 1
@@ -214,12 +215,20 @@ def _shape_points(sessions, unit_of):
 
 def object_unknowns(study: Study) -> tuple[str, ...]:
     """The object's own global unknowns besides P_g: E, and h and R where they carry a std."""
-    return ("young_modulus",) + (("thickness",) if study.thickness_std > 0 else ()) + (
-        ("radius",) if study.radius_std > 0 else ())  # fmt: skip
+    return (
+        ("young_modulus",)
+        + (("thickness",) if study.thickness_std > 0 else ())
+        + (("radius",) if study.radius_std > 0 else ())
+    )
 
 
-def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, float]] | None = None, *,
-                min_trials: int = MIN_TRIALS, command: str = "diagnose") -> Study:
+def build_study(
+    sessions: Sequence[Session],
+    noise: tuple[float, tuple[float, float]] | None = None,
+    *,
+    min_trials: int = MIN_TRIALS,
+    command: str = "diagnose",
+) -> Study:
     """Check that ``sessions`` are of one object and lay out their data (see :class:`Study`).
 
     ``noise`` = (τ_t [m], (a [m²], b [-])) fixes the depth noise model instead of estimating it
@@ -258,29 +267,54 @@ def build_study(sessions: Sequence[Session], noise: tuple[float, tuple[float, fl
     count_unit = np.array([unit_of[(i, t)] for i, s in enumerate(sessions) for t in s.trial_ids])
     shape = _shape_points(sessions, unit_of)
     radius = np.array([s.radius for s in sessions])
-    manometer = np.array([np.nan if s.manometer_gauge_pressure is None else s.manometer_gauge_pressure
-                          for s in sessions])  # fmt: skip
+    manometer = np.array(
+        [np.nan if s.manometer_gauge_pressure is None else s.manometer_gauge_pressure for s in sessions]
+    )
     # start: the manometer where there is one, else the closed form's P_g with the paper's k_s
-    start_pressure = np.array([m if np.isfinite(m) else pressure_slope(s)[0].value / PAPER_KS
-                               for m, s in zip(manometer, sessions)])  # fmt: skip
+    start_pressure = np.array(
+        [m if np.isfinite(m) else pressure_slope(s)[0].value / PAPER_KS for m, s in zip(manometer, sessions)]
+    )
     # E from the wrinkle law at the starting pressures (the manometer's where known, not k_s's)
-    moduli = [modulus_from_wrinkles(p, s.radius, s.thickness, float(np.mean(s.wrinkle_counts)), s.poisson_ratio)
-              for p, s in zip(start_pressure, sessions) if np.mean(s.wrinkle_counts) > 0]  # fmt: skip
+    moduli = [
+        modulus_from_wrinkles(p, s.radius, s.thickness, float(np.mean(s.wrinkle_counts)), s.poisson_ratio)
+        for p, s in zip(start_pressure, sessions)
+        if np.mean(s.wrinkle_counts) > 0
+    ]
     masses = [s.mass for s in sessions if s.mass is not None]
-    volumes = [s.enclosed_volume / (4.0 / 3.0 * math.pi * s.radius**3) for s in sessions
-               if getattr(s, "enclosed_volume", None) is not None]  # fmt: skip
+    volumes = [
+        s.enclosed_volume / (4.0 / 3.0 * math.pi * s.radius**3)
+        for s in sessions
+        if getattr(s, "enclosed_volume", None) is not None
+    ]
     return Study(
-        sessions=sessions, depth_session=depth_session, depth_unit=depth_unit,
-        force=np.concatenate([s.force for s in sessions]), depth=depth, depth_std=depth_std,
-        whitening=_whitening(depth_unit, depth_std, tau), level=np.concatenate(levels),
-        count_session=count_session, count_unit=count_unit,
+        sessions=sessions,
+        depth_session=depth_session,
+        depth_unit=depth_unit,
+        force=np.concatenate([s.force for s in sessions]),
+        depth=depth,
+        depth_std=depth_std,
+        whitening=_whitening(depth_unit, depth_std, tau),
+        level=np.concatenate(levels),
+        count_session=count_session,
+        count_unit=count_unit,
         count=np.concatenate([s.wrinkle_counts for s in sessions]).astype(float),
-        shape_session=shape[0], shape_unit=shape[1], shape_kind=shape[2], shape_force=shape[3],
-        shape_value=shape[4], shape_std=shape[5], radius=radius, manometer=manometer,
-        start_pressure=start_pressure, radius_std=float(np.sqrt(np.mean([s.radius_std**2 for s in sessions]))),
-        thickness=sessions[0].thickness, thickness_std=sessions[0].thickness_std,
-        poisson_ratio=sessions[0].poisson_ratio, mass=float(np.mean(masses)) if masses else None,
+        shape_session=shape[0],
+        shape_unit=shape[1],
+        shape_kind=shape[2],
+        shape_force=shape[3],
+        shape_value=shape[4],
+        shape_std=shape[5],
+        radius=radius,
+        manometer=manometer,
+        start_pressure=start_pressure,
+        radius_std=float(np.sqrt(np.mean([s.radius_std**2 for s in sessions]))),
+        thickness=sessions[0].thickness,
+        thickness_std=sessions[0].thickness_std,
+        poisson_ratio=sessions[0].poisson_ratio,
+        mass=float(np.mean(masses)) if masses else None,
         gas_volume_ratio=float(np.mean(volumes)) if volumes else 1.0,
         start_modulus=float(np.exp(np.mean(np.log(moduli)))) if moduli else 1e6,
-        trial_offset_std=tau, depth_noise=scatter, units=tuple(units),
-    )  # fmt: skip
+        trial_offset_std=tau,
+        depth_noise=scatter,
+        units=tuple(units),
+    )

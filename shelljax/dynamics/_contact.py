@@ -140,7 +140,9 @@ class PowerLawContact(AbstractContactLaw):
     def __check_init__(self):
         check_positive("PowerLawContact.stiffness [N/m^p]", self.stiffness, "Give K > 0.")
         if not self.exponent >= 1.0:
-            raise InvalidInputError(f"PowerLawContact.exponent must be ≥ 1; got {self.exponent}. Use 1 (linear) or 1.5 (Hertz).")
+            raise InvalidInputError(
+                f"PowerLawContact.exponent must be ≥ 1; got {self.exponent}. Use 1 (linear) or 1.5 (Hertz)."
+            )
 
     def energy(self, gap):
         d = _compression(jnp.asarray(gap))
@@ -176,7 +178,9 @@ class TabulatedCompressionCurve(AbstractContactLaw):
                 f"TabulatedCompressionCurve needs as many compressions as forces (got {d.size} and {f.size}); give matching lists in m and N."
             )
         if not (np.all(np.isfinite(d)) and np.all(np.isfinite(f))) or d[0] < 0.0 or np.any(f < 0.0):
-            raise InvalidInputError("TabulatedCompressionCurve: compressions [m] and forces [N] must be finite and ≥ 0.")
+            raise InvalidInputError(
+                "TabulatedCompressionCurve: compressions [m] and forces [N] must be finite and ≥ 0."
+            )
         if d[0] > 0.0:
             d, f = np.concatenate([[0.0], d]), np.concatenate([[0.0], f])
         if d.size < 2 or np.any(np.diff(d) <= 0.0):
@@ -206,6 +210,11 @@ class TabulatedCompressionCurve(AbstractContactLaw):
 def ground(law: AbstractContactLaw, *, height: float = 0.0, friction=0.0, slip_tolerance=1e-4, damping=0.0) -> Plane:
     """The horizontal ground plane z = ``height`` [m] (normal +z) with the given contact law."""
     return Plane(
-        jnp.array([0.0, 0.0, height]), jnp.array([0.0, 0.0, 1.0]), law,
-        friction=friction, slip_tolerance=slip_tolerance, damping=damping, name="ground",
-    )  # fmt: skip
+        jnp.array([0.0, 0.0, height]),
+        jnp.array([0.0, 0.0, 1.0]),
+        law,
+        friction=friction,
+        slip_tolerance=slip_tolerance,
+        damping=damping,
+        name="ground",
+    )

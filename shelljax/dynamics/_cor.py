@@ -148,13 +148,23 @@ def measured_cor(trajectory: Trajectory) -> tuple[Impact, ...]:
             by_speed = v_out / v_in if v_in > 0.0 else float("nan")
             by_height = np.sqrt(max(bounce, 0.0) / drop) if g_n > 0.0 and drop > 0.0 else by_speed
             force = trajectory["contact_force_N"][k0 : k1 + 1, p] @ n
-            impacts.append(Impact(
-                plane=name, onset_s=float(t0), end_s=float(t1), contact_time_s=float(t1 - t0),
-                speed_in_m_per_s=float(v_in), speed_out_m_per_s=float(v_out), drop_height_m=drop,
-                bounce_height_m=bounce, cor=float(by_height), cor_from_speeds=float(by_speed),
-                peak_force_N=float(np.max(force)), max_compression_m=float(z0 - np.min(height[k0 : k1 + 1])),
-                max_contact_diameter_m=_max_contact_diameter(trajectory, edges, p, range(k0, k1 + 1)),
-            ))  # fmt: skip
+            impacts.append(
+                Impact(
+                    plane=name,
+                    onset_s=float(t0),
+                    end_s=float(t1),
+                    contact_time_s=float(t1 - t0),
+                    speed_in_m_per_s=float(v_in),
+                    speed_out_m_per_s=float(v_out),
+                    drop_height_m=drop,
+                    bounce_height_m=bounce,
+                    cor=float(by_height),
+                    cor_from_speeds=float(by_speed),
+                    peak_force_N=float(np.max(force)),
+                    max_compression_m=float(z0 - np.min(height[k0 : k1 + 1])),
+                    max_contact_diameter_m=_max_contact_diameter(trajectory, edges, p, range(k0, k1 + 1)),
+                )
+            )
     return tuple(sorted(impacts, key=lambda m: m.onset_s))
 
 
@@ -183,7 +193,9 @@ def calibrate_contact_damping(
     """
     lo, hi = (float(b) for b in bracket)
     if not 0.0 < target_cor <= 1.0:
-        raise InvalidInputError(f"target COR must be in (0, 1]; got {target_cor}. Measure it as √(bounce height / drop height).")
+        raise InvalidInputError(
+            f"target COR must be in (0, 1]; got {target_cor}. Measure it as √(bounce height / drop height)."
+        )
     if not 0.0 <= lo < hi:
         raise InvalidInputError(f"bracket must be 0 ≤ c_lo < c_hi [N·s/m]; got {bracket}.")
     evaluations = []
@@ -197,7 +209,9 @@ def calibrate_contact_damping(
         if isinstance(out, Trajectory):
             impacts = measured_cor(out)
             if not impacts:
-                raise InvalidInputError("the simulated run has no completed impact; run it longer so the body leaves the plane again.")
+                raise InvalidInputError(
+                    "the simulated run has no completed impact; run it longer so the body leaves the plane again."
+                )
             out = impacts[0].cor
         evaluations.append((float(c), float(out)))
         return float(out)

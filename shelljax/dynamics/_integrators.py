@@ -81,7 +81,9 @@ class AbstractIntegrator(eqx.Module):
         dt = jnp.asarray(dt)
         return Stage(start.time + dt, self.predictor(start, dt), self.inertia_factor() * dt * dt, start.position, dt)
 
-    def finish_stage(self, k: int, start: DynamicState, current: DynamicState, x_new: Float[Array, " n"], dt: Scalar) -> DynamicState:
+    def finish_stage(
+        self, k: int, start: DynamicState, current: DynamicState, x_new: Float[Array, " n"], dt: Scalar
+    ) -> DynamicState:
         """The state at the end of stage ``k`` from its minimiser's positions [m] (``advance`` by default)."""
         return self.advance(start, x_new, dt)
 
@@ -157,7 +159,13 @@ class TRBDF2(AbstractIntegrator):
         g, c1, c0, dd = self._coefficients()
         if k == 0:
             h = g * dt
-            return Stage(start.time + h, self.predictor(start, dt), 0.25 * h * h, start.position + 0.5 * h * start.velocity, 0.5 * h)
+            return Stage(
+                start.time + h,
+                self.predictor(start, dt),
+                0.25 * h * h,
+                start.position + 0.5 * h * start.velocity,
+                0.5 * h,
+            )
         reference = c1 * current.position - c0 * start.position
         x_hat = reference + dd * dt * (c1 * current.velocity - c0 * start.velocity)
         return Stage(start.time + dt, x_hat, (dd * dt) ** 2, reference, dd * dt)

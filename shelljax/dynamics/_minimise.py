@@ -39,8 +39,11 @@ def _solution(max_steps: int, y, converged, iterations, history, assemblies, mem
     iteration (NaN after the last); ``stats["assemblies"]``: Newton matrices assembled; ``state``:
     the memory kept for the next step. A loop that stopped early unconverged did so on a failed
     line search; one that ran its ``max_steps``, on the iteration bound."""
-    result = RESULTS.where(converged, RESULTS.successful,
-                           RESULTS.where(iterations < max_steps, RESULTS.line_search_failed, RESULTS.max_steps_reached))  # fmt: skip
+    result = RESULTS.where(
+        converged,
+        RESULTS.successful,
+        RESULTS.where(iterations < max_steps, RESULTS.line_search_failed, RESULTS.max_steps_reached),
+    )
     return Solution(y, result, iterations, history, {"assemblies": assemblies}, memory)
 
 
@@ -70,7 +73,9 @@ class AbstractMinimiser(eqx.Module):
         return None
 
     @abc.abstractmethod
-    def linear_solve(self, potential: IncrementalPotential, y: Float[Array, " m"], rhs: Float[Array, " m"]) -> Float[Array, " m"]:
+    def linear_solve(
+        self, potential: IncrementalPotential, y: Float[Array, " m"], rhs: Float[Array, " m"]
+    ) -> Float[Array, " m"]:
         """∇²Φ_inc(y)⁻¹ rhs, for rhs in [m] per [N] units of the cotangent."""
 
 
@@ -152,14 +157,22 @@ def newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m
         converged = small | jnp.all(g_new == 0.0)
         return dict(y=y_new, f=f_new, g=g_new, k=k + 1, done=converged | ~found, converged=converged, history=history)
 
-    init = dict(y=y0, f=potential.value(y0), g=potential.gradient(y0), k=jnp.asarray(0), done=jnp.asarray(False),
-                converged=jnp.asarray(False), history=history0)  # fmt: skip
+    init = dict(
+        y=y0,
+        f=potential.value(y0),
+        g=potential.gradient(y0),
+        k=jnp.asarray(0),
+        done=jnp.asarray(False),
+        converged=jnp.asarray(False),
+        history=history0,
+    )
     out = jax.lax.while_loop(cond, body, init)
     return _solution(minimiser.max_steps, out["y"], out["converged"], out["k"], out["history"], out["k"])
 
 
-def simplified_newton_loop(minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], assemble, solve,
-                           memory: KeptMatrix) -> Solution:  # fmt: skip
+def simplified_newton_loop(
+    minimiser, potential: IncrementalPotential, y0: Float[Array, " m"], assemble, solve, memory: KeptMatrix
+) -> Solution:
     """Simplified Newton (module doc) with the line search of :func:`newton_loop` (traceable).
 
     ``assemble(y)`` gives Newton's matrix values at y [m]; ``solve(values, g)`` the step [m] for
@@ -188,20 +201,41 @@ def simplified_newton_loop(minimiser, potential: IncrementalPotential, y0: Float
         converged = ((size <= minimiser.step_tolerance) & (fresh | settled)) | jnp.all(g_new == 0.0)
         # A kept matrix whose step had to be cut, or that contracts slowly, is assembled afresh.
         renew = (measured & ~settled & (theta > MAX_CONTRACTION)) | (alpha < 1.0) | ~found
-        return dict(y=y_new, f=f_new, g=g_new, k=k + 1, done=converged | (~found & fresh), converged=converged,
-                    history=history, kept=KeptMatrix(values, renew), previous=jnp.where(renew, 0.0, size),
-                    assemblies=c["assemblies"] + fresh.astype(c["assemblies"].dtype))  # fmt: skip
+        return dict(
+            y=y_new,
+            f=f_new,
+            g=g_new,
+            k=k + 1,
+            done=converged | (~found & fresh),
+            converged=converged,
+            history=history,
+            kept=KeptMatrix(values, renew),
+            previous=jnp.where(renew, 0.0, size),
+            assemblies=c["assemblies"] + fresh.astype(c["assemblies"].dtype),
+        )
 
-    init = dict(y=y0, f=potential.value(y0), g=potential.gradient(y0), k=jnp.asarray(0), done=jnp.asarray(False),
-                converged=jnp.asarray(False), history=history0, kept=memory, previous=jnp.asarray(0.0, dtype=y0.dtype),
-                assemblies=jnp.asarray(0))  # fmt: skip
+    init = dict(
+        y=y0,
+        f=potential.value(y0),
+        g=potential.gradient(y0),
+        k=jnp.asarray(0),
+        done=jnp.asarray(False),
+        converged=jnp.asarray(False),
+        history=history0,
+        kept=memory,
+        previous=jnp.asarray(0.0, dtype=y0.dtype),
+        assemblies=jnp.asarray(0),
+    )
     out = jax.lax.while_loop(cond, body, init)
-    return _solution(minimiser.max_steps, out["y"], out["converged"], out["k"], out["history"], out["assemblies"],
-                     out["kept"])  # fmt: skip
+    return _solution(
+        minimiser.max_steps, out["y"], out["converged"], out["k"], out["history"], out["assemblies"], out["kept"]
+    )
 
 
 @eqx.filter_custom_vjp
-def solve_step(potential: IncrementalPotential, minimiser: AbstractMinimiser, y0: Float[Array, " m"], memory=None) -> Solution:
+def solve_step(
+    potential: IncrementalPotential, minimiser: AbstractMinimiser, y0: Float[Array, " m"], memory=None
+) -> Solution:
     """Minimise a step's potential; y* is differentiable in ``potential`` (implicitly, see module doc)."""
     return minimiser.minimise(potential, y0, memory)
 

@@ -30,13 +30,22 @@ _NOT_IN_JSON = ("position_m", "residual_history_N")
 def results_dict(trajectory: Trajectory, impacts: tuple[Impact, ...]) -> dict:
     """The JSON-ready content of ``results.json``: per-step arrays and the impact summary."""
     steps = {k: np.asarray(v).tolist() for k, v in trajectory.records.items() if k not in _NOT_IN_JSON}
-    steps = {k: [None if isinstance(x, float) and not np.isfinite(x) else x for x in v] if np.ndim(trajectory.records[k]) == 1 else v for k, v in steps.items()}
+    steps = {
+        k: [None if isinstance(x, float) and not np.isfinite(x) else x for x in v]
+        if np.ndim(trajectory.records[k]) == 1
+        else v
+        for k, v in steps.items()
+    }
     return {
         "units": "SI; every field name ends in its unit (_s, _m, _m_per_s, _N, _Pa, _m3, _J); contact_force_N is (step, plane, xyz)",
         "dt_s": trajectory.dt_s,
         "gravity_m_per_s2": trajectory.gravity_m_per_s2.tolist(),
         "planes": [
-            {"name": n, "normal": trajectory.plane_normals[i].tolist(), "contact_distance_m": float(trajectory.contact_distances_m[i])}
+            {
+                "name": n,
+                "normal": trajectory.plane_normals[i].tolist(),
+                "contact_distance_m": float(trajectory.contact_distances_m[i]),
+            }
             for i, n in enumerate(trajectory.plane_names)
         ],
         "steps": steps,
@@ -103,8 +112,11 @@ def most_deformed_step(trajectory: Trajectory) -> tuple[int, int]:
     best, best_extent = (0, 0), np.inf
     for p, n in enumerate(trajectory.plane_normals):
         heights = positions @ n
-        extent = np.where(trajectory["min_gap_m"][:, p] <= trajectory.contact_distances_m[p],
-                          heights.max(axis=1) - heights.min(axis=1), np.inf)  # fmt: skip
+        extent = np.where(
+            trajectory["min_gap_m"][:, p] <= trajectory.contact_distances_m[p],
+            heights.max(axis=1) - heights.min(axis=1),
+            np.inf,
+        )
         if extent.min() < best_extent:
             best, best_extent = (int(np.argmin(extent)), p), float(extent.min())
     return best
@@ -128,11 +140,21 @@ def _max_deformation_figure(trajectory: Trajectory, path: Path) -> Path:
         band = np.abs((nodes - centre) @ across) < 0.08 * size
         extents.append(np.ptp(heights))
         offset = 0.0 if k == 0 else 1.3 * size
-        ax.plot((nodes - centre)[band] @ along + offset, heights[band], ".", ms=2, color=colour,
-                label=f"{label}, t = {trajectory['time_s'][k]:.3f} s")  # fmt: skip
+        ax.plot(
+            (nodes - centre)[band] @ along + offset,
+            heights[band],
+            ".",
+            ms=2,
+            color=colour,
+            label=f"{label}, t = {trajectory['time_s'][k]:.3f} s",
+        )
     ax.axhline(0.0, color="k", lw=1.5, label=trajectory.plane_names[p])
-    ax.set(aspect="equal", xlabel="along the plane [m]", ylabel="height above the plane [m]",
-           title=f"height {1e3 * extents[0]:.1f} mm free, {1e3 * extents[1]:.1f} mm most deformed")
+    ax.set(
+        aspect="equal",
+        xlabel="along the plane [m]",
+        ylabel="height above the plane [m]",
+        title=f"height {1e3 * extents[0]:.1f} mm free, {1e3 * extents[1]:.1f} mm most deformed",
+    )
     ax.legend(loc="upper center", fontsize=8, ncol=3, bbox_to_anchor=(0.5, -0.22))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -140,7 +162,9 @@ def _max_deformation_figure(trajectory: Trajectory, path: Path) -> Path:
     return path
 
 
-def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str, preview_gif: bool = True) -> list[Path]:
+def _mesh_frames(
+    trajectory: Trajectory, out: Path, max_frames: int, mesh_format: str, preview_gif: bool = True
+) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -150,7 +174,9 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
     picks = np.unique(np.linspace(0, len(positions) - 1, min(max_frames, len(positions))).astype(int))
     touches = len(trajectory.plane_names) > 0
     if touches:  # the frame that shows the physics is always among them
-        picks = np.unique(np.append(picks[:-1] if len(picks) >= max_frames else picks, most_deformed_step(trajectory)[0]))
+        picks = np.unique(
+            np.append(picks[:-1] if len(picks) >= max_frames else picks, most_deformed_step(trajectory)[0])
+        )
     nodes = positions.reshape(len(positions), -1, 3)
     strain = _render.face_strain(nodes[picks], trajectory.faces, nodes[0])
     limit = _render.strain_limit(strain)
@@ -170,8 +196,17 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
         largest = _render.largest_contact_step(trajectory, levels)
         if largest is not None:
             step, plane = largest
-            written.append(_render.closeup(trajectory, step, plane, out / "figures" / "closeup.png",
-                                           _render.face_strain(nodes[step], trajectory.faces, nodes[0]), limit, levels))  # fmt: skip
+            written.append(
+                _render.closeup(
+                    trajectory,
+                    step,
+                    plane,
+                    out / "figures" / "closeup.png",
+                    _render.face_strain(nodes[step], trajectory.faces, nodes[0]),
+                    limit,
+                    levels,
+                )
+            )
     if not preview_gif:
         return written
     written.append(_render.preview(trajectory, picks, out / "preview.gif", strain, limit, levels))
@@ -179,8 +214,13 @@ def _mesh_frames(trajectory: Trajectory, out: Path, max_frames: int, mesh_format
 
 
 def write_results(
-    trajectory: Trajectory, out_dir: str | os.PathLike, *, max_frames: int = 30, mesh_format: str = "ply",
-    figures: bool = True, preview_gif: bool = True,
+    trajectory: Trajectory,
+    out_dir: str | os.PathLike,
+    *,
+    max_frames: int = 30,
+    mesh_format: str = "ply",
+    figures: bool = True,
+    preview_gif: bool = True,
 ) -> list[Path]:
     """Write ``results.json``, the figures and (with faces) mesh frames and a GIF to ``out_dir``; the paths written.
 

@@ -104,7 +104,9 @@ class IncrementalPotential(eqx.Module):
             t_prev = self.time - self.dt
             kd = jax.jvp(jax.grad(lambda z: self.system.internal_energy(z, t_prev)), (self.x_prev,), (d,))[1]
             mass = self.system.lumped_mass()
-            quad = self.rayleigh.mass_coefficient * jnp.sum(mass * d * d) + self.rayleigh.stiffness_coefficient * (d @ kd)
+            quad = self.rayleigh.mass_coefficient * jnp.sum(mass * d * d) + self.rayleigh.stiffness_coefficient * (
+                d @ kd
+            )
             total = total + quad / (2.0 * self.dt)
         return total
 
@@ -139,7 +141,10 @@ class IncrementalPotential(eqx.Module):
     def plane_forces(self, x: Float[Array, " n"]) -> Float[Array, "P 3"]:
         """Force [N] each plane exerts on the body at x [m] (contact, damping and friction)."""
         points = self.system.contact_points(x)
-        rows = [-jnp.sum(jax.grad(lambda p, i=i: self.plane_energy(i, p))(points), axis=0) for i in range(len(self.system.planes))]
+        rows = [
+            -jnp.sum(jax.grad(lambda p, i=i: self.plane_energy(i, p))(points), axis=0)
+            for i in range(len(self.system.planes))
+        ]
         return jnp.stack(rows) if rows else jnp.zeros((0, 3))
 
 
@@ -187,7 +192,11 @@ def stage_potential(
     x = lagged_position
     free, prescribed = free_dofs(system, x.shape[0])
     points, forces, weights = lagged_contact(system, x)
-    body = jnp.stack([system.body_damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes]) if system.planes else jnp.zeros((0,))
+    body = (
+        jnp.stack([system.body_damping_weights(p.law.damping_weight(p.gap(points))) for p in system.planes])
+        if system.planes
+        else jnp.zeros((0,))
+    )
     mass = system.lumped_mass()
     return IncrementalPotential(
         system=system,

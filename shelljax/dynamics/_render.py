@@ -40,8 +40,12 @@ def largest_contact_step(trajectory, plane_levels) -> tuple[int, int] | None:
     None if no face ever touches a plane."""
     nodes = trajectory["position_m"].reshape(len(trajectory["time_s"]), -1, 3)
     best, best_area = None, 0.0
-    for p, (n, level, distance) in enumerate(zip(trajectory.plane_normals, plane_levels, trajectory.contact_distances_m)):
-        for k in np.flatnonzero(trajectory["min_gap_m"][:, p] <= distance):  # only the steps in contact: memory stays O(F)
+    for p, (n, level, distance) in enumerate(
+        zip(trajectory.plane_normals, plane_levels, trajectory.contact_distances_m)
+    ):
+        for k in np.flatnonzero(
+            trajectory["min_gap_m"][:, p] <= distance
+        ):  # only the steps in contact: memory stays O(F)
             touching = (nodes[k] @ np.asarray(n) - level <= distance)[trajectory.faces].all(axis=1)
             area = float(face_areas(nodes[k], trajectory.faces[touching]).sum())
             if area > best_area:
@@ -68,7 +72,9 @@ def strain_rgba(strain: np.ndarray, limit: float, touching: np.ndarray | None = 
 def frame_rgba(trajectory, step: int, strain: np.ndarray, limit: float, plane_levels) -> np.ndarray:
     """Face colours (F, 4) of ``step``: its ``strain`` (F,) on ±``limit``, the faces touching a plane dark."""
     nodes = trajectory["position_m"][step].reshape(-1, 3)
-    touching = contact_faces(nodes, trajectory.faces, trajectory.plane_normals, plane_levels, trajectory.contact_distances_m)
+    touching = contact_faces(
+        nodes, trajectory.faces, trajectory.plane_normals, plane_levels, trajectory.contact_distances_m
+    )
     return strain_rgba(strain, limit, touching)
 
 
@@ -111,11 +117,19 @@ def draw_shell(ax, nodes, faces, rgba, centre, half, planes=(), planes_in_front:
         u, v = _tangents(np.asarray(n))
         foot = centre - ((centre @ n) - level) * n
         corners = np.array([foot + half * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
-        ax.add_collection3d(Poly3DCollection([corners], facecolor=(0.5, 0.5, 0.5, 0.25), edgecolor="0.4",
-                                             lw=0.5, zorder=3 if planes_in_front else 1))  # fmt: skip
-    ax.add_collection3d(Poly3DCollection(nodes[faces], facecolors=_shaded(nodes, faces, rgba), edgecolor="none", zorder=2))
-    ax.set(xlim=(centre[0] - half, centre[0] + half), ylim=(centre[1] - half, centre[1] + half),
-           zlim=(centre[2] - half, centre[2] + half))  # fmt: skip
+        ax.add_collection3d(
+            Poly3DCollection(
+                [corners], facecolor=(0.5, 0.5, 0.5, 0.25), edgecolor="0.4", lw=0.5, zorder=3 if planes_in_front else 1
+            )
+        )
+    ax.add_collection3d(
+        Poly3DCollection(nodes[faces], facecolors=_shaded(nodes, faces, rgba), edgecolor="none", zorder=2)
+    )
+    ax.set(
+        xlim=(centre[0] - half, centre[0] + half),
+        ylim=(centre[1] - half, centre[1] + half),
+        zlim=(centre[2] - half, centre[2] + half),
+    )
     ax.set_box_aspect((1, 1, 1))
     ax.locator_params(nbins=4)
     ax.tick_params(labelsize=6, pad=0)
@@ -125,8 +139,10 @@ def draw_shell(ax, nodes, faces, rgba, centre, half, planes=(), planes_in_front:
 
 def status_line(trajectory, step: int) -> str:
     """Time, each plane's normal contact force and the gauge pressure at ``step``, for a caption."""
-    forces = ", ".join(f"{name} {float(trajectory['contact_force_N'][step, i] @ trajectory.plane_normals[i]):.1f} N"
-                       for i, name in enumerate(trajectory.plane_names))  # fmt: skip
+    forces = ", ".join(
+        f"{name} {float(trajectory['contact_force_N'][step, i] @ trajectory.plane_normals[i]):.1f} N"
+        for i, name in enumerate(trajectory.plane_names)
+    )
     text = f"t = {trajectory['time_s'][step]:.3f} s"
     if forces:
         text += f"   contact: {forces}"
@@ -138,11 +154,18 @@ def _strain_colourbar(fig, limit: float, rect=(0.85, 0.24, 0.025, 0.5)) -> None:
     from matplotlib.patches import Patch
 
     cax = fig.add_axes(rect)
-    bar = fig.colorbar(mpl.cm.ScalarMappable(mpl.colors.Normalize(-100 * limit, 100 * limit), STRAIN_COLOURMAP), cax=cax)
+    bar = fig.colorbar(
+        mpl.cm.ScalarMappable(mpl.colors.Normalize(-100 * limit, 100 * limit), STRAIN_COLOURMAP), cax=cax
+    )
     bar.set_label("membrane areal strain ΔA/A vs t = 0 [%]", fontsize=7)
     bar.ax.tick_params(labelsize=6)
-    fig.legend(handles=[Patch(color=CONTACT_RGBA, label="in contact")], loc="lower right", fontsize=7, frameon=False,
-               bbox_to_anchor=(0.99, 0.08))  # fmt: skip
+    fig.legend(
+        handles=[Patch(color=CONTACT_RGBA, label="in contact")],
+        loc="lower right",
+        fontsize=7,
+        frameon=False,
+        bbox_to_anchor=(0.99, 0.08),
+    )
 
 
 def preview(trajectory, picks: np.ndarray, path: Path, strain: np.ndarray, limit: float, plane_levels) -> Path:
@@ -187,8 +210,16 @@ def closeup(trajectory, step: int, plane: int, path: Path, strain: np.ndarray, l
     centre = patch.mean(axis=0) + 0.7 * half * normal
     fig = plt.figure(figsize=(5, 4.4))
     ax = fig.add_axes((0.0, 0.0, 0.84, 0.86), projection="3d")
-    draw_shell(ax, nodes, trajectory.faces, frame_rgba(trajectory, step, strain, limit, plane_levels), centre, half,
-               [(normal, plane_levels[plane])], planes_in_front=True)  # fmt: skip
+    draw_shell(
+        ax,
+        nodes,
+        trajectory.faces,
+        frame_rgba(trajectory, step, strain, limit, plane_levels),
+        centre,
+        half,
+        [(normal, plane_levels[plane])],
+        planes_in_front=True,
+    )
     # the camera behind the plane, looking at the patch through it, a little from the side
     if abs(normal[2]) > 0.9:
         ax.view_init(elev=-25.0 * np.sign(normal[2]), azim=-60.0)

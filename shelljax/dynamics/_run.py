@@ -48,18 +48,28 @@ class StepRecord(eqx.Module):
 
 def _check_system(system: AbstractDynamicSystem, state: DynamicState) -> None:
     mass = system.lumped_mass()
-    check_positive("the lumped mass per degree of freedom [kg]", mass, "Give the system a mass (e.g. a session's `mass`, or a wall density).")
+    check_positive(
+        "the lumped mass per degree of freedom [kg]",
+        mass,
+        "Give the system a mass (e.g. a session's `mass`, or a wall density).",
+    )
     n = mass.shape[0]
     for name in ("position", "velocity", "acceleration"):
         shape = getattr(state, name).shape
         if shape != (n,):
-            raise InvalidInputError(f"the initial {name} has shape {shape}, but the system has {n} degrees of freedom; give one value per degree of freedom.")
+            raise InvalidInputError(
+                f"the initial {name} has shape {shape}, but the system has {n} degrees of freedom; give one value per degree of freedom."
+            )
 
 
 def initial_state(system: AbstractDynamicSystem, position, velocity=None, time=0.0) -> DynamicState:
     """State at ``time`` [s] from positions [m] and velocities [m/s] (zero if None), with a₀ = M⁻¹F(x₀) [m/s²]."""
     x = jnp.asarray(position, dtype=float).reshape(-1)
-    v = jnp.zeros_like(x) if velocity is None else jnp.broadcast_to(jnp.asarray(velocity, dtype=float).reshape(-1), x.shape)
+    v = (
+        jnp.zeros_like(x)
+        if velocity is None
+        else jnp.broadcast_to(jnp.asarray(velocity, dtype=float).reshape(-1), x.shape)
+    )
     state = DynamicState(time, x, v, jnp.zeros_like(x))
     _check_system(system, state)
     if not isinstance(x, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(x))):
@@ -79,7 +89,12 @@ def _potential_gradient(system, x, t):
 
 
 def observe(
-    system: AbstractDynamicSystem, state: DynamicState, forces: Float[Array, "P 3"], result=None, max_steps: int = 1, feasible_start=True
+    system: AbstractDynamicSystem,
+    state: DynamicState,
+    forces: Float[Array, "P 3"],
+    result=None,
+    max_steps: int = 1,
+    feasible_start=True,
 ) -> StepRecord:
     """The record of ``state`` with plane forces [N] (and the step's convergence, if any)."""
     x, t = state.position, state.time
@@ -93,16 +108,35 @@ def observe(
     gaps = [jnp.min(p.gap(points)) for p in system.planes]
     pressure, volume = system.gas_state(x)
     if result is None:
-        converged, iterations, history, matrices = jnp.asarray(True), jnp.asarray(0), jnp.full((max_steps,), jnp.nan), jnp.asarray(0)
+        converged, iterations, history, matrices = (
+            jnp.asarray(True),
+            jnp.asarray(0),
+            jnp.full((max_steps,), jnp.nan),
+            jnp.asarray(0),
+        )
     else:
-        converged, iterations, history, matrices = result.converged, result.iterations, result.history, result.stats["assemblies"]
+        converged, iterations, history, matrices = (
+            result.converged,
+            result.iterations,
+            result.history,
+            result.stats["assemblies"],
+        )
     return StepRecord(
-        time_s=t, com_position_m=com, com_velocity_m_per_s=com_velocity, contact_force_N=forces,
-        min_gap_m=jnp.stack(gaps) if gaps else jnp.zeros((0,)), gas_pressure_Pa=jnp.asarray(pressure, dtype=float),
-        gas_volume_m3=jnp.asarray(volume, dtype=float), energy_J=energies, position_m=x,
-        converged=converged, feasible_start=jnp.asarray(feasible_start), newton_iterations=iterations, newton_matrices=matrices,
+        time_s=t,
+        com_position_m=com,
+        com_velocity_m_per_s=com_velocity,
+        contact_force_N=forces,
+        min_gap_m=jnp.stack(gaps) if gaps else jnp.zeros((0,)),
+        gas_pressure_Pa=jnp.asarray(pressure, dtype=float),
+        gas_volume_m3=jnp.asarray(volume, dtype=float),
+        energy_J=energies,
+        position_m=x,
+        converged=converged,
+        feasible_start=jnp.asarray(feasible_start),
+        newton_iterations=iterations,
+        newton_matrices=matrices,
         residual_history_N=history,
-    )  # fmt: skip
+    )
 
 
 def elastic_plane_forces(system: AbstractDynamicSystem, x: Float[Array, " n"]) -> Float[Array, "P 3"]:
@@ -156,8 +190,11 @@ def _step_kept(system, state, dt, integrator, minimiser, rayleigh, memory):
         iterations = iterations + result.iterations
         matrices = matrices + result.stats["assemblies"]
     record = observe(system, current, potential.plane_forces(x_new), result, feasible_start=feasible)
-    record = eqx.tree_at(lambda r: (r.converged, r.newton_iterations, r.newton_matrices, r.residual_history_N), record,
-                         (converged, jnp.asarray(iterations), jnp.asarray(matrices), history))  # fmt: skip
+    record = eqx.tree_at(
+        lambda r: (r.converged, r.newton_iterations, r.newton_matrices, r.residual_history_N),
+        record,
+        (converged, jnp.asarray(iterations), jnp.asarray(matrices), history),
+    )
     return current, record, memory
 
 
@@ -189,7 +226,6 @@ def rollout(
 def _chunk(system, state, dt, n_steps, integrator, minimiser, rayleigh):
     """``rollout`` compiled once per system structure and chunk length (Δt [s] and parameters traced)."""
     return rollout(system, state, dt, n_steps, integrator, minimiser, rayleigh)
-
 
 
 @eqx.filter_jit
@@ -285,7 +321,9 @@ def simulate(
             done += take
             bar.update(take)
     # The initial state has no Newton history: pad it to the minimiser's history length.
-    first = eqx.tree_at(lambda r: r.residual_history_N, first, jnp.full(chunks[0].residual_history_N.shape[1:], jnp.nan))
+    first = eqx.tree_at(
+        lambda r: r.residual_history_N, first, jnp.full(chunks[0].residual_history_N.shape[1:], jnp.nan)
+    )
     chunks.insert(0, jax.tree_util.tree_map(lambda a: np.asarray(a)[None], first))
     stacked = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *chunks)
     planes = system.planes
@@ -300,12 +338,16 @@ def simulate(
     )
 
 
-def drop_state(system: AbstractDynamicSystem, rest_position, height: float, velocity=None, plane: int = 0) -> DynamicState:
+def drop_state(
+    system: AbstractDynamicSystem, rest_position, height: float, velocity=None, plane: int = 0
+) -> DynamicState:
     """The system's ``rest_position`` [m] moved along plane ``plane``'s normal so its lowest contact
     point is ``height`` [m] above it (the drop height), moving at ``velocity`` [m/s] (at rest if None).
     """
     if not np.isfinite(height) or height < 0.0:
-        raise InvalidInputError(f"drop height must be ≥ 0 m; got {height} m. Give the height of the lowest point above the {system.planes[plane].name if system.planes else 'plane'}.")
+        raise InvalidInputError(
+            f"drop height must be ≥ 0 m; got {height} m. Give the height of the lowest point above the {system.planes[plane].name if system.planes else 'plane'}."
+        )
     if not system.planes:
         raise InvalidInputError("drop_state needs a system with a plane to drop onto; add a ground plane.")
     x = jnp.asarray(rest_position, dtype=float).reshape(-1)
@@ -313,5 +355,9 @@ def drop_state(system: AbstractDynamicSystem, rest_position, height: float, velo
     lowest = jnp.min(p.gap(system.contact_points(x)))
     shift = (height - lowest) * p.normal
     x = (x.reshape(-1, 3) + shift).reshape(-1)
-    v = None if velocity is None else jnp.broadcast_to(jnp.asarray(velocity, dtype=float), (x.shape[0] // 3, 3)).reshape(-1)
+    v = (
+        None
+        if velocity is None
+        else jnp.broadcast_to(jnp.asarray(velocity, dtype=float), (x.shape[0] // 3, 3)).reshape(-1)
+    )
     return initial_state(system, x, v)

@@ -58,8 +58,14 @@ PATTERNS: dict[int, object] = {}
 def _pattern_key(pattern) -> int:
     """A key equal for equal patterns: systems on one mesh topology share the compiled step programs."""
     digest = hashlib.sha256()
-    arrays = (pattern.indptr, pattern.indices, pattern.fixed_entries, pattern.fixed_diagonal, pattern.free,
-              *(np.asarray(part) for pair in pattern.maps for part in pair))  # fmt: skip
+    arrays = (
+        pattern.indptr,
+        pattern.indices,
+        pattern.fixed_entries,
+        pattern.fixed_diagonal,
+        pattern.free,
+        *(np.asarray(part) for pair in pattern.maps for part in pair),
+    )
     for array in arrays:
         digest.update(f"{array.dtype}{array.shape}".encode() + np.ascontiguousarray(array).tobytes())
     return int.from_bytes(digest.digest()[:8], "little")
@@ -130,7 +136,9 @@ class ShellDynamicSystem(AbstractDynamicSystem):
             return jnp.zeros((0,))
         return self.prescribed.positions(t).reshape(-1)
 
-    def with_prescribed(self, vertices, axis_point, axis_direction, times, angles, reference=None) -> "ShellDynamicSystem":
+    def with_prescribed(
+        self, vertices, axis_point, axis_direction, times, angles, reference=None
+    ) -> "ShellDynamicSystem":
         """The same system with ``vertices`` (indices) held and turned rigidly about the axis through
         ``axis_point`` (3,) [m] along ``axis_direction`` (3,) by ``angles`` (K,) [rad] at ``times``
         (K,) [s] (:class:`PrescribedRotation`), from their positions in ``reference`` (3V,) [m]
@@ -140,10 +148,14 @@ class ShellDynamicSystem(AbstractDynamicSystem):
         idx = np.asarray(vertices, dtype=int).reshape(-1)
         n = self.node_masses.shape[0]
         if idx.size == 0 or idx.min() < 0 or idx.max() >= n or np.unique(idx).size != idx.size:
-            raise InvalidInputError(f"prescribed vertices must be distinct indices in [0, {n}); got {idx.size} of them. Select at least one vertex of the mesh.")
+            raise InvalidInputError(
+                f"prescribed vertices must be distinct indices in [0, {n}); got {idx.size} of them. Select at least one vertex of the mesh."
+            )
         t, a = np.asarray(times, dtype=float).reshape(-1), np.asarray(angles, dtype=float).reshape(-1)
         if t.size < 2 or t.size != a.size or np.any(np.diff(t) <= 0.0):
-            raise InvalidInputError(f"the rotation schedule needs ≥ 2 strictly increasing times [s] and as many angles [rad]; got {t.size} times and {a.size} angles.")
+            raise InvalidInputError(
+                f"the rotation schedule needs ≥ 2 strictly increasing times [s] and as many angles [rad]; got {t.size} times and {a.size} angles."
+            )
         direction = np.asarray(axis_direction, dtype=float)
         if direction.shape != (3,) or not np.linalg.norm(direction) > 0.0:
             raise InvalidInputError(f"axis_direction must be a nonzero 3-vector; got {direction.tolist()}.")
@@ -218,8 +230,12 @@ def shell_system(
             f"got {properties!r}. Fix: ShellProperties(gauge_pressure=…, young_modulus=…, thickness=shell.thickness, "
             "poisson_ratio=…)"
         )
-    params = ShellParams(young_modulus=float(properties.young_modulus), poisson_ratio=float(properties.poisson_ratio),
-                         thickness=float(shell.thickness), gauge_pressure=float(properties.gauge_pressure))
+    params = ShellParams(
+        young_modulus=float(properties.young_modulus),
+        poisson_ratio=float(properties.poisson_ratio),
+        thickness=float(shell.thickness),
+        gauge_pressure=float(properties.gauge_pressure),
+    )
     reference = inflated_reference(shell, params)
     inflated = reference.inflated.reshape(-1)
     n = shell.mesh.n_vertices
@@ -232,11 +248,18 @@ def shell_system(
     key = _pattern_key(model.pattern)
     PATTERNS.setdefault(key, model.pattern)
     return ShellDynamicSystem(
-        params=params, geometry=model.geometry, config=config,
+        params=params,
+        geometry=model.geometry,
+        config=config,
         node_masses=jnp.asarray(_node_masses(model, mass, wall_density, shell.thickness)),
-        faces=jnp.asarray(shell.mesh.faces), inflated=jnp.asarray(inflated), planes=tuple(planes),
-        gravity=gravity_vector(gravity), maps=model.pattern.maps, nnz=model.pattern.nnz, pattern_key=key,
-    )  # fmt: skip
+        faces=jnp.asarray(shell.mesh.faces),
+        inflated=jnp.asarray(inflated),
+        planes=tuple(planes),
+        gravity=gravity_vector(gravity),
+        maps=model.pattern.maps,
+        nnz=model.pattern.nnz,
+        pattern_key=key,
+    )
 
 
 def remeshed(shell: Shell, n_faces: int) -> Shell:
@@ -252,9 +275,11 @@ def remeshed(shell: Shell, n_faces: int) -> Shell:
     if n_faces < mesh.n_faces:
         raise InvalidInputError(
             f"mesh_faces = {n_faces}: the mesh {mesh.name} has {mesh.n_faces} faces and can only be refined; "
-            f"give mesh_faces ≥ {mesh.n_faces}, or a coarser mesh (e.g. object.mesh = \"bundled:meshes/hammer-coarse.stl\")."
+            f'give mesh_faces ≥ {mesh.n_faces}, or a coarser mesh (e.g. object.mesh = "bundled:meshes/hammer-coarse.stl").'
         )
-    solid = manifold3d.Manifold(manifold3d.Mesh(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32)))
+    solid = manifold3d.Manifold(
+        manifold3d.Mesh(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32))
+    )
     low, high = 1e-6 * float(np.ptp(mesh.vertices, axis=0).max()), float(np.ptp(mesh.vertices, axis=0).max())
     for _ in range(40):  # bisection on the edge length [m]: the face count falls as it grows
         length = float(np.sqrt(low * high))
@@ -264,5 +289,9 @@ def remeshed(shell: Shell, n_faces: int) -> Shell:
         low, high = (length, high) if fine.num_tri() > n_faces else (low, length)
     out = fine.to_mesh()
     vertices = np.asarray(out.vert_properties[:, :3], dtype=float)
-    return Shell(mesh=ShellMesh.from_arrays(vertices, np.asarray(out.tri_verts, dtype=int), name=f"{mesh.name} refined to {fine.num_tri()} faces"),
-                 thickness=shell.thickness)  # fmt: skip
+    return Shell(
+        mesh=ShellMesh.from_arrays(
+            vertices, np.asarray(out.tri_verts, dtype=int), name=f"{mesh.name} refined to {fine.num_tri()} faces"
+        ),
+        thickness=shell.thickness,
+    )

@@ -74,7 +74,9 @@ class _FreeAssembly:
     @staticmethod
     def build(pattern, n: int, free: np.ndarray) -> "_FreeAssembly":
         """From the shell's pattern (its first ``n`` dofs the vertices') and the free dof indices."""
-        positions = sp.csr_matrix((np.arange(1.0, pattern.nnz + 1.0), pattern.indices, pattern.indptr), shape=(pattern.n_dofs,) * 2)
+        positions = sp.csr_matrix(
+            (np.arange(1.0, pattern.nnz + 1.0), pattern.indices, pattern.indptr), shape=(pattern.n_dofs,) * 2
+        )
         sub = positions[:n, :n][free][:, free]
         sub.sort_indices()
         m = free.size
@@ -91,15 +93,21 @@ class _FreeAssembly:
         local[free] = np.arange(m)
         v = n // 3
         base = 3 * np.arange(v)[:, None, None]
-        row, col = np.broadcast_to(base + np.arange(3)[:, None], (v, 3, 3)), np.broadcast_to(base + np.arange(3), (v, 3, 3))
+        row, col = (
+            np.broadcast_to(base + np.arange(3)[:, None], (v, 3, 3)),
+            np.broadcast_to(base + np.arange(3), (v, 3, 3)),
+        )
         kept = (local[row] >= 0) & (local[col] >= 0)
         return _FreeAssembly(
-            indptr=sub.indptr, indices=sub.indices, source=source,
-            block_target=find(local[row][kept], local[col][kept]), block_source=np.flatnonzero(kept.ravel()),
+            indptr=sub.indptr,
+            indices=sub.indices,
+            source=source,
+            block_target=find(local[row][kept], local[col][kept]),
+            block_source=np.flatnonzero(kept.ravel()),
             diagonal=find(np.arange(m), np.arange(m)),
             fixed_zero=np.flatnonzero(np.isin(source, pattern.fixed_entries)),
             fixed_unit=np.flatnonzero(np.isin(source, pattern.fixed_diagonal)),
-        )  # fmt: skip
+        )
 
     def values(self, data, blocks, diag) -> np.ndarray:
         """CSR values of K (its fixed dofs folded in) + blockdiag(blocks) + diag(diag) on the free dofs."""
@@ -192,13 +200,19 @@ class SparseNewton(AbstractMinimiser):
         """CSR values [N/m] of Rayleigh β's β K(xₙ)/Δt (None without Rayleigh): fixed over a step."""
         if potential.rayleigh is None:
             return None
-        return potential.rayleigh.stiffness_coefficient / potential.dt * potential.system.hessian_parts(potential.x_prev)[0]
+        return (
+            potential.rayleigh.stiffness_coefficient
+            / potential.dt
+            * potential.system.hessian_parts(potential.x_prev)[0]
+        )
 
     def _matrix(self, potential, y, rayleigh_values):
         """Newton's matrix at y [m] as the host solve's inputs (data, blocks, diag, c2, u, columns, coeffs)."""
         system = potential.system
         if not isinstance(system, ShellDynamicSystem):
-            raise InvalidInputError(f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems.")
+            raise InvalidInputError(
+                f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems."
+            )
         x = potential.full(y)
         data, c2, u = system.hessian_parts(x)
         diag = potential.inertia_weight
@@ -207,15 +221,25 @@ class SparseNewton(AbstractMinimiser):
             data = data + rayleigh_values
         blocks = potential.point_hessian_blocks(x)
         share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
-        columns = jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes]) if system.planes else jnp.zeros((0, x.shape[0]))
-        coeffs = jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt if system.planes else jnp.zeros((0,))
+        columns = (
+            jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes])
+            if system.planes
+            else jnp.zeros((0, x.shape[0]))
+        )
+        coeffs = (
+            jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt
+            if system.planes
+            else jnp.zeros((0,))
+        )
         return data, blocks, diag, c2, u, columns, coeffs
 
     def _apply(self, potential, matrix, rhs, shift: bool):
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
         solve = functools.partial(_host_solve, potential.system.pattern_key, shift)
         data, blocks, diag, c2, u, columns, coeffs = matrix
-        return jax.pure_callback(solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential")
+        return jax.pure_callback(
+            solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential"
+        )
 
     def _direction(self, potential, matrix, g):
         p = self._apply(potential, matrix, -g, True)
@@ -239,4 +263,6 @@ class SparseNewton(AbstractMinimiser):
         if not self.reuse_matrix:
             return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, assemble(y), g))
         memory = self.initial_memory(potential, y0) if memory is None else memory
-        return simplified_newton_loop(self, potential, y0, assemble, lambda values, g: self._direction(potential, values, g), memory)
+        return simplified_newton_loop(
+            self, potential, y0, assemble, lambda values, g: self._direction(potential, values, g), memory
+        )

@@ -72,15 +72,34 @@ class SpringBalloon(AbstractDynamicSystem):
     prescribed: PrescribedRotation | None
 
     def __init__(
-        self, rest_nodes, faces, node_masses, spring_stiffness, planes, *, gauge_pressure=0.0,
-        gas_exponent=1.0, gravity=STANDARD_GRAVITY, prescribed_nodes=(), prescribed=None,
-    ):  # fmt: skip
+        self,
+        rest_nodes,
+        faces,
+        node_masses,
+        spring_stiffness,
+        planes,
+        *,
+        gauge_pressure=0.0,
+        gas_exponent=1.0,
+        gravity=STANDARD_GRAVITY,
+        prescribed_nodes=(),
+        prescribed=None,
+    ):
         nodes = np.asarray(rest_nodes, dtype=float)
         f = np.asarray(faces, dtype=int)
-        if nodes.ndim != 2 or nodes.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(nodes):
+        if (
+            nodes.ndim != 2
+            or nodes.shape[1] != 3
+            or f.ndim != 2
+            or f.shape[1] != 3
+            or f.min() < 0
+            or f.max() >= len(nodes)
+        ):
             raise InvalidInputError("SpringBalloon needs rest_nodes (N, 3) [m] and faces (F, 3) indexing them.")
         if node_masses is None:
-            raise InvalidInputError("SpringBalloon.node_masses [kg] is missing; give the mass per node (total mass / N).")
+            raise InvalidInputError(
+                "SpringBalloon.node_masses [kg] is missing; give the mass per node (total mass / N)."
+            )
         m = np.broadcast_to(np.asarray(node_masses, dtype=float), (len(nodes),))
         check_positive("SpringBalloon.node_masses [kg]", m, "Give the mass per node (total mass / N).")
         check_nonnegative("SpringBalloon.spring_stiffness [N/m]", spring_stiffness, "Give k ≥ 0.")
@@ -89,7 +108,10 @@ class SpringBalloon(AbstractDynamicSystem):
         self.rest_nodes, self.faces, self.edges = jnp.asarray(nodes), jnp.asarray(f), jnp.asarray(e)
         self.rest_lengths = jnp.asarray(np.linalg.norm(nodes[e[:, 0]] - nodes[e[:, 1]], axis=1))
         self.node_masses, self.spring_stiffness = jnp.asarray(m), jnp.asarray(spring_stiffness, dtype=float)
-        self.gauge_pressure, self.gas_exponent = jnp.asarray(gauge_pressure, dtype=float), jnp.asarray(gas_exponent, dtype=float)
+        self.gauge_pressure, self.gas_exponent = (
+            jnp.asarray(gauge_pressure, dtype=float),
+            jnp.asarray(gas_exponent, dtype=float),
+        )
         self.rest_volume = _mesh_volume(self.rest_nodes, self.faces)
         if float(self.rest_volume) <= 0.0:
             raise InvalidInputError("SpringBalloon: the mesh encloses no positive volume; orient its faces outward.")
@@ -113,7 +135,9 @@ class SpringBalloon(AbstractDynamicSystem):
 
     def gas_state(self, x):
         v = self.volume(x)
-        return polytropic_gauge_pressure(v, self.rest_volume, self.gauge_pressure, self.gas_exponent, ATMOSPHERIC_PRESSURE), v
+        return polytropic_gauge_pressure(
+            v, self.rest_volume, self.gauge_pressure, self.gas_exponent, ATMOSPHERIC_PRESSURE
+        ), v
 
     def prescribed_dofs(self):
         return tuple(3 * i + k for i in self.prescribed_nodes for k in range(3))

@@ -46,8 +46,15 @@ from ._surrogate import (
 )
 from ._result import Estimate
 
-_UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m",
-          "depth_offset": "m", "force_gain": "1", "depth_noise": "m"}  # fmt: skip
+_UNITS = {
+    "gauge_pressure": "Pa",
+    "young_modulus": "Pa",
+    "thickness": "m",
+    "radius": "m",
+    "depth_offset": "m",
+    "force_gain": "1",
+    "depth_noise": "m",
+}
 
 
 class ConvergenceWarning(UserWarning):
@@ -98,13 +105,17 @@ class PosteriorResult:
         steps, effective samples, autocorrelation times [steps], failed forward solves,
         acceptance fraction and the ``surrogate`` report (None when the model itself was sampled)."""
         return {
-            "estimates": {name: {**est.to_dict(), "ci68": list(self.intervals68[name])}
-                          for name, est in self.estimates.items()},
-            "converged": self.converged, "steps": self.n_steps, "effective_samples": self.effective_samples,
+            "estimates": {
+                name: {**est.to_dict(), "ci68": list(self.intervals68[name])} for name, est in self.estimates.items()
+            },
+            "converged": self.converged,
+            "steps": self.n_steps,
+            "effective_samples": self.effective_samples,
             "autocorr_time": {"value": self.autocorr_time, "unit": "steps"},
-            "failed_forward_solves": self.failed_forward, "acceptance_fraction": self.acceptance_fraction,
+            "failed_forward_solves": self.failed_forward,
+            "acceptance_fraction": self.acceptance_fraction,
             "surrogate": self.surrogate,
-        }  # fmt: skip
+        }
 
 
 @jax.jit
@@ -125,8 +136,11 @@ def _surrogate_around_fit(fit: FitResult, nodes, progress):
     problem, model = fit.problem, fit.problem.model
     u_std = np.sqrt(np.diag(fit.covariance))
     center = {k: float(v) for k, v in problem.physical(jnp.asarray(fit.u)).items()}
-    half_width = {name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
-                  for i, name in enumerate(problem.names) if name in SURROGATE_AXES}  # fmt: skip
+    half_width = {
+        name: max(SURROGATE_SIGMAS * u_std[i], SURROGATE_MIN_HALF_WIDTH)
+        for i, name in enumerate(problem.names)
+        if name in SURROGATE_AXES
+    }
     built = build_surrogate(model, center, half_width, nodes, progress=progress)
     # check points: Laplace draws, pulled into the box
     rng = np.random.default_rng(0)
@@ -144,14 +158,15 @@ def _surrogate_around_fit(fit: FitResult, nodes, progress):
         "fit_converged": fit.converged,
         "curves": int(np.prod(built.coefficients.shape[:4])),
         "box": {"half_width_log": half_width, "center": center},
-    }  # fmt: skip
+    }
     if error["depth"] > SURROGATE_TOLERANCE * problem.depth_noise or error["wrinkle_count"] > SURROGATE_TOLERANCE:
         warnings.warn(
             f"{fit.source}: the surrogate differs from the engine by up to {error['depth'] * 1e3:.3g} mm in depth "
             f"({error['depth'] / problem.depth_noise:.2f} σ_w) and {error['wrinkle_count']:.2g} wrinkles; "
             "Fix: more surrogate_nodes, or surrogate=False",
-            SurrogateWarning, stacklevel=3,
-        )  # fmt: skip
+            SurrogateWarning,
+            stacklevel=3,
+        )
     return built, report
 
 
@@ -217,7 +232,9 @@ class _Ensemble:
     kept in the backend as emcee keeps its sampler's; ``length``: steps of the compiled block.
     """
 
-    def __init__(self, problem: PaddedProblem, columns: np.ndarray, backend, random: np.random.RandomState, length: int):
+    def __init__(
+        self, problem: PaddedProblem, columns: np.ndarray, backend, random: np.random.RandomState, length: int
+    ):
         self.problem, self.columns, self.backend, self.random, self.length = problem, columns, backend, random, length
         self.free = np.zeros(len(ALL_NAMES) + 1, bool)
         self.free[columns] = True
@@ -231,7 +248,9 @@ class _Ensemble:
     def log_prob(self, coords: np.ndarray) -> np.ndarray:
         """log p [-] of each walker of ``coords`` (walkers, unknowns + 1)."""
         # the sampling program itself, for no steps: no second program to compile
-        return np.asarray(stretch_block(self.problem, self.padded(coords), 0, self.free, 0, self.length)["initial_log_prob"])
+        return np.asarray(
+            stretch_block(self.problem, self.padded(coords), 0, self.free, 0, self.length)["initial_log_prob"]
+        )
 
     def run(self, coords: np.ndarray, steps: int) -> np.ndarray:
         """``steps`` (≤ ``length``) steps from ``coords`` into the backend; the last walkers."""
@@ -269,8 +288,11 @@ def _run_until_converged(ensemble: _Ensemble, coords, chain: ChainOptions, sourc
             done = backend.iteration
             bar.update(step)
             tau = backend.get_autocorr_time(tol=0)
-            converged = bool(done >= chain.min_steps and np.all(chain.autocorr_factor * tau < done)
-                             and np.all(np.abs(tau_old - tau) < chain.tau_tolerance * tau))  # fmt: skip
+            converged = bool(
+                done >= chain.min_steps
+                and np.all(chain.autocorr_factor * tau < done)
+                and np.all(np.abs(tau_old - tau) < chain.tau_tolerance * tau)
+            )
             bar.set_postfix(tau=f"{np.max(tau):.0f}")
             if converged:
                 break
@@ -281,13 +303,15 @@ def _run_until_converged(ensemble: _Ensemble, coords, chain: ChainOptions, sourc
             f"{source}: MCMC stopped at {done} steps before convergence (max τ = {np.max(tau):.0f} steps "
             f"needs > {chain.autocorr_factor * np.max(tau):.0f} steps and τ stable within {chain.tau_tolerance:.0%}); "
             "treat the intervals as rough or raise max_steps",
-            ConvergenceWarning, stacklevel=3,
-        )  # fmt: skip
+            ConvergenceWarning,
+            stacklevel=3,
+        )
     return converged, done
 
 
-def _summarise(ensemble: _Ensemble, names: tuple[str, ...], model_name: str, converged: bool, done: int,
-               surrogate_info) -> PosteriorResult:  # fmt: skip
+def _summarise(
+    ensemble: _Ensemble, names: tuple[str, ...], model_name: str, converged: bool, done: int, surrogate_info
+) -> PosteriorResult:
     """The posterior's estimates after burn-in (2 max τ) and thinning (½ min τ)."""
     backend = ensemble.backend
     tau = backend.get_autocorr_time(tol=0)
@@ -301,15 +325,24 @@ def _summarise(ensemble: _Ensemble, names: tuple[str, ...], model_name: str, con
     for name in names:
         x = samples[name]
         q = np.percentile(x, [2.5, 16, 50, 84, 97.5])
-        estimates[name] = Estimate(float(q[2]), float(np.std(x, ddof=1)), (float(q[0]), float(q[4])), _UNITS[name], method)
+        estimates[name] = Estimate(
+            float(q[2]), float(np.std(x, ddof=1)), (float(q[0]), float(q[4])), _UNITS[name], method
+        )
         intervals68[name] = (float(q[1]), float(q[3]))
     return PosteriorResult(
-        estimates=estimates, intervals68=intervals68, samples=samples,
-        autocorr_time=dict(zip(names, map(float, tau))), n_steps=int(done),
-        effective_samples=float(n_walkers * (done - burn) / np.max(tau)), converged=converged,
-        failed_forward=ensemble.failed_forward, acceptance_fraction=float(np.mean(backend.accepted / done)),
-        chain=backend.get_chain(), names=names, surrogate=surrogate_info,
-    )  # fmt: skip
+        estimates=estimates,
+        intervals68=intervals68,
+        samples=samples,
+        autocorr_time=dict(zip(names, map(float, tau))),
+        n_steps=int(done),
+        effective_samples=float(n_walkers * (done - burn) / np.max(tau)),
+        converged=converged,
+        failed_forward=ensemble.failed_forward,
+        acceptance_fraction=float(np.mean(backend.accepted / done)),
+        chain=backend.get_chain(),
+        names=names,
+        surrogate=surrogate_info,
+    )
 
 
 def sample_posterior(
@@ -374,9 +407,15 @@ def sample_posterior(
 _COMPILED_AHEAD: set = set()
 
 
-def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_walkers: int = 32, check_every: int = 250,
-                            nuisance: tuple[str, ...] = (),
-                            surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES) -> threading.Thread | None:
+def compile_posterior_ahead(
+    session: Session,
+    model: AxisymForwardModel,
+    *,
+    n_walkers: int = 32,
+    check_every: int = 250,
+    nuisance: tuple[str, ...] = (),
+    surrogate_nodes: tuple[int, int, int, int] = DEFAULT_NODES,
+) -> threading.Thread | None:
     """Compile, on a background thread, the programs a surrogate posterior of ``session`` through
     ``model`` will run (the engine's curves and the sampler), while its fit compiles on this one.
 
@@ -388,8 +427,17 @@ def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_wa
     """
     if not isinstance(model, AxisymForwardModel) or session.wrinkle_counts is None:
         return None
-    structure = (model.setup, model.wrinkle_law, model.n_grid, n_walkers, check_every, nuisance, surrogate_nodes,
-                 session.force.size, len(session.wrinkle_counts))
+    structure = (
+        model.setup,
+        model.wrinkle_law,
+        model.n_grid,
+        n_walkers,
+        check_every,
+        nuisance,
+        surrogate_nodes,
+        session.force.size,
+        len(session.wrinkle_counts),
+    )
     if structure in _COMPILED_AHEAD:
         return None
     _COMPILED_AHEAD.add(structure)
@@ -399,9 +447,15 @@ def compile_posterior_ahead(session: Session, model: AxisymForwardModel, *, n_wa
             # the sampler first: it compiles in seconds, the engine's curves in tens of them
             start = np.array([[1e3, 1e6, session.thickness, session.radius]])
             log_center = np.log(start[0])
-            placeholder = surrogate_from_values(np.zeros((*surrogate_nodes, model.n_grid + 1)), log_center - 1.0,
-                                                log_center + 1.0, np.linspace(model.force_min, model.force_max, model.n_grid),
-                                                model.poisson_ratio, model.wrinkle_law, surrogate_nodes)
+            placeholder = surrogate_from_values(
+                np.zeros((*surrogate_nodes, model.n_grid + 1)),
+                log_center - 1.0,
+                log_center + 1.0,
+                np.linspace(model.force_min, model.force_max, model.n_grid),
+                model.poisson_ratio,
+                model.wrinkle_law,
+                surrogate_nodes,
+            )
             problem = build_problem(session, placeholder, start_pressure=1e3, start_modulus=1e6, nuisance=nuisance)
             padded, columns, _ = padded_problem(problem)
             free = np.zeros(len(ALL_NAMES) + 1, bool)

@@ -81,10 +81,15 @@ def regress_force_on_depth(depth: np.ndarray, force: np.ndarray, *, through_orig
     cov = np.zeros((2, 2))
     cov[:n_params, :n_params] = cov_small
     return Regression(
-        slope=float(coef[0]), intercept=0.0 if through_origin else float(coef[1]),
-        slope_std=float(np.sqrt(cov[0, 0])), intercept_std=float(np.sqrt(cov[1, 1])),
-        residual_std=math.sqrt(sigma2), dof=dof, covariance=cov, through_origin=through_origin,
-    )  # fmt: skip
+        slope=float(coef[0]),
+        intercept=0.0 if through_origin else float(coef[1]),
+        slope_std=float(np.sqrt(cov[0, 0])),
+        intercept_std=float(np.sqrt(cov[1, 1])),
+        residual_std=math.sqrt(sigma2),
+        dof=dof,
+        covariance=cov,
+        through_origin=through_origin,
+    )
 
 
 def pressure_slope(session: Session, *, through_origin: bool = False) -> tuple[Estimate, Regression]:
@@ -137,15 +142,22 @@ def calibrate_ks(sessions: Sequence[Session], *, through_origin: bool = False) -
     k_std = math.sqrt(float(residual @ residual) / (len(sessions) - 1) / float(p_true @ p_true))
     estimate = Estimate.lognormal(k, k_std / k, "1", "closed-form (paper Procedure 1), OLS through origin")
     return KsCalibration(
-        k_s=estimate, gauge_pressures=p_true, pressure_slopes=p_hat,
+        k_s=estimate,
+        gauge_pressures=p_true,
+        pressure_slopes=p_hat,
         pressure_slope_stds=np.array([e.std for e in slopes]),
-        objects=tuple(s.object_name for s in sessions), sources=tuple(str(s.source) for s in sessions),
-    )  # fmt: skip
+        objects=tuple(s.object_name for s in sessions),
+        sources=tuple(str(s.source) for s in sessions),
+    )
 
 
 def modulus_from_wrinkles(gauge_pressure, radius, thickness, wrinkle_count, poisson_ratio):
     """E [Pa] = √(12(1−ν²)) (1.33 R / (n h))² P_g from P_g [Pa], R [m], h [m], n [-], ν [-]."""
-    return math.sqrt(12 * (1 - poisson_ratio**2)) * (WRINKLE_PREFACTOR * radius / (wrinkle_count * thickness)) ** 2 * gauge_pressure
+    return (
+        math.sqrt(12 * (1 - poisson_ratio**2))
+        * (WRINKLE_PREFACTOR * radius / (wrinkle_count * thickness)) ** 2
+        * gauge_pressure
+    )
 
 
 def modulus_from_critical_depth(gauge_pressure, radius, thickness, critical_depth):
@@ -209,10 +221,12 @@ class ClosedFormResult:
         return {
             "estimates": {name: est.to_dict() for name, est in self.estimates.items()},
             "bootstrap": {name: est.to_dict() for name, est in self.bootstrap.items()},
-            "regression": {"slope": {"value": reg.slope, "std": reg.slope_std, "unit": "N/m"},
-                           "intercept": {"value": reg.intercept, "std": reg.intercept_std, "unit": "N"},
-                           "residual_std": {"value": reg.residual_std, "unit": "N"}},
-        }  # fmt: skip
+            "regression": {
+                "slope": {"value": reg.slope, "std": reg.slope_std, "unit": "N/m"},
+                "intercept": {"value": reg.intercept, "std": reg.intercept_std, "unit": "N"},
+                "residual_std": {"value": reg.residual_std, "unit": "N"},
+            },
+        }
 
 
 def paper_k_s() -> Estimate:
@@ -249,8 +263,7 @@ def estimate_session(
     if session.onset_depth is not None:
         estimates["critical_depth_modulus"] = _critical_depth_estimate(session, p_g, rel)
     estimates["k_s"] = k_s
-    boot = (_bootstrap(session, k_s, through_origin, bootstrap_samples, seed)
-            if bootstrap_samples > 0 else {})  # fmt: skip
+    boot = _bootstrap(session, k_s, through_origin, bootstrap_samples, seed) if bootstrap_samples > 0 else {}
     return ClosedFormResult(estimates=estimates, regression=reg, bootstrap=boot)
 
 
@@ -270,23 +283,34 @@ def _wrinkle_estimates(session: Session, p_g: float, rel: dict[str, float]) -> d
         "young_modulus": Estimate.lognormal(e_value, e_rel, "Pa", _METHOD),
         # τ = (n / 1.33)² exactly, by the model's own relation.
         "tau": Estimate.lognormal((n_mean / WRINKLE_PREFACTOR) ** 2, 2 * count_rel, "1", _METHOD),
-        "wrinkle_count": Estimate(n_mean, n_std, (n_mean - 1.96 * n_std, n_mean + 1.96 * n_std), "1",
-                                  "mean of per-trial counts; var = (scatter + 1)/N"),
-    }  # fmt: skip
+        "wrinkle_count": Estimate(
+            n_mean,
+            n_std,
+            (n_mean - 1.96 * n_std, n_mean + 1.96 * n_std),
+            "1",
+            "mean of per-trial counts; var = (scatter + 1)/N",
+        ),
+    }
 
 
 def _critical_depth_estimate(session: Session, p_g: float, rel: dict[str, float]) -> Estimate:
     """E [Pa] from the mean wrinkling-onset depth, flagged unreliable."""
     w_c = float(np.mean(session.onset_depth))
-    w_c_rel = (float(np.std(session.onset_depth, ddof=1)) / math.sqrt(session.onset_depth.size)
-               if session.onset_depth.size > 1 else 0.5) / w_c  # fmt: skip
+    w_c_rel = (
+        float(np.std(session.onset_depth, ddof=1)) / math.sqrt(session.onset_depth.size)
+        if session.onset_depth.size > 1
+        else 0.5
+    ) / w_c
     # E ∝ P_g R² h⁻¹ w_c⁻¹ ∝ slope R k_s⁻¹ h⁻¹ w_c⁻¹
     c_rel = math.hypot(rel["slope"], rel["radius"], rel["k_s"], rel["thickness"], w_c_rel)
     return Estimate.lognormal(
-        modulus_from_critical_depth(p_g, session.radius, session.thickness, w_c), c_rel, "Pa",
-        _METHOD, note="unreliable: the wrinkling onset is ambiguous to observe and E ∝ 1/w_c "
+        modulus_from_critical_depth(p_g, session.radius, session.thickness, w_c),
+        c_rel,
+        "Pa",
+        _METHOD,
+        note="unreliable: the wrinkling onset is ambiguous to observe and E ∝ 1/w_c "
         "amplifies its error (paper Section 3.4); use young_modulus from the wrinkle count",
-    )  # fmt: skip
+    )
 
 
 def _positive_normal(rng, mean, std, size):

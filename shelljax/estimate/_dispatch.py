@@ -39,8 +39,13 @@ def run_estimator(
     Every result has ``estimates`` (name → :class:`Estimate`) and ``to_dict()``.
     """
     if method == "closed-form":
-        return estimate_session(session, k_s=options.k_s, through_origin=options.through_origin,
-                                bootstrap_samples=options.bootstrap_samples, seed=options.seed)  # fmt: skip
+        return estimate_session(
+            session,
+            k_s=options.k_s,
+            through_origin=options.through_origin,
+            bootstrap_samples=options.bootstrap_samples,
+            seed=options.seed,
+        )
     if method not in METHODS:
         raise InvalidInputError(f"unknown estimator {method!r}. Fix: use one of {', '.join(METHODS)}")
     if method == "fit" or fit is None:
@@ -50,5 +55,12 @@ def run_estimator(
         if options.surrogate:
             compile_posterior_ahead(session, model, n_walkers=options.walkers, nuisance=options.nuisance)
         fit = fit_session(session, model, nuisance=options.nuisance, raise_on_failure=False)
-    return sample_posterior(fit, n_walkers=options.walkers, max_steps=options.max_steps, backend_path=backend_path,
-                            seed=options.seed, surrogate=options.surrogate, progress=progress)  # fmt: skip
+    return sample_posterior(
+        fit,
+        n_walkers=options.walkers,
+        max_steps=options.max_steps,
+        backend_path=backend_path,
+        seed=options.seed,
+        surrogate=options.surrogate,
+        progress=progress,
+    )

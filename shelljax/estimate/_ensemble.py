@@ -26,7 +26,9 @@ from .._programs import persistent_jit
 STRETCH_SCALE = 2.0  # emcee's default a
 
 
-def _stretch(key: UInt32[Array, " 2"], coords, log_prob, moving, others, problem: PaddedProblem, sampled: Float[Array, ""]):
+def _stretch(
+    key: UInt32[Array, " 2"], coords, log_prob, moving, others, problem: PaddedProblem, sampled: Float[Array, ""]
+):
     """One half-step: the walkers ``moving`` stretched against ``others``; (coords, log_prob,
     accepted of ``moving``, forward solves that failed)."""
     key_z, key_partner, key_accept = jax.random.split(key, 3)
@@ -43,8 +45,14 @@ def _stretch(key: UInt32[Array, " 2"], coords, log_prob, moving, others, problem
     return coords, log_prob, accept, jnp.sum(~converged, dtype=jnp.int32)
 
 
-def _block(problem: PaddedProblem, coords: Float[Array, "w 7"], key: UInt32[Array, " 2"], free: Bool[Array, " 7"],
-           steps: Int[Array, ""], length: int):
+def _block(
+    problem: PaddedProblem,
+    coords: Float[Array, "w 7"],
+    key: UInt32[Array, " 2"],
+    free: Bool[Array, " 7"],
+    steps: Int[Array, ""],
+    length: int,
+):
     walkers = coords.shape[0]
     half = (walkers + 1) // 2  # emcee splits an odd ensemble the same way
     sampled = jnp.sum(free).astype(coords.dtype)
@@ -55,8 +63,12 @@ def _block(problem: PaddedProblem, coords: Float[Array, "w 7"], key: UInt32[Arra
         key, key_split, key_first, key_second = jax.random.split(key, 4)
         order = jax.random.permutation(key_split, walkers)
         first, second = order[:half], order[half:]
-        coords, log_prob, accept_first, failed_first = _stretch(key_first, coords, log_prob, first, second, problem, sampled)
-        coords, log_prob, accept_second, failed_second = _stretch(key_second, coords, log_prob, second, first, problem, sampled)
+        coords, log_prob, accept_first, failed_first = _stretch(
+            key_first, coords, log_prob, first, second, problem, sampled
+        )
+        coords, log_prob, accept_second, failed_second = _stretch(
+            key_second, coords, log_prob, second, first, problem, sampled
+        )
         accepted = jnp.zeros(walkers, bool).at[first].set(accept_first).at[second].set(accept_second)
         return (coords, log_prob, key, failed + failed_first + failed_second), accepted
 
@@ -67,8 +79,13 @@ def _block(problem: PaddedProblem, coords: Float[Array, "w 7"], key: UInt32[Arra
 
     start = (coords, initial_log_prob, key, jnp.zeros((), jnp.int32))
     (_, _, _, failed), (chain, log_prob, accepted) = jax.lax.scan(step, start, jnp.arange(length, dtype=jnp.int32))
-    return {"initial_log_prob": initial_log_prob, "chain": chain, "log_prob": log_prob, "accepted": accepted,
-            "failed_forward": failed}
+    return {
+        "initial_log_prob": initial_log_prob,
+        "chain": chain,
+        "log_prob": log_prob,
+        "accepted": accepted,
+        "failed_forward": failed,
+    }
 
 
 _block_kept = persistent_jit(_block)
@@ -85,8 +102,14 @@ def stretch_block(problem: PaddedProblem, coords, seed: int, free, steps: int, l
     whose forward model failed.
     """
     key = jax.random.PRNGKey(seed)
-    return _block_kept(problem, jnp.asarray(coords, jnp.float64), key, jnp.asarray(free), jnp.asarray(steps, jnp.int32),
-                       length=int(length))
+    return _block_kept(
+        problem,
+        jnp.asarray(coords, jnp.float64),
+        key,
+        jnp.asarray(free),
+        jnp.asarray(steps, jnp.int32),
+        length=int(length),
+    )
 
 
 __all__ = ["STRETCH_SCALE", "stretch_block"]

@@ -25,7 +25,14 @@ from ._problem import ALL_NAMES, OFFSET_SCALE, InverseProblem, PaddedProblem, bu
 from ._result import Estimate
 
 _METHOD = "fit: Levenberg-Marquardt through {model}, Laplace (Gauss-Newton) errors"
-_UNITS = {"gauge_pressure": "Pa", "young_modulus": "Pa", "thickness": "m", "radius": "m", "depth_offset": "m", "force_gain": "1"}
+_UNITS = {
+    "gauge_pressure": "Pa",
+    "young_modulus": "Pa",
+    "thickness": "m",
+    "radius": "m",
+    "depth_offset": "m",
+    "force_gain": "1",
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,10 +66,12 @@ class FitResult:
         wrinkle count [-] and the depth noise σ_w [m] of the whitened residuals."""
         return {
             "estimates": {name: est.to_dict() for name, est in self.estimates.items()},
-            "chi2": self.chi2, "dof": self.dof, "iterations": self.steps,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "iterations": self.steps,
             "predicted_wrinkle_count": self.predicted_wrinkle_count,
             "depth_noise": {"value": self.problem.depth_noise, "unit": "m"},
-        }  # fmt: skip
+        }
 
 
 OPTIMALITY_TOL = 1e-3  # [χ²] an optimum's remaining Gauss–Newton decrease; 1 χ² ≈ a 1σ shift
@@ -111,14 +120,20 @@ def _solve(problem: PaddedProblem, u0, rtol, atol, max_steps: int):
     # the residuals, Jacobian and predictions at the optimum are LM's own, not a fresh pass.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     residuals = _with_dense_jacobian(problem.residuals_and_prediction)
-    sol = optx.least_squares(lambda u, args: residuals(u), solver, u0, has_aux=True, max_steps=max_steps,
-                             throw=False)  # fmt: skip
+    sol = optx.least_squares(lambda u, args: residuals(u), solver, u0, has_aux=True, max_steps=max_steps, throw=False)
     # (sol.aux belongs to the iterate before the last accepted one; the state's to the optimum)
     *prediction, forward_ok = sol.state.aux
     accepted = sol.state.f_info
-    return dict(u=sol.value, ok=sol.result == optx.RESULTS.successful, forward_ok=forward_ok, steps=sol.stats["num_steps"],
-                out_of_steps=sol.result == optx.RESULTS.nonlinear_max_steps_reached,
-                residual=accepted.residual, jacobian=accepted.jac.as_matrix(), prediction=tuple(prediction))  # fmt: skip
+    return dict(
+        u=sol.value,
+        ok=sol.result == optx.RESULTS.successful,
+        forward_ok=forward_ok,
+        steps=sol.stats["num_steps"],
+        out_of_steps=sol.result == optx.RESULTS.nonlinear_max_steps_reached,
+        residual=accepted.residual,
+        jacobian=accepted.jac.as_matrix(),
+        prediction=tuple(prediction),
+    )
 
 
 # a fit is compiled more often than it runs long: XLA:CPU's legacy elemental emitters and LLVM at
@@ -127,8 +142,9 @@ _FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_opti
 _solve_kept = persistent_jit(_solve, cpu_compiler_options=_FIT_COMPILER_OPTIONS)
 
 
-def solve_least_squares(problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
-                        optimality_tol: float = OPTIMALITY_TOL):
+def solve_least_squares(
+    problem, u0, rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200, optimality_tol: float = OPTIMALITY_TOL
+):
     """Levenberg–Marquardt on ``problem.residuals_and_prediction`` (whitened residuals, aux
     ending in a forward-model-finite flag) from ``u0``.
 
@@ -179,8 +195,14 @@ def fit_session(
     """
     start = estimate_session(session, bootstrap_samples=0)
     start_modulus = start.young_modulus.value if start.young_modulus is not None else 1e6
-    problem = build_problem(session, model, start_pressure=start.gauge_pressure.value,
-                            start_modulus=start_modulus, depth_noise=depth_noise, nuisance=nuisance)  # fmt: skip
+    problem = build_problem(
+        session,
+        model,
+        start_pressure=start.gauge_pressure.value,
+        start_modulus=start_modulus,
+        depth_noise=depth_noise,
+        nuisance=nuisance,
+    )
     # the padded problem: one compiled fit for every session of this model's structure
     padded, columns, rows = padded_problem(problem)
     u0 = jnp.zeros(len(ALL_NAMES))
@@ -206,12 +228,18 @@ def fit_session(
     covariance = np.linalg.inv(jac.T @ jac)
     chi2 = float(residual @ residual)
     return FitResult(
-        estimates=_laplace_estimates(problem, u, covariance), covariance=covariance, chi2=chi2,
-        dof=int(residual.size - problem.ndim), steps=int(steps),
+        estimates=_laplace_estimates(problem, u, covariance),
+        covariance=covariance,
+        chi2=chi2,
+        dof=int(residual.size - problem.ndim),
+        steps=int(steps),
         predicted_depth=np.asarray(out["prediction"][0])[: problem.force.shape[0]],
-        predicted_wrinkle_count=float(out["prediction"][1]), problem=problem, u=np.asarray(u),
-        source=session.source, converged=converged,
-    )  # fmt: skip
+        predicted_wrinkle_count=float(out["prediction"][1]),
+        problem=problem,
+        u=np.asarray(u),
+        source=session.source,
+        converged=converged,
+    )
 
 
 def _laplace_estimates(problem: InverseProblem, u, covariance: np.ndarray) -> dict[str, Estimate]:

@@ -103,8 +103,16 @@ class AxisymForwardModel(AbstractForwardModel):
     wrinkle_law: str = eqx.field(static=True, default="mechanics")
 
     @classmethod
-    def for_forces(cls, radius: float, forces, *, poisson_ratio: float = DEFAULT_POISSON_RATIO, n_grid: int = 7,
-                   wrinkle_law: str = "mechanics", **setup_kwargs):  # fmt: skip
+    def for_forces(
+        cls,
+        radius: float,
+        forces,
+        *,
+        poisson_ratio: float = DEFAULT_POISSON_RATIO,
+        n_grid: int = 7,
+        wrinkle_law: str = "mechanics",
+        **setup_kwargs,
+    ):
         """Model for a session of inflated radius R [m] and recorded ``forces`` [N]; ``setup_kwargs``
         go to the engine's ``Setup`` (its finger, gas law and penalty become traced fields), but for
         ``gas_volume_ratio`` [-] (sealed gas volume / 4/3 π R³, a traced ``CurvePhysics`` field; default 1)."""
@@ -117,17 +125,33 @@ class AxisymForwardModel(AbstractForwardModel):
         forces = jnp.asarray(forces)
         ratio = setup_kwargs.pop("gas_volume_ratio", 1.0)
         if not (math.isfinite(ratio) and ratio > 0):
-            raise InvalidInputError(f"gas_volume_ratio = {ratio!r} must be a positive number (sealed gas volume / "
-                                    "4/3 π R³). Fix: pass 1 for a ball")  # fmt: skip
+            raise InvalidInputError(
+                f"gas_volume_ratio = {ratio!r} must be a positive number (sealed gas volume / "
+                "4/3 π R³). Fix: pass 1 for a ball"
+            )
         given = Setup(radius=float(radius), **setup_kwargs)  # checks every field
-        engine = dataclasses.replace(given, radius=ENGINE_RADIUS, indenter_radius=ENGINE_RADIUS,
-                                     contact_stiffness=Setup().contact_stiffness, gas="polytropic")  # fmt: skip
+        engine = dataclasses.replace(
+            given,
+            radius=ENGINE_RADIUS,
+            indenter_radius=ENGINE_RADIUS,
+            contact_stiffness=Setup().contact_stiffness,
+            gas="polytropic",
+        )
         # a "polytropic" Setup carries no κ: the engine's default, CurvePhysics.defaults' isothermal κ = 1
         gas_exponent = GAS_EXPONENTS["isothermal" if given.gas == "polytropic" else given.gas]
-        return cls(reference_radius=float(radius), force_min=float(forces.min()), force_max=float(forces.max()), poisson_ratio=poisson_ratio,
-                   indenter_radius=given.indenter_radius, gas_volume_ratio=float(ratio),
-                   contact_stiffness=given.contact_stiffness, gas_exponent=gas_exponent, n_grid=n_grid, setup=engine,
-                   wrinkle_law=wrinkle_law)  # fmt: skip
+        return cls(
+            reference_radius=float(radius),
+            force_min=float(forces.min()),
+            force_max=float(forces.max()),
+            poisson_ratio=poisson_ratio,
+            indenter_radius=given.indenter_radius,
+            gas_volume_ratio=float(ratio),
+            contact_stiffness=given.contact_stiffness,
+            gas_exponent=gas_exponent,
+            n_grid=n_grid,
+            setup=engine,
+            wrinkle_law=wrinkle_law,
+        )
 
     def engine_frame(self, radius):
         """(the ``Similarity`` R → R₀, the engine's ``CurvePhysics`` at R₀) of the ball of radius R [m]."""
@@ -135,11 +159,15 @@ class AxisymForwardModel(AbstractForwardModel):
 
         measured = Similarity.between(self.reference_radius, self.setup.radius)
         default = CurvePhysics.defaults(self.setup)
-        physics = CurvePhysics(indenter_radius=jnp.asarray(measured.length_to_engine(self.indenter_radius), jnp.float64),
-                               gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
-                               gas_exponent=jnp.asarray(self.gas_exponent, jnp.float64), stiffening=default.stiffening,
-                               areal_weight=default.areal_weight, friction_coefficient=default.friction_coefficient,
-                               contact_stiffness=jnp.asarray(measured.penalty_to_engine(self.contact_stiffness), jnp.float64))  # fmt: skip
+        physics = CurvePhysics(
+            indenter_radius=jnp.asarray(measured.length_to_engine(self.indenter_radius), jnp.float64),
+            gas_volume_ratio=jnp.asarray(self.gas_volume_ratio, jnp.float64),
+            gas_exponent=jnp.asarray(self.gas_exponent, jnp.float64),
+            stiffening=default.stiffening,
+            areal_weight=default.areal_weight,
+            friction_coefficient=default.friction_coefficient,
+            contact_stiffness=jnp.asarray(measured.penalty_to_engine(self.contact_stiffness), jnp.float64),
+        )
         return Similarity.between(radius, self.setup.radius), physics
 
     def engine_inputs(self, gauge_pressure, young_modulus, thickness, radius):
@@ -148,12 +176,17 @@ class AxisymForwardModel(AbstractForwardModel):
         for these is the model's, by similarity (:meth:`prediction` maps it back)."""
         similarity, physics = self.engine_frame(radius)
         grid = jnp.linspace(self.force_min, self.force_max, self.n_grid)
-        shell = ShellProperties(gauge_pressure=gauge_pressure, young_modulus=young_modulus,
-                                thickness=similarity.length_to_engine(thickness), poisson_ratio=self.poisson_ratio)
+        shell = ShellProperties(
+            gauge_pressure=gauge_pressure,
+            young_modulus=young_modulus,
+            thickness=similarity.length_to_engine(thickness),
+            poisson_ratio=self.poisson_ratio,
+        )
         return shell, similarity.force_to_engine(grid), physics
 
-    def prediction(self, engine_depth, engine_count, converged, gauge_pressure, young_modulus, thickness, radius,
-                   forces) -> Prediction:
+    def prediction(
+        self, engine_depth, engine_count, converged, gauge_pressure, young_modulus, thickness, radius, forces
+    ) -> Prediction:
         """The prediction at ``forces`` [N] from the engine's curve of :meth:`engine_inputs`:
         its depths (n_grid,) [m] at the engine's scale, its count [-] at the top force and
         whether it converged."""
@@ -162,7 +195,9 @@ class AxisymForwardModel(AbstractForwardModel):
         if self.wrinkle_law == "mechanics":
             count = engine_count
         else:
-            count = ScalingLawModel(self.poisson_ratio)(gauge_pressure, young_modulus, thickness, radius, forces).wrinkle_count
+            count = ScalingLawModel(self.poisson_ratio)(
+                gauge_pressure, young_modulus, thickness, radius, forces
+            ).wrinkle_count
         return Prediction(depth=depth, wrinkle_count=count, converged=converged)
 
     def __call__(self, gauge_pressure, young_modulus, thickness, radius, forces):
@@ -171,8 +206,9 @@ class AxisymForwardModel(AbstractForwardModel):
         shell, engine_forces, physics = self.engine_inputs(gauge_pressure, young_modulus, thickness, radius)
         curve = indentation_curves_raw(shell, engine_forces, self.setup, physics=physics)
         converged = jnp.all(curve.converged[0])
-        return self.prediction(curve.w0[0], curve.wrinkle_count[0, -1], converged, gauge_pressure, young_modulus,
-                               thickness, radius, forces)
+        return self.prediction(
+            curve.w0[0], curve.wrinkle_count[0, -1], converged, gauge_pressure, young_modulus, thickness, radius, forces
+        )
 
 
 def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwardModel:
@@ -191,10 +227,15 @@ def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwa
             if volume is not None:
                 options = {**options, "gas_volume_ratio": volume / (4.0 / 3.0 * jnp.pi * session.radius**3)}
             elif getattr(session, "mesh_path", None) is not None:
-                warnings.warn(f"{session.source}: the mesh {session.mesh_path} is not watertight, so it encloses no "
-                              "volume; the sealed gas fills the local sphere of radius R instead. Fix: close the mesh, "
-                              "or pass gas_volume_ratio = V / (4/3 π R³)", stacklevel=2)  # fmt: skip
-        return AxisymForwardModel.for_forces(session.radius, session.force, poisson_ratio=session.poisson_ratio, **options)
+                warnings.warn(
+                    f"{session.source}: the mesh {session.mesh_path} is not watertight, so it encloses no "
+                    "volume; the sealed gas fills the local sphere of radius R instead. Fix: close the mesh, "
+                    "or pass gas_volume_ratio = V / (4/3 π R³)",
+                    stacklevel=2,
+                )
+        return AxisymForwardModel.for_forces(
+            session.radius, session.force, poisson_ratio=session.poisson_ratio, **options
+        )
     if kind == "scaling":
         return ScalingLawModel(poisson_ratio=session.poisson_ratio, **options)
     raise InvalidInputError(f"unknown forward model {kind!r}. Fix: use one of {', '.join(FORWARD_MODELS)}")

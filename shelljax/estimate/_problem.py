@@ -109,7 +109,9 @@ class InverseProblem(eqx.Module):
     def predict(self, u):
         """Predicted depths [m] at the recorded forces, wrinkle count [-], converged flag."""
         p = self.physical(u)
-        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
+        pred = self.model(
+            p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"]
+        )
         return pred.depth + p["depth_offset"], pred.wrinkle_count, pred.converged
 
     def _prior_residuals(self, u) -> list:
@@ -164,7 +166,9 @@ def build_problem(
     """
     unknown = sorted(set(nuisance) - set(OPTIONAL_PARAMETERS))
     if unknown:
-        raise InvalidInputError(f"unknown nuisance parameter(s) {unknown}. Fix: choose from {list(OPTIONAL_PARAMETERS)}")
+        raise InvalidInputError(
+            f"unknown nuisance parameter(s) {unknown}. Fix: choose from {list(OPTIONAL_PARAMETERS)}"
+        )
     if session.wrinkle_counts is None:
         raise InvalidInputError(
             f"{session.source}: no [wrinkles] counts: the fit needs them to separate E from P_g. "
@@ -178,12 +182,19 @@ def build_problem(
     names += [n for n in OPTIONAL_PARAMETERS if n in nuisance]
     noise = depth_noise if depth_noise is not None else depth_noise_from_scatter(session.force, session.depth)
     return InverseProblem(
-        model=model, force=jnp.asarray(session.force), depth=jnp.asarray(session.depth),
-        counts=jnp.asarray(session.wrinkle_counts, dtype=jnp.float64), depth_noise=float(noise),
-        thickness=session.thickness, thickness_std=session.thickness_std, radius=session.radius,
-        radius_std=session.radius_std, reference_pressure=float(start_pressure),
-        reference_modulus=float(start_modulus), names=tuple(names),
-    )  # fmt: skip
+        model=model,
+        force=jnp.asarray(session.force),
+        depth=jnp.asarray(session.depth),
+        counts=jnp.asarray(session.wrinkle_counts, dtype=jnp.float64),
+        depth_noise=float(noise),
+        thickness=session.thickness,
+        thickness_std=session.thickness_std,
+        radius=session.radius,
+        radius_std=session.radius_std,
+        reference_pressure=float(start_pressure),
+        reference_modulus=float(start_modulus),
+        names=tuple(names),
+    )
 
 
 def jacobian(problem: InverseProblem, u) -> Float[Array, "r d"]:
@@ -226,16 +237,20 @@ class PaddedProblem(eqx.Module):
         return {
             "gauge_pressure": self.reference_pressure * jnp.exp(get["gauge_pressure"]),
             "young_modulus": self.reference_modulus * jnp.exp(get["young_modulus"]),
-            "thickness": self.thickness * jnp.exp(get["thickness"]), "radius": self.radius * jnp.exp(get["radius"]),
-            "depth_offset": OFFSET_SCALE * get["depth_offset"], "force_gain": jnp.exp(get["force_gain"]),
-        }  # fmt: skip
+            "thickness": self.thickness * jnp.exp(get["thickness"]),
+            "radius": self.radius * jnp.exp(get["radius"]),
+            "depth_offset": OFFSET_SCALE * get["depth_offset"],
+            "force_gain": jnp.exp(get["force_gain"]),
+        }
 
     def residuals_and_prediction(self, u, args=None):
         """As :meth:`InverseProblem.residuals_and_prediction`, padded: depth rows, count rows,
         then the thickness, radius and gain priors (each 0 where it is not fitted), then u of
         every fixed unknown."""
         p = self.physical(u)
-        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
+        pred = self.model(
+            p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"]
+        )
         depth = pred.depth + p["depth_offset"]
         on = dict(zip(ALL_NAMES, self.free))
         # a fixed unknown's σ may be 0: its prior row divides by 1 instead
@@ -266,20 +281,29 @@ class PaddedProblem(eqx.Module):
         u, log_noise = u_and_noise[:-1], u_and_noise[-1]
         p = self.physical(u)
         in_bounds = (
-            (p["gauge_pressure"] > PRESSURE_BOUNDS[0]) & (p["gauge_pressure"] < PRESSURE_BOUNDS[1])
-            & (p["young_modulus"] > MODULUS_BOUNDS[0]) & (p["young_modulus"] < MODULUS_BOUNDS[1])
-            & (log_noise > math.log(DEPTH_NOISE_BOUNDS[0])) & (log_noise < math.log(DEPTH_NOISE_BOUNDS[1]))
+            (p["gauge_pressure"] > PRESSURE_BOUNDS[0])
+            & (p["gauge_pressure"] < PRESSURE_BOUNDS[1])
+            & (p["young_modulus"] > MODULUS_BOUNDS[0])
+            & (p["young_modulus"] < MODULUS_BOUNDS[1])
+            & (log_noise > math.log(DEPTH_NOISE_BOUNDS[0]))
+            & (log_noise < math.log(DEPTH_NOISE_BOUNDS[1]))
             & (jnp.abs(p["depth_offset"]) < OFFSET_BOUND)
         )
-        pred = self.model(p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"])
-        depth_misfit = jnp.where(self.sample_mask, (pred.depth + p["depth_offset"] - self.depth) * jnp.exp(-log_noise), 0.0)
+        pred = self.model(
+            p["gauge_pressure"], p["young_modulus"], p["thickness"], p["radius"], self.force * p["force_gain"]
+        )
+        depth_misfit = jnp.where(
+            self.sample_mask, (pred.depth + p["depth_offset"] - self.depth) * jnp.exp(-log_noise), 0.0
+        )
         log_like = -0.5 * jnp.sum(depth_misfit**2) - jnp.sum(self.sample_mask, dtype=log_noise.dtype) * log_noise
         log_like += jnp.sum(jnp.where(self.count_mask, count_log_likelihood(self.counts, pred.wrinkle_count), 0.0))
         on = dict(zip(ALL_NAMES, self.free))
         std = {"thickness": self.thickness_std, "radius": self.radius_std, "force_gain": GAIN_STD}
         mean = {"thickness": self.thickness, "radius": self.radius, "force_gain": 1.0}
         # uniform priors in log P, log E, log σ_w are log-uniform in the physical values
-        log_prior = sum(jnp.where(on[n], -0.5 * ((p[n] - mean[n]) / jnp.where(on[n], std[n], 1.0)) ** 2, 0.0) for n in _PRIORS)
+        log_prior = sum(
+            jnp.where(on[n], -0.5 * ((p[n] - mean[n]) / jnp.where(on[n], std[n], 1.0)) ** 2, 0.0) for n in _PRIORS
+        )
         log_p = log_like + log_prior
         ok = in_bounds & pred.converged & jnp.isfinite(log_p)
         return jnp.where(ok, log_p, -jnp.inf), pred.converged
@@ -299,12 +323,21 @@ def padded_problem(problem: InverseProblem) -> tuple[PaddedProblem, np.ndarray, 
     counts, count_mask = _pad(problem.counts, COUNT_QUANTUM, 0.0)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
     padded = PaddedProblem(
-        model=problem.model, force=force, depth=depth, sample_mask=sample_mask, counts=counts, count_mask=count_mask,
-        free=jnp.asarray([n in problem.names for n in ALL_NAMES]), depth_noise=f(problem.depth_noise),
-        thickness=f(problem.thickness), thickness_std=f(problem.thickness_std), radius=f(problem.radius),
-        radius_std=f(problem.radius_std), reference_pressure=f(problem.reference_pressure),
+        model=problem.model,
+        force=force,
+        depth=depth,
+        sample_mask=sample_mask,
+        counts=counts,
+        count_mask=count_mask,
+        free=jnp.asarray([n in problem.names for n in ALL_NAMES]),
+        depth_noise=f(problem.depth_noise),
+        thickness=f(problem.thickness),
+        thickness_std=f(problem.thickness_std),
+        radius=f(problem.radius),
+        radius_std=f(problem.radius_std),
+        reference_pressure=f(problem.reference_pressure),
         reference_modulus=f(problem.reference_modulus),
-    )  # fmt: skip
+    )
     columns = np.asarray([ALL_NAMES.index(n) for n in problem.names])
     m, k, mp, kp = problem.force.shape[0], problem.counts.shape[0], force.shape[0], counts.shape[0]
     priors = [mp + kp + j for j, n in enumerate(_PRIORS) if n in problem.names]

@@ -35,21 +35,29 @@ class Estimate:
         """
         half = 1.959963984540054 * relative_std
         return cls(
-            value=float(value), std=float(abs(value) * relative_std),
+            value=float(value),
+            std=float(abs(value) * relative_std),
             ci95=(float(value * math.exp(-half)), float(value * math.exp(half))),
-            unit=unit, method=method, note=note,
-        )  # fmt: skip
+            unit=unit,
+            method=method,
+            note=note,
+        )
 
     @classmethod
     def from_dict(cls, record: dict) -> "Estimate":
         """The estimate :meth:`to_dict` wrote (JSON numbers read back exactly)."""
-        return cls(float(record["value"]), float(record["std"]), tuple(float(v) for v in record["ci95"]), record["unit"],
-                   record["method"], record.get("note", ""))  # fmt: skip
+        return cls(
+            float(record["value"]),
+            float(record["std"]),
+            tuple(float(v) for v in record["ci95"]),
+            record["unit"],
+            record["method"],
+            record.get("note", ""),
+        )
 
     def to_dict(self) -> dict:
         """JSON-ready dict: value, std, ci95 and unit, method (and note when present)."""
-        out = {"value": self.value, "std": self.std, "ci95": list(self.ci95), "unit": self.unit,
-               "method": self.method}  # fmt: skip
+        out = {"value": self.value, "std": self.std, "ci95": list(self.ci95), "unit": self.unit, "method": self.method}
         if self.note:
             out["note"] = self.note
         return out

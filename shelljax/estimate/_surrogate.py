@@ -81,8 +81,9 @@ class SurrogateForwardModel(AbstractForwardModel):
             out = jnp.tensordot(_chebyshev_basis(t[axis], out.shape[0]), out, axes=(0, 0))
         depth = jnp.interp(forces, self.force_grid, out[:-1])
         if self.wrinkle_law == "scaling":
-            count = ScalingLawModel(self.poisson_ratio)(gauge_pressure, young_modulus, thickness, radius,
-                                                        forces).wrinkle_count  # fmt: skip
+            count = ScalingLawModel(self.poisson_ratio)(
+                gauge_pressure, young_modulus, thickness, radius, forces
+            ).wrinkle_count
         else:
             count = out[-1]
         return Prediction(depth=depth, wrinkle_count=count, converged=inside)
@@ -100,8 +101,15 @@ def node_axes(center: dict[str, float], half_width: dict[str, float], nodes=DEFA
     return axes, log_center - widths, log_center + widths
 
 
-def surrogate_from_values(values: np.ndarray, lower, upper, force_grid, poisson_ratio: float,
-                          wrinkle_law: str = "mechanics", nodes: tuple[int, ...] | None = None) -> SurrogateForwardModel:
+def surrogate_from_values(
+    values: np.ndarray,
+    lower,
+    upper,
+    force_grid,
+    poisson_ratio: float,
+    wrinkle_law: str = "mechanics",
+    nodes: tuple[int, ...] | None = None,
+) -> SurrogateForwardModel:
     """The interpolant of ``values`` (n_P, n_E, n_h, n_R, k + 1) given at the ``node_axes``.
 
     ``nodes``: the series' lengths per axis (default: the values'); an axis held fixed (one
@@ -112,8 +120,12 @@ def surrogate_from_values(values: np.ndarray, lower, upper, force_grid, poisson_
     if nodes is not None:
         coefficients = np.pad(coefficients, [(0, n - c) for n, c in zip(nodes, coefficients.shape)] + [(0, 0)])
     return SurrogateForwardModel(
-        poisson_ratio=poisson_ratio, force_grid=jnp.asarray(force_grid), log_lower=jnp.asarray(lower),
-        log_upper=jnp.asarray(upper), coefficients=jnp.asarray(coefficients), wrinkle_law=wrinkle_law,
+        poisson_ratio=poisson_ratio,
+        force_grid=jnp.asarray(force_grid),
+        log_lower=jnp.asarray(lower),
+        log_upper=jnp.asarray(upper),
+        coefficients=jnp.asarray(coefficients),
+        wrinkle_law=wrinkle_law,
     )
 
 
@@ -140,15 +152,30 @@ def engine_predictions(model: AxisymForwardModel, points: np.ndarray, forces, wo
     points = jnp.asarray(points, jnp.float64)
     shell, engine_forces, physics = _engine_inputs(model, points)
     setup_fields = {f: getattr(model.setup, f) for f in model.setup.__dataclass_fields__ if f != "radius"}
-    curves = indentation_curves(shell, engine_forces, radius=model.setup.radius, raise_on_failure=False, workers=workers,
-                                physics=physics, rows_per_call=ROWS_PER_CALL, **setup_fields)
+    curves = indentation_curves(
+        shell,
+        engine_forces,
+        radius=model.setup.radius,
+        raise_on_failure=False,
+        workers=workers,
+        physics=physics,
+        rows_per_call=ROWS_PER_CALL,
+        **setup_fields,
+    )
     converged = np.all(curves.converged, axis=1)
-    return _predictions(model, curves.w0, curves.wrinkle_count[:, -1], converged, points, jnp.asarray(forces, jnp.float64))
+    return _predictions(
+        model, curves.w0, curves.wrinkle_count[:, -1], converged, points, jnp.asarray(forces, jnp.float64)
+    )
 
 
-def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_width: dict[str, float],
-                    nodes: tuple[int, int, int, int] = DEFAULT_NODES, workers: int | None = None,
-                    progress: bool | None = None) -> SurrogateForwardModel:
+def build_surrogate(
+    model: AxisymForwardModel,
+    center: dict[str, float],
+    half_width: dict[str, float],
+    nodes: tuple[int, int, int, int] = DEFAULT_NODES,
+    workers: int | None = None,
+    progress: bool | None = None,
+) -> SurrogateForwardModel:
     """Solve ``model``'s engine on the Chebyshev nodes of a box and return the interpolant.
 
     ``center``/``half_width``: see :func:`node_axes`; ``workers``: host threads of the batched
@@ -166,8 +193,9 @@ def build_surrogate(model: AxisymForwardModel, center: dict[str, float], half_wi
     grid = np.asarray(jnp.linspace(model.force_min, model.force_max, model.n_grid))
     values = np.empty(counts + [model.n_grid + 1])
     mesh = np.stack(np.meshgrid(*axes[:3], indexing="ij"), axis=-1).reshape(-1, 3)
-    bar = tqdm(axes[3], desc=f"surrogate ({int(np.prod(counts))} curves)",
-               disable=None if progress is None else not progress)
+    bar = tqdm(
+        axes[3], desc=f"surrogate ({int(np.prod(counts))} curves)", disable=None if progress is None else not progress
+    )
     # one radius a batch: the engine's walk through a batch starts each curve from a neighbour's
     # equilibrium, which is closest at the same radius
     for r_index, log_radius in enumerate(bar):
@@ -192,8 +220,9 @@ def _evaluate(model: AbstractForwardModel, points, forces):
     return jax.vmap(lambda q: model(q[0], q[1], q[2], q[3], forces))(points)
 
 
-def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel, points: np.ndarray,
-                    forces: np.ndarray) -> dict[str, float]:
+def surrogate_error(
+    surrogate: SurrogateForwardModel, model: AxisymForwardModel, points: np.ndarray, forces: np.ndarray
+) -> dict[str, float]:
     """Largest |surrogate − engine| over ``points`` (m, 4) of physical (P_g, E, h, R).
 
     Returns ``depth`` [m] (at ``forces`` [N]) and ``wrinkle_count`` [-]. The engine's side is
@@ -210,4 +239,11 @@ def surrogate_error(surrogate: SurrogateForwardModel, model: AxisymForwardModel,
     }
 
 
-__all__ = ["SurrogateForwardModel", "build_surrogate", "engine_predictions", "node_axes", "surrogate_error", "surrogate_from_values"]
+__all__ = [
+    "SurrogateForwardModel",
+    "build_surrogate",
+    "engine_predictions",
+    "node_axes",
+    "surrogate_error",
+    "surrogate_from_values",
+]

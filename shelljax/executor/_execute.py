@@ -59,16 +59,23 @@ class ExecutorOptions:
     connect_timeout_s: float = CONNECT_TIMEOUT_S
 
     def __post_init__(self):
-        if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, int)
-                                         or self.workers < 1):  # fmt: skip
-            raise InvalidInputError(f"--workers = {self.workers!r}: must be a whole number ≥ 1. Fix: e.g. --workers 2, "
-                                    "or leave it out to run in-process")  # fmt: skip
+        if self.workers is not None and (
+            isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1
+        ):
+            raise InvalidInputError(
+                f"--workers = {self.workers!r}: must be a whole number ≥ 1. Fix: e.g. --workers 2, "
+                "or leave it out to run in-process"
+            )
         if self.workers is not None and self.cluster is not None:
-            raise InvalidInputError(f"--workers {self.workers} and --cluster {self.cluster} both given: the cluster's "
-                                    "workers are its own. Fix: give one of them")  # fmt: skip
+            raise InvalidInputError(
+                f"--workers {self.workers} and --cluster {self.cluster} both given: the cluster's "
+                "workers are its own. Fix: give one of them"
+            )
         if self.cluster is not None and "://" not in str(self.cluster):
-            raise InvalidInputError(f"--cluster = {self.cluster!r}: not a scheduler address. Fix: give it as "
-                                    "tcp://HOST:PORT (what `dask scheduler` prints)")  # fmt: skip
+            raise InvalidInputError(
+                f"--cluster = {self.cluster!r}: not a scheduler address. Fix: give it as "
+                "tcp://HOST:PORT (what `dask scheduler` prints)"
+            )
 
     @property
     def distributed(self) -> bool:
@@ -95,31 +102,41 @@ def call_item(item: WorkItem) -> ItemResult:
     try:
         value = item.function(*item.args, **item.kwargs, **({} if item.seed is None else {"seed": item.seed}))
     except Exception as err:  # noqa: BLE001 - recorded in the item's result, with its type
-        return ItemResult(item.key, "failed", error=f"{type(err).__name__}: {err}",
-                          seconds=time.perf_counter() - start, worker=worker, seed=item.seed)  # fmt: skip
-    return ItemResult(item.key, "done", value=value, seconds=time.perf_counter() - start, worker=worker,
-                      seed=item.seed)  # fmt: skip
+        return ItemResult(
+            item.key,
+            "failed",
+            error=f"{type(err).__name__}: {err}",
+            seconds=time.perf_counter() - start,
+            worker=worker,
+            seed=item.seed,
+        )
+    return ItemResult(item.key, "done", value=value, seconds=time.perf_counter() - start, worker=worker, seed=item.seed)
 
 
 def _check_keys(items: Sequence[WorkItem]) -> None:
     seen = set()
     for item in items:
         if item.key in seen:
-            raise InvalidInputError(f"two work items share the key {item.key!r}; each item's record needs its own. "
-                                    "Fix: give every item a distinct key")  # fmt: skip
+            raise InvalidInputError(
+                f"two work items share the key {item.key!r}; each item's record needs its own. "
+                "Fix: give every item a distinct key"
+            )
         seen.add(item.key)
 
 
 def _no_dask() -> InvalidInputError:
-    return InvalidInputError("--workers and --cluster run on Dask, which is not installed. Fix: "
-                             "python3 -m pip install 'shelljax[cluster]' (or dask[distributed])")
+    return InvalidInputError(
+        "--workers and --cluster run on Dask, which is not installed. Fix: "
+        "python3 -m pip install 'shelljax[cluster]' (or dask[distributed])"
+    )
 
 
 def _no_scheduler(options: ExecutorOptions, err: BaseException) -> InvalidInputError:
     return InvalidInputError(
         f"--cluster {options.cluster}: no Dask scheduler answered within {options.connect_timeout_s:g} s "
         f"({type(err).__name__}). Fix: start one (`dask scheduler`, then `dask worker {options.cluster}` on "
-        "each machine), check the address, or leave --cluster out to run locally")
+        "each machine), check the address, or leave --cluster out to run locally"
+    )
 
 
 def check_executor(options: ExecutorOptions) -> None:
@@ -146,8 +163,10 @@ def check_executor(options: ExecutorOptions) -> None:
     if address.scheme not in ("tcp", "tls"):
         return
     if not address.hostname or port is None:
-        raise InvalidInputError(f"--cluster = {options.cluster!r}: no host and port in the address. Fix: give it as "
-                                "tcp://HOST:PORT (what `dask scheduler` prints)")
+        raise InvalidInputError(
+            f"--cluster = {options.cluster!r}: no host and port in the address. Fix: give it as "
+            "tcp://HOST:PORT (what `dask scheduler` prints)"
+        )
     try:
         socket.create_connection((address.hostname, port), timeout=options.connect_timeout_s).close()
     except OSError as err:
@@ -173,11 +192,18 @@ def dask_client(options: ExecutorOptions):
         except (OSError, TimeoutError) as err:
             raise _no_scheduler(options, err) from None
     else:
-        cluster = LocalCluster(n_workers=options.workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.CRITICAL)  # fmt: skip
+        cluster = LocalCluster(
+            n_workers=options.workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.CRITICAL,
+        )
         client = Client(cluster)
     try:
-        client.register_plugin(CompilationCache(None if options.cache_dir is None else str(Path(options.cache_dir).resolve())))
+        client.register_plugin(
+            CompilationCache(None if options.cache_dir is None else str(Path(options.cache_dir).resolve()))
+        )
         yield client
     finally:
         client.close()
@@ -192,9 +218,15 @@ def _bar(total: int, initial: int, desc: str, progress: bool | None):
     return tqdm(total=total, initial=initial, desc=desc, unit="item", disable=disable, file=sys.stderr)
 
 
-def run_items(items: Sequence[WorkItem], *, run_dir: str | Path | None = None,
-              options: ExecutorOptions | None = None, resume: bool = False, progress: bool | None = None,
-              desc: str = "items") -> list[ItemResult]:  # fmt: skip
+def run_items(
+    items: Sequence[WorkItem],
+    *,
+    run_dir: str | Path | None = None,
+    options: ExecutorOptions | None = None,
+    resume: bool = False,
+    progress: bool | None = None,
+    desc: str = "items",
+) -> list[ItemResult]:
     """Run ``items`` (module docstring); return their results in the items' order.
 
     ``run_dir``: where each finished item's record is written (None: nowhere); ``resume``: skip
@@ -251,8 +283,9 @@ def _run_on_dask(pending: Sequence[WorkItem], options: ExecutorOptions, finish) 
                 try:
                     result = future.result()
                 except Exception as err:  # noqa: BLE001 - e.g. KilledWorker after Dask's retries
-                    result = ItemResult(item.key, "failed", error=f"{type(err).__name__}: {err}", seed=item.seed,
-                                        worker="dask")  # fmt: skip
+                    result = ItemResult(
+                        item.key, "failed", error=f"{type(err).__name__}: {err}", seed=item.seed, worker="dask"
+                    )
                 finish(result)
         except KeyboardInterrupt:
             client.cancel(list(futures))

@@ -38,8 +38,16 @@ class ItemResult:
 
     def to_dict(self) -> dict:
         """JSON-ready: every field but ``resumed``, ``seconds`` with its unit."""
-        return {"key": self.key, "status": self.status, "value": self.value, "error": self.error,
-                "seconds": self.seconds, "seconds_unit": "s", "worker": self.worker, "seed": self.seed}  # fmt: skip
+        return {
+            "key": self.key,
+            "status": self.status,
+            "value": self.value,
+            "error": self.error,
+            "seconds": self.seconds,
+            "seconds_unit": "s",
+            "worker": self.worker,
+            "seed": self.seed,
+        }
 
 
 def item_path(run_dir: Path, key: str) -> Path:
@@ -64,15 +72,25 @@ def read_item(run_dir: Path, key: str) -> ItemResult | None:
     try:
         record = json.loads(path.read_text())
     except json.JSONDecodeError as err:
-        raise InvalidInputError(f"{path}: not a readable item record ({err}). Fix: delete it; --resume then reruns "
-                                "the item")  # fmt: skip
+        raise InvalidInputError(
+            f"{path}: not a readable item record ({err}). Fix: delete it; --resume then reruns the item"
+        )
     if record.get("key") != key or record.get("status") not in STATUSES:
-        raise InvalidInputError(f"{path}: field 'key' = {record.get('key')!r} / 'status' = {record.get('status')!r} "
-                                f"is not a record of item {key!r}. Fix: delete it; --resume then reruns the item")  # fmt: skip
+        raise InvalidInputError(
+            f"{path}: field 'key' = {record.get('key')!r} / 'status' = {record.get('status')!r} "
+            f"is not a record of item {key!r}. Fix: delete it; --resume then reruns the item"
+        )
     if record["status"] != "done":
         return None
-    return ItemResult(key=key, status="done", value=record.get("value"), seconds=float(record.get("seconds", 0.0)),
-                      worker=str(record.get("worker", "local")), seed=record.get("seed"), resumed=True)  # fmt: skip
+    return ItemResult(
+        key=key,
+        status="done",
+        value=record.get("value"),
+        seconds=float(record.get("seconds", 0.0)),
+        worker=str(record.get("worker", "local")),
+        seed=record.get("seed"),
+        resumed=True,
+    )
 
 
 def check_inputs(run_dir: Path, inputs: dict, *, resume: bool, what: str) -> None:
@@ -89,11 +107,15 @@ def check_inputs(run_dir: Path, inputs: dict, *, resume: bool, what: str) -> Non
         atomic_write_text(path, json.dumps(inputs, indent=1))
         return
     if not path.exists():
-        raise InvalidInputError(f"--resume {run_dir}: no {INPUTS} there, so it is not a {what} shelljax can resume. "
-                                f"Fix: give the --out directory of the interrupted {what}, or start a fresh one")  # fmt: skip
+        raise InvalidInputError(
+            f"--resume {run_dir}: no {INPUTS} there, so it is not a {what} shelljax can resume. "
+            f"Fix: give the --out directory of the interrupted {what}, or start a fresh one"
+        )
     recorded = json.loads(path.read_text())
     changed = sorted(k for k in set(recorded) | set(inputs) if recorded.get(k) != inputs.get(k))
     if changed:
-        raise InvalidInputError(f"--resume {run_dir}: that {what} was started with other {', '.join(changed)}, so its "
-                                f"finished items answer those. Fix: resume it as it was started, or start a fresh one "
-                                "in another --out")  # fmt: skip
+        raise InvalidInputError(
+            f"--resume {run_dir}: that {what} was started with other {', '.join(changed)}, so its "
+            f"finished items answer those. Fix: resume it as it was started, or start a fresh one "
+            "in another --out"
+        )

@@ -80,16 +80,12 @@ def _closest_surface_point(mesh: trimesh.Trimesh, point: np.ndarray) -> tuple[np
     edge = np.max(np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2), axis=1)
     d_face_min = np.min(d_vert[mesh.faces], axis=1)
     candidates = np.flatnonzero(d_face_min <= d_vert.min() + edge)
-    closest = trimesh.triangles.closest_point(
-        triangles[candidates], np.broadcast_to(point, (len(candidates), 3))
-    )
+    closest = trimesh.triangles.closest_point(triangles[candidates], np.broadcast_to(point, (len(candidates), 3)))
     k = int(np.argmin(np.linalg.norm(closest - point, axis=1)))
     return np.asarray(closest[k], dtype=np.float64), int(candidates[k])
 
 
-def _connected_neighbourhood(
-    mesh: trimesh.Trimesh, inside: np.ndarray, seeds: np.ndarray
-) -> np.ndarray:
+def _connected_neighbourhood(mesh: trimesh.Trimesh, inside: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     """Vertices in `inside` reachable from `seeds` along mesh edges without leaving `inside`.
 
     Cuts off pieces of the surface that are close in space but not along the surface (the other
@@ -155,9 +151,7 @@ def _quadric_terms(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = len(x)
     one, zero = np.ones(n), np.zeros(n)
     x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
-    values = np.column_stack(
-        [x0 * x0, x1 * x1, x2 * x2, x0 * x1, x0 * x2, x1 * x2, x0, x1, x2, one]
-    )
+    values = np.column_stack([x0 * x0, x1 * x1, x2 * x2, x0 * x1, x0 * x2, x1 * x2, x0, x1, x2, one])
     grads = np.stack(
         [
             np.column_stack([2 * x0, zero, zero]),
@@ -235,11 +229,7 @@ def _quadric_curvatures(
     return k, origin + y * length, normal
 
 
-def fit_local_sphere(
-    mesh: trimesh.Trimesh,
-    poke_point,
-    fit_radius: float | None = None,
-) -> LocalCurvature:
+def fit_local_sphere(mesh: trimesh.Trimesh, poke_point, fit_radius: float | None = None) -> LocalCurvature:
     """Fit a sphere to the mesh around a poke point: the local radius of curvature R [m].
 
     **Arguments:**

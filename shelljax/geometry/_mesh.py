@@ -52,9 +52,7 @@ def bundled_mesh_path(name: str) -> Path:
     path = Path(str(resources.files("shelljax") / "data" / "meshes" / name))
     if not path.is_file():
         available = sorted(p.name for p in path.parent.glob("*")) if path.parent.is_dir() else []
-        raise InvalidInputError(
-            f"no bundled mesh named {name!r} in {path.parent}; available: {available}"
-        )
+        raise InvalidInputError(f"no bundled mesh named {name!r} in {path.parent}; available: {available}")
     return path
 
 
@@ -96,9 +94,7 @@ def _require_watertight(mesh: trimesh.Trimesh, where: str) -> None:
     )
 
 
-def load_mesh(
-    path: str | Path, *, length_unit: str = "m", require_watertight: bool = True
-) -> trimesh.Trimesh:
+def load_mesh(path: str | Path, *, length_unit: str = "m", require_watertight: bool = True) -> trimesh.Trimesh:
     """Read a closed surface mesh and return it in metres with outward-facing normals.
 
     **Arguments:**

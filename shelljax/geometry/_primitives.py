@@ -45,7 +45,9 @@ def make_ball_mesh(radius: float, subdivisions: int = 4) -> trimesh.Trimesh:
     is slightly below 4/3 π R³. `subdivisions` = 4 gives 2562 vertices (edge ≈ 0.06 R).
     """
     vertices, faces = sphere_mesh(radius, layout="icosphere", subdivisions=subdivisions)
-    return trimesh.Trimesh(vertices=vertices, faces=faces, metadata={"shape": "sphere", "radius": float(radius)}, process=False)
+    return trimesh.Trimesh(
+        vertices=vertices, faces=faces, metadata={"shape": "sphere", "radius": float(radius)}, process=False
+    )
 
 
 def make_hammer_mesh(
@@ -70,13 +72,9 @@ def make_hammer_mesh(
     handle_length = _positive("handle_length", handle_length)
     handle_radius = _positive("handle_radius", handle_radius)
     if head_length <= 2.0 * head_radius:
-        raise InvalidInputError(
-            f"head_length = {head_length} m must exceed the head diameter {2 * head_radius} m"
-        )
+        raise InvalidInputError(f"head_length = {head_length} m must exceed the head diameter {2 * head_radius} m")
     if handle_radius >= head_radius:
-        raise InvalidInputError(
-            f"handle_radius = {handle_radius} m must be smaller than head_radius = {head_radius} m"
-        )
+        raise InvalidInputError(f"handle_radius = {handle_radius} m must be smaller than head_radius = {head_radius} m")
     try:
         import manifold3d  # noqa: F401  (trimesh's boolean engine)
     except ImportError:
@@ -157,8 +155,16 @@ def sphere_mesh(
     if layout == "rings":
         return _rings_layout(radius, n_triangles, pole_refinement, growth, max_spacing, pole_spacing)
     if layout == "random":
-        return _random_layout(radius, top_spacing, max_spacing, bottom_spacing, refined_arc, growth,
-                              0 if seed is None else seed, smoothing_iterations)  # fmt: skip
+        return _random_layout(
+            radius,
+            top_spacing,
+            max_spacing,
+            bottom_spacing,
+            refined_arc,
+            growth,
+            0 if seed is None else seed,
+            smoothing_iterations,
+        )
     if layout == "icosphere":
         return _icosphere_layout(radius, n_triangles, subdivisions, seed)
     raise InvalidInputError(f"sphere_mesh: layout = {layout!r} is not one of {SPHERE_LAYOUTS}.")
@@ -186,8 +192,15 @@ def _rings_layout(radius, n_triangles, pole_refinement, growth, max_spacing, pol
 
 def _random_layout(radius, top_spacing, max_spacing, bottom_spacing, refined_arc, growth, seed, smoothing_iterations):
     bottom_spacing = top_spacing if bottom_spacing is None else bottom_spacing
-    if not (radius > 0 and top_spacing is not None and max_spacing is not None and 0 < top_spacing <= max_spacing
-            and 0 < bottom_spacing <= max_spacing and refined_arc >= 0 and growth > 0):  # fmt: skip
+    if not (
+        radius > 0
+        and top_spacing is not None
+        and max_spacing is not None
+        and 0 < top_spacing <= max_spacing
+        and 0 < bottom_spacing <= max_spacing
+        and refined_arc >= 0
+        and growth > 0
+    ):
         raise InvalidInputError(
             f"sphere_mesh(layout='random'): need radius > 0 (got {radius}), 0 < top_spacing, bottom_spacing ≤ "
             f"max_spacing (got {top_spacing}, {bottom_spacing}, {max_spacing}), refined_arc ≥ 0 "
@@ -230,11 +243,13 @@ def _random_sphere_points(radius, top_spacing, max_spacing, bottom_spacing, refi
     polar angles stratified band by band, azimuths uniform."""
     theta = np.linspace(0.0, np.pi, 20001)  # polar angle from the bottom pole [rad]
     arc_top, arc_bottom = radius * (np.pi - theta), radius * theta
-    spacing = np.minimum.reduce([
-        np.full_like(theta, max_spacing),
-        top_spacing + growth * np.maximum(arc_top - refined_arc, 0.0),
-        bottom_spacing + growth * arc_bottom,
-    ])
+    spacing = np.minimum.reduce(
+        [
+            np.full_like(theta, max_spacing),
+            top_spacing + growth * np.maximum(arc_top - refined_arc, 0.0),
+            bottom_spacing + growth * arc_bottom,
+        ]
+    )
     # vertices per unit polar angle for an equilateral lattice: area per vertex (√3/2) s²
     density = 2.0 * np.pi * radius**2 * np.sin(theta) / (0.5 * np.sqrt(3.0) * spacing**2)
     count = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(theta))])
@@ -243,11 +258,13 @@ def _random_sphere_points(radius, top_spacing, max_spacing, bottom_spacing, refi
     quantile = (np.arange(n_inner) + rng.uniform(0.0, 1.0, n_inner)) / n_inner
     polar = np.interp(quantile * count[-1], count, theta)
     azimuth = rng.uniform(0.0, 2.0 * np.pi, n_inner)
-    return np.concatenate([
-        [[0.0, 0.0, -radius]],
-        radius * np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)], -1),
-        [[0.0, 0.0, radius]],
-    ])
+    return np.concatenate(
+        [
+            [[0.0, 0.0, -radius]],
+            radius * np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)], -1),
+            [[0.0, 0.0, radius]],
+        ]
+    )
 
 
 def _smooth_on_sphere(verts: np.ndarray, radius: float, iterations: int) -> np.ndarray:
@@ -309,9 +326,7 @@ def _ring_sphere(radius, spacing_max, spacing_pole, growth):
         phi = 2.0 * np.pi * (np.arange(n) + offset) / n
         start = len(verts)
         for p in phi:
-            verts.append(
-                (radius * np.sin(th) * np.cos(p), radius * np.sin(th) * np.sin(p), radius * np.cos(th))
-            )
+            verts.append((radius * np.sin(th) * np.cos(p), radius * np.sin(th) * np.sin(p), radius * np.cos(th)))
         rings.append((np.arange(start, start + n), phi))
     faces = []
     for (ia, pa), (ib, pb) in zip(rings[:-1], rings[1:]):

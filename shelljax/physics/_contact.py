@@ -79,9 +79,7 @@ def barrier_energy(gap, activation_distance, stiffness):
     active = gap < activation_distance
     safe_gap = jnp.where(active, jnp.maximum(gap, 1e-300), activation_distance)
     return jnp.where(
-        active,
-        -stiffness * (safe_gap - activation_distance) ** 2 * jnp.log(safe_gap / activation_distance),
-        0.0,
+        active, -stiffness * (safe_gap - activation_distance) ** 2 * jnp.log(safe_gap / activation_distance), 0.0
     )
 
 
@@ -177,14 +175,18 @@ class Plane(eqx.Module):
         if _concrete(n):
             norm = float(np.linalg.norm(np.asarray(n)))
             if n.shape != (3,) or not np.isfinite(norm) or norm == 0.0:
-                raise InvalidInputError(f"Plane {name!r}: normal must be a nonzero 3-vector; got {np.asarray(normal).tolist()}.")
+                raise InvalidInputError(
+                    f"Plane {name!r}: normal must be a nonzero 3-vector; got {np.asarray(normal).tolist()}."
+                )
         self.point, self.normal, self.law = point, n / jnp.linalg.norm(n), law
         self.friction, self.slip_tolerance, self.damping, self.name = friction, slip_tolerance, damping, name
 
     def __check_init__(self):
         check_nonnegative(f"Plane {self.name!r} friction μ [-]", self.friction, "Give μ ≥ 0 (0 for frictionless).")
         check_positive(f"Plane {self.name!r} slip_tolerance ε [m]", self.slip_tolerance, "Give ε > 0, e.g. 1e-4 m.")
-        check_nonnegative(f"Plane {self.name!r} damping c [N·s/m]", self.damping, "Give c ≥ 0 (0 for an elastic contact).")
+        check_nonnegative(
+            f"Plane {self.name!r} damping c [N·s/m]", self.damping, "Give c ≥ 0 (0 for an elastic contact)."
+        )
 
     def gap(self, points: Float[Array, "k 3"]) -> Float[Array, " k"]:
         """Signed gaps [m] of points (k, 3) [m] to this plane."""

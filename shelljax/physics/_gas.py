@@ -74,16 +74,17 @@ def adiabatic_gas_energy(
     p0 = atmospheric_pressure + reference_gauge_pressure
     gm1 = heat_capacity_ratio - 1.0
     change = volume - reference_volume
-    return p0 * reference_volume / gm1 * jnp.expm1(-gm1 * jnp.log1p(change / reference_volume)) + atmospheric_pressure * change
+    return (
+        p0 * reference_volume / gm1 * jnp.expm1(-gm1 * jnp.log1p(change / reference_volume))
+        + atmospheric_pressure * change
+    )
 
 
 def isothermal_gauge_pressure(
     volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE
 ):
     """Gauge pressure [Pa] of a sealed isothermal gas at V [m³]: p₀V₀/V − P_atm."""
-    return (atmospheric_pressure + reference_gauge_pressure) * reference_volume / volume - (
-        atmospheric_pressure
-    )
+    return (atmospheric_pressure + reference_gauge_pressure) * reference_volume / volume - (atmospheric_pressure)
 
 
 def adiabatic_gauge_pressure(
@@ -116,11 +117,7 @@ def _exprel(x):
 
 
 def polytropic_gas_energy(
-    volume,
-    reference_volume,
-    reference_gauge_pressure,
-    exponent,
-    atmospheric_pressure=ATMOSPHERIC_PRESSURE,
+    volume, reference_volume, reference_gauge_pressure, exponent, atmospheric_pressure=ATMOSPHERIC_PRESSURE
 ):
     """Energy [J] of a sealed polytropic gas (p V^κ constant) at V [m³], gauge P_g0 [Pa] at V₀ [m³].
 
@@ -129,17 +126,13 @@ def polytropic_gas_energy(
     """
     p0 = atmospheric_pressure + reference_gauge_pressure
     log_ratio = jnp.log1p((volume - reference_volume) / reference_volume)
-    return -p0 * reference_volume * log_ratio * _exprel(
-        (1.0 - exponent) * log_ratio
-    ) + atmospheric_pressure * (volume - reference_volume)
+    return -p0 * reference_volume * log_ratio * _exprel((1.0 - exponent) * log_ratio) + atmospheric_pressure * (
+        volume - reference_volume
+    )
 
 
 def polytropic_gauge_pressure(
-    volume,
-    reference_volume,
-    reference_gauge_pressure,
-    exponent,
-    atmospheric_pressure=ATMOSPHERIC_PRESSURE,
+    volume, reference_volume, reference_gauge_pressure, exponent, atmospheric_pressure=ATMOSPHERIC_PRESSURE
 ):
     """Gauge pressure [Pa] of a sealed polytropic gas (exponent κ [-]) at V [m³]: p₀(V₀/V)^κ − P_atm."""
     return (atmospheric_pressure + reference_gauge_pressure) * jnp.exp(

@@ -70,9 +70,7 @@ def neo_hookean_membrane_invariants(trace_c, det_c, thickness, young_modulus, po
     """
     alpha, beta = lame_constants_2d(young_modulus, poisson_ratio)
     log_det = jnp.log(det_c)
-    return thickness * (
-        0.5 * beta * (trace_c - 2.0 - log_det) + 0.25 * alpha * (det_c - 1.0 - log_det)
-    )
+    return thickness * (0.5 * beta * (trace_c - 2.0 - log_det) + 0.25 * alpha * (det_c - 1.0 - log_det))
 
 
 def _horner(coefficients, x):
@@ -100,8 +98,11 @@ def _gent_shear(invariant, stiffening):
     closed = ~small & finite
     x_closed = jnp.where(closed, x, 0.5)
     s_closed = jnp.where(closed, stiffening, 1.0)
-    return jnp.where(small, invariant * _horner(_GENT_VALUE_COEFFICIENTS, x_series),
-                     jnp.where(finite, -jnp.log1p(-x_closed) / s_closed, jnp.inf))
+    return jnp.where(
+        small,
+        invariant * _horner(_GENT_VALUE_COEFFICIENTS, x_series),
+        jnp.where(finite, -jnp.log1p(-x_closed) / s_closed, jnp.inf),
+    )
 
 
 def _gent_shear_jvp(primals, tangents):
@@ -176,12 +177,7 @@ def bending_density_invariants(trace_m, trace_m2, thickness, young_modulus, pois
 
 
 def bending_density(
-    rest_metric: Matrix2,
-    rest_curvature: Matrix2,
-    curvature: Matrix2,
-    thickness,
-    young_modulus,
-    poisson_ratio,
+    rest_metric: Matrix2, rest_curvature: Matrix2, curvature: Matrix2, thickness, young_modulus, poisson_ratio
 ) -> Scalar:
     """Bending energy per rest area [J/m²] relative to the rest curvature.
 

@@ -33,4 +33,3 @@ class ShellProperties(eqx.Module):
         self.thickness = thickness
         self.poisson_ratio = poisson_ratio
         self.radius = radius
-

@@ -19,8 +19,14 @@ import numpy as np
 from ..paper import WRINKLE_PREFACTOR, scaling_wrinkle_count, tau
 from ._material import bending_stiffness
 
-__all__ = ["CRITICAL_W", "WRINKLE_PREFACTOR", "reissner_stiffness", "scaling_wrinkle_count", "tau",
-           "vella_linear_stiffness"]  # fmt: skip
+__all__ = [
+    "CRITICAL_W",
+    "WRINKLE_PREFACTOR",
+    "reissner_stiffness",
+    "scaling_wrinkle_count",
+    "tau",
+    "vella_linear_stiffness",
+]
 
 CRITICAL_W = 2.52  # [-], wrinkling onset at the dimensionless depth W(0) = −2.52 (Vella et al. 2011)
 

@@ -40,11 +40,20 @@ def _planes_array(planes, slip_velocity: float) -> tuple[np.ndarray, tuple[str, 
         point = np.asarray(p.point, dtype=float).reshape(-1)
         normal = np.asarray(p.normal, dtype=float).reshape(-1)
         name = str(getattr(p, "name", f"plane{i}"))
-        if point.shape != (3,) or normal.shape != (3,) or not np.all(np.isfinite(point)) or not np.linalg.norm(normal) > 0:
-            raise InvalidInputError(f"planes[{i}] ({name!r}): point and normal must be finite 3-vectors, normal nonzero; "
-                                    f"got point {point.tolist()}, normal {normal.tolist()}.")
+        if (
+            point.shape != (3,)
+            or normal.shape != (3,)
+            or not np.all(np.isfinite(point))
+            or not np.linalg.norm(normal) > 0
+        ):
+            raise InvalidInputError(
+                f"planes[{i}] ({name!r}): point and normal must be finite 3-vectors, normal nonzero; "
+                f"got point {point.tolist()}, normal {normal.tolist()}."
+            )
         mu = _check(f"planes[{i}] ({name!r}).friction", np.asarray(getattr(p, "friction", 0.0)), positive=False)
-        damping = _check(f"planes[{i}] ({name!r}).damping [N·s/m]", np.asarray(getattr(p, "damping", 0.0)), positive=False)
+        damping = _check(
+            f"planes[{i}] ({name!r}).damping [N·s/m]", np.asarray(getattr(p, "damping", 0.0)), positive=False
+        )
         reach, kappa = _barrier(p)
         _check(f"planes[{i}] ({name!r}) barrier activation distance ĝ [m]", reach, positive=False)
         _check(f"planes[{i}] ({name!r}) barrier stiffness κ [J/m²]", kappa, positive=reach > 0.0)

@@ -79,8 +79,9 @@ def _plane_law(gap, k, reach, kappa, clamp):
         d = clamp[0] - gap
         return clamp[1] + k * d, clamp[2] + clamp[1] * d + 0.5 * k * d * d
     s = gap / reach
-    return kappa * reach * (2.0 * (s - 1.0) * math.log(s) + (s - 1.0) ** 2 / s), \
-        -kappa * reach * reach * (s - 1.0) ** 2 * math.log(s)
+    return kappa * reach * (2.0 * (s - 1.0) * math.log(s) + (s - 1.0) ** 2 / s), -kappa * reach * reach * (
+        s - 1.0
+    ) ** 2 * math.log(s)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -90,16 +91,35 @@ def planes_energy(x, planes, clamps, k_contact):
     for p in range(planes.shape[0]):
         reach = max(planes[p, 9], 0.0)
         for i in range(x.shape[0]):
-            gap = (x[i, 0] - planes[p, 0]) * planes[p, 3] + (x[i, 1] - planes[p, 1]) * planes[p, 4] \
+            gap = (
+                (x[i, 0] - planes[p, 0]) * planes[p, 3]
+                + (x[i, 1] - planes[p, 1]) * planes[p, 4]
                 + (x[i, 2] - planes[p, 2]) * planes[p, 5]
+            )
             if gap < reach:
                 energy += _plane_law(gap, k_contact[i], planes[p, 9], planes[p, 10], clamps[p, i])[1]
     return energy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _plane_contact(x, v, mass, dt, planes, clamps, p, vertex_area, mean_area, k_contact, c_contact, total_mass, force,
-                   plane_force, depth, energy):
+def _plane_contact(
+    x,
+    v,
+    mass,
+    dt,
+    planes,
+    clamps,
+    p,
+    vertex_area,
+    mean_area,
+    k_contact,
+    c_contact,
+    total_mass,
+    force,
+    plane_force,
+    depth,
+    energy,
+):
     """Plane p's contact law, dampers and friction and its centre-of-mass dashpot (see
     ``contact_forces``), added to ``force`` and ``plane_force[p]``; ``depth[p]`` ← its deepest
     penetration [m]. Returns ``energy`` [J] plus its contact energy."""
@@ -155,8 +175,9 @@ def _plane_contact(x, v, mass, dt, planes, clamps, p, vertex_area, mean_area, k_
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, veps, force, collider_force, depth,
-                      slot, energy):
+def _collider_contact(
+    x, v, mass, dt, collider, sample_idx, sample_w, sample_k, veps, force, collider_force, depth, slot, energy
+):
     """The moving capsule's springs and friction at the contact points (see ``contact_forces``),
     added to ``force`` and ``collider_force``; ``depth[slot]`` ← the deepest penetration [m].
     Returns ``energy`` [J] plus its springs' energy."""
@@ -171,8 +192,9 @@ def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, 
         px = w0 * x[j0, 0] + w1 * x[j1, 0] + w2 * x[j2, 0]
         py = w0 * x[j0, 1] + w1 * x[j1, 1] + w2 * x[j2, 1]
         pz = w0 * x[j0, 2] + w1 * x[j1, 2] + w2 * x[j2, 2]
-        cx, cy, cz = _closest_on_segment(px, py, pz, collider[0], collider[1], collider[2],
-                                         collider[3], collider[4], collider[5])
+        cx, cy, cz = _closest_on_segment(
+            px, py, pz, collider[0], collider[1], collider[2], collider[3], collider[4], collider[5]
+        )
         rx, ry, rz = px - cx, py - cy, pz - cz
         dist = math.sqrt(rx * rx + ry * ry + rz * rz)
         d = radius - dist
@@ -188,8 +210,9 @@ def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, 
         k = sample_k[q]
         fn = k * d
         energy += 0.5 * k * d * d
-        gx, gy, gz = _friction(wx - vn * nx, wy - vn * ny, wz - vn * nz, fn, mu, veps,
-                               min(mass[j0], min(mass[j1], mass[j2])), dt)  # fmt: skip
+        gx, gy, gz = _friction(
+            wx - vn * nx, wy - vn * ny, wz - vn * nz, fn, mu, veps, min(mass[j0], min(mass[j1], mass[j2])), dt
+        )
         fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
         force[j0, 0] += w0 * fx
         force[j0, 1] += w0 * fy
@@ -207,8 +230,25 @@ def _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def contact_forces(x, v, mass, dt, planes, clamps, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx, sample_w,
-                   sample_k, force, plane_force, collider_force):
+def contact_forces(
+    x,
+    v,
+    mass,
+    dt,
+    planes,
+    clamps,
+    vertex_area,
+    mean_area,
+    k_contact,
+    c_contact,
+    collider,
+    sample_idx,
+    sample_w,
+    sample_k,
+    force,
+    plane_force,
+    collider_force,
+):
     """Add contact forces [N] to ``force``; return (energy [J], deepest penetration [m] per plane).
 
     ``planes`` (P, 11): point (3) [m], unit normal (3), μ [-], slip velocity v_ε [m/s], body damping
@@ -235,9 +275,39 @@ def contact_forces(x, v, mass, dt, planes, clamps, vertex_area, mean_area, k_con
     total_mass = mass.sum()
     planes_veps = 1e-2
     for p in range(n_planes):
-        energy = _plane_contact(x, v, mass, dt, planes, clamps, p, vertex_area, mean_area, k_contact, c_contact,
-                                total_mass, force, plane_force, depth, energy)
+        energy = _plane_contact(
+            x,
+            v,
+            mass,
+            dt,
+            planes,
+            clamps,
+            p,
+            vertex_area,
+            mean_area,
+            k_contact,
+            c_contact,
+            total_mass,
+            force,
+            plane_force,
+            depth,
+            energy,
+        )
     if collider[6] > 0.0:
-        energy = _collider_contact(x, v, mass, dt, collider, sample_idx, sample_w, sample_k, planes_veps, force,
-                                   collider_force, depth, n_planes, energy)
+        energy = _collider_contact(
+            x,
+            v,
+            mass,
+            dt,
+            collider,
+            sample_idx,
+            sample_w,
+            sample_k,
+            planes_veps,
+            force,
+            collider_force,
+            depth,
+            n_planes,
+            energy,
+        )
     return energy, depth

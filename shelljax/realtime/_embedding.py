@@ -130,8 +130,10 @@ class DisplayEmbedding:
         q = np.einsum("ij,ijk->ik", self.bary, tri[self.face])
         t1, t2, n, s = frames[self.face, 0:3], frames[self.face, 3:6], frames[self.face, 6:9], frames[self.face, 9]
         r = p - q
-        self.local = np.ascontiguousarray(np.stack([np.einsum("ij,ij->i", r, t1), np.einsum("ij,ij->i", r, t2),
-                                                    np.einsum("ij,ij->i", r, n)], axis=1) / s[:, None])  # fmt: skip
+        self.local = np.ascontiguousarray(
+            np.stack([np.einsum("ij,ij->i", r, t1), np.einsum("ij,ij->i", r, t2), np.einsum("ij,ij->i", r, n)], axis=1)
+            / s[:, None]
+        )
 
     @property
     def n_vertices(self) -> int:

@@ -57,8 +57,9 @@ def _flap(x, i0, j, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, a00, a01, a11, inv
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _flap_back(lk, ga0, ga1, ga2, u, v, r1, r2, dx, dy, dz, a00, a01, a11, inv_det, e1x, e1y, e1z, e2x, e2y, e2z,
-               nx, ny, nz):
+def _flap_back(
+    lk, ga0, ga1, ga2, u, v, r1, r2, dx, dy, dz, a00, a01, a11, inv_det, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz
+):
     """Reverse pass of one flap with w̄ = λ_k: (d̄ (3), Ā00, Ā01, Ā11, r̄1, r̄2)."""
     mb0 = -lk * ga0
     mb1 = -lk * ga1
@@ -156,8 +157,32 @@ def _bending_moment(ga0, ga1, ga2, rb00, rb01, rb11, q00, q01, q11, h, alpha, be
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _bending(x, f, stencil, i0, e1x, e1y, e1z, e2x, e2y, e2z, a00, a01, a11, inv_det, q00, q01, q11, rest_b, area, h,
-             alpha, beta, g, with_energy):
+def _bending(
+    x,
+    f,
+    stencil,
+    i0,
+    e1x,
+    e1y,
+    e1z,
+    e2x,
+    e2y,
+    e2z,
+    a00,
+    a01,
+    a11,
+    inv_det,
+    q00,
+    q01,
+    q11,
+    rest_b,
+    area,
+    h,
+    alpha,
+    beta,
+    g,
+    with_energy,
+):
     """Bending of face f: its energy density [J/m²] (0 unless ``with_energy``); the flap vertices'
     gradient [N] into g[3:6]; and, for the caller's chain rule, x̄₀ (3) (the flaps' share), the
     increments of ā (a00, a01, a11) and ē1, ē2 (3 each)."""
@@ -171,25 +196,101 @@ def _bending(x, f, stencil, i0, e1x, e1y, e1z, e2x, e2y, e2z, a00, a01, a11, inv
     ny = cy * inv_cn
     nz = cz * inv_cn
     # flap vertices: offsets d, in-plane coordinates (u, v), heights w
-    d0x, d0y, d0z, r10, r20, u0, v0, w0 = _flap(x, i0, stencil[f, 3], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz,
-                                                a00, a01, a11, inv_det)
-    d1x, d1y, d1z, r11, r21, u1, v1, w1 = _flap(x, i0, stencil[f, 4], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz,
-                                                a00, a01, a11, inv_det)
-    d2x, d2y, d2z, r12, r22, u2, v2, w2 = _flap(x, i0, stencil[f, 5], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz,
-                                                a00, a01, a11, inv_det)
+    d0x, d0y, d0z, r10, r20, u0, v0, w0 = _flap(
+        x, i0, stencil[f, 3], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, a00, a01, a11, inv_det
+    )
+    d1x, d1y, d1z, r11, r21, u1, v1, w1 = _flap(
+        x, i0, stencil[f, 4], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, a00, a01, a11, inv_det
+    )
+    d2x, d2y, d2z, r12, r22, u2, v2, w2 = _flap(
+        x, i0, stencil[f, 5], e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, a00, a01, a11, inv_det
+    )
     ga0, ga1, ga2, c00, c01, c02, c10, c11, c12, c20, c21, c22, inv_dm = _flap_solve(u0, v0, w0, u1, v1, w1, u2, v2, w2)
-    energy, gb0, gb1, gb2 = _bending_moment(ga0, ga1, ga2, rest_b[f, 0], rest_b[f, 1], rest_b[f, 2], q00, q01, q11, h,
-                                            alpha, beta, with_energy)
+    energy, gb0, gb1, gb2 = _bending_moment(
+        ga0, ga1, ga2, rest_b[f, 0], rest_b[f, 1], rest_b[f, 2], q00, q01, q11, h, alpha, beta, with_energy
+    )
     # γ = m⁻¹ w, m⁻¹ = [c0 c1 c2]/dm: w̄_k = λ_k = c_k · γ̄ / dm, m̄_k = −λ_k γ
     lam0 = (c00 * gb0 + c01 * gb1 + c02 * gb2) * inv_dm
     lam1 = (c10 * gb0 + c11 * gb1 + c12 * gb2) * inv_dm
     lam2 = (c20 * gb0 + c21 * gb1 + c22 * gb2) * inv_dm
-    t0 = _flap_back(lam0, ga0, ga1, ga2, u0, v0, r10, r20, d0x, d0y, d0z, a00, a01, a11, inv_det,
-                    e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz)
-    t1 = _flap_back(lam1, ga0, ga1, ga2, u1, v1, r11, r21, d1x, d1y, d1z, a00, a01, a11, inv_det,
-                    e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz)
-    t2 = _flap_back(lam2, ga0, ga1, ga2, u2, v2, r12, r22, d2x, d2y, d2z, a00, a01, a11, inv_det,
-                    e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz)
+    t0 = _flap_back(
+        lam0,
+        ga0,
+        ga1,
+        ga2,
+        u0,
+        v0,
+        r10,
+        r20,
+        d0x,
+        d0y,
+        d0z,
+        a00,
+        a01,
+        a11,
+        inv_det,
+        e1x,
+        e1y,
+        e1z,
+        e2x,
+        e2y,
+        e2z,
+        nx,
+        ny,
+        nz,
+    )
+    t1 = _flap_back(
+        lam1,
+        ga0,
+        ga1,
+        ga2,
+        u1,
+        v1,
+        r11,
+        r21,
+        d1x,
+        d1y,
+        d1z,
+        a00,
+        a01,
+        a11,
+        inv_det,
+        e1x,
+        e1y,
+        e1z,
+        e2x,
+        e2y,
+        e2z,
+        nx,
+        ny,
+        nz,
+    )
+    t2 = _flap_back(
+        lam2,
+        ga0,
+        ga1,
+        ga2,
+        u2,
+        v2,
+        r12,
+        r22,
+        d2x,
+        d2y,
+        d2z,
+        a00,
+        a01,
+        a11,
+        inv_det,
+        e1x,
+        e1y,
+        e1z,
+        e2x,
+        e2y,
+        e2z,
+        nx,
+        ny,
+        nz,
+    )
     for k in range(3):
         g[3, k] = area * t0[k]
         g[4, k] = area * t1[k]
@@ -215,8 +316,21 @@ def _bending(x, f, stencil, i0, e1x, e1y, e1z, e2x, e2y, e2z, a00, a01, a11, inv
     b2x += cby * e1z - cbz * e1y
     b2y += cbz * e1x - cbx * e1z
     b2z += cbx * e1y - cby * e1x
-    return (energy, -(t0[0] + t1[0] + t2[0]), -(t0[1] + t1[1] + t2[1]), -(t0[2] + t1[2] + t2[2]),
-            t0[3] + t1[3] + t2[3], t0[4] + t1[4] + t2[4], t0[5] + t1[5] + t2[5], b1x, b1y, b1z, b2x, b2y, b2z)
+    return (
+        energy,
+        -(t0[0] + t1[0] + t2[0]),
+        -(t0[1] + t1[1] + t2[1]),
+        -(t0[2] + t1[2] + t2[2]),
+        t0[3] + t1[3] + t2[3],
+        t0[4] + t1[4] + t2[4],
+        t0[5] + t1[5] + t2[5],
+        b1x,
+        b1y,
+        b1z,
+        b2x,
+        b2y,
+        b2z,
+    )
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -243,8 +357,31 @@ def _face_grad(x, f, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, g, wi
     energy, ba00, ba01, ba11 = _membrane(a00, a01, a11, det, inv_det, q00, q01, q11, h, alpha, beta, with_energy)
     if with_bending:
         eb, gx0, gy0, gz0, da00, da01, da11, b1x, b1y, b1z, b2x, b2y, b2z = _bending(
-            x, f, stencil, i0, e1x, e1y, e1z, e2x, e2y, e2z, a00, a01, a11, inv_det, q00, q01, q11, rest_b, area, h,
-            alpha, beta, g, with_energy)  # fmt: skip
+            x,
+            f,
+            stencil,
+            i0,
+            e1x,
+            e1y,
+            e1z,
+            e2x,
+            e2y,
+            e2z,
+            a00,
+            a01,
+            a11,
+            inv_det,
+            q00,
+            q01,
+            q11,
+            rest_b,
+            area,
+            h,
+            alpha,
+            beta,
+            g,
+            with_energy,
+        )
         energy += eb
         ba00 += da00
         ba01 += da01
@@ -276,8 +413,9 @@ def _face_grad(x, f, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, g, wi
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def elastic_forces_serial(x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending, force,
-                          with_energy=True):
+def elastic_forces_serial(
+    x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending, force, with_energy=True
+):
     """Elastic energy [J] (0 unless ``with_energy``); ``force`` (V, 3) [N] ← −∇E (overwritten). One thread."""
     force[:, :] = 0.0
     g = np.empty((6, 3))
@@ -293,14 +431,30 @@ def elastic_forces_serial(x, stencil, rest_inv, rest_b, rest_area, h, alpha, bet
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
-def elastic_forces_parallel(x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending, force,
-                            face_grad, face_energy, incidence_ptr, incidence, with_energy=True):
+def elastic_forces_parallel(
+    x,
+    stencil,
+    rest_inv,
+    rest_b,
+    rest_area,
+    h,
+    alpha,
+    beta,
+    with_bending,
+    force,
+    face_grad,
+    face_energy,
+    incidence_ptr,
+    incidence,
+    with_energy=True,
+):
     """As ``elastic_forces_serial``, threads over faces (into ``face_grad`` (F, 6, 3)), then over
     vertices (gathering the faces' slots through the CSR ``incidence_ptr``/``incidence`` = 6 f + k)."""
     n_faces = stencil.shape[0]
     for f in prange(n_faces):
-        face_energy[f] = _face_grad(x, f, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, face_grad[f],
-                                    with_bending, with_energy)
+        face_energy[f] = _face_grad(
+            x, f, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, face_grad[f], with_bending, with_energy
+        )
     for i in prange(x.shape[0]):
         fx = 0.0
         fy = 0.0
@@ -357,8 +511,10 @@ def gas_pressure_energy(vol, law, p_gauge, v_ref, p_atm, gamma):
     if law == 1:
         return p0 * v_ref / vol - p_atm, -p0 * v_ref * math.log1p(change / v_ref) + p_atm * change
     gm1 = gamma - 1.0
-    return (p0 * (v_ref / vol) ** gamma - p_atm,
-            p0 * v_ref / gm1 * math.expm1(-gm1 * math.log1p(change / v_ref)) + p_atm * change)
+    return (
+        p0 * (v_ref / vol) ** gamma - p_atm,
+        p0 * v_ref / gm1 * math.expm1(-gm1 * math.log1p(change / v_ref)) + p_atm * change,
+    )
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -371,17 +527,70 @@ def kinetic_energy(v, mass):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending,
-                 gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area, k_contact, c_contact, collider, sample_idx,
-                 sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr, incidence, force, vgrad, plane_force, collider_force,
-                 out):
+def _total_force(
+    x,
+    v,
+    dt,
+    mass,
+    gravity,
+    stencil,
+    faces,
+    rest_inv,
+    rest_b,
+    rest_area,
+    h,
+    alpha,
+    beta,
+    with_bending,
+    gas_law,
+    p_gauge,
+    v_ref,
+    p_atm,
+    gamma,
+    planes,
+    clamps,
+    vertex_area,
+    mean_area,
+    k_contact,
+    c_contact,
+    collider,
+    sample_idx,
+    sample_w,
+    sample_k,
+    parallel,
+    face_grad,
+    face_energy,
+    incidence_ptr,
+    incidence,
+    force,
+    vgrad,
+    plane_force,
+    collider_force,
+    out,
+):
     """``force`` (V, 3) [N] ← elastic + gas + gravity + contact at (x, v); ``out`` as in ``advance``."""
     if parallel:
-        e_el = elastic_forces_parallel(x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending,
-                                       force, face_grad, face_energy, incidence_ptr, incidence, False)
+        e_el = elastic_forces_parallel(
+            x,
+            stencil,
+            rest_inv,
+            rest_b,
+            rest_area,
+            h,
+            alpha,
+            beta,
+            with_bending,
+            force,
+            face_grad,
+            face_energy,
+            incidence_ptr,
+            incidence,
+            False,
+        )
     else:
-        e_el = elastic_forces_serial(x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending, force,
-                                     False)
+        e_el = elastic_forces_serial(
+            x, stencil, rest_inv, rest_b, rest_area, h, alpha, beta, with_bending, force, False
+        )
     vol = volume_and_gradient(x, faces, vgrad)
     pres, e_gas = gas_pressure_energy(vol, gas_law, p_gauge, v_ref, p_atm, gamma)
     nv = x.shape[0]
@@ -392,8 +601,25 @@ def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest
         force[i, 2] += pres * vgrad[i, 2] + mass[i] * gravity[2]
         if not (math.isfinite(force[i, 0]) and math.isfinite(force[i, 1]) and math.isfinite(force[i, 2])):
             finite = False
-    e_con, depth = contact_forces(x, v, mass, dt, planes, clamps, vertex_area, mean_area, k_contact, c_contact,
-                                  collider, sample_idx, sample_w, sample_k, force, plane_force, collider_force)
+    e_con, depth = contact_forces(
+        x,
+        v,
+        mass,
+        dt,
+        planes,
+        clamps,
+        vertex_area,
+        mean_area,
+        k_contact,
+        c_contact,
+        collider,
+        sample_idx,
+        sample_w,
+        sample_k,
+        force,
+        plane_force,
+        collider_force,
+    )
     n_planes = planes.shape[0]
     dmax = 0.0
     for p in range(n_planes):
@@ -411,10 +637,50 @@ def _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-            with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area, k_contact,
-            c_contact, collider, sample_idx, sample_w, sample_k, tunnel_depth, parallel, face_grad, face_energy, incidence_ptr, incidence,
-            force, vgrad, plane_force, collider_force, out, velocity_decay):
+def advance(
+    x,
+    v,
+    n_steps,
+    dt,
+    mass,
+    gravity,
+    stencil,
+    faces,
+    rest_inv,
+    rest_b,
+    rest_area,
+    h,
+    alpha,
+    beta,
+    with_bending,
+    gas_law,
+    p_gauge,
+    v_ref,
+    p_atm,
+    gamma,
+    planes,
+    clamps,
+    vertex_area,
+    mean_area,
+    k_contact,
+    c_contact,
+    collider,
+    sample_idx,
+    sample_w,
+    sample_k,
+    tunnel_depth,
+    parallel,
+    face_grad,
+    face_energy,
+    incidence_ptr,
+    incidence,
+    force,
+    vgrad,
+    plane_force,
+    collider_force,
+    out,
+    velocity_decay,
+):
     """``n_steps`` velocity-Verlet substeps of Δt = ``dt`` [s] in place on x, v (V, 3) [m], [m/s]:
 
         v ← v + Δt/2 M⁻¹F;  x ← x + Δt v;  F ← F(x, v);  v ← v + Δt/2 M⁻¹F
@@ -432,10 +698,47 @@ def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, 
     n_planes = planes.shape[0]
     pf_sum = np.zeros((n_planes, 3))
     cf_sum = np.zeros(3)
-    status = _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-                          with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area,
-                          k_contact, c_contact, collider, sample_idx, sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr, incidence,
-                          force, vgrad, plane_force, collider_force, out)
+    status = _total_force(
+        x,
+        v,
+        dt,
+        mass,
+        gravity,
+        stencil,
+        faces,
+        rest_inv,
+        rest_b,
+        rest_area,
+        h,
+        alpha,
+        beta,
+        with_bending,
+        gas_law,
+        p_gauge,
+        v_ref,
+        p_atm,
+        gamma,
+        planes,
+        clamps,
+        vertex_area,
+        mean_area,
+        k_contact,
+        c_contact,
+        collider,
+        sample_idx,
+        sample_w,
+        sample_k,
+        parallel,
+        face_grad,
+        face_energy,
+        incidence_ptr,
+        incidence,
+        force,
+        vgrad,
+        plane_force,
+        collider_force,
+        out,
+    )
     if status != OK:
         return status, 0
     # Trapezoidal averages of the contact forces: their impulse over the substeps done, divided by the time.
@@ -453,10 +756,47 @@ def advance(x, v, n_steps, dt, mass, gravity, stencil, faces, rest_inv, rest_b, 
         for c in range(3):  # the collider moves with its velocity
             collider[c] += dt * collider[7 + c]
             collider[3 + c] += dt * collider[7 + c]
-        status = _total_force(x, v, dt, mass, gravity, stencil, faces, rest_inv, rest_b, rest_area, h, alpha, beta,
-                              with_bending, gas_law, p_gauge, v_ref, p_atm, gamma, planes, clamps, vertex_area, mean_area,
-                              k_contact, c_contact, collider, sample_idx, sample_w, sample_k, parallel, face_grad, face_energy, incidence_ptr,
-                              incidence, force, vgrad, plane_force, collider_force, out)
+        status = _total_force(
+            x,
+            v,
+            dt,
+            mass,
+            gravity,
+            stencil,
+            faces,
+            rest_inv,
+            rest_b,
+            rest_area,
+            h,
+            alpha,
+            beta,
+            with_bending,
+            gas_law,
+            p_gauge,
+            v_ref,
+            p_atm,
+            gamma,
+            planes,
+            clamps,
+            vertex_area,
+            mean_area,
+            k_contact,
+            c_contact,
+            collider,
+            sample_idx,
+            sample_w,
+            sample_k,
+            parallel,
+            face_grad,
+            face_energy,
+            incidence_ptr,
+            incidence,
+            force,
+            vgrad,
+            plane_force,
+            collider_force,
+            out,
+        )
         pf_sum += plane_force
         cf_sum += collider_force
         if status == OK and out[6] > tunnel_depth:

@@ -31,23 +31,41 @@ class _Loading:
         params, geometry = system.params, system.geometry
         gas = system.config.gas
         kwargs = {
-            "stencil": np.asarray(geometry.stencil), "rest_metric": np.asarray(geometry.rest_metric),
-            "rest_curvature": np.asarray(geometry.rest_curvature), "rest_area": np.asarray(geometry.rest_area),
-            "vertex_area": np.asarray(geometry.vertex_area), "positions": np.asarray(system.inflated).reshape(-1, 3),
-            "masses": np.asarray(system.node_masses), "young_modulus": float(params.young_modulus),
-            "poisson_ratio": float(params.poisson_ratio), "thickness": float(params.thickness), "gas": gas,
+            "stencil": np.asarray(geometry.stencil),
+            "rest_metric": np.asarray(geometry.rest_metric),
+            "rest_curvature": np.asarray(geometry.rest_curvature),
+            "rest_area": np.asarray(geometry.rest_area),
+            "vertex_area": np.asarray(geometry.vertex_area),
+            "positions": np.asarray(system.inflated).reshape(-1, 3),
+            "masses": np.asarray(system.node_masses),
+            "young_modulus": float(params.young_modulus),
+            "poisson_ratio": float(params.poisson_ratio),
+            "thickness": float(params.thickness),
+            "gas": gas,
             "gauge_pressure": float(params.gauge_pressure),
             "reference_volume": None if params.reference_volume is None else float(params.reference_volume),
             "heat_capacity_ratio": float(system.config.heat_capacity_ratio),
-            "atmospheric_pressure": float(params.outside_pressure), "planes": tuple(system.planes),
+            "atmospheric_pressure": float(params.outside_pressure),
+            "planes": tuple(system.planes),
             "gravity": np.asarray(system.gravity),
-        }  # fmt: skip
+        }
         kwargs.update(options)
         return cls(**kwargs)
 
     @classmethod
-    def from_shell(cls, shell, properties: ShellProperties, *, mass=None, wall_density=None, gas="adiabatic",
-                   planes=(), gravity=STANDARD_GRAVITY, rest_shape="solve", **options) -> RealtimeShell:
+    def from_shell(
+        cls,
+        shell,
+        properties: ShellProperties,
+        *,
+        mass=None,
+        wall_density=None,
+        gas="adiabatic",
+        planes=(),
+        gravity=STANDARD_GRAVITY,
+        rest_shape="solve",
+        **options,
+    ) -> RealtimeShell:
         """From a :class:`shelljax.shell3d.Shell` (its mesh the inflated shape [m]) and a
         ``physics.ShellProperties`` (P_g [Pa], E [Pa], h [m], ν [-]), the mass [kg] (or the wall
         density [kg/m³]). ``rest_shape="solve"``: the rest shape, inflated state and masses exactly
@@ -60,22 +78,39 @@ class _Loading:
         if not isinstance(properties, ShellProperties):
             raise InvalidInputError(f"properties: expected a physics.ShellProperties; got {type(properties).__name__}.")
         for name in ("gauge_pressure", "young_modulus", "thickness", "poisson_ratio"):
-            _check(f"properties.{name}", getattr(properties, name), positive=name not in ("gauge_pressure", "poisson_ratio"))
+            _check(
+                f"properties.{name}",
+                getattr(properties, name),
+                positive=name not in ("gauge_pressure", "poisson_ratio"),
+            )
         if rest_shape not in ("solve", "small-strain"):
             raise InvalidInputError(f"rest_shape: expected 'solve' or 'small-strain'; got {rest_shape!r}.")
         if rest_shape == "small-strain":
-            return cls._small_strain(shell, properties, mass=mass, wall_density=wall_density, gas=gas, planes=planes,
-                                     gravity=gravity, **options)  # fmt: skip
-        system = d.shell_system(shell, properties, gas=gas, mass=mass, wall_density=wall_density, planes=(),
-                                gravity=gravity)  # fmt: skip
+            return cls._small_strain(
+                shell,
+                properties,
+                mass=mass,
+                wall_density=wall_density,
+                gas=gas,
+                planes=planes,
+                gravity=gravity,
+                **options,
+            )
+        system = d.shell_system(
+            shell, properties, gas=gas, mass=mass, wall_density=wall_density, planes=(), gravity=gravity
+        )
         return cls.from_system(system, planes=tuple(planes), **options)
 
     @classmethod
     def _small_strain(cls, shell, properties, *, mass, wall_density, gas, planes, gravity, **options):
         scan = np.asarray(shell.mesh.vertices, dtype=float)
         faces = np.asarray(shell.mesh.faces)
-        p, e, h, nu = (float(properties.gauge_pressure), float(properties.young_modulus), float(properties.thickness),
-                       float(properties.poisson_ratio))  # fmt: skip
+        p, e, h, nu = (
+            float(properties.gauge_pressure),
+            float(properties.young_modulus),
+            float(properties.thickness),
+            float(properties.poisson_ratio),
+        )
         volume = signed_volume(scan, faces)
         strain, _ = membrane_strain(scan, faces, properties)
         centroid = scan.mean(axis=0)
@@ -85,16 +120,43 @@ class _Loading:
         np.add.at(vertex_area, faces, rest_area[:, None] / 3.0)
         if (mass is None) == (wall_density is None):
             raise InvalidInputError("mass: give either `mass` [kg] or `wall_density` [kg/m³] (exactly one).")
-        masses = (_check("mass [kg]", mass) * vertex_area / vertex_area.sum() if mass is not None
-                  else _check("wall_density [kg/m³]", wall_density) * h * vertex_area)  # fmt: skip
-        return cls(stencil=shell.mesh.stencil, rest_metric=metric, rest_curvature=curvature, rest_area=rest_area,
-                   vertex_area=vertex_area, positions=scan, masses=masses, young_modulus=e, poisson_ratio=nu,
-                   thickness=h, gas=gas, gauge_pressure=p, reference_volume=volume, planes=planes, gravity=gravity,
-                   **options)  # fmt: skip
+        masses = (
+            _check("mass [kg]", mass) * vertex_area / vertex_area.sum()
+            if mass is not None
+            else _check("wall_density [kg/m³]", wall_density) * h * vertex_area
+        )
+        return cls(
+            stencil=shell.mesh.stencil,
+            rest_metric=metric,
+            rest_curvature=curvature,
+            rest_area=rest_area,
+            vertex_area=vertex_area,
+            positions=scan,
+            masses=masses,
+            young_modulus=e,
+            poisson_ratio=nu,
+            thickness=h,
+            gas=gas,
+            gauge_pressure=p,
+            reference_volume=volume,
+            planes=planes,
+            gravity=gravity,
+            **options,
+        )
 
     @classmethod
-    def ball(cls, properties: ShellProperties, *, mass, n_faces=2000, gas="adiabatic", planes=(),
-             gravity=STANDARD_GRAVITY, pole_refinement=1.0, **options) -> RealtimeShell:
+    def ball(
+        cls,
+        properties: ShellProperties,
+        *,
+        mass,
+        n_faces=2000,
+        gas="adiabatic",
+        planes=(),
+        gravity=STANDARD_GRAVITY,
+        pole_refinement=1.0,
+        **options,
+    ) -> RealtimeShell:
         """A sphere of ``properties.radius`` R [m] remeshed with about ``n_faces`` faces (the rings
         layout of :func:`shelljax.geometry.sphere_mesh`, uniform unless ``pole_refinement`` > 1)."""
         from ..shell3d import Shell, ShellMesh
@@ -111,8 +173,9 @@ class _Loading:
         return cls.from_shell(shell, properties, mass=mass, gas=gas, planes=planes, gravity=gravity, **options)
 
     @classmethod
-    def from_session(cls, session, properties: ShellProperties, *, n_faces=2000, gas="adiabatic", planes=(),
-                     mesh=None, **options) -> RealtimeShell:
+    def from_session(
+        cls, session, properties: ShellProperties, *, n_faces=2000, gas="adiabatic", planes=(), mesh=None, **options
+    ) -> RealtimeShell:
         """From a session (a path or a loaded ``Session``: its mass [kg], h [m], ν [-], radius R
         [m] or mesh) and the estimates ``properties`` (P_g [Pa], E [Pa]; its h, ν, R where given
         override the session's). ``mesh``: a mesh file to use instead of the session's (refined to
@@ -126,9 +189,13 @@ class _Loading:
             raise InvalidInputError(f"{s.source}: field 'mass' is missing. Fix: add `mass = <kg>` to the session.")
         thickness = float(properties.thickness if properties.thickness is not None else s.thickness)
         nu = float(properties.poisson_ratio if properties.poisson_ratio is not None else s.poisson_ratio)
-        full = ShellProperties(gauge_pressure=properties.gauge_pressure, young_modulus=properties.young_modulus,
-                               thickness=thickness, poisson_ratio=nu,
-                               radius=properties.radius if properties.radius is not None else s.radius)  # fmt: skip
+        full = ShellProperties(
+            gauge_pressure=properties.gauge_pressure,
+            young_modulus=properties.young_modulus,
+            thickness=thickness,
+            poisson_ratio=nu,
+            radius=properties.radius if properties.radius is not None else s.radius,
+        )
         mesh_path = mesh or getattr(s, "mesh_path", None)
         if mesh_path is None:
             return cls.ball(full, mass=s.mass, n_faces=n_faces, gas=gas, planes=planes, **options)
@@ -138,8 +205,9 @@ class _Loading:
         return cls.from_shell(shell, full, mass=s.mass, gas=gas, planes=planes, **options)
 
     @classmethod
-    def from_replica(cls, directory, *, planes=(), gravity=STANDARD_GRAVITY, rest_shape="solve",
-                     **options) -> RealtimeShell:
+    def from_replica(
+        cls, directory, *, planes=(), gravity=STANDARD_GRAVITY, rest_shape="solve", **options
+    ) -> RealtimeShell:
         """From a ``shelljax replica`` output directory (``replica.json``: P_g [Pa], E [Pa], ν [-],
         h [m], mass [kg], gas law; ``replica.glb``: the inflated mesh [m]), as
         :func:`shelljax.replica.load_replica` reads it, with ``rest_shape`` as :meth:`from_shell`."""
@@ -149,11 +217,17 @@ class _Loading:
         directory = Path(directory)
         path = directory / "replica.json"
         if not path.is_file():
-            raise InvalidInputError(f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`.")
-        replica = read_json(path, "replica file", fix="export the replica again with `shelljax replica SESSION --out DIR`")
+            raise InvalidInputError(
+                f"{directory}: no replica.json. Fix: give a directory written by `shelljax replica`."
+            )
+        replica = read_json(
+            path, "replica file", fix="export the replica again with `shelljax replica SESSION --out DIR`"
+        )
         if not isinstance(replica, dict):
-            raise InvalidInputError(f"{path}: not a replica file (a JSON {type(replica).__name__}). Fix: export the "
-                                    "replica again with `shelljax replica SESSION --out DIR`")
+            raise InvalidInputError(
+                f"{path}: not a replica file (a JSON {type(replica).__name__}). Fix: export the "
+                "replica again with `shelljax replica SESSION --out DIR`"
+            )
         values = {}
         for name in ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg"):
             entry = replica.get(name)
@@ -163,7 +237,19 @@ class _Loading:
         if replica.get("gas") not in GAS_LAWS:
             raise InvalidInputError(f"{path}: field 'gas' must be one of {GAS_LAWS}; got {replica.get('gas')!r}.")
         shell = s3.load(directory / str(replica.get("mesh", "replica.glb")), values["thickness_m"])
-        properties = ShellProperties(gauge_pressure=values["gauge_pressure_Pa"], young_modulus=values["youngs_modulus_Pa"],
-                                     thickness=shell.thickness, poisson_ratio=values["poisson_ratio"])  # fmt: skip
-        return cls.from_shell(shell, properties, mass=values["mass_kg"], gas=replica["gas"], planes=planes,
-                              gravity=gravity, rest_shape=rest_shape, **options)  # fmt: skip
+        properties = ShellProperties(
+            gauge_pressure=values["gauge_pressure_Pa"],
+            young_modulus=values["youngs_modulus_Pa"],
+            thickness=shell.thickness,
+            poisson_ratio=values["poisson_ratio"],
+        )
+        return cls.from_shell(
+            shell,
+            properties,
+            mass=values["mass_kg"],
+            gas=replica["gas"],
+            planes=planes,
+            gravity=gravity,
+            rest_shape=rest_shape,
+            **options,
+        )

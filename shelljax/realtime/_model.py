@@ -25,12 +25,7 @@ import time as _time
 import numpy as np
 
 from .._errors import InvalidInputError
-from ..physics import (
-    AIR_HEAT_CAPACITY_RATIO,
-    ATMOSPHERIC_PRESSURE,
-    GAS_LAWS,
-    STANDARD_GRAVITY,
-)
+from ..physics import AIR_HEAT_CAPACITY_RATIO, ATMOSPHERIC_PRESSURE, GAS_LAWS, STANDARD_GRAVITY
 from . import _kernels as K
 from ._checks import _check, _planes_array
 from ._contact import plane_clamps, planes_energy
@@ -64,7 +59,9 @@ class Collider:
         vel = np.asarray(self.velocity, dtype=float).reshape(-1)
         for name, value in (("a", a), ("b", b), ("velocity", vel)):
             if value.shape != (3,) or not np.all(np.isfinite(value)):
-                raise InvalidInputError(f"Collider.{name}: expected a finite 3-vector [m or m/s]; got {value.tolist()}.")
+                raise InvalidInputError(
+                    f"Collider.{name}: expected a finite 3-vector [m or m/s]; got {value.tolist()}."
+                )
         if not (np.isfinite(self.radius) and self.radius > 0.0):
             raise InvalidInputError(f"Collider.radius: must be a positive length in m; got {self.radius}.")
         if not (np.isfinite(self.friction) and self.friction >= 0.0):
@@ -130,14 +127,48 @@ class RealtimeShell(_Loading, _StableTimeStep):
     estimated at rest; 0: raise at once).
     """
 
-    def __init__(self, *, stencil, rest_metric, rest_curvature, rest_area, vertex_area, positions, masses,
-                 young_modulus, poisson_ratio, thickness, gas="adiabatic", gauge_pressure, reference_volume=None,
-                 heat_capacity_ratio=AIR_HEAT_CAPACITY_RATIO, atmospheric_pressure=ATMOSPHERIC_PRESSURE, planes=(),
-                 gravity=STANDARD_GRAVITY, contact_stiffness=None, contact_damping_ratio=0.0, slip_velocity=1e-2,
-                 safety=SAFETY, bending=True, parallel=False, tunnel_depth=None, energy_growth=0.5, max_refinements=3,
-                 velocities=None, dt_method="spectral"):  # fmt: skip
-        self._set_material(gas, young_modulus, poisson_ratio, thickness, gauge_pressure, heat_capacity_ratio,
-                           atmospheric_pressure, safety)  # fmt: skip
+    def __init__(
+        self,
+        *,
+        stencil,
+        rest_metric,
+        rest_curvature,
+        rest_area,
+        vertex_area,
+        positions,
+        masses,
+        young_modulus,
+        poisson_ratio,
+        thickness,
+        gas="adiabatic",
+        gauge_pressure,
+        reference_volume=None,
+        heat_capacity_ratio=AIR_HEAT_CAPACITY_RATIO,
+        atmospheric_pressure=ATMOSPHERIC_PRESSURE,
+        planes=(),
+        gravity=STANDARD_GRAVITY,
+        contact_stiffness=None,
+        contact_damping_ratio=0.0,
+        slip_velocity=1e-2,
+        safety=SAFETY,
+        bending=True,
+        parallel=False,
+        tunnel_depth=None,
+        energy_growth=0.5,
+        max_refinements=3,
+        velocities=None,
+        dt_method="spectral",
+    ):
+        self._set_material(
+            gas,
+            young_modulus,
+            poisson_ratio,
+            thickness,
+            gauge_pressure,
+            heat_capacity_ratio,
+            atmospheric_pressure,
+            safety,
+        )
         self._set_rest_geometry(stencil, rest_metric, rest_curvature, rest_area, vertex_area)
         self._set_bodies(positions, velocities, masses, gravity)
         self.slip_velocity = _check("slip_velocity [m/s]", slip_velocity)
@@ -145,8 +176,14 @@ class RealtimeShell(_Loading, _StableTimeStep):
         self.with_bending = bool(bending)
         self.parallel = bool(parallel)
         self.energy_growth = _check("energy_growth [-]", energy_growth)
-        if isinstance(max_refinements, bool) or not isinstance(max_refinements, (int, np.integer)) or max_refinements < 0:
-            raise InvalidInputError(f"max_refinements: expected an integer ≥ 0 (0: no redone frames); got {max_refinements!r}.")
+        if (
+            isinstance(max_refinements, bool)
+            or not isinstance(max_refinements, (int, np.integer))
+            or max_refinements < 0
+        ):
+            raise InvalidInputError(
+                f"max_refinements: expected an integer ≥ 0 (0: no redone frames); got {max_refinements!r}."
+            )
         self.max_refinements = int(max_refinements)
         self._set_gas_and_sizes(reference_volume, tunnel_depth)
         self._allocate_buffers()
@@ -157,8 +194,17 @@ class RealtimeShell(_Loading, _StableTimeStep):
         self._energy_scale = None
         self._energy_start = None
 
-    def _set_material(self, gas, young_modulus, poisson_ratio, thickness, gauge_pressure, heat_capacity_ratio,
-                      atmospheric_pressure, safety) -> None:
+    def _set_material(
+        self,
+        gas,
+        young_modulus,
+        poisson_ratio,
+        thickness,
+        gauge_pressure,
+        heat_capacity_ratio,
+        atmospheric_pressure,
+        safety,
+    ) -> None:
         """E [Pa], ν [-], h [m], the gas and its pressures [Pa], the Lamé-like α, β [Pa] and the Δt safety."""
         if gas not in GAS_LAWS:
             raise InvalidInputError(f"gas: expected one of {GAS_LAWS}; got {gas!r}.")
@@ -184,7 +230,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         inv = np.linalg.inv(metric)
         self.rest_inv = np.ascontiguousarray(np.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], axis=1))
         curvature = np.asarray(rest_curvature, dtype=float).reshape(n_faces, 2, 2)
-        self.rest_b = np.ascontiguousarray(np.stack([curvature[:, 0, 0], curvature[:, 0, 1], curvature[:, 1, 1]], axis=1))
+        self.rest_b = np.ascontiguousarray(
+            np.stack([curvature[:, 0, 0], curvature[:, 0, 1], curvature[:, 1, 1]], axis=1)
+        )
         self.rest_area = np.ascontiguousarray(rest_area, dtype=float).reshape(n_faces)
         self.vertex_area = np.ascontiguousarray(vertex_area, dtype=float).reshape(-1)
 
@@ -255,8 +303,13 @@ class RealtimeShell(_Loading, _StableTimeStep):
         f = self.faces
         edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
         idx = np.concatenate([np.stack([np.arange(n)] * 3, axis=1), np.column_stack([edges, edges[:, 0]]), f])
-        w = np.concatenate([np.tile([1.0, 0.0, 0.0], (n, 1)), np.tile([0.5, 0.5, 0.0], (len(edges), 1)),
-                            np.full((len(f), 3), 1.0 / 3.0)])  # fmt: skip
+        w = np.concatenate(
+            [
+                np.tile([1.0, 0.0, 0.0], (n, 1)),
+                np.tile([0.5, 0.5, 0.0], (len(edges), 1)),
+                np.full((len(f), 3), 1.0 / 3.0),
+            ]
+        )
         self._sample_idx = np.ascontiguousarray(idx, dtype=np.int64)
         self._sample_w = np.ascontiguousarray(w)
         self._sample_k = np.ascontiguousarray((w * self.k_contact[idx]).sum(axis=1) / 3.0)
@@ -268,11 +321,22 @@ class RealtimeShell(_Loading, _StableTimeStep):
         ``out`` (V, 3) float64, C-contiguous: the force's buffer (default: a new array)."""
         x = self.x if x is None else np.ascontiguousarray(x, dtype=float).reshape(-1, 3)
         force = np.zeros_like(x) if out is None else out
-        args = (x, self.stencil, self.rest_inv, self.rest_b, self.rest_area, self.h, self.alpha, self.beta,
-                self.with_bending, force)  # fmt: skip
+        args = (
+            x,
+            self.stencil,
+            self.rest_inv,
+            self.rest_b,
+            self.rest_area,
+            self.h,
+            self.alpha,
+            self.beta,
+            self.with_bending,
+            force,
+        )
         if parallel:
-            e = K.elastic_forces_parallel(*args, self._face_grad, self._face_energy, self._incidence_ptr, self._incidence,
-                                          with_energy)  # fmt: skip
+            e = K.elastic_forces_parallel(
+                *args, self._face_grad, self._face_energy, self._incidence_ptr, self._incidence, with_energy
+            )
         else:
             e = K.elastic_forces_serial(*args, with_energy)
         return e, force
@@ -282,7 +346,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         x = self.x if x is None else np.ascontiguousarray(x, dtype=float).reshape(-1, 3)
         grad = np.zeros_like(x)
         vol = K.volume_and_gradient(x, self.faces, grad)
-        pressure, _ = K.gas_pressure_energy(vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma)
+        pressure, _ = K.gas_pressure_energy(
+            vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma
+        )
         return float(pressure), float(vol), pressure * grad
 
     def internal_forces(self, x) -> np.ndarray:
@@ -298,8 +364,13 @@ class RealtimeShell(_Loading, _StableTimeStep):
         _, e_gas = K.gas_pressure_energy(vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma)
         e_grav = float(-np.sum(self.masses * (self.x @ self.gravity)))
         e_con = float(planes_energy(self.x, self.planes, self._clamps, self.k_contact))
-        out = {"kinetic": float(K.kinetic_energy(self.v, self.masses)), "elastic": float(e_el), "gas": float(e_gas),
-               "gravity": e_grav, "contact": e_con}  # fmt: skip
+        out = {
+            "kinetic": float(K.kinetic_energy(self.v, self.masses)),
+            "elastic": float(e_el),
+            "gas": float(e_gas),
+            "gravity": e_grav,
+            "contact": e_con,
+        }
         out["total"] = sum(out.values())
         return out
 
@@ -319,7 +390,11 @@ class RealtimeShell(_Loading, _StableTimeStep):
         x = np.array(positions, dtype=float).reshape(self.x.shape)
         if not np.all(np.isfinite(x)):
             raise InvalidInputError("positions [m]: contain NaN or inf.")
-        v = np.zeros_like(x) if velocities is None else np.broadcast_to(np.asarray(velocities, dtype=float), x.shape).copy()
+        v = (
+            np.zeros_like(x)
+            if velocities is None
+            else np.broadcast_to(np.asarray(velocities, dtype=float), x.shape).copy()
+        )
         self.x, self.v, self.time = x, v, float(time)
         self.collider_work = 0.0
         self._energy_start = None
@@ -329,7 +404,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         or moving rigidly at ``velocity`` (3,) [m/s] (as :func:`shelljax.dynamics.drop_state`)."""
         h = _check("height [m]", height, positive=False)
         if self.planes.shape[0] <= plane:
-            raise InvalidInputError(f"plane: no plane {plane} to drop onto ({self.planes.shape[0]} planes); add the ground.")
+            raise InvalidInputError(
+                f"plane: no plane {plane} to drop onto ({self.planes.shape[0]} planes); add the ground."
+            )
         row = self.planes[plane]
         x = self.x.copy()
         if centre_xy is not None:
@@ -370,14 +447,49 @@ class RealtimeShell(_Loading, _StableTimeStep):
     def advance(self, n_substeps: int, dt: float, velocity_decay: float = 1.0) -> tuple[int, int]:
         """Run ``n_substeps`` of ``dt`` [s] (no guard on energy); returns (status, substeps done)."""
         status, done = K.advance(
-            self.x, self.v, int(n_substeps), float(dt), self.masses, self.gravity, self.stencil, self.faces,
-            self.rest_inv, self.rest_b, self.rest_area, self.h, self.alpha, self.beta, self.with_bending,
-            K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma, self.planes, self._clamps, self.vertex_area,
-            self.mean_area, self.k_contact, self.c_contact, self.collider, self._sample_idx, self._sample_w,
-            self._sample_k, self.tunnel_depth, self.parallel,
-            self._face_grad, self._face_energy, self._incidence_ptr, self._incidence, self._force,
-            self._vgrad, self._plane_force, self._collider_force, self._out, float(velocity_decay),
-        )  # fmt: skip
+            self.x,
+            self.v,
+            int(n_substeps),
+            float(dt),
+            self.masses,
+            self.gravity,
+            self.stencil,
+            self.faces,
+            self.rest_inv,
+            self.rest_b,
+            self.rest_area,
+            self.h,
+            self.alpha,
+            self.beta,
+            self.with_bending,
+            K.GAS_CODES[self.gas],
+            self.p_gauge,
+            self.v_ref,
+            self.p_atm,
+            self.gamma,
+            self.planes,
+            self._clamps,
+            self.vertex_area,
+            self.mean_area,
+            self.k_contact,
+            self.c_contact,
+            self.collider,
+            self._sample_idx,
+            self._sample_w,
+            self._sample_k,
+            self.tunnel_depth,
+            self.parallel,
+            self._face_grad,
+            self._face_energy,
+            self._incidence_ptr,
+            self._incidence,
+            self._force,
+            self._vgrad,
+            self._plane_force,
+            self._collider_force,
+            self._out,
+            float(velocity_decay),
+        )
         self.time += done * dt
         if self.collider[6] > 0.0:  # the collider's work on the shell [J]: its force on it × its velocity
             self.collider_work += float(self._collider_force @ self.collider[7:10]) * done * dt
@@ -401,8 +513,12 @@ class RealtimeShell(_Loading, _StableTimeStep):
         n = max(1, math.ceil(duration / dt))
         status, _ = self.advance(n, dt, math.exp(-rate * dt))
         if status != K.OK:
-            raise BlowUpError(f"relax: the stepping blew up (status {status}) at Δt = {dt:.3g} s. Fix: lower `safety`.",
-                              reason="not finite" if status == K.NOT_FINITE else "tunnelled", time_s=self.time, dt_s=dt)  # fmt: skip
+            raise BlowUpError(
+                f"relax: the stepping blew up (status {status}) at Δt = {dt:.3g} s. Fix: lower `safety`.",
+                reason="not finite" if status == K.NOT_FINITE else "tunnelled",
+                time_s=self.time,
+                dt_s=dt,
+            )
         kinetic = float(K.kinetic_energy(self.v, self.masses))
         self.reestimate_dt()
         self.v[:] = 0.0
@@ -438,8 +554,20 @@ class RealtimeShell(_Loading, _StableTimeStep):
         wall = _time.perf_counter() - start
         com, vcom = self.com()
         pressure, volume, _ = self.gas_state()
-        return Frame(self.time, done, dt, wall, self._plane_force.copy(), self._collider_force.copy(), pressure,
-                     volume, energies, com, vcom, refinements)  # fmt: skip
+        return Frame(
+            self.time,
+            done,
+            dt,
+            wall,
+            self._plane_force.copy(),
+            self._collider_force.copy(),
+            pressure,
+            volume,
+            energies,
+            com,
+            vcom,
+            refinements,
+        )
 
     def _blow_up(self, status: int, dt: float, energies: dict | None) -> BlowUpError | None:
         """The guard's verdict on the frame just stepped at ``dt`` [s]: a :class:`BlowUpError` to
@@ -447,17 +575,28 @@ class RealtimeShell(_Loading, _StableTimeStep):
         o = self._out
         if status != K.OK:
             reason = "not finite" if status == K.NOT_FINITE else "tunnelled"
-            detail = ("a force or the volume became NaN/inf" if status == K.NOT_FINITE else
-                      f"a vertex is {o[6]:.3g} m behind a plane (tunnel depth {self.tunnel_depth:.3g} m)")
-            return BlowUpError(f"realtime step blew up at t = {self.time:.6g} s ({reason}: {detail}) with Δt = {dt:.3g} s. "
-                               f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s, or lower the contact stiffness.",
-                               reason=reason, time_s=self.time, dt_s=dt)  # fmt: skip
+            detail = (
+                "a force or the volume became NaN/inf"
+                if status == K.NOT_FINITE
+                else f"a vertex is {o[6]:.3g} m behind a plane (tunnel depth {self.tunnel_depth:.3g} m)"
+            )
+            return BlowUpError(
+                f"realtime step blew up at t = {self.time:.6g} s ({reason}: {detail}) with Δt = {dt:.3g} s. "
+                f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s, or lower the contact stiffness.",
+                reason=reason,
+                time_s=self.time,
+                dt_s=dt,
+            )
         growth = energies["total"] - self._energy_start - self.collider_work
         if not math.isfinite(energies["kinetic"]) or growth > self.energy_growth * self._energy_scale:
-            return BlowUpError(f"realtime step blew up at t = {self.time:.6g} s (energy growth: the total energy rose by "
-                               f"{growth:.3g} J, past the bound {self.energy_growth * self._energy_scale:.3g} J) with Δt = {dt:.3g} s. "
-                               f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s.",
-                               reason="energy growth", time_s=self.time, dt_s=dt)  # fmt: skip
+            return BlowUpError(
+                f"realtime step blew up at t = {self.time:.6g} s (energy growth: the total energy rose by "
+                f"{growth:.3g} J, past the bound {self.energy_growth * self._energy_scale:.3g} J) with Δt = {dt:.3g} s. "
+                f"Fix: step at or below the stable Δt {self.stable.dt_s:.3g} s.",
+                reason="energy growth",
+                time_s=self.time,
+                dt_s=dt,
+            )
         return None
 
     def run(self, duration: float, frame_dt: float = 1.0 / 60.0, substeps: int | None = None) -> dict:
@@ -465,13 +604,15 @@ class RealtimeShell(_Loading, _StableTimeStep):
         duration = _check("duration [s]", duration)
         frames = [self.frame(frame_dt, substeps) for _ in range(max(1, round(duration / frame_dt)))]
         out = {
-            "time_s": np.array([f.time_s for f in frames]), "wall_s": np.array([f.wall_s for f in frames]),
-            "substeps": np.array([f.substeps for f in frames]), "com_m": np.array([f.com_m for f in frames]),
+            "time_s": np.array([f.time_s for f in frames]),
+            "wall_s": np.array([f.wall_s for f in frames]),
+            "substeps": np.array([f.substeps for f in frames]),
+            "com_m": np.array([f.com_m for f in frames]),
             "com_velocity_m_per_s": np.array([f.com_velocity_m_per_s for f in frames]),
             "plane_forces_N": np.array([f.plane_forces_N for f in frames]),
             "collider_force_N": np.array([f.collider_force_N for f in frames]),
             "gauge_pressure_Pa": np.array([f.gauge_pressure_Pa for f in frames]),
             "volume_m3": np.array([f.volume_m3 for f in frames]),
             "total_energy_J": np.array([f.energies_J["total"] for f in frames]),
-        }  # fmt: skip
+        }
         return out

@@ -71,7 +71,11 @@ class _StableTimeStep:
         def matvec(u):
             w = (scale * np.ravel(u)).reshape(-1, 3)
             norm = float(np.abs(w).max()) or 1.0
-            ku = -(self.internal_forces(x0 + eps * w / norm) - self.internal_forces(x0 - eps * w / norm)) * norm / (2 * eps)
+            ku = (
+                -(self.internal_forces(x0 + eps * w / norm) - self.internal_forces(x0 - eps * w / norm))
+                * norm
+                / (2 * eps)
+            )
             return scale * ku.ravel()
 
         n = x0.size

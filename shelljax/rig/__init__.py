@@ -5,6 +5,14 @@ manometer readings, :func:`write_rig`/:func:`load_rig` keep it as TOML, and
 """
 
 from ._calibrate import Rig, RigModel, RigWarning, calibrate_rig, pseudo_bma_plus
-from ._estimate import RigEstimate, check_compatible, estimate_with_rig, normal_mixture, psis, rig_measurement, updated_weights
+from ._estimate import (
+    RigEstimate,
+    check_compatible,
+    estimate_with_rig,
+    normal_mixture,
+    psis,
+    rig_measurement,
+    updated_weights,
+)
 from ._file import load_rig, physical_parameter, write_rig
 from ._terms import FAMILIES, RIG_PARAMETERS, RIG_TERMS, RigTerm

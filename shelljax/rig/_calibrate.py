@@ -123,8 +123,10 @@ def _rig_name(sessions, presses) -> str | None:
             named.setdefault(item.rig_name, str(item.source))
     if len(named) > 1:
         listing = "; ".join(f"{source}: rig = {name!r}" for name, source in named.items())
-        raise InvalidInputError(f"the calibration files were recorded with different rigs ({listing}). Fix: calibrate "
-                                "each measuring chain on its own sessions (`shelljax rig calibrate` once per rig)")  # fmt: skip
+        raise InvalidInputError(
+            f"the calibration files were recorded with different rigs ({listing}). Fix: calibrate "
+            "each measuring chain on its own sessions (`shelljax rig calibrate` once per rig)"
+        )
     return next(iter(named), None)
 
 
@@ -133,14 +135,19 @@ def _check_sessions(sessions: Sequence[Session]) -> None:
     if missing:
         raise InvalidInputError(
             f"{missing[0].source}: field 'manometer_gauge_pressure': missing; a rig is calibrated where the gauge "
-            "pressure is known. Fix: add the manometer reading, or leave this session out of `rig calibrate`")
+            "pressure is known. Fix: add the manometer reading, or leave this session out of `rig calibrate`"
+        )
     for s in sessions:
         if s.wrinkle_counts is None:
-            raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; the calibration needs the "
-                                    "wrinkle counts to separate E from the rig. Fix: add one count per trial")  # fmt: skip
+            raise InvalidInputError(
+                f"{s.source}: field 'wrinkles.counts': missing; the calibration needs the "
+                "wrinkle counts to separate E from the rig. Fix: add one count per trial"
+            )
     if len(sessions) < 2:
-        raise InvalidInputError(f"{sessions[0].source}: one session cannot separate a rig from the object. "
-                                "Fix: calibrate on an object measured at two or more pressures (four are better)")  # fmt: skip
+        raise InvalidInputError(
+            f"{sessions[0].source}: one session cannot separate a rig from the object. "
+            "Fix: calibrate on an object measured at two or more pressures (four are better)"
+        )
 
 
 def pooled_noise(studies) -> tuple[float, tuple[float, float]]:
@@ -155,8 +162,9 @@ def pooled_noise(studies) -> tuple[float, tuple[float, float]]:
 def model_data(base, study, terms, *, rig_prior=None):
     """``base`` arrays with the free mask and fixed values of a rig model with ``terms``;
     ``rig_prior`` = (parameters, mean u, covariance) puts the rig's correlated prior on them."""
-    return with_measurement(base, free=object_unknowns(study) + freed_parameters(terms), fixes=fixed_values(terms),
-                            prior=rig_prior)
+    return with_measurement(
+        base, free=object_unknowns(study) + freed_parameters(terms), fixes=fixed_values(terms), prior=rig_prior
+    )
 
 
 def fit_model(base, study, terms, wrinkle_law: str, u_start: np.ndarray, *, rig_prior=None):
@@ -199,8 +207,10 @@ def _search(objects, terms, wrinkle_law, report, presses) -> tuple[dict, list[di
     report("ideal rig")
     start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects], presses)
     if isinstance(start, str):
-        raise NoConvergenceError(f"the calibration fit with an ideal rig did not converge ({start}). Fix: check the "
-                                 "sessions with `shelljax validate` and `shelljax diagnose`")  # fmt: skip
+        raise NoConvergenceError(
+            f"the calibration fit with an ideal rig did not converge ({start}). Fix: check the "
+            "sessions with `shelljax validate` and `shelljax diagnose`"
+        )
     fitted, failed, current = {(): start}, [], ()
     while True:
         used = {RIG_TERMS[t].family for t in current}
@@ -240,8 +250,13 @@ def _rig_posterior(result: _Fitted, objects) -> tuple[tuple[str, ...], np.ndarra
     for fit, (_, study) in zip(result.fits, objects):
         free = np.flatnonzero(np.asarray(fit.data.free))
         index = [int(np.flatnonzero(free == study.n_sessions + GLOBAL_PARAMETERS.index(p))[0]) for p in names]
-        factors.append((names, fit.u[[study.n_sessions + GLOBAL_PARAMETERS.index(p) for p in names]],
-                        fit.covariance[np.ix_(index, index)]))  # fmt: skip
+        factors.append(
+            (
+                names,
+                fit.u[[study.n_sessions + GLOBAL_PARAMETERS.index(p) for p in names]],
+                fit.covariance[np.ix_(index, index)],
+            )
+        )
     if result.press is not None and result.press.parameters:
         factors.append((result.press.parameters, result.press.mean, result.press.covariance))
     precision, shift = np.zeros((len(names), len(names))), np.zeros(len(names))
@@ -262,9 +277,12 @@ def _object_summary(fit, study) -> dict:
     free = np.flatnonzero(np.asarray(fit.data.free))
     index = int(np.flatnonzero(free == study.n_sessions + GLOBAL_PARAMETERS.index("young_modulus"))[0])
     rel = math.sqrt(fit.covariance[index, index])
-    return {"object": study.sessions[0].object_name, "radius": {"value": float(np.mean(phys["radius"])), "unit": "m"},
-            "young_modulus": {"value": float(phys["young_modulus"]), "relative_std": rel, "unit": "Pa"},
-            "thickness": {"value": float(phys["thickness"]), "unit": "m"}}  # fmt: skip
+    return {
+        "object": study.sessions[0].object_name,
+        "radius": {"value": float(np.mean(phys["radius"])), "unit": "m"},
+        "young_modulus": {"value": float(phys["young_modulus"]), "relative_std": rel, "unit": "Pa"},
+        "thickness": {"value": float(phys["thickness"]), "unit": "m"},
+    }
 
 
 def _objects(sessions, gas, force_ref, manometer_std):
@@ -277,8 +295,9 @@ def _objects(sessions, gas, force_ref, manometer_std):
     forces = np.concatenate([s.force for s in sessions])
     objects = []
     for study in studies:
-        base = study_arrays(study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref,
-                            manometer_std=manometer_std)
+        base = study_arrays(
+            study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref, manometer_std=manometer_std
+        )
         objects.append((widened_grid(base, forces, CALIBRATION_GRID_SPAN), study))
     return objects, noise
 
@@ -308,13 +327,17 @@ def calibrate_rig(
     """
     terms = tuple(RIG_TERMS) if terms is None else check_terms_list(terms)
     if gas not in ESTIMATOR_GASES:
-        raise InvalidInputError(f"unknown gas {gas!r} for an estimate. Fix: choose from {', '.join(ESTIMATOR_GASES)} "
-                                "(a poke is slow: a sealed object's gas stays isothermal)")  # fmt: skip
+        raise InvalidInputError(
+            f"unknown gas {gas!r} for an estimate. Fix: choose from {', '.join(ESTIMATOR_GASES)} "
+            "(a poke is slow: a sealed object's gas stays isothermal)"
+        )
     if wrinkle_law not in WRINKLE_LAWS:
         raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
     if not 0 < manometer_std < 0.5:
-        raise InvalidInputError(f"manometer_std {manometer_std!r} is not a relative std in (0, 0.5). Fix: give the "
-                                "manometer's accuracy as a fraction, e.g. 0.01 for 1 %")  # fmt: skip
+        raise InvalidInputError(
+            f"manometer_std {manometer_std!r} is not a relative std in (0, 0.5). Fix: give the "
+            "manometer's accuracy as a fraction, e.g. 0.01 for 1 %"
+        )
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
     if not sessions:
         raise InvalidInputError("no calibration sessions given. Fix: pass session TOML files with manometer readings")
@@ -343,10 +366,14 @@ def _hint_radius(sessions) -> None:
     loose = [s for s in sessions if s.radius_std > PRECISE_RADIUS * s.radius]
     if loose:
         worst = max(loose, key=lambda s: s.radius_std / s.radius)
-        warnings.warn(f"{worst.source}: field 'radius_std': the calibration object's radius is stated to "
-                      f"±{100 * worst.radius_std / worst.radius:.1f} %, and on one object the rig's force gain takes "
-                      "that error with it to every later P_g. Fix: measure its circumference with a tape (R to about "
-                      "±0.3 %) and state radius_std (docs/rig.md)", RigWarning, stacklevel=3)  # fmt: skip
+        warnings.warn(
+            f"{worst.source}: field 'radius_std': the calibration object's radius is stated to "
+            f"±{100 * worst.radius_std / worst.radius:.1f} %, and on one object the rig's force gain takes "
+            "that error with it to every later P_g. Fix: measure its circumference with a tape (R to about "
+            "±0.3 %) and state radius_std (docs/rig.md)",
+            RigWarning,
+            stacklevel=3,
+        )
 
 
 def check_terms_list(terms) -> tuple[str, ...]:
@@ -371,8 +398,11 @@ def _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force
     kept, excluded = [], []
     for result in fitted.values():
         beaten, delta, se = _beats(best.elpd, result.elpd) if result is not best else (False, 0.0, 0.0)
-        nested_better = any(other.total > result.total and _nests(result.terms, other.terms)
-                            for other in fitted.values() if other is not result)  # fmt: skip
+        nested_better = any(
+            other.total > result.total and _nests(result.terms, other.terms)
+            for other in fitted.values()
+            if other is not result
+        )
         (excluded if beaten or nested_better else kept).append((result, -delta, se))
     weights = pseudo_bma_plus(np.stack([r.elpd for r, _, _ in kept]))
     keep = weights >= MIN_WEIGHT
@@ -382,22 +412,48 @@ def _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force
     for (result, delta, se), weight in sorted(zip(kept, weights), key=lambda kw: -kw[1]):
         names, mean, cov = _rig_posterior(result, objects)
         n = result.elpd.size
-        models.append(RigModel(terms=result.terms, parameters=names, mean=mean, covariance=cov,
-                               fixes=fixed_values(result.terms), elpd=result.total,
-                               elpd_se=float(math.sqrt(n * np.var(result.elpd))), delta=delta, delta_se=se,
-                               weight=float(weight)))  # fmt: skip
+        models.append(
+            RigModel(
+                terms=result.terms,
+                parameters=names,
+                mean=mean,
+                covariance=cov,
+                fixes=fixed_values(result.terms),
+                elpd=result.total,
+                elpd_se=float(math.sqrt(n * np.var(result.elpd))),
+                delta=delta,
+                delta_se=se,
+                weight=float(weight),
+            )
+        )
     inclusion = {t: float(sum(m.weight for m in models if t in m.terms)) for t in RIG_TERMS}
     not_identified = tuple(t for t, p in inclusion.items() if 1 - IDENTIFIED < p < IDENTIFIED)
-    calibration = tuple({"path": str(s.source), "sha256": files_sha256(s.input_files), "object": s.object_name,
-                         "manometer_gauge_pressure": float(s.manometer_gauge_pressure)} for s in sessions)  # fmt: skip
-    calibration += tuple({"path": str(p.source), "sha256": p.sha256, "object": p.object_name, "kind": "rigid_press"}
-                         for p in presses)  # fmt: skip
+    calibration = tuple(
+        {
+            "path": str(s.source),
+            "sha256": files_sha256(s.input_files),
+            "object": s.object_name,
+            "manometer_gauge_pressure": float(s.manometer_gauge_pressure),
+        }
+        for s in sessions
+    )
+    calibration += tuple(
+        {"path": str(p.source), "sha256": p.sha256, "object": p.object_name, "kind": "rigid_press"} for p in presses
+    )
     objects_summary = tuple(_object_summary(f, study) for f, (_, study) in zip(fitted[models[0].terms].fits, objects))
-    return Rig(models=tuple(models), excluded=tuple({"terms": list(r.terms), "delta": d, "delta_se": se}
-                                                    for r, d, se in excluded),
-               inclusion=inclusion, not_identified=not_identified, gas=gas, wrinkle_law=wrinkle_law,
-               force_ref=force_ref, indenter_radius=PAPER_INDENTER_RADIUS, noise=noise, calibration=calibration,
-               objects=objects_summary)  # fmt: skip
+    return Rig(
+        models=tuple(models),
+        excluded=tuple({"terms": list(r.terms), "delta": d, "delta_se": se} for r, d, se in excluded),
+        inclusion=inclusion,
+        not_identified=not_identified,
+        gas=gas,
+        wrinkle_law=wrinkle_law,
+        force_ref=force_ref,
+        indenter_radius=PAPER_INDENTER_RADIUS,
+        noise=noise,
+        calibration=calibration,
+        objects=objects_summary,
+    )
 
 
 def _reporter(progress):
@@ -417,4 +473,3 @@ def _reporter(progress):
         bar.set_postfix_str(stage)
 
     return update
-

@@ -51,12 +51,14 @@ Z95 = 1.959963984540054
 
 # the measurement that settles a term the calibration could not
 SEPARATING_MEASUREMENT = {
-    "pad_linear": "a rigid-surface press (the pad alone)", "pad_hertz": "a rigid-surface press (the pad alone)",
-    "pad_power": "a rigid-surface press (the pad alone)", "depth_offset": "a rigid-surface press (the depth gauge's zero)",
+    "pad_linear": "a rigid-surface press (the pad alone)",
+    "pad_hertz": "a rigid-surface press (the pad alone)",
+    "pad_power": "a rigid-surface press (the pad alone)",
+    "depth_offset": "a rigid-surface press (the depth gauge's zero)",
     "finger_radius": "a second finger size, or a sphere of known radius",
     "sensor_gain": "the force sensor checked against weights (shelljax sensor-calibrate)",
     "sensor_power": "the force sensor checked against weights across 5-20 N (shelljax sensor-calibrate)",
-}  # fmt: skip
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,15 +84,25 @@ class RigEstimate:
         if own is not None:
             width = math.log(e.ci95[1] / e.ci95[0])
             shrink = width / (2 * Z95 * own["estimates"]["young_modulus"]["relative_std"])
-        return [{"term": t, "measurement": SEPARATING_MEASUREMENT[t], "young_modulus_interval_shrink": shrink}
-                for t in self.not_identified]  # fmt: skip
+        return [
+            {"term": t, "measurement": SEPARATING_MEASUREMENT[t], "young_modulus_interval_shrink": shrink}
+            for t in self.not_identified
+        ]
 
     def to_dict(self) -> dict:
         """JSON-ready: estimates by name, each rig model's share, and the rig's provenance."""
-        return {"estimates": {k: v.to_dict() for k, v in self.estimates.items()}, "rig_models": list(self.models),
-                "not_identified": list(self.not_identified), "separating": self.separating(),
-                "rig": {"gas": self.rig.gas, "wrinkle_law": self.rig.wrinkle_law, "version": self.rig.version,
-                        "calibration": [c["sha256"] for c in self.rig.calibration]}}  # fmt: skip
+        return {
+            "estimates": {k: v.to_dict() for k, v in self.estimates.items()},
+            "rig_models": list(self.models),
+            "not_identified": list(self.not_identified),
+            "separating": self.separating(),
+            "rig": {
+                "gas": self.rig.gas,
+                "wrinkle_law": self.rig.wrinkle_law,
+                "version": self.rig.version,
+                "calibration": [c["sha256"] for c in self.rig.calibration],
+            },
+        }
 
 
 def check_compatible(rig: Rig, *, gas: str | None, wrinkle_law: str | None, where: str = "the estimate") -> None:
@@ -100,14 +112,22 @@ def check_compatible(rig: Rig, *, gas: str | None, wrinkle_law: str | None, wher
             raise InvalidInputError(
                 f"the rig was calibrated with {name} = {made!r} but {where} asks for {name} = {asked!r}; a rig's "
                 f"parameters hold only for the forward model they were learned with. Fix: use {name} = {made!r}, or "
-                f"calibrate a rig with `shelljax rig calibrate ... --{name.replace('_', '-')} {asked}`")  # fmt: skip
+                f"calibrate a rig with `shelljax rig calibrate ... --{name.replace('_', '-')} {asked}`"
+            )
 
 
 def rig_measurement(rig: Rig) -> MeasurementPrior:
     """The rig's weightiest model as a diagnosis baseline (``shelljax.diagnose.diagnose(measurement=...)``)."""
     model = rig.models[0]
-    return MeasurementPrior(name="+".join(model.terms) or "ideal rig", parameters=model.parameters, mean=model.mean,
-                            covariance=model.covariance, fixes=model.fixes, force_ref=rig.force_ref, noise=rig.noise)
+    return MeasurementPrior(
+        name="+".join(model.terms) or "ideal rig",
+        parameters=model.parameters,
+        mean=model.mean,
+        covariance=model.covariance,
+        fixes=model.fixes,
+        force_ref=rig.force_ref,
+        noise=rig.noise,
+    )
 
 
 def _true_forces(rig: Rig, force: np.ndarray) -> np.ndarray:
@@ -128,11 +148,15 @@ def _prepare(sessions, rig: Rig):
         raise InvalidInputError("no session given. Fix: pass the session TOML file(s) of one object")
     for s in sessions:
         if rig.name is not None and s.rig_name is not None and s.rig_name != rig.name:
-            raise InvalidInputError(f"{s.source}: field 'rig': recorded with rig {s.rig_name!r}, but the rig file is of "
-                                    f"{rig.name!r}. Fix: estimate through the rig file calibrated for {s.rig_name!r}")  # fmt: skip
+            raise InvalidInputError(
+                f"{s.source}: field 'rig': recorded with rig {s.rig_name!r}, but the rig file is of "
+                f"{rig.name!r}. Fix: estimate through the rig file calibrated for {s.rig_name!r}"
+            )
         if s.wrinkle_counts is None:
-            raise InvalidInputError(f"{s.source}: field 'wrinkles.counts': missing; E needs the wrinkle counts. "
-                                    "Fix: add one count per trial")  # fmt: skip
+            raise InvalidInputError(
+                f"{s.source}: field 'wrinkles.counts': missing; E needs the wrinkle counts. "
+                "Fix: add one count per trial"
+            )
     study = build_study(sessions, rig.noise, min_trials=1, command="estimate --rig")
     base = study_arrays(study, gas=rig.gas, indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
     return sessions, study, widened_grid(base, _true_forces(rig, study.force), ESTIMATE_GRID_SPAN)
@@ -146,7 +170,9 @@ def _start(base, study, model) -> np.ndarray:
 
 
 def _quantities(study) -> list[tuple[str, int]]:
-    names = [("gauge_pressure" if study.n_sessions == 1 else f"gauge_pressure[{i}]", i) for i in range(study.n_sessions)]
+    names = [
+        ("gauge_pressure" if study.n_sessions == 1 else f"gauge_pressure[{i}]", i) for i in range(study.n_sessions)
+    ]
     return names + [("young_modulus", study.n_sessions + GLOBAL_PARAMETERS.index("young_modulus"))]
 
 
@@ -164,7 +190,9 @@ def normal_mixture(means, stds, weights) -> tuple[float, float, float, float]:
     lo, hi = float(np.min(means - 10 * stds)), float(np.max(means + 10 * stds))
 
     def quantile(q):
-        return optimize.brentq(lambda x: float(np.sum(weights * stats.norm.cdf(x, means, stds))) - q, lo, hi, xtol=1e-10)
+        return optimize.brentq(
+            lambda x: float(np.sum(weights * stats.norm.cdf(x, means, stds))) - q, lo, hi, xtol=1e-10
+        )
 
     std = math.sqrt(max(float(np.sum(weights * (stds**2 + means**2))) - float(np.sum(weights * means)) ** 2, 0.0))
     return quantile(0.5), quantile(0.025), quantile(0.975), std
@@ -211,18 +239,30 @@ def estimate_with_rig(
     per_model, mixture = [], []
     for model in rig.models:
         record = {"terms": list(model.terms), "weight": model.weight}
-        fit = fit_model(base, study, model.terms, rig.wrinkle_law, _start(base, study, model),
-                        rig_prior=(model.parameters, model.mean, model.covariance) if model.parameters else None)  # fmt: skip
+        fit = fit_model(
+            base,
+            study,
+            model.terms,
+            rig.wrinkle_law,
+            _start(base, study, model),
+            rig_prior=(model.parameters, model.mean, model.covariance) if model.parameters else None,
+        )
         if not fit.converged:
-            warnings.warn(f"{sessions[0].source}: the fit under rig model {'+'.join(model.terms) or 'ideal'} failed "
-                          f"({fit.message}); the other models carry its weight", RigWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{sessions[0].source}: the fit under rig model {'+'.join(model.terms) or 'ideal'} failed "
+                f"({fit.message}); the other models carry its weight",
+                RigWarning,
+                stacklevel=2,
+            )
             per_model.append({**record, "status": "failed", "message": fit.message})
             continue
         laplace = {}
         for name, index in quantities:
             u, std = laplace_interval(fit, index)
             laplace[name] = (u + _log_reference(fit.data, index, study.n_sessions), std)
-        record["estimates"] = {n: {"value": math.exp(m), "relative_std": s, "unit": "Pa"} for n, (m, s) in laplace.items()}
+        record["estimates"] = {
+            n: {"value": math.exp(m), "relative_std": s, "unit": "Pa"} for n, (m, s) in laplace.items()
+        }
         record["chi2"] = fit.chi2
         record["log_evidence"] = _log_evidence(fit, model)
         entry = {"weight": model.weight, "laplace": laplace, "fit": fit, "log_evidence": record["log_evidence"]}
@@ -231,15 +271,19 @@ def estimate_with_rig(
             entry["draws"], entry["draw_weights"], k_hat = _importance(fit, rig, quantities, study, n_draws, seed)
             record["pareto_k"] = k_hat
             if k_hat > PARETO_K_LIMIT:
-                warnings.warn(f"{sessions[0].source}: PSIS k̂ = {k_hat:.2f} > {PARETO_K_LIMIT} under rig model "
-                              f"{'+'.join(model.terms) or 'ideal'}: its posterior draws are unreliable", RigWarning,
-                              stacklevel=2)  # fmt: skip
+                warnings.warn(
+                    f"{sessions[0].source}: PSIS k̂ = {k_hat:.2f} > {PARETO_K_LIMIT} under rig model "
+                    f"{'+'.join(model.terms) or 'ideal'}: its posterior draws are unreliable",
+                    RigWarning,
+                    stacklevel=2,
+                )
         record["status"] = "ok"
         per_model.append(record)
         mixture.append(entry)
     if not mixture:
-        raise NoConvergenceError(f"{sessions[0].source}: no rig model's fit converged ("
-                                 f"{'; '.join(r.get('message', '') for r in per_model)})")  # fmt: skip
+        raise NoConvergenceError(
+            f"{sessions[0].source}: no rig model's fit converged ({'; '.join(r.get('message', '') for r in per_model)})"
+        )
     weights = updated_weights([e["weight"] for e in mixture], [e["log_evidence"] for e in mixture])
     for record, weight in zip([r for r in per_model if r["status"] == "ok"], weights):
         record["updated_weight"] = float(weight)
@@ -247,8 +291,9 @@ def estimate_with_rig(
     label = f"{method} through a rig of {len(rig.models)} model(s)"
     for name, _ in quantities:
         if method == "fit":
-            center, lo, hi, log_std = normal_mixture([e["laplace"][name][0] for e in mixture],
-                                                     [e["laplace"][name][1] for e in mixture], weights)  # fmt: skip
+            center, lo, hi, log_std = normal_mixture(
+                [e["laplace"][name][0] for e in mixture], [e["laplace"][name][1] for e in mixture], weights
+            )
         else:
             values = np.concatenate([e["draws"][name] for e in mixture])
             w = np.concatenate([wm * e["draw_weights"] for wm, e in zip(weights, mixture)])
@@ -256,8 +301,14 @@ def estimate_with_rig(
             mean = float(np.sum(w * values) / np.sum(w))
             log_std = math.sqrt(float(np.sum(w * (values - mean) ** 2) / np.sum(w)))
         estimates[name] = _estimate_from_log(center, lo, hi, log_std, label)
-    return RigEstimate(estimates=estimates, models=tuple(per_model), not_identified=rig.not_identified, method=method,
-                       rig=rig, sources=tuple(str(s.source) for s in sessions))  # fmt: skip
+    return RigEstimate(
+        estimates=estimates,
+        models=tuple(per_model),
+        not_identified=rig.not_identified,
+        method=method,
+        rig=rig,
+        sources=tuple(str(s.source) for s in sessions),
+    )
 
 
 def _log_evidence(fit, model) -> float:
@@ -283,7 +334,9 @@ def _log_posterior_batch(data, u_batch, wrinkle_law: str):
     shell, physics = jax.vmap(lambda p: engine_inputs(p, data))(phys)
     n_draws, n_sessions = shell.gauge_pressure.shape[:2]
     flat = lambda v: v.reshape((n_draws * n_sessions,) + v.shape[2:])  # noqa: E731
-    curves = solve_curves(jax.tree_util.tree_map(flat, shell), jax.tree_util.tree_map(flat, physics), data)  # draws are scattered: walking curve to curve saves nothing
+    curves = solve_curves(
+        jax.tree_util.tree_map(flat, shell), jax.tree_util.tree_map(flat, physics), data
+    )  # draws are scattered: walking curve to curve saves nothing
     curves = jax.tree_util.tree_map(lambda v: v.reshape((n_draws, n_sessions) + v.shape[1:]), curves)
 
     def one(u, c):

@@ -20,8 +20,10 @@ from ._calibrate import ESTIMATOR_GASES, Rig, RigModel
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 FORMAT = 1
-_HEADER = ("# shelljax rig: the measuring chain (finger pad, finger radius, force sensor, depth gauge), calibrated\n"
-           "# on sessions with manometer readings. Written by `shelljax rig calibrate`; see docs/rig.md.\n")  # fmt: skip
+_HEADER = (
+    "# shelljax rig: the measuring chain (finger pad, finger radius, force sensor, depth gauge), calibrated\n"
+    "# on sessions with manometer readings. Written by `shelljax rig calibrate`; see docs/rig.md.\n"
+)
 
 
 def physical_parameter(name: str, u: float, std: float, indenter_radius: float) -> tuple[float, float]:
@@ -42,36 +44,66 @@ def _model_table(model: RigModel, rig: Rig) -> dict:
         value, err = physical_parameter(name, float(u), float(std), rig.indenter_radius)
         parameters[name] = {"value": value, "std": err, "unit": UNITS[name]}
     for name, u in model.fixes.items():
-        parameters[name] = {"value": physical_parameter(name, u, 0.0, rig.indenter_radius)[0], "std": 0.0,
-                            "unit": UNITS[name], "fixed": True}  # fmt: skip
+        parameters[name] = {
+            "value": physical_parameter(name, u, 0.0, rig.indenter_radius)[0],
+            "std": 0.0,
+            "unit": UNITS[name],
+            "fixed": True,
+        }
     return {
-        "terms": list(model.terms), "weight": model.weight,
-        "evidence": {"elpd": model.elpd, "elpd_se": model.elpd_se, "delta_elpd": model.delta,
-                     "delta_se": model.delta_se, "unit": "nats"},
+        "terms": list(model.terms),
+        "weight": model.weight,
+        "evidence": {
+            "elpd": model.elpd,
+            "elpd_se": model.elpd_se,
+            "delta_elpd": model.delta,
+            "delta_se": model.delta_se,
+            "unit": "nats",
+        },
         "parameters": parameters,
-        "scaled": {"names": list(model.parameters), "mean": [float(v) for v in model.mean],
-                   "covariance": [[float(v) for v in row] for row in model.covariance]},
-    }  # fmt: skip
+        "scaled": {
+            "names": list(model.parameters),
+            "mean": [float(v) for v in model.mean],
+            "covariance": [[float(v) for v in row] for row in model.covariance],
+        },
+    }
 
 
 def rig_document(rig: Rig) -> dict:
     """The rig as the TOML document's dict."""
     return {
-        "format": FORMAT, "shelljax_version": rig.version, **({"name": rig.name} if rig.name else {}),
+        "format": FORMAT,
+        "shelljax_version": rig.version,
+        **({"name": rig.name} if rig.name else {}),
         "manometer_std": rig.manometer_std,
         "forward_model": {"engine": "axisym", "gas": rig.gas, "wrinkle_law": rig.wrinkle_law},
-        "reference": {"force_ref": rig.force_ref, "force_ref_unit": "N", "indenter_radius": rig.indenter_radius,
-                      "indenter_radius_unit": "m"},
-        "noise": {"trial_offset_std": rig.noise[0], "trial_offset_std_unit": "m", "depth_scatter_a": rig.noise[1][0],
-                  "depth_scatter_a_unit": "m^2", "depth_scatter_b": rig.noise[1][1], "depth_scatter_b_unit": "1"},
-        "selection": {"weights": "pseudo-BMA+", "inclusion": dict(rig.inclusion), "not_identified": list(rig.not_identified),
-                      "excluded": [{"terms": e["terms"], "delta_elpd": e["delta"], "delta_se": e["delta_se"]}
-                                   for e in rig.excluded],
-                      "failed": [dict(f) for f in rig.failed]},
+        "reference": {
+            "force_ref": rig.force_ref,
+            "force_ref_unit": "N",
+            "indenter_radius": rig.indenter_radius,
+            "indenter_radius_unit": "m",
+        },
+        "noise": {
+            "trial_offset_std": rig.noise[0],
+            "trial_offset_std_unit": "m",
+            "depth_scatter_a": rig.noise[1][0],
+            "depth_scatter_a_unit": "m^2",
+            "depth_scatter_b": rig.noise[1][1],
+            "depth_scatter_b_unit": "1",
+        },
+        "selection": {
+            "weights": "pseudo-BMA+",
+            "inclusion": dict(rig.inclusion),
+            "not_identified": list(rig.not_identified),
+            "excluded": [
+                {"terms": e["terms"], "delta_elpd": e["delta"], "delta_se": e["delta_se"]} for e in rig.excluded
+            ],
+            "failed": [dict(f) for f in rig.failed],
+        },
         "calibration": [dict(c) for c in rig.calibration],
         "objects": [dict(o) for o in rig.objects],
         "model": [_model_table(m, rig) for m in rig.models],
-    }  # fmt: skip
+    }
 
 
 def write_rig(rig: Rig, path: str | Path) -> Path:
@@ -88,14 +120,22 @@ def _read_model(check: TomlReader, table: dict, i: int) -> RigModel:
     scaled = check.typed(table, "scaled", dict, f"{where}.")
     names = tuple(check.typed(scaled, "names", list, f"{where}.scaled."))
     if names != freed_parameters(terms):
-        raise check.fail(f"{where}.scaled.names", f"{list(names)} are not the parameters of terms {list(terms)} "
-                         f"({list(freed_parameters(terms))})")  # fmt: skip
+        raise check.fail(
+            f"{where}.scaled.names",
+            f"{list(names)} are not the parameters of terms {list(terms)} ({list(freed_parameters(terms))})",
+        )
     mean = np.asarray(check.typed(scaled, "mean", list, f"{where}.scaled."), float)
     cov = np.asarray(check.typed(scaled, "covariance", list, f"{where}.scaled."), float).reshape(-1)
-    if mean.shape != (len(names),) or cov.size != len(names) ** 2 or not np.all(np.isfinite(cov)) \
-            or not np.all(np.isfinite(mean)):
-        raise check.fail(f"{where}.scaled", f"mean {mean.tolist()} / covariance of {cov.size} entries do not fit "
-                         f"{len(names)} parameters")  # fmt: skip
+    if (
+        mean.shape != (len(names),)
+        or cov.size != len(names) ** 2
+        or not np.all(np.isfinite(cov))
+        or not np.all(np.isfinite(mean))
+    ):
+        raise check.fail(
+            f"{where}.scaled",
+            f"mean {mean.tolist()} / covariance of {cov.size} entries do not fit {len(names)} parameters",
+        )
     cov = cov.reshape(len(names), len(names))
     if names and (not np.allclose(cov, cov.T, rtol=1e-8, atol=0) or np.min(np.linalg.eigvalsh(cov)) <= 0):
         raise check.fail(f"{where}.scaled.covariance", "not symmetric positive definite")
@@ -104,9 +144,18 @@ def _read_model(check: TomlReader, table: dict, i: int) -> RigModel:
         raise check.fail(f"{where}.weight", f"{weight!r} is not in (0, 1]")
     ev = check.typed(table, "evidence", dict, f"{where}.")
     num = lambda k: check.typed(ev, k, float, f"{where}.evidence.")  # noqa: E731
-    return RigModel(terms=terms, parameters=names, mean=mean, covariance=cov, fixes=fixed_values(terms),
-                    elpd=num("elpd"), elpd_se=num("elpd_se"), delta=num("delta_elpd"), delta_se=num("delta_se"),
-                    weight=weight)  # fmt: skip
+    return RigModel(
+        terms=terms,
+        parameters=names,
+        mean=mean,
+        covariance=cov,
+        fixes=fixed_values(terms),
+        elpd=num("elpd"),
+        elpd_se=num("elpd_se"),
+        delta=num("delta_elpd"),
+        delta_se=num("delta_se"),
+        weight=weight,
+    )
 
 
 def load_rig(path: str | Path) -> Rig:
@@ -119,22 +168,35 @@ def load_rig(path: str | Path) -> Rig:
     from .. import __version__
 
     path = Path(path)
-    data = read_toml(path, "rig file", fix_missing=f"make one with `shelljax rig calibrate SESSIONS... --out {path}`",
-                     fix_syntax="re-create it with `shelljax rig calibrate`")  # fmt: skip
+    data = read_toml(
+        path,
+        "rig file",
+        fix_missing=f"make one with `shelljax rig calibrate SESSIONS... --out {path}`",
+        fix_syntax="re-create it with `shelljax rig calibrate`",
+    )
     # a rig file is written by `shelljax rig calibrate`, so every field's fix is to write it again
     check = TomlReader(path, fix="re-create the file with `shelljax rig calibrate`", doc="docs/rig.md")
     fmt = data.get("format")
     if fmt is None:
         is_session = "object" in data or "indentation" in data
         what = "this is a measurement session, not a rig file" if is_session else "not a rig file"
-        raise check.fail("format", f"missing: {what}", "make a rig file from sessions with manometer readings: "
-                         "`shelljax rig calibrate SESSIONS... --out rig.toml`, then pass --rig rig.toml")
+        raise check.fail(
+            "format",
+            f"missing: {what}",
+            "make a rig file from sessions with manometer readings: "
+            "`shelljax rig calibrate SESSIONS... --out rig.toml`, then pass --rig rig.toml",
+        )
     if fmt != FORMAT:
-        raise check.fail("format", f"{fmt!r} is not this shelljax's rig format {FORMAT}", "re-calibrate the rig with this version")
+        raise check.fail(
+            "format", f"{fmt!r} is not this shelljax's rig format {FORMAT}", "re-calibrate the rig with this version"
+        )
     version = check.typed(data, "shelljax_version", str)
     if version.split(".")[:2] != __version__.split(".")[:2]:
-        raise check.fail("shelljax_version", f"made by shelljax {version}, incompatible with {__version__} (the models may differ)",
-                         "re-calibrate the rig with this version")  # fmt: skip
+        raise check.fail(
+            "shelljax_version",
+            f"made by shelljax {version}, incompatible with {__version__} (the models may differ)",
+            "re-calibrate the rig with this version",
+        )
     fm = check.typed(data, "forward_model", dict)
     ref = check.typed(data, "reference", dict)
     noise = check.typed(data, "noise", dict)
@@ -164,20 +226,37 @@ def load_rig(path: str | Path) -> Rig:
     gas = check.typed(fm, "gas", str, "forward_model.")
     law = check.typed(fm, "wrinkle_law", str, "forward_model.")
     if gas not in ESTIMATOR_GASES or law not in WRINKLE_LAWS:
-        raise check.fail("forward_model", f"gas {gas!r} / wrinkle_law {law!r} unknown",
-                         f"use a gas of {', '.join(ESTIMATOR_GASES)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}")  # fmt: skip
-    return Rig(models=models, excluded=tuple({"terms": e.get("terms"), "delta": e.get("delta_elpd"), "delta_se": e.get("delta_se")}
-                                             for e in selection.get("excluded", [])),
-               inclusion={t: float(selection.get("inclusion", {}).get(t, 0.0)) for t in RIG_TERMS},
-               not_identified=tuple(selection.get("not_identified", [])), gas=gas, wrinkle_law=law,
-               force_ref=force_ref, indenter_radius=radius, noise=(tau, (a, b)),
-               calibration=tuple(data.get("calibration", [])), objects=tuple(data.get("objects", [])), version=version,
-               name=_name(check, data), manometer_std=check.typed(data, "manometer_std", float),
-               failed=tuple(selection.get("failed", [])))  # fmt: skip
+        raise check.fail(
+            "forward_model",
+            f"gas {gas!r} / wrinkle_law {law!r} unknown",
+            f"use a gas of {', '.join(ESTIMATOR_GASES)} and a wrinkle law of {', '.join(WRINKLE_LAWS)}",
+        )
+    return Rig(
+        models=models,
+        excluded=tuple(
+            {"terms": e.get("terms"), "delta": e.get("delta_elpd"), "delta_se": e.get("delta_se")}
+            for e in selection.get("excluded", [])
+        ),
+        inclusion={t: float(selection.get("inclusion", {}).get(t, 0.0)) for t in RIG_TERMS},
+        not_identified=tuple(selection.get("not_identified", [])),
+        gas=gas,
+        wrinkle_law=law,
+        force_ref=force_ref,
+        indenter_radius=radius,
+        noise=(tau, (a, b)),
+        calibration=tuple(data.get("calibration", [])),
+        objects=tuple(data.get("objects", [])),
+        version=version,
+        name=_name(check, data),
+        manometer_std=check.typed(data, "manometer_std", float),
+        failed=tuple(selection.get("failed", [])),
+    )
 
 
 def _name(check: TomlReader, data: dict) -> str | None:
     name = data.get("name")
     if name is not None and (not isinstance(name, str) or not name.strip()):
-        raise check.fail("name", f"{name!r} is not a rig's name", 'write name = "alice-index-film3", or delete the line')
+        raise check.fail(
+            "name", f"{name!r} is not a rig's name", 'write name = "alice-index-film3", or delete the line'
+        )
     return name

@@ -57,7 +57,9 @@ class PressFit:
 def press_data(presses: Sequence) -> PressData:
     """Lay out rigid presses (``shelljax.session.RigidPress``) with the noise model of their replicates."""
     presses = tuple(presses)
-    levels = np.split(_levels(np.concatenate([p.force for p in presses])), np.cumsum([p.force.size for p in presses])[:-1])
+    levels = np.split(
+        _levels(np.concatenate([p.force for p in presses])), np.cumsum([p.force.size for p in presses])[:-1]
+    )
     tau, scatter = _anova(presses, levels)
     depth = np.concatenate([p.depth for p in presses])
     if scatter is None:
@@ -69,17 +71,30 @@ def press_data(presses: Sequence) -> PressData:
             unit_of[(k, t)] = len(unit_of)
     unit = np.array([unit_of[(k, t)] for k, p in enumerate(presses) for t in p.trial])
     whitening = _whitening(unit, std, tau)
-    log_jac = np.array([np.sum(np.log(np.abs(np.diag(whitening)[unit == u]))) - 0.5 * np.sum(unit == u) * math.log(2 * math.pi)
-                        for u in range(len(unit_of))])  # fmt: skip
-    return PressData(force=np.concatenate([p.force for p in presses]), depth=depth, unit=unit, whitening=whitening,
-                     log_jacobian=log_jac, sources=tuple(str(p.source) for p in presses))  # fmt: skip
+    log_jac = np.array(
+        [
+            np.sum(np.log(np.abs(np.diag(whitening)[unit == u]))) - 0.5 * np.sum(unit == u) * math.log(2 * math.pi)
+            for u in range(len(unit_of))
+        ]
+    )
+    return PressData(
+        force=np.concatenate([p.force for p in presses]),
+        depth=depth,
+        unit=unit,
+        whitening=whitening,
+        log_jacobian=log_jac,
+        sources=tuple(str(p.source) for p in presses),
+    )
 
 
 def _physical(u: dict) -> dict:
-    return {"c": LINEAR_SCALE["finger_compliance"] * u["finger_compliance"],
-            "q": 1.0 + LINEAR_SCALE["pad_exponent"] * u["pad_exponent"],
-            "delta": LINEAR_SCALE["depth_offset"] * u["depth_offset"], "g": math.exp(u["force_gain"]),
-            "p": 1.0 + LINEAR_SCALE["force_exponent"] * u["force_exponent"]}  # fmt: skip
+    return {
+        "c": LINEAR_SCALE["finger_compliance"] * u["finger_compliance"],
+        "q": 1.0 + LINEAR_SCALE["pad_exponent"] * u["pad_exponent"],
+        "delta": LINEAR_SCALE["depth_offset"] * u["depth_offset"],
+        "g": math.exp(u["force_gain"]),
+        "p": 1.0 + LINEAR_SCALE["force_exponent"] * u["force_exponent"],
+    }
 
 
 def press_depth(u: dict, force: np.ndarray, force_ref: float) -> np.ndarray:
@@ -101,12 +116,15 @@ def fit_press(data: PressData, terms, force_ref: float) -> PressFit:
 
     if names:
         # a pad of zero compliance has no exponent to fit: start with a millimetre at F_ref
-        start = np.array([1e-3 / force_ref / LINEAR_SCALE["finger_compliance"] if p == "finger_compliance" else 0.0
-                          for p in names])  # fmt: skip
+        start = np.array(
+            [1e-3 / force_ref / LINEAR_SCALE["finger_compliance"] if p == "finger_compliance" else 0.0 for p in names]
+        )
         out = optimize.least_squares(residuals, start, jac="3-point", x_scale="jac", xtol=1e-12, ftol=1e-12)
         if not out.success:
-            raise InvalidInputError(f"the rigid-surface press ({', '.join(data.sources)}) could not be fitted under rig model "
-                                    f"{'+'.join(terms)}: {out.message}. Fix: check the press session for outliers")  # fmt: skip
+            raise InvalidInputError(
+                f"the rigid-surface press ({', '.join(data.sources)}) could not be fitted under rig model "
+                f"{'+'.join(terms)}: {out.message}. Fix: check the press session for outliers"
+            )
         x, jac = out.x, out.jac
         covariance = np.linalg.inv(jac.T @ jac)
     else:

@@ -44,19 +44,44 @@ class RigTerm:
     description: str
 
 
-RIG_TERMS: dict[str, RigTerm] = {t.name: t for t in (
-    RigTerm("pad_linear", "pad", ("finger_compliance",), (), "the finger pad compresses by c F: depth = w0 + c F"),
-    RigTerm("pad_hertz", "pad", ("finger_compliance",), (("pad_exponent", (HERTZ_EXPONENT - 1.0) / LINEAR_SCALE["pad_exponent"]),),
-            "a Hertzian finger pad: depth = w0 + c F_ref (F/F_ref)^(2/3)"),
-    RigTerm("pad_power", "pad", ("finger_compliance", "pad_exponent"), (),
-            "a finger pad with a power-law response: depth = w0 + c F_ref (F/F_ref)^q"),
-    RigTerm("finger_radius", "finger", ("indenter_radius",), (),
-            "the finger's contact radius a differs from the assumed 8 mm sphere"),
-    RigTerm("depth_offset", "depth", ("depth_offset",), (), "a zero-point error of the depth gauge: depth = w0 + δ"),
-    RigTerm("sensor_gain", "sensor", ("force_gain",), (), "the force sensor's gain: F_true = g F_recorded"),
-    RigTerm("sensor_power", "sensor_law", ("force_exponent",), (),
-            "the force sensor responds as a power law: F_true = F_ref (F_recorded/F_ref)^p"),
-)}  # fmt: skip
+RIG_TERMS: dict[str, RigTerm] = {
+    t.name: t
+    for t in (
+        RigTerm("pad_linear", "pad", ("finger_compliance",), (), "the finger pad compresses by c F: depth = w0 + c F"),
+        RigTerm(
+            "pad_hertz",
+            "pad",
+            ("finger_compliance",),
+            (("pad_exponent", (HERTZ_EXPONENT - 1.0) / LINEAR_SCALE["pad_exponent"]),),
+            "a Hertzian finger pad: depth = w0 + c F_ref (F/F_ref)^(2/3)",
+        ),
+        RigTerm(
+            "pad_power",
+            "pad",
+            ("finger_compliance", "pad_exponent"),
+            (),
+            "a finger pad with a power-law response: depth = w0 + c F_ref (F/F_ref)^q",
+        ),
+        RigTerm(
+            "finger_radius",
+            "finger",
+            ("indenter_radius",),
+            (),
+            "the finger's contact radius a differs from the assumed 8 mm sphere",
+        ),
+        RigTerm(
+            "depth_offset", "depth", ("depth_offset",), (), "a zero-point error of the depth gauge: depth = w0 + δ"
+        ),
+        RigTerm("sensor_gain", "sensor", ("force_gain",), (), "the force sensor's gain: F_true = g F_recorded"),
+        RigTerm(
+            "sensor_power",
+            "sensor_law",
+            ("force_exponent",),
+            (),
+            "the force sensor responds as a power law: F_true = F_ref (F_recorded/F_ref)^p",
+        ),
+    )
+}
 FAMILIES = tuple(dict.fromkeys(t.family for t in RIG_TERMS.values()))
 # every diagnosis parameter a rig may hold, in the diagnosis's order
 RIG_PARAMETERS = tuple(p for p in GLOBAL_PARAMETERS if any(p in t.frees for t in RIG_TERMS.values()))
@@ -67,13 +92,15 @@ def check_terms(terms, where: str = "terms") -> tuple[str, ...]:
     terms = tuple(terms)
     unknown = [t for t in terms if t not in RIG_TERMS]
     if unknown:
-        raise InvalidInputError(f"{where}: unknown rig term(s) {', '.join(map(repr, unknown))}. "
-                                f"Fix: choose from {', '.join(RIG_TERMS)}")  # fmt: skip
+        raise InvalidInputError(
+            f"{where}: unknown rig term(s) {', '.join(map(repr, unknown))}. Fix: choose from {', '.join(RIG_TERMS)}"
+        )
     families = [RIG_TERMS[t].family for t in terms]
     doubled = sorted({f for f in families if families.count(f) > 1})
     if doubled:
-        raise InvalidInputError(f"{where}: {list(terms)} has more than one term of family {doubled[0]!r}. "
-                                "Fix: keep one of them")  # fmt: skip
+        raise InvalidInputError(
+            f"{where}: {list(terms)} has more than one term of family {doubled[0]!r}. Fix: keep one of them"
+        )
     return tuple(t for t in RIG_TERMS if t in terms)
 
 

@@ -8,4 +8,11 @@
 from ._diagnoses import diagnose_studies, diagnoses_table, diagnosis_baseline, study_groups
 from ._run import run_experiment, summary_table
 
-__all__ = ["diagnose_studies", "diagnoses_table", "diagnosis_baseline", "run_experiment", "study_groups", "summary_table"]
+__all__ = [
+    "diagnose_studies",
+    "diagnoses_table",
+    "diagnosis_baseline",
+    "run_experiment",
+    "study_groups",
+    "summary_table",
+]

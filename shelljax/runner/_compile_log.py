@@ -58,11 +58,14 @@ class CompileLog:
 
     def to_dict(self) -> dict:
         return {
-            "programs_compiled": self.compiled, "persistent_cache_hits": self.cache_hits,
-            "trace_seconds": self.trace_seconds, "lower_seconds": self.lower_seconds,
-            "backend_seconds": sum(self.backend_seconds.values()), "total_seconds": self.total_seconds,
+            "programs_compiled": self.compiled,
+            "persistent_cache_hits": self.cache_hits,
+            "trace_seconds": self.trace_seconds,
+            "lower_seconds": self.lower_seconds,
+            "backend_seconds": sum(self.backend_seconds.values()),
+            "total_seconds": self.total_seconds,
             "backend_seconds_by_program": dict(self.backend_seconds.most_common()),
-        }  # fmt: skip
+        }
 
 
 @contextlib.contextmanager

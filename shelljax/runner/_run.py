@@ -63,9 +63,15 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
         "shelljax_version": __version__,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "machine": platform.platform(),
-        "config": {"path": str(config.source), "sha256": file_sha256(config.source), "name": config.name,
-                   "description": config.description, "methods": list(config.methods),
-                   "bootstrap_samples": config.estimator_options.bootstrap_samples, "seed": config.estimator_options.seed},  # fmt: skip
+        "config": {
+            "path": str(config.source),
+            "sha256": file_sha256(config.source),
+            "name": config.name,
+            "description": config.description,
+            "methods": list(config.methods),
+            "bootstrap_samples": config.estimator_options.bootstrap_samples,
+            "seed": config.estimator_options.seed,
+        },
         "units": "SI: Pa, m, N, kg; '1' marks dimensionless quantities",
         "k_s": k_s.to_dict(),
         "sessions": [],
@@ -75,25 +81,51 @@ def _results_header(config: ExperimentConfig, k_s: Estimate) -> dict:
 def _calibration_record(calibration) -> dict:
     return {
         "k_s": calibration.k_s.to_dict(),
-        "points": [{"session": src, "object": obj, "manometer_gauge_pressure": {"value": float(p), "unit": "Pa"},
-                    "pressure_slope": {"value": float(ph), "std": float(sd), "unit": "Pa"}}
-                   for src, obj, p, ph, sd in zip(calibration.sources, calibration.objects, calibration.gauge_pressures,
-                                                  calibration.pressure_slopes, calibration.pressure_slope_stds)],
-    }  # fmt: skip
+        "points": [
+            {
+                "session": src,
+                "object": obj,
+                "manometer_gauge_pressure": {"value": float(p), "unit": "Pa"},
+                "pressure_slope": {"value": float(ph), "std": float(sd), "unit": "Pa"},
+            }
+            for src, obj, p, ph, sd in zip(
+                calibration.sources,
+                calibration.objects,
+                calibration.gauge_pressures,
+                calibration.pressure_slopes,
+                calibration.pressure_slope_stds,
+            )
+        ],
+    }
 
 
-def _session_items(config: ExperimentConfig, sessions: list[Session], options: EstimatorOptions, run_dir: Path,
-                   calibration_files: set[str], verbose: bool) -> list[WorkItem]:  # fmt: skip
+def _session_items(
+    config: ExperimentConfig,
+    sessions: list[Session],
+    options: EstimatorOptions,
+    run_dir: Path,
+    calibration_files: set[str],
+    verbose: bool,
+) -> list[WorkItem]:
     """One work item per session, keyed by its position and file name (unique in a run); its seeds
     are the config's, in ``options``, as in a serial run."""
-    return [WorkItem(f"session{i:04d}-{s.source.stem}", estimate_session_item,
-                     (str(s.source), config, options, str(run_dir), str(s.source) in calibration_files, verbose))
-            for i, s in enumerate(sessions)]  # fmt: skip
+    return [
+        WorkItem(
+            f"session{i:04d}-{s.source.stem}",
+            estimate_session_item,
+            (str(s.source), config, options, str(run_dir), str(s.source) in calibration_files, verbose),
+        )
+        for i, s in enumerate(sessions)
+    ]
 
 
 def _write_manifest(run_dir: Path, config: ExperimentConfig, items: list[WorkItem]) -> None:
-    manifest = {"config": str(Path(config.source).resolve()), "config_sha256": file_sha256(config.source),
-                "shelljax_version": __version__, "items": [item.key for item in items]}  # fmt: skip
+    manifest = {
+        "config": str(Path(config.source).resolve()),
+        "config_sha256": file_sha256(config.source),
+        "shelljax_version": __version__,
+        "items": [item.key for item in items],
+    }
     (run_dir / MANIFEST).write_text(json.dumps(manifest, indent=1))
 
 
@@ -101,21 +133,35 @@ def _resumed_config(run_dir: Path, config_path: str | Path | None) -> Path:
     """The config of the interrupted run in ``run_dir``, checked unchanged since it started."""
     manifest_path = run_dir / MANIFEST
     if not manifest_path.exists():
-        raise InvalidInputError(f"--resume {run_dir}: no {MANIFEST} there, so it is not a run directory shelljax can "
-                                "resume. Fix: give the directory `shelljax run` printed, or start a fresh run")  # fmt: skip
+        raise InvalidInputError(
+            f"--resume {run_dir}: no {MANIFEST} there, so it is not a run directory shelljax can "
+            "resume. Fix: give the directory `shelljax run` printed, or start a fresh run"
+        )
     manifest = json.loads(manifest_path.read_text())
     original = Path(manifest["config"])
     if config_path is not None and Path(config_path).resolve() != original:
-        raise InvalidInputError(f"--resume {run_dir}: that run is of {original}, not of {config_path}. Fix: leave the "
-                                "config out, or resume the run of this config")  # fmt: skip
+        raise InvalidInputError(
+            f"--resume {run_dir}: that run is of {original}, not of {config_path}. Fix: leave the "
+            "config out, or resume the run of this config"
+        )
     if not original.exists() or file_sha256(original) != manifest["config_sha256"]:
-        raise InvalidInputError(f"--resume {run_dir}: its config {original} is gone or has changed since the run "
-                                "started, so its finished sessions no longer answer it. Fix: start a fresh run")  # fmt: skip
+        raise InvalidInputError(
+            f"--resume {run_dir}: its config {original} is gone or has changed since the run "
+            "started, so its finished sessions no longer answer it. Fix: start a fresh run"
+        )
     return original
 
 
-def _write_results(config: ExperimentConfig, k_s: Estimate, calibration, sessions: list[Session],
-                   calibration_files: set[str], done: list, executor: ExecutorOptions, run_dir: Path) -> None:
+def _write_results(
+    config: ExperimentConfig,
+    k_s: Estimate,
+    calibration,
+    sessions: list[Session],
+    calibration_files: set[str],
+    done: list,
+    executor: ExecutorOptions,
+    run_dir: Path,
+) -> None:
     """results.json, the run's figures and report.md from the sessions' item results, in config order."""
     results = _results_header(config, k_s)
     results["executor"] = executor.describe()
@@ -133,8 +179,17 @@ def _write_results(config: ExperimentConfig, k_s: Estimate, calibration, session
         summary_rows.append(summary_row(result.value["row"]))
         held_out += [tuple(h) for h in result.value["held_out"]]
         stages += result.value["stages"]
-    results["items"] = [{"key": r.key, "status": r.status, "seconds": r.seconds, "worker": r.worker,
-                         "resumed": r.resumed, **({"error": r.error} if r.error else {})} for r in done]  # fmt: skip
+    results["items"] = [
+        {
+            "key": r.key,
+            "status": r.status,
+            "seconds": r.seconds,
+            "worker": r.worker,
+            "resumed": r.resumed,
+            **({"error": r.error} if r.error else {}),
+        }
+        for r in done
+    ]
 
     if calibration is not None:
         results["calibration"] = _calibration_record(calibration)
@@ -147,15 +202,20 @@ def _write_results(config: ExperimentConfig, k_s: Estimate, calibration, session
         if summary_rows:
             plot_estimate_summary(summary_rows, run_dir / "figures" / "estimates.png")
             results["summary_figure"] = "figures/estimates.png"
-    results["compilation"] = {"stages": stages, "unit": "s",
-                              "total_seconds": sum(s["total_seconds"] for s in stages)}  # fmt: skip
+    results["compilation"] = {"stages": stages, "unit": "s", "total_seconds": sum(s["total_seconds"] for s in stages)}
     (run_dir / "results.json").write_text(json.dumps(results, indent=2))
     write_run_report(results, run_dir, summary_table(results))
 
 
-def run_experiment(config_path: str | Path | None = None, *, output_dir: str | Path | None = None,
-                   progress: bool | None = None, verbose: bool = False, executor: ExecutorOptions | None = None,
-                   resume: str | Path | None = None) -> Path:  # fmt: skip
+def run_experiment(
+    config_path: str | Path | None = None,
+    *,
+    output_dir: str | Path | None = None,
+    progress: bool | None = None,
+    verbose: bool = False,
+    executor: ExecutorOptions | None = None,
+    resume: str | Path | None = None,
+) -> Path:
     """Run the experiment config at ``config_path``; return the run directory.
 
     Every session is loaded and validated before anything is written, so a bad input fails the run
@@ -176,8 +236,10 @@ def run_experiment(config_path: str | Path | None = None, *, output_dir: str | P
     config = load_config(config_path)
     executor = executor or config.executor
     if resume is None:  # every output checked before any work; nothing is created until all are
-        check_output_dir(config.output_dir if output_dir is None else output_dir,
-                         "--out" if output_dir is not None else f"{config.source}: output_dir")
+        check_output_dir(
+            config.output_dir if output_dir is None else output_dir,
+            "--out" if output_dir is not None else f"{config.source}: output_dir",
+        )
     check_executor(executor)  # an unreachable cluster is refused before the run directory exists
     disable = None if progress is None else not progress
     calibration_sessions = [load_session(p) for p in config.calibration_sessions]
@@ -197,16 +259,20 @@ def run_experiment(config_path: str | Path | None = None, *, output_dir: str | P
     if resume is None:
         _write_manifest(run_dir, config, items)
     try:
-        done = run_items(items, run_dir=run_dir, options=executor, resume=resume is not None,
-                         progress=progress, desc="estimating")  # fmt: skip
+        done = run_items(
+            items, run_dir=run_dir, options=executor, resume=resume is not None, progress=progress, desc="estimating"
+        )
     except InvalidInputError:
         if resume is None:  # refused before any session ran: a fresh run leaves nothing behind
             shutil.rmtree(run_dir, ignore_errors=True)
         raise
     except KeyboardInterrupt:
         finished = sum(read_item(run_dir, item.key) is not None for item in items)
-        tqdm.write(f"interrupted: {finished} of {len(items)} sessions finished in {run_dir}; finish the run with "
-                   f"`shelljax run --resume {run_dir}`", file=sys.stderr)  # fmt: skip
+        tqdm.write(
+            f"interrupted: {finished} of {len(items)} sessions finished in {run_dir}; finish the run with "
+            f"`shelljax run --resume {run_dir}`",
+            file=sys.stderr,
+        )
         raise
 
     _write_results(config, k_s, calibration, sessions, calibration_files, done, executor, run_dir)
@@ -227,7 +293,9 @@ def summary_table(results: dict) -> str:
     left out (their pressures are known); the manometer column shows held-out truths.
     """
     methods = list(results["config"]["methods"])
-    header = ["session", "manometer P_g [kPa]"] + [f"P_g {m} [kPa]" for m in methods] + [f"E {m} [MPa]" for m in methods]
+    header = (
+        ["session", "manometer P_g [kPa]"] + [f"P_g {m} [kPa]" for m in methods] + [f"E {m} [MPa]" for m in methods]
+    )
     rows = []
     for entry in results["sessions"]:
         if entry["used_in_calibration"]:
@@ -241,6 +309,8 @@ def summary_table(results: dict) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in [header, *rows]]
     lines.insert(1, "  ".join("-" * w for w in widths))
     k_s = results["k_s"]
-    lines.append(f"closed form with k_s = {k_s['value']:.3g} ± {k_s['std']:.2g} ({k_s['method']}); "
-                 "fit/bayes need no k_s; failures are explained in results.json")  # fmt: skip
+    lines.append(
+        f"closed form with k_s = {k_s['value']:.3g} ± {k_s['std']:.2g} ({k_s['method']}); "
+        "fit/bayes need no k_s; failures are explained in results.json"
+    )
     return "\n".join(lines)

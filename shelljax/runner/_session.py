@@ -30,14 +30,18 @@ from ._memory_mappings import release_compiled_programs_if_crowded
 
 def _session_inputs(session: Session) -> dict:
     inputs = {
-        "radius": {"value": session.radius, "std": session.radius_std, "unit": "m",
-                   "source": "mesh sphere fit" if session.mesh_path else "session file"},
+        "radius": {
+            "value": session.radius,
+            "std": session.radius_std,
+            "unit": "m",
+            "source": "mesh sphere fit" if session.mesh_path else "session file",
+        },
         "thickness": {"value": session.thickness, "std": session.thickness_std, "unit": "m"},
         "poisson_ratio": {"value": session.poisson_ratio, "unit": "1"},
         "n_samples": int(session.force.size),
         "n_trials": int(session.trial_ids.size),
         "force_levels": {"value": session.force_levels.tolist(), "unit": "N"},
-    }  # fmt: skip
+    }
     if session.wrinkle_counts is not None:
         inputs["wrinkle_counts"] = session.wrinkle_counts.tolist()
     if session.manometer_gauge_pressure is not None:
@@ -84,8 +88,15 @@ def _stage(name: str, stages: list[dict], verbose: bool):
     return stage(name, verbose, stages)
 
 
-def _simulation_methods(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                        stages: list[dict], verbose: bool, rig=None):  # fmt: skip
+def _simulation_methods(
+    session: Session,
+    config: ExperimentConfig,
+    options: EstimatorOptions,
+    run_dir: Path,
+    stages: list[dict],
+    verbose: bool,
+    rig=None,
+):
     """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
     result or None). bayes starts from the fit when it converged; each method is a timed stage.
     With a ``rig`` (``shelljax.rig``), both go through it.
@@ -119,14 +130,28 @@ def _plotted(estimates: dict[str, Estimate | None]) -> dict:
     return {"gauge_pressure": estimates.get("gauge_pressure"), "young_modulus": estimates.get("young_modulus")}
 
 
-def _estimate_session_entry(session: Session, config: ExperimentConfig, options: EstimatorOptions, run_dir: Path,
-                            used_in_calibration: bool, held_out: list, stages: list[dict], verbose: bool,
-                            rig=None):  # fmt: skip
+def _estimate_session_entry(
+    session: Session,
+    config: ExperimentConfig,
+    options: EstimatorOptions,
+    run_dir: Path,
+    used_in_calibration: bool,
+    held_out: list,
+    stages: list[dict],
+    verbose: bool,
+    rig=None,
+):
     """Every configured estimator on one session: (results.json entry, summary-figure row); a
     held-out manometer point of the calibration figure is appended to ``held_out``."""
-    entry = {"object": session.object_name, "session": str(session.source),
-             "used_in_calibration": used_in_calibration, "input_files": session.input_files,
-             "inputs": _session_inputs(session), "estimates": {}, "figures": []}  # fmt: skip
+    entry = {
+        "object": session.object_name,
+        "session": str(session.source),
+        "used_in_calibration": used_in_calibration,
+        "input_files": session.input_files,
+        "inputs": _session_inputs(session),
+        "estimates": {},
+        "figures": [],
+    }
     row = {"label": session.source.stem, "manometer": session.manometer_gauge_pressure, "estimates": {}}
     closed = run_estimator("closed-form", session, options)
     model_curves: dict[str, np.ndarray] = {}
@@ -150,36 +175,61 @@ def _estimate_session_entry(session: Session, config: ExperimentConfig, options:
     if config.figures:
         from ..plots import plot_force_depth  # matplotlib loads only when figures are asked for
 
-        fig = plot_force_depth(session, closed, run_dir / "figures" / f"force_depth_{session.source.stem}.png",
-                               model_curves=model_curves)  # fmt: skip
+        fig = plot_force_depth(
+            session, closed, run_dir / "figures" / f"force_depth_{session.source.stem}.png", model_curves=model_curves
+        )
         entry["figures"].append(str(fig.relative_to(run_dir)))
     return entry, row
 
 
-def estimate_session_item(session_path: str, config: ExperimentConfig, options: EstimatorOptions, run_dir: str,
-                          used_in_calibration: bool, verbose: bool) -> dict:  # fmt: skip
+def estimate_session_item(
+    session_path: str,
+    config: ExperimentConfig,
+    options: EstimatorOptions,
+    run_dir: str,
+    used_in_calibration: bool,
+    verbose: bool,
+) -> dict:
     """The work item of one session: every configured method on it, its figures written into
     ``run_dir``; returns ``{"entry", "row", "held_out", "stages"}`` as JSON (estimates as dicts)."""
     session = load_session(session_path)
     rig = None if config.rig is None else load_rig(config.rig)
     held_out: list = []
     stages: list[dict] = []
-    entry, row = _estimate_session_entry(session, config, options, Path(run_dir), used_in_calibration, held_out, stages,
-                                         verbose, rig)  # fmt: skip
+    entry, row = _estimate_session_entry(
+        session, config, options, Path(run_dir), used_in_calibration, held_out, stages, verbose, rig
+    )
     release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate
-    row = {**row, "estimates": {method: {name: None if e is None else e.to_dict() for name, e in pair.items()}
-                                for method, pair in row["estimates"].items()}}  # fmt: skip
+    row = {
+        **row,
+        "estimates": {
+            method: {name: None if e is None else e.to_dict() for name, e in pair.items()}
+            for method, pair in row["estimates"].items()
+        },
+    }
     return {"entry": entry, "row": row, "held_out": [list(h) for h in held_out], "stages": stages}
 
 
 def summary_row(row: dict) -> dict:
     """A summary-figure row of :func:`estimate_session_item`'s JSON, its estimates as :class:`Estimate`."""
-    return {**row, "estimates": {method: {name: None if e is None else Estimate.from_dict(e) for name, e in pair.items()}
-                                 for method, pair in row["estimates"].items()}}  # fmt: skip
+    return {
+        **row,
+        "estimates": {
+            method: {name: None if e is None else Estimate.from_dict(e) for name, e in pair.items()}
+            for method, pair in row["estimates"].items()
+        },
+    }
 
 
 def failed_entry(session: Session, used_in_calibration: bool, error: str) -> dict:
     """The results.json entry of a session whose work item failed: its inputs and the error."""
-    return {"object": session.object_name, "session": str(session.source), "used_in_calibration": used_in_calibration,
-            "input_files": session.input_files, "inputs": _session_inputs(session), "estimates": {}, "figures": [],
-            "error": error}  # fmt: skip
+    return {
+        "object": session.object_name,
+        "session": str(session.source),
+        "used_in_calibration": used_in_calibration,
+        "input_files": session.input_files,
+        "inputs": _session_inputs(session),
+        "estimates": {},
+        "figures": [],
+        "error": error,
+    }

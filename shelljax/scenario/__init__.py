@@ -23,7 +23,24 @@ from ._run import (
 from ._sweep import run_sweep, simulate_sweep_value, sweep_table
 
 __all__ = [
-    "CALIBRATION_WINDOW", "SCENARIO_CHUNK", "ObjectModel", "PlaneSpec", "PrescribedSpec", "Scenario", "build_system",
-    "calibration_cor", "eqx_replace_damping", "held_vertices", "hold", "initial_state", "load_scenario",
-    "resolve_object", "run_scenario", "run_sweep", "simulate_sweep_value", "sweep_table", "SWEEP_PARAMETERS", "SweepSpec",
-]  # fmt: skip
+    "CALIBRATION_WINDOW",
+    "SCENARIO_CHUNK",
+    "ObjectModel",
+    "PlaneSpec",
+    "PrescribedSpec",
+    "Scenario",
+    "build_system",
+    "calibration_cor",
+    "eqx_replace_damping",
+    "held_vertices",
+    "hold",
+    "initial_state",
+    "load_scenario",
+    "resolve_object",
+    "run_scenario",
+    "run_sweep",
+    "simulate_sweep_value",
+    "sweep_table",
+    "SWEEP_PARAMETERS",
+    "SweepSpec",
+]

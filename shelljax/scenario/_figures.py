@@ -46,9 +46,18 @@ def digest(trajectory, label: str) -> RunDigest:
             most[p] = int(np.argmin(np.where(touching, np.ptp(heights, axis=1), np.inf)))
     steps = {0, *most.values()}
     levels = _plane_levels(trajectory) if len(trajectory.plane_names) else np.zeros(0)
-    return RunDigest(label, np.asarray(trajectory["time_s"]), np.asarray(trajectory["com_position_m"]), np.asarray(trajectory.faces),
-                     {k: positions[k] for k in steps}, tuple(trajectory.plane_names), np.asarray(trajectory.plane_normals),
-                     np.asarray(levels), most, np.asarray(trajectory.gravity_m_per_s2))  # fmt: skip
+    return RunDigest(
+        label,
+        np.asarray(trajectory["time_s"]),
+        np.asarray(trajectory["com_position_m"]),
+        np.asarray(trajectory.faces),
+        {k: positions[k] for k in steps},
+        tuple(trajectory.plane_names),
+        np.asarray(trajectory.plane_normals),
+        np.asarray(levels),
+        most,
+        np.asarray(trajectory.gravity_m_per_s2),
+    )
 
 
 def _section(nodes: np.ndarray, faces: np.ndarray, origin: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -81,7 +90,10 @@ def max_deformation_figure(runs: list[RunDigest], path: Path) -> Path | None:
         p = min(run.most_deformed)  # the first plane it flattens on (the ground of a drop)
         normal, level = run.plane_normals[p], run.plane_levels[p]
         along, across = _tangents(normal)
-        for step, style in ((0, {"color": "0.55", "lw": 1.0, "ls": "--"}), (run.most_deformed[p], {"color": colour, "lw": 1.6})):
+        for step, style in (
+            (0, {"color": "0.55", "lw": 1.0, "ls": "--"}),
+            (run.most_deformed[p], {"color": colour, "lw": 1.6}),
+        ):
             if step == 0 and j:
                 continue  # the free shape is the same for every run: draw it once
             nodes = run.frames[step]
@@ -91,8 +103,11 @@ def max_deformation_figure(runs: list[RunDigest], path: Path) -> Path | None:
             xy = np.stack([(seg - centre) @ along, seg @ normal - rest_lift], axis=-1)
             height = float(np.ptp(nodes @ normal))
             size = max(size, height)
-            label = (f"free, {1e3 * height:.0f} mm tall" if step == 0 else
-                     f"{run.label}: {1e3 * height:.0f} mm at t = {run.time_s[step]:.3f} s")  # fmt: skip
+            label = (
+                f"free, {1e3 * height:.0f} mm tall"
+                if step == 0
+                else f"{run.label}: {1e3 * height:.0f} mm at t = {run.time_s[step]:.3f} s"
+            )
             ax.add_collection(LineCollection(xy, label=label, **style))
     ax.axhline(0.0, color="k", lw=1.5)
     ax.set_aspect("equal")
@@ -147,16 +162,26 @@ def trajectory_figure(runs: list[RunDigest], path: Path) -> Path:
                 seg = _section(nodes, run.faces, nodes.mean(axis=0), across)
                 ax.add_collection(LineCollection(np.stack([seg @ horizontal, seg @ up], axis=-1), color=colour, lw=1.0))
                 label_at = nodes.mean(axis=0) - 0.22 * np.ptp(nodes @ up) * up
-                ax.annotate(f"t = {run.time_s[step]:.3f} s", (label_at @ horizontal, label_at @ up), fontsize=7, ha="center",
-                            va="center", bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})  # fmt: skip
+                ax.annotate(
+                    f"t = {run.time_s[step]:.3f} s",
+                    (label_at @ horizontal, label_at @ up),
+                    fontsize=7,
+                    ha="center",
+                    va="center",
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+                )
             start = run.frames[0]
             seg = _section(start, run.faces, start.mean(axis=0), across)
-            ax.add_collection(LineCollection(np.stack([seg @ horizontal, seg @ up], axis=-1), color="0.6", lw=0.8, ls="--"))
+            ax.add_collection(
+                LineCollection(np.stack([seg @ horizontal, seg @ up], axis=-1), color="0.6", lw=0.8, ls="--")
+            )
         ax.set_aspect("equal")
         ax.autoscale_view()
         _draw_planes_edge_on(ax, runs[0], horizontal, up)
         ax.set(xlabel="horizontal [m]", ylabel="height [m]")
-    ax.set_title("centre-of-mass trajectory" + ("" if horizontal is None else " (outlines: start, most deformed)"), fontsize=10)
+    ax.set_title(
+        "centre-of-mass trajectory" + ("" if horizontal is None else " (outlines: start, most deformed)"), fontsize=10
+    )
     ax.tick_params(labelsize=8)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
@@ -191,12 +216,23 @@ def _draw_planes_edge_on(ax, run: RunDigest, horizontal: np.ndarray, up: np.ndar
         labels.append((name, xs, ys, a, b))
     for name, xs, ys, a, b in labels:  # each name on the plane's free side, near its low / left end
         if abs(b) >= abs(a):
-            ax.annotate(name, (x0 + 0.02 * (x1 - x0), np.interp(x0, xs, ys) + 0.01 * np.sign(b) * (y1 - y0)),
-                        fontsize=8, ha="left", va="bottom" if b > 0 else "top")  # fmt: skip
+            ax.annotate(
+                name,
+                (x0 + 0.02 * (x1 - x0), np.interp(x0, xs, ys) + 0.01 * np.sign(b) * (y1 - y0)),
+                fontsize=8,
+                ha="left",
+                va="bottom" if b > 0 else "top",
+            )
         else:
             x = np.interp(y0, ys, xs) if ys[0] < ys[1] else np.interp(y0, ys[::-1], xs[::-1])
-            ax.annotate(name, (x + 0.01 * np.sign(a) * (x1 - x0), y0 + 0.15 * (y1 - y0)), fontsize=8, rotation=90,
-                        ha="left" if a > 0 else "right", va="bottom")  # fmt: skip
+            ax.annotate(
+                name,
+                (x + 0.01 * np.sign(a) * (x1 - x0), y0 + 0.15 * (y1 - y0)),
+                fontsize=8,
+                rotation=90,
+                ha="left" if a > 0 else "right",
+                va="bottom",
+            )
     ax.set(xlim=(x0, x1), ylim=(y0, y1))
 
 
@@ -228,7 +264,7 @@ def keyframes_figure(run: RunDigest, rigid: dict[int, np.ndarray], axis: np.ndar
     ylim = (every @ up).min(), (every @ up).max()
     rows = (len(steps) + 2) // 3
     fig, axes = plt.subplots(rows, 3, figsize=(7.2, 1.75 * rows + 0.75), sharex=True, sharey=True, squeeze=False)
-    for ax in axes.flat[len(steps):]:
+    for ax in axes.flat[len(steps) :]:
         ax.set_visible(False)
     for ax, k in zip(axes.flat, steps):
         for nodes, colours, z in ((rigid[k], None, 1), (run.frames[k], plt.get_cmap("plasma")(norm(away[k])), 2)):

@@ -23,6 +23,7 @@ from ..session import load_session
 from . import _figures
 from ._load import Scenario
 
+
 @dataclasses.dataclass(frozen=True)
 class ObjectModel:
     """What a scenario's object resolves to: the shell, E [Pa], ν, P_g [Pa], mass [kg], their source."""
@@ -46,15 +47,24 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
         p_g, e = scenario.gauge_pressure, scenario.youngs_modulus
         source["parameters"] = "given in the config"
     elif session is None:
-        raise InvalidInputError(f"{scenario.source}: no session to estimate P_g and E from. Fix: set object.session or pass --session")
+        raise InvalidInputError(
+            f"{scenario.source}: no session to estimate P_g and E from. Fix: set object.session or pass --session"
+        )
     else:
-        p_g, e, source["estimate"] = estimated_parameters(session, scenario.estimate, scenario.estimator_options, scenario.rig)
+        p_g, e, source["estimate"] = estimated_parameters(
+            session, scenario.estimate, scenario.estimator_options, scenario.rig
+        )
         source["parameters"] = f"estimator '{scenario.estimate}' of {path}"
-        source["estimator_options"] = {k: list(v) if isinstance(v, tuple) else v for k, v in scenario.estimator_options.items()}
+        source["estimator_options"] = {
+            k: list(v) if isinstance(v, tuple) else v for k, v in scenario.estimator_options.items()
+        }
+
     def pick(given, field, name, unit):
         value = given if given is not None else (getattr(session, field) if session is not None else None)
         if value is None:
-            raise InvalidInputError(f"{scenario.source}: field 'object.{name}' is missing and no session gives it. Fix: add object.{name} ({unit}) or object.session")
+            raise InvalidInputError(
+                f"{scenario.source}: field 'object.{name}' is missing and no session gives it. Fix: add object.{name} ({unit}) or object.session"
+            )
         return float(value)
 
     thickness = pick(scenario.thickness, "thickness", "thickness_m", "m")
@@ -70,7 +80,9 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     mass = scenario.mass if scenario.mass is not None else (session.mass if session is not None else None)
     if mass is None and scenario.wall_density is None:
         where = f"the session {path} has no `mass`" if session is not None else "no session gives it"
-        raise InvalidInputError(f"{scenario.source}: the object's mass is missing ({where}). Fix: add object.mass_kg (kg) or object.wall_density_kg_per_m3 to the config, or `mass` to the session")
+        raise InvalidInputError(
+            f"{scenario.source}: the object's mass is missing ({where}). Fix: add object.mass_kg (kg) or object.wall_density_kg_per_m3 to the config, or `mass` to the session"
+        )
     if scenario.wall_density is not None:
         mass = None
     return ObjectModel(shell, e, nu, p_g, mass, scenario.wall_density, source)
@@ -79,14 +91,26 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
 def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
     """The scenario's :class:`shelljax.dynamics.ShellDynamicSystem` with contact damping c [N·s/m] on every plane."""
     planes = [
-        d.Plane(p.point, p.normal, d.BarrierContact(p.activation_distance, p.barrier_stiffness),
-                friction=p.friction, slip_tolerance=p.slip_tolerance, damping=damping, name=p.name)
+        d.Plane(
+            p.point,
+            p.normal,
+            d.BarrierContact(p.activation_distance, p.barrier_stiffness),
+            friction=p.friction,
+            slip_tolerance=p.slip_tolerance,
+            damping=damping,
+            name=p.name,
+        )
         for p in scenario.planes
-    ]  # fmt: skip
-    properties = ShellProperties(gauge_pressure=obj.gauge_pressure, young_modulus=obj.young_modulus,
-                                 thickness=obj.shell.thickness, poisson_ratio=obj.poisson_ratio)
-    return d.shell_system(obj.shell, properties, gas=scenario.gas, mass=obj.mass, wall_density=obj.wall_density,
-                          planes=planes)  # fmt: skip
+    ]
+    properties = ShellProperties(
+        gauge_pressure=obj.gauge_pressure,
+        young_modulus=obj.young_modulus,
+        thickness=obj.shell.thickness,
+        poisson_ratio=obj.poisson_ratio,
+    )
+    return d.shell_system(
+        obj.shell, properties, gas=scenario.gas, mass=obj.mass, wall_density=obj.wall_density, planes=planes
+    )
 
 
 def _integrator(scenario: Scenario):
@@ -104,10 +128,22 @@ SCENARIO_CHUNK = 25
 
 def _simulate(scenario: Scenario, system, state, duration: float, progress: bool):
     try:
-        return d.simulate(system, state, scenario.dt, duration, integrator=_integrator(scenario), minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
-                          rayleigh=_rayleigh(scenario), chunk=SCENARIO_CHUNK, progress=progress)  # fmt: skip
+        return d.simulate(
+            system,
+            state,
+            scenario.dt,
+            duration,
+            integrator=_integrator(scenario),
+            minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
+            rayleigh=_rayleigh(scenario),
+            chunk=SCENARIO_CHUNK,
+            progress=progress,
+        )
     except NoConvergenceError as err:
-        raise NoConvergenceError(f"{scenario.source}: field 'integrator.dt_s' = {scenario.dt}: {err} Fix: reduce integrator.dt_s", err.history) from err
+        raise NoConvergenceError(
+            f"{scenario.source}: field 'integrator.dt_s' = {scenario.dt}: {err} Fix: reduce integrator.dt_s",
+            err.history,
+        ) from err
 
 
 def initial_state(scenario: Scenario, system, height: float):
@@ -141,7 +177,10 @@ def calibration_cor(scenario: Scenario, system, damping: float, *, progress: boo
     radius = (3.0 * float(one.volume(one.inflated)) / (4.0 * math.pi)) ** (1.0 / 3.0)
     textbook = d.pressurized_ball_contact_time(mass, radius, float(one.params.gauge_pressure))
     # The shell's contact outlasts the textbook spring's (docs/dynamics.md): widen the window once.
-    for window in (CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt, 2.0 * CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt):
+    for window in (
+        CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt,
+        2.0 * CALIBRATION_WINDOW * textbook + 4.0 * scenario.dt,
+    ):
         impacts = d.measured_cor(_simulate(scenario, one, state, window, progress))
         if impacts:
             break
@@ -188,7 +227,7 @@ def held_vertices(scenario: Scenario, system) -> np.ndarray:
     if held.max() >= len(x):
         raise InvalidInputError(
             f"{scenario.source}: field 'prescribed.select' = {list(spec.select)}: vertex {int(held.max())} is not in the "
-            f"{len(x)}-vertex mesh. Fix: give indices below {len(x)}, or select = \"lowest\""
+            f'{len(x)}-vertex mesh. Fix: give indices below {len(x)}, or select = "lowest"'
         )
     return held
 
@@ -203,8 +242,14 @@ def _swing(scenario: Scenario, system, out: Path, progress: bool) -> dict:
     """Run a held object once from its posed start into ``out``/swing; what the run shows."""
     trajectory = _simulate(scenario, system, d.initial_state(system, system.posed(0.0)), scenario.duration, progress)
     run_dir = out / "swing"
-    d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
-                    figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
+    d.write_results(
+        trajectory,
+        run_dir,
+        max_frames=scenario.max_frames,
+        mesh_format=scenario.mesh_frames,
+        figures=scenario.figures,
+        preview_gif=scenario.preview_gif,
+    )
     positions, times = trajectory["position_m"], trajectory["time_s"]
     held = np.asarray(system.prescribed_vertices)
     rigid = np.stack([np.asarray(system.posed(t)) for t in times])
@@ -216,18 +261,34 @@ def _swing(scenario: Scenario, system, out: Path, progress: bool) -> dict:
         steps = _figures.keyframe_steps(times, deviation)
         swing = _figures.digest(trajectory, "swing")
         swing.frames.update({int(k): positions[k].reshape(-1, 3) for k in steps})
-        _figures.keyframes_figure(swing, {int(k): rigid[k].reshape(-1, 3) for k in steps}, np.asarray(scenario.prescribed.axis_direction),
-                                  out / "keyframes.png")  # fmt: skip
+        _figures.keyframes_figure(
+            swing,
+            {int(k): rigid[k].reshape(-1, 3) for k in steps},
+            np.asarray(scenario.prescribed.axis_direction),
+            out / "keyframes.png",
+        )
         figures.append("keyframes.png")
     return {
-        "directory": str(run_dir), "held_vertices": held.tolist(), "figures": figures,
-        "held_error_m": float(np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))),
-        "max_deviation_from_rigid_m": float(deviation.max()), "time_of_max_deviation_s": float(times[np.argmax(deviation)]),
-        "peak_gas_pressure_Pa": float(np.max(trajectory["gas_pressure_Pa"])), "time_of_peak_pressure_s": float(times[np.argmax(trajectory["gas_pressure_Pa"])]),
-        "planes": {name: {"min_gap_m": float(np.min(trajectory["min_gap_m"][:, i])), "peak_force_N": float(np.max(force[:, i])),
-                          "first_contact_s": _first_contact(trajectory, i)} for i, name in enumerate(trajectory.plane_names)},
+        "directory": str(run_dir),
+        "held_vertices": held.tolist(),
+        "figures": figures,
+        "held_error_m": float(
+            np.max(np.abs(positions.reshape(len(times), -1, 3)[:, held].reshape(len(times), -1) - schedule))
+        ),
+        "max_deviation_from_rigid_m": float(deviation.max()),
+        "time_of_max_deviation_s": float(times[np.argmax(deviation)]),
+        "peak_gas_pressure_Pa": float(np.max(trajectory["gas_pressure_Pa"])),
+        "time_of_peak_pressure_s": float(times[np.argmax(trajectory["gas_pressure_Pa"])]),
+        "planes": {
+            name: {
+                "min_gap_m": float(np.min(trajectory["min_gap_m"][:, i])),
+                "peak_force_N": float(np.max(force[:, i])),
+                "first_contact_s": _first_contact(trajectory, i),
+            }
+            for i, name in enumerate(trajectory.plane_names)
+        },
         "impacts": [m.to_dict() for m in d.measured_cor(trajectory)],
-    }  # fmt: skip
+    }
 
 
 def _first_contact(trajectory, plane: int) -> float | None:
@@ -242,6 +303,7 @@ def _calibrate(scenario: Scenario, system, progress: bool) -> tuple[float, dict]
     from tqdm.auto import tqdm
 
     with tqdm(desc=f"calibrating the contact damping to COR {scenario.cor}", unit="drop", disable=not progress) as bar:
+
         def cor(c):
             value = calibration_cor(scenario, system, c)
             bar.update(1)
@@ -249,8 +311,12 @@ def _calibrate(scenario: Scenario, system, progress: bool) -> tuple[float, dict]
             return value
 
         cal = d.calibrate_contact_damping(cor, scenario.cor, scenario.bracket, rtol=1e-2)
-    return cal.damping, {"target_cor": scenario.cor, "damping_N_s_per_m": cal.damping, "cor": cal.cor,
-                         "evaluations": [list(e) for e in cal.evaluations]}  # fmt: skip
+    return cal.damping, {
+        "target_cor": scenario.cor,
+        "damping_N_s_per_m": cal.damping,
+        "cor": cal.cor,
+        "evaluations": [list(e) for e in cal.evaluations],
+    }
 
 
 def _scenario_figures(scenario: Scenario, out: Path, digests: list) -> list[str]:
@@ -264,8 +330,14 @@ def _scenario_figures(scenario: Scenario, out: Path, digests: list) -> list[str]
     return written
 
 
-def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, session: str | Path | None = None, progress: bool = True,
-                 verbose: bool = False) -> dict:  # fmt: skip
+def run_scenario(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    *,
+    session: str | Path | None = None,
+    progress: bool = True,
+    verbose: bool = False,
+) -> dict:
     """Run every drop of ``scenario`` into ``out_dir`` (default: its output_dir/name); the summary it writes.
 
     Writes ``scenario.json`` (parameters, calibration, every run's impacts), ``report.md`` (the
@@ -296,11 +368,25 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
         for h, label in zip(scenario.drop_heights, labels):
             bar.set_postfix_str(label)
             with stage(label, verbose, stages):
-                trajectory = _simulate(scenario, system, initial_state(scenario, system, h), scenario.duration, progress)
+                trajectory = _simulate(
+                    scenario, system, initial_state(scenario, system, h), scenario.duration, progress
+                )
                 run_dir = out / f"h{h:.2f}m"
-                d.write_results(trajectory, run_dir, max_frames=scenario.max_frames, mesh_format=scenario.mesh_frames,
-                                figures=scenario.figures, preview_gif=scenario.preview_gif)  # fmt: skip
-            runs.append({"drop_height_m": h, "directory": str(run_dir), "impacts": [m.to_dict() for m in d.measured_cor(trajectory)]})
+                d.write_results(
+                    trajectory,
+                    run_dir,
+                    max_frames=scenario.max_frames,
+                    mesh_format=scenario.mesh_frames,
+                    figures=scenario.figures,
+                    preview_gif=scenario.preview_gif,
+                )
+            runs.append(
+                {
+                    "drop_height_m": h,
+                    "directory": str(run_dir),
+                    "impacts": [m.to_dict() for m in d.measured_cor(trajectory)],
+                }
+            )
             if trajectory.faces is not None:
                 digests.append(_figures.digest(trajectory, label))
             bar.update(1)
@@ -312,14 +398,26 @@ def run_scenario(scenario: Scenario, out_dir: str | Path | None = None, *, sessi
     with stage("scenario figures", verbose, stages):
         figures = _scenario_figures(scenario, out, digests)
     summary = {
-        "scenario": str(scenario.source), "name": scenario.name, "object": obj.source,
-        "parameters": {"gauge_pressure_Pa": obj.gauge_pressure, "youngs_modulus_Pa": obj.young_modulus, "poisson_ratio": obj.poisson_ratio,
-                       "thickness_m": obj.shell.thickness, "mass_kg": float(np.sum(np.asarray(system.node_masses))), "gas": scenario.gas,
-                       "mesh_faces": int(obj.shell.mesh.n_faces), "dt_s": scenario.dt, "scheme": scenario.scheme},
-        "contact_damping_N_s_per_m": damping, "calibration": calibration, "runs": runs,
+        "scenario": str(scenario.source),
+        "name": scenario.name,
+        "object": obj.source,
+        "parameters": {
+            "gauge_pressure_Pa": obj.gauge_pressure,
+            "youngs_modulus_Pa": obj.young_modulus,
+            "poisson_ratio": obj.poisson_ratio,
+            "thickness_m": obj.shell.thickness,
+            "mass_kg": float(np.sum(np.asarray(system.node_masses))),
+            "gas": scenario.gas,
+            "mesh_faces": int(obj.shell.mesh.n_faces),
+            "dt_s": scenario.dt,
+            "scheme": scenario.scheme,
+        },
+        "contact_damping_N_s_per_m": damping,
+        "calibration": calibration,
+        "runs": runs,
         "figures": figures + [f for run in runs for f in run.get("figures", [])],
         "compilation": {"stages": stages, "unit": "s", "total_seconds": sum(s["total_seconds"] for s in stages)},
-    }  # fmt: skip
+    }
     (out / "scenario.json").write_text(json.dumps(summary, indent=1))
     write_scenario_report(summary, out)
     return summary

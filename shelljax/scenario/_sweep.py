@@ -41,19 +41,36 @@ def simulate_sweep_value(config: str, value: float, out_dir: str, session: str |
 
 def _row(value: float, result) -> dict:
     """One value's line of sweep.json: where it ran, its contact damping [N·s/m] and each run's impacts."""
-    row = {"value": value, "status": result.status, "seconds": result.seconds, "worker": result.worker,
-           "resumed": result.resumed}
+    row = {
+        "value": value,
+        "status": result.status,
+        "seconds": result.seconds,
+        "worker": result.worker,
+        "resumed": result.resumed,
+    }
     if result.status != "done":
         return {**row, "error": result.error}
     summary = result.value
-    return {**row, "directory": str(Path(summary["runs"][0]["directory"]).parent) if summary["runs"] else None,
-            "parameters": summary["parameters"], "contact_damping_N_s_per_m": summary["contact_damping_N_s_per_m"],
-            "runs": [{k: v for k, v in run.items() if k in ("drop_height_m", "directory", "impacts")}
-                     for run in summary["runs"]]}  # fmt: skip
+    return {
+        **row,
+        "directory": str(Path(summary["runs"][0]["directory"]).parent) if summary["runs"] else None,
+        "parameters": summary["parameters"],
+        "contact_damping_N_s_per_m": summary["contact_damping_N_s_per_m"],
+        "runs": [
+            {k: v for k, v in run.items() if k in ("drop_height_m", "directory", "impacts")} for run in summary["runs"]
+        ],
+    }
 
 
-def run_sweep(scenario: Scenario, out_dir: str | Path | None = None, *, session: str | Path | None = None,
-              executor: ExecutorOptions | None = None, progress: bool = True, resume: bool = False) -> dict:  # fmt: skip
+def run_sweep(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    *,
+    session: str | Path | None = None,
+    executor: ExecutorOptions | None = None,
+    progress: bool = True,
+    resume: bool = False,
+) -> dict:
     """Run every value of ``scenario.sweep`` (module docstring) into ``out_dir`` (default: the
     config's output_dir/name); return what it writes to ``sweep.json``. ``resume``: run only the
     values ``out_dir`` has no finished record of (refused when its config or session has changed).
@@ -63,24 +80,48 @@ def run_sweep(scenario: Scenario, out_dir: str | Path | None = None, *, session:
         KeyboardInterrupt: after cancelling the values in flight; the finished ones stay on disk.
     """
     if scenario.sweep is None:
-        raise InvalidInputError(f"{scenario.source}: no [sweep] table to run. Fix: add [sweep] parameter = \"...\" "
-                                "and values = [...] (docs/cluster.md), or run the scenario itself")  # fmt: skip
+        raise InvalidInputError(
+            f'{scenario.source}: no [sweep] table to run. Fix: add [sweep] parameter = "..." '
+            "and values = [...] (docs/cluster.md), or run the scenario itself"
+        )
     sweep = scenario.sweep
     out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
     executor = executor or ExecutorOptions()
     check_executor(executor)  # an unreachable cluster is refused before anything is written
-    items = [WorkItem(f"value{i:03d}-{value_directory(sweep.parameter, v)}", simulate_sweep_value,
-                      (str(scenario.source), v, str(out / value_directory(sweep.parameter, v)),
-                       None if session is None else str(session)))
-             for i, v in enumerate(sweep.values)]  # fmt: skip
-    check_inputs(out, {"config": str(Path(scenario.source).resolve()), "config_sha256": file_sha256(scenario.source),
-                       "session": None if session is None else str(Path(session).resolve())},
-                 resume=resume, what="sweep")  # fmt: skip
-    results = run_items(items, run_dir=out, options=executor, resume=resume, progress=progress,
-                        desc=f"sweeping {sweep.parameter}")  # fmt: skip
-    summary = {"scenario": str(scenario.source), "name": scenario.name, "parameter": sweep.parameter,
-               "unit": parameter_unit(sweep.parameter), "executor": executor.describe(),
-               "values": [_row(v, r) for v, r in zip(sweep.values, results)]}  # fmt: skip
+    items = [
+        WorkItem(
+            f"value{i:03d}-{value_directory(sweep.parameter, v)}",
+            simulate_sweep_value,
+            (
+                str(scenario.source),
+                v,
+                str(out / value_directory(sweep.parameter, v)),
+                None if session is None else str(session),
+            ),
+        )
+        for i, v in enumerate(sweep.values)
+    ]
+    check_inputs(
+        out,
+        {
+            "config": str(Path(scenario.source).resolve()),
+            "config_sha256": file_sha256(scenario.source),
+            "session": None if session is None else str(Path(session).resolve()),
+        },
+        resume=resume,
+        what="sweep",
+    )
+    results = run_items(
+        items, run_dir=out, options=executor, resume=resume, progress=progress, desc=f"sweeping {sweep.parameter}"
+    )
+    summary = {
+        "scenario": str(scenario.source),
+        "name": scenario.name,
+        "parameter": sweep.parameter,
+        "unit": parameter_unit(sweep.parameter),
+        "executor": executor.describe(),
+        "values": [_row(v, r) for v, r in zip(sweep.values, results)],
+    }
     atomic_write_text(out / SWEEP_SUMMARY, json.dumps(summary, indent=1))
     return summary
 
@@ -98,9 +139,20 @@ def sweep_table(summary: dict) -> str:
         for run in entry["runs"]:
             drop = f"{run['drop_height_m']:.3g}" if "drop_height_m" in run else "swing"
             first = run["impacts"][0] if run["impacts"] else None
-            rows.append([f"{entry['value']:g}", drop] + (["no impact", "", "", "", ""] if first is None else [
-                first["plane"], f"{first['cor']:.4f}", f"{1e3 * first['contact_time_s']:.2f}",
-                f"{first['peak_force_N']:.4g}", f"{1e3 * first['max_compression_m']:.2f}"]))  # fmt: skip
+            rows.append(
+                [f"{entry['value']:g}", drop]
+                + (
+                    ["no impact", "", "", "", ""]
+                    if first is None
+                    else [
+                        first["plane"],
+                        f"{first['cor']:.4f}",
+                        f"{1e3 * first['contact_time_s']:.2f}",
+                        f"{first['peak_force_N']:.4g}",
+                        f"{1e3 * first['max_compression_m']:.2f}",
+                    ]
+                )
+            )
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in [header, *rows]]
     lines.insert(1, "  ".join("-" * w for w in widths))

@@ -45,8 +45,10 @@ def calibrate_sensor(
     """
     masses = sorted(float(m) for m in masses)
     if not masses or masses[0] != 0.0 or any(not 0 <= m <= MAX_MASS for m in masses) or len(set(masses)) < 3:
-        raise InvalidInputError(f"--masses {masses}: not a set of calibration weights. Fix: give 0 (unloaded) and at "
-                                f"least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5")
+        raise InvalidInputError(
+            f"--masses {masses}: not a set of calibration weights. Fix: give 0 (unloaded) and at "
+            f"least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5"
+        )
     operator = operator or HumanOperator()
     if not driver.is_open:
         driver.open()
@@ -103,5 +105,9 @@ def emulated_calibration(seed: int = 0) -> SensorCalibration:
     device = EmulatedDevice(seed=seed)
     driver = SerialSensor(opener=device.open_port, clock=device.clock, sleep=device.sleep, wallclock=device.clock)
     with driver:
-        return calibrate_sensor(driver, AutoConsole(), operator=EmulatedOperator(device),
-                                sensor="emulated film (shelljax.sensing.FilmSensor defaults)")  # fmt: skip
+        return calibrate_sensor(
+            driver,
+            AutoConsole(),
+            operator=EmulatedOperator(device),
+            sensor="emulated film (shelljax.sensing.FilmSensor defaults)",
+        )

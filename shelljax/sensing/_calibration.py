@@ -118,8 +118,13 @@ class SensorCalibration:
         force = np.where(loaded, np.exp(log_f), 0.0)
         cov = np.asarray(self.covariance)
         j0, j1 = -1.0 / beta, -log_f / beta
-        var_log = (j0 * j0 * cov[0, 0] + 2 * j0 * j1 * cov[0, 1] + j1 * j1 * cov[1, 1]
-                   + (self.residual_std / beta) ** 2 + (self.zero_std / (beta * safe)) ** 2)  # fmt: skip
+        var_log = (
+            j0 * j0 * cov[0, 0]
+            + 2 * j0 * j1 * cov[0, 1]
+            + j1 * j1 * cov[1, 1]
+            + (self.residual_std / beta) ** 2
+            + (self.zero_std / (beta * safe)) ** 2
+        )
         std = np.where(loaded, force * np.sqrt(var_log), 0.0)
         flags = np.zeros(c.shape, dtype=np.int64)
         flags |= np.where(~loaded | (force < self.force_min), BELOW_RANGE, OK)
@@ -150,8 +155,9 @@ class SensorCalibration:
 
     def with_zero(self, zero: float, zero_std: float | None = None) -> "SensorCalibration":
         """The same calibration re-tared: zero-load conductance proxy ``zero`` [-]."""
-        return dataclasses.replace(self, zero=float(zero),
-                                   zero_std=self.zero_std if zero_std is None else float(zero_std))  # fmt: skip
+        return dataclasses.replace(
+            self, zero=float(zero), zero_std=self.zero_std if zero_std is None else float(zero_std)
+        )
 
     def zero_shift_force(self, zero: float, at_force: float) -> float:
         """How far a reading at ``at_force`` [N] would be off [N] if the zero moved to ``zero``
@@ -162,18 +168,30 @@ class SensorCalibration:
     # -- file I/O -----------------------------------------------------------------------------
     def to_dict(self) -> dict:
         return {
-            "kind": SCHEMA_KIND, "schema_version": SCHEMA_VERSION, "sensor": self.sensor,
-            "created": self.created, "model": self.model, "transform": self.transform,
-            "adc_max": self.adc_max, "log_sensitivity": self.log_sensitivity,
-            "exponent": self.exponent, "covariance": [list(row) for row in self.covariance],
-            "residual_std": self.residual_std, "zero": self.zero, "zero_std": self.zero_std,
-            "force_min": self.force_min, "force_max": self.force_max, "force_unit": "N",
+            "kind": SCHEMA_KIND,
+            "schema_version": SCHEMA_VERSION,
+            "sensor": self.sensor,
+            "created": self.created,
+            "model": self.model,
+            "transform": self.transform,
+            "adc_max": self.adc_max,
+            "log_sensitivity": self.log_sensitivity,
+            "exponent": self.exponent,
+            "covariance": [list(row) for row in self.covariance],
+            "residual_std": self.residual_std,
+            "zero": self.zero,
+            "zero_std": self.zero_std,
+            "force_min": self.force_min,
+            "force_max": self.force_max,
+            "force_unit": "N",
             "gravity": self.gravity,
             "loads": {
-                "force": [p.force for p in self.loads], "c_mean": [p.c_mean for p in self.loads],
-                "c_std": [p.c_std for p in self.loads], "n": [p.n for p in self.loads],
+                "force": [p.force for p in self.loads],
+                "c_mean": [p.c_mean for p in self.loads],
+                "c_std": [p.c_std for p in self.loads],
+                "n": [p.n for p in self.loads],
             },
-        }  # fmt: skip
+        }
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as TOML (SI: forces in N; c dimensionless)."""
@@ -182,8 +200,11 @@ class SensorCalibration:
     @classmethod
     def from_dict(cls, data: dict, source: str = "<dict>") -> "SensorCalibration":
         # a calibration is written by a program, so every field's fix is to write it again
-        reader = TomlReader(source, fix="use a file written by `shelljax.sensing.SensorCalibration.save` (see docs/sensing.md), "
-                            "or re-calibrate")  # fmt: skip
+        reader = TomlReader(
+            source,
+            fix="use a file written by `shelljax.sensing.SensorCalibration.save` (see docs/sensing.md), "
+            "or re-calibrate",
+        )
         fail = reader.fail
         if data.get("kind") != SCHEMA_KIND:
             raise fail("kind", f"expected {SCHEMA_KIND!r}, got {data.get('kind')!r}")
@@ -191,8 +212,20 @@ class SensorCalibration:
             raise fail("schema_version", f"expected {SCHEMA_VERSION}, got {data.get('schema_version')!r}")
         for key, allowed in (("model", MODELS), ("transform", TRANSFORMS)):
             reader.choice(data, key, "", allowed, REQUIRED, what=key)
-        numbers = {key: reader.number(data, key) for key in ("adc_max", "log_sensitivity", "exponent", "residual_std", "zero",
-                                                              "zero_std", "force_min", "force_max", "gravity")}  # fmt: skip
+        numbers = {
+            key: reader.number(data, key)
+            for key in (
+                "adc_max",
+                "log_sensitivity",
+                "exponent",
+                "residual_std",
+                "zero",
+                "zero_std",
+                "force_min",
+                "force_max",
+                "gravity",
+            )
+        }
         if numbers["exponent"] <= 0 or numbers["force_max"] <= numbers["force_min"] or numbers["force_min"] <= 0:
             raise fail("exponent/force_min/force_max", "need exponent > 0 and 0 < force_min < force_max")
         cov = np.asarray(data.get("covariance"), dtype=np.float64)
@@ -201,25 +234,42 @@ class SensorCalibration:
         loads_table = data.get("loads", {})
         loads = tuple(
             LoadPoint(float(f), float(m), float(s), int(n))
-            for f, m, s, n in zip(loads_table.get("force", []), loads_table.get("c_mean", []),
-                                  loads_table.get("c_std", []), loads_table.get("n", []), strict=True)
-        )  # fmt: skip
+            for f, m, s, n in zip(
+                loads_table.get("force", []),
+                loads_table.get("c_mean", []),
+                loads_table.get("c_std", []),
+                loads_table.get("n", []),
+                strict=True,
+            )
+        )
         return cls(
-            model=data["model"], transform=data["transform"], adc_max=int(numbers["adc_max"]),
-            log_sensitivity=float(numbers["log_sensitivity"]), exponent=float(numbers["exponent"]),
+            model=data["model"],
+            transform=data["transform"],
+            adc_max=int(numbers["adc_max"]),
+            log_sensitivity=float(numbers["log_sensitivity"]),
+            exponent=float(numbers["exponent"]),
             covariance=((float(cov[0, 0]), float(cov[0, 1])), (float(cov[1, 0]), float(cov[1, 1]))),
-            residual_std=float(numbers["residual_std"]), zero=float(numbers["zero"]),
-            zero_std=float(numbers["zero_std"]), force_min=float(numbers["force_min"]),
-            force_max=float(numbers["force_max"]), sensor=str(data.get("sensor", "")),
-            created=str(data.get("created", "")), gravity=float(numbers["gravity"]), loads=loads,
-        )  # fmt: skip
+            residual_std=float(numbers["residual_std"]),
+            zero=float(numbers["zero"]),
+            zero_std=float(numbers["zero_std"]),
+            force_min=float(numbers["force_min"]),
+            force_max=float(numbers["force_max"]),
+            sensor=str(data.get("sensor", "")),
+            created=str(data.get("created", "")),
+            gravity=float(numbers["gravity"]),
+            loads=loads,
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> "SensorCalibration":
         """Read a calibration TOML; raises :class:`~shelljax.InvalidInputError` naming the field."""
         path = Path(path)
-        data = read_toml(path, "calibration file", fix_syntax="re-save the calibration",
-                         fix_missing="pass --calibration with an existing file, or create one with `shelljax sensor-calibrate`")
+        data = read_toml(
+            path,
+            "calibration file",
+            fix_syntax="re-save the calibration",
+            fix_missing="pass --calibration with an existing file, or create one with `shelljax sensor-calibrate`",
+        )
         return cls.from_dict(data, source=str(path))
 
 
@@ -301,21 +351,41 @@ def fit_calibration(
             "Fix: check the wiring and that the loads were entered in the right order"
         )
     return SensorCalibration(
-        model=model, transform=transform, adc_max=int(adc_max), log_sensitivity=log_a,
-        exponent=beta, covariance=((float(cov[0, 0]), float(cov[0, 1])), (float(cov[1, 0]), float(cov[1, 1]))),
-        residual_std=math.sqrt(s2), zero=c0, zero_std=zero_std, force_min=float(force.min()),
-        force_max=float(force.max()), sensor=sensor,
+        model=model,
+        transform=transform,
+        adc_max=int(adc_max),
+        log_sensitivity=log_a,
+        exponent=beta,
+        covariance=((float(cov[0, 0]), float(cov[0, 1])), (float(cov[1, 0]), float(cov[1, 1]))),
+        residual_std=math.sqrt(s2),
+        zero=c0,
+        zero_std=zero_std,
+        force_min=float(force.min()),
+        force_max=float(force.max()),
+        sensor=sensor,
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        gravity=gravity, loads=tuple(loads),
-    )  # fmt: skip
+        gravity=gravity,
+        loads=tuple(loads),
+    )
 
 
-def load_point(force: float, raw: Sequence[int] | np.ndarray, *, transform: str = "divider",
-               adc_max: int = 1023) -> LoadPoint:  # fmt: skip
+def load_point(
+    force: float, raw: Sequence[int] | np.ndarray, *, transform: str = "divider", adc_max: int = 1023
+) -> LoadPoint:
     """Summarize raw counts taken under a known ``force`` [N] as a :class:`LoadPoint`."""
-    probe = SensorCalibration(model="power", transform=transform, adc_max=adc_max, log_sensitivity=0.0,
-                        exponent=1.0, covariance=((0.0, 0.0), (0.0, 0.0)), residual_std=0.0,
-                        zero=0.0, zero_std=0.0, force_min=1.0, force_max=2.0)  # fmt: skip
+    probe = SensorCalibration(
+        model="power",
+        transform=transform,
+        adc_max=adc_max,
+        log_sensitivity=0.0,
+        exponent=1.0,
+        covariance=((0.0, 0.0), (0.0, 0.0)),
+        residual_std=0.0,
+        zero=0.0,
+        zero_std=0.0,
+        force_min=1.0,
+        force_max=2.0,
+    )
     c = probe.conductance(np.asarray(raw))
     if not np.all(np.isfinite(c)):
         raise InvalidInputError(

@@ -23,8 +23,19 @@ from ._calibration import OK, SensorCalibration
 from ._console import Console
 from ._driver import Sample, SerialSensor
 
-LOG_COLUMNS = ("row", "host_time_s", "device_time_s", "connection", "raw0", "raw1", "force_N",
-               "force_std_N", "flags", "phase", "trial")  # fmt: skip
+LOG_COLUMNS = (
+    "row",
+    "host_time_s",
+    "device_time_s",
+    "connection",
+    "raw0",
+    "raw1",
+    "force_N",
+    "force_std_N",
+    "flags",
+    "phase",
+    "trial",
+)
 
 
 class SampleLog:
@@ -171,11 +182,23 @@ class Pump:
     def pull(self) -> list[Reading]:
         batch: list[Sample] = self.driver.read(self.batch_s)
         readings = self._convert(batch)
-        self.log.append([
-            (s.host_time, s.device_time, s.connection, s.raw[0], s.raw[1] if len(s.raw) > 1 else None,
-             r.force, r.force_std, r.flags, self.phase, self.trial)
-            for s, r in zip(batch, readings, strict=True)
-        ])  # fmt: skip
+        self.log.append(
+            [
+                (
+                    s.host_time,
+                    s.device_time,
+                    s.connection,
+                    s.raw[0],
+                    s.raw[1] if len(s.raw) > 1 else None,
+                    r.force,
+                    r.force_std,
+                    r.flags,
+                    self.phase,
+                    self.trial,
+                )
+                for s, r in zip(batch, readings, strict=True)
+            ]
+        )
         self.received += len(batch)
         if readings:
             self.last = readings[-1]
@@ -193,10 +216,17 @@ class Pump:
         c = self.calibration.conductance(raw0)
         reading = self.calibration.force(raw0, zero=self.zero)
         return [
-            Reading(s.device_time, s.connection, s.raw, float(c[i]), float(reading.force[i]),
-                    float(reading.std[i]), int(reading.flags[i]))
+            Reading(
+                s.device_time,
+                s.connection,
+                s.raw,
+                float(c[i]),
+                float(reading.force[i]),
+                float(reading.std[i]),
+                int(reading.flags[i]),
+            )
             for i, s in enumerate(batch)
-        ]  # fmt: skip
+        ]
 
     def _display(self) -> None:
         r = self.last

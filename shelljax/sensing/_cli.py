@@ -47,33 +47,57 @@ def register(subparsers) -> None:
         "write a session file for `shelljax estimate`. See docs/sensing.md.",
     )
     _add_source(acq)
-    acq.add_argument("--out", required=True, help="session TOML to write (other files go beside it; checked before "
-                     "the first sample)")
+    acq.add_argument(
+        "--out", required=True, help="session TOML to write (other files go beside it; checked before the first sample)"
+    )
     acq.add_argument("--resume", action="store_true", help="continue the interrupted recording at --out")
-    acq.add_argument("--calibration", help="sensor calibration TOML (from `shelljax sensor-calibrate`); "
-                     "default with --emulate: the bundled calibration of the emulated film")
+    acq.add_argument(
+        "--calibration",
+        help="sensor calibration TOML (from `shelljax sensor-calibrate`); "
+        "default with --emulate: the bundled calibration of the emulated film",
+    )
     _add_session_fields(acq)
     proto = acq.add_argument_group("protocol")
     proto.add_argument("--forces", default="5:20:2.5", help="levels [N]: START:STOP:STEP or a comma list")
     proto.add_argument("--trials", type=whole(1), default=3, help="sweeps through the levels [count]")
-    proto.add_argument("--hold", type=real(0.0, 60.0, low_open=True, unit="s"), default=0.5,
-                       help="[s] a level is captured after holding this long")
-    proto.add_argument("--tolerance", type=real(0.0, 10.0, low_open=True, unit="N"), default=0.5,
-                       help="[N] allowed deviation from the level while holding")
-    proto.add_argument("--level-timeout", type=real(0.0, low_open=True, unit="s"), default=60.0,
-                       help="[s] before offering retry/skip/quit")
+    proto.add_argument(
+        "--hold",
+        type=real(0.0, 60.0, low_open=True, unit="s"),
+        default=0.5,
+        help="[s] a level is captured after holding this long",
+    )
+    proto.add_argument(
+        "--tolerance",
+        type=real(0.0, 10.0, low_open=True, unit="N"),
+        default=0.5,
+        help="[N] allowed deviation from the level while holding",
+    )
+    proto.add_argument(
+        "--level-timeout",
+        type=real(0.0, low_open=True, unit="s"),
+        default=60.0,
+        help="[s] before offering retry/skip/quit",
+    )
     proto.add_argument("--depth-unit", default="mm", choices=list(LENGTH_UNITS), help="unit of typed depths")
-    proto.add_argument("--depth-from-channel", action="store_true", help="read the depth from the sensor's second channel")
-    proto.add_argument("--depth-scale", type=real(0.0, low_open=True, unit="m/count"),
-                       help="[m/count] of the second channel (with --depth-from-channel)")
+    proto.add_argument(
+        "--depth-from-channel", action="store_true", help="read the depth from the sensor's second channel"
+    )
+    proto.add_argument(
+        "--depth-scale",
+        type=real(0.0, low_open=True, unit="m/count"),
+        help="[m/count] of the second channel (with --depth-from-channel)",
+    )
     proto.add_argument("--no-level-wrinkles", action="store_true", help="ask for the wrinkle count only once per trial")
     acq.set_defaults(func=cmd_acquire)
 
     cal = subparsers.add_parser("sensor-calibrate", help="calibrate the force sensor with known weights")
     _add_source(cal)
     cal.add_argument("--out", required=True, help="calibration TOML to write (checked before the first weight)")
-    cal.add_argument("--masses", default=",".join(f"{m:g}" for m in DEFAULT_MASSES),
-                     help="known masses [kg], comma-separated, including 0")
+    cal.add_argument(
+        "--masses",
+        default=",".join(f"{m:g}" for m in DEFAULT_MASSES),
+        help="known masses [kg], comma-separated, including 0",
+    )
     cal.add_argument("--cycles", type=whole(1), default=2, help="up-and-down cycles through the masses [count]")
     cal.add_argument("--hold", type=real(0.0, 60.0, low_open=True, unit="s"), default=1.0, help="[s] averaged per mass")
     cal.add_argument("--model", choices=MODELS, default="power", help="calibration curve (docs/sensing.md)")
@@ -81,13 +105,21 @@ def register(subparsers) -> None:
     cal.add_argument("--gravity", type=real(9.7, 9.9, unit="m/s^2"), default=9.80665, help="[m/s^2] local gravity")
     cal.set_defaults(func=cmd_calibrate)
 
-    emu = subparsers.add_parser("sensor-emulator",
-                                help="serve the emulated sensor on a pseudo-terminal (try the hardware path without hardware)")  # fmt: skip
+    emu = subparsers.add_parser(
+        "sensor-emulator",
+        help="serve the emulated sensor on a pseudo-terminal (try the hardware path without hardware)",
+    )
     emu.add_argument("--link", default=None, help="path of the port symlink to create (default: a temporary path)")
-    emu.add_argument("--faults", action="store_true", help="add garbage bytes, corrupted lines and an unplug every 20 s")
+    emu.add_argument(
+        "--faults", action="store_true", help="add garbage bytes, corrupted lines and an unplug every 20 s"
+    )
     emu.add_argument("--seed", type=whole(0), default=0, help="emulator random seed")
-    emu.add_argument("--duration", type=real(0.0, low_open=True, unit="s"), default=None,
-                     help="[s] stop after this long (default: until Ctrl-C)")
+    emu.add_argument(
+        "--duration",
+        type=real(0.0, low_open=True, unit="s"),
+        default=None,
+        help="[s] stop after this long (default: until Ctrl-C)",
+    )
     emu.set_defaults(func=cmd_emulator)
 
 
@@ -97,25 +129,44 @@ def _add_session_fields(acq: argparse.ArgumentParser) -> None:
     meta = acq.add_argument_group("session fields (see the session format; ignored with --resume)")
     meta.add_argument("--object", help="object name (default with --emulate: emulated-ball)")
     meta.add_argument("--notes", default="", help="free text")
-    meta.add_argument("--poisson-ratio", type=real(-1.0, 0.5, low_open=True, high_open=True),
-                      help="Poisson's ratio of the wall [-] (default: the paper's 0.4)")
+    meta.add_argument(
+        "--poisson-ratio",
+        type=real(-1.0, 0.5, low_open=True, high_open=True),
+        help="Poisson's ratio of the wall [-] (default: the paper's 0.4)",
+    )
     meta.add_argument("--mass", type=real(0.0, low_open=True), help="object mass, in --mass-unit")
     meta.add_argument("--mass-unit", choices=list(MASS_UNITS), default="kg", help="unit of --mass")
-    meta.add_argument("--manometer-pressure", type=real(0.0, low_open=True),
-                      help="measured gauge pressure (calibration objects), in --pressure-unit")
-    meta.add_argument("--pressure-unit", default="Pa", choices=list(PRESSURE_UNITS), help="unit of --manometer-pressure")
-    meta.add_argument("--radius", type=real(0.0, low_open=True),
-                      help="local radius of curvature at the poke point, in --length-unit")
+    meta.add_argument(
+        "--manometer-pressure",
+        type=real(0.0, low_open=True),
+        help="measured gauge pressure (calibration objects), in --pressure-unit",
+    )
+    meta.add_argument(
+        "--pressure-unit", default="Pa", choices=list(PRESSURE_UNITS), help="unit of --manometer-pressure"
+    )
+    meta.add_argument(
+        "--radius", type=real(0.0, low_open=True), help="local radius of curvature at the poke point, in --length-unit"
+    )
     meta.add_argument("--radius-std", type=real(0.0), help="standard deviation of --radius, in --length-unit")
     meta.add_argument("--mesh", help="mesh file (instead of --radius); stored relative to the session file")
-    meta.add_argument("--poke-point", type=real(), nargs=3, metavar=("X", "Y", "Z"), help="with --mesh, in --length-unit")
+    meta.add_argument(
+        "--poke-point", type=real(), nargs=3, metavar=("X", "Y", "Z"), help="with --mesh, in --length-unit"
+    )
     meta.add_argument("--fit-radius", type=real(0.0, low_open=True), help="with --mesh, in --length-unit")
-    meta.add_argument("--length-unit", default="m", choices=list(LENGTH_UNITS),
-                      help="unit of --radius, --radius-std, --poke-point, --fit-radius and the mesh")
+    meta.add_argument(
+        "--length-unit",
+        default="m",
+        choices=list(LENGTH_UNITS),
+        help="unit of --radius, --radius-std, --poke-point, --fit-radius and the mesh",
+    )
     meta.add_argument("--thickness", type=real(0.0, low_open=True), help="wall thickness, in --thickness-unit")
     meta.add_argument("--thickness-std", type=real(0.0), help="standard deviation of --thickness, in --thickness-unit")
-    meta.add_argument("--thickness-unit", default="mm", choices=list(LENGTH_UNITS),
-                      help="unit of --thickness and --thickness-std (a calliper reads millimetres)")
+    meta.add_argument(
+        "--thickness-unit",
+        default="mm",
+        choices=list(LENGTH_UNITS),
+        help="unit of --thickness and --thickness-std (a calliper reads millimetres)",
+    )
 
 
 # (option, its attribute, its range in shelljax.session.PLAUSIBLE_RANGES, the option naming its unit)
@@ -146,11 +197,15 @@ def _check_session_options(args) -> None:
         else:
             fix += "; check the value you measured"
         raise InvalidInputError(f"{option} {shown(value)}: {problem}. Fix: {fix}")
-    for option, std, value in (("--radius-std", args.radius_std, args.radius),
-                               ("--thickness-std", args.thickness_std, args.thickness)):
+    for option, std, value in (
+        ("--radius-std", args.radius_std, args.radius),
+        ("--thickness-std", args.thickness_std, args.thickness),
+    ):
         if std is not None and value is not None and std >= value:
-            raise InvalidInputError(f"{option} {std:g}: not smaller than {option.removesuffix('-std')} {value:g}. Fix: give "
-                                    "the standard deviation in the same unit, e.g. 5 % of the value")
+            raise InvalidInputError(
+                f"{option} {std:g}: not smaller than {option.removesuffix('-std')} {value:g}. Fix: give "
+                "the standard deviation in the same unit, e.g. 5 % of the value"
+            )
     for level in _parse_forces(args.forces):
         problem = implausible("force", level, "N")
         if problem is not None:
@@ -160,14 +215,21 @@ def _check_session_options(args) -> None:
 def _add_source(parser: argparse.ArgumentParser) -> None:
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--port", help="serial port (/dev/ttyACM0, COM3) or pyserial URL (socket://host:port)")
-    source.add_argument("--emulate", action="store_true",
-                        help="no hardware: an emulated sensor on a pseudo-terminal, in real time")  # fmt: skip
-    source.add_argument("--emulate-fast", action="store_true",
-                        help="no hardware: an in-process emulated sensor on a virtual clock (seconds)")  # fmt: skip
+    source.add_argument(
+        "--emulate", action="store_true", help="no hardware: an emulated sensor on a pseudo-terminal, in real time"
+    )
+    source.add_argument(
+        "--emulate-fast",
+        action="store_true",
+        help="no hardware: an in-process emulated sensor on a virtual clock (seconds)",
+    )
     parser.add_argument("--baud", type=whole(1), default=DEFAULT_BAUD, help="baud rate [bit/s]")
     parser.add_argument("--yes", action="store_true", help="accept every default (no typing; emulator demo)")
-    parser.add_argument("--emulate-faults", action="store_true",
-                        help="emulator: garbage bytes, corrupted lines, split writes and one unplug")  # fmt: skip
+    parser.add_argument(
+        "--emulate-faults",
+        action="store_true",
+        help="emulator: garbage bytes, corrupted lines, split writes and one unplug",
+    )
     parser.add_argument("--seed", type=whole(0), default=0, help="emulator random seed")
 
 
@@ -181,8 +243,9 @@ def _parse_forces(text: str) -> tuple[float, ...]:
             return tuple(start + i * step for i in range(n + 1))
         return tuple(float(x) for x in text.split(","))
     except ValueError:
-        raise InvalidInputError(f"--forces {text!r}: not a list of levels. Fix: write START:STOP:STEP (e.g. 5:20:2.5) or "
-                                "a comma list [N]") from None
+        raise InvalidInputError(
+            f"--forces {text!r}: not a list of levels. Fix: write START:STOP:STEP (e.g. 5:20:2.5) or a comma list [N]"
+        ) from None
 
 
 def _console(args) -> Console:
@@ -210,8 +273,11 @@ def _source(args, console: Console):
         if args.port:
             yield SerialSensor(args.port, args.baud), HumanOperator(), None
             return
-        faults = Faults(garbage_rate=0.01, corrupt_rate=0.01, split_rate=0.05, disconnects=(20.0,)) \
-            if args.emulate_faults else Faults()  # fmt: skip
+        faults = (
+            Faults(garbage_rate=0.01, corrupt_rate=0.01, split_rate=0.05, disconnects=(20.0,))
+            if args.emulate_faults
+            else Faults()
+        )
         use_pty = args.emulate and os.name == "posix"
         device = EmulatedDevice(faults=faults, seed=args.seed, realtime=args.emulate and not use_pty)
         operator = EmulatedOperator(device)
@@ -242,8 +308,11 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
         )
     if notes:
         meta["notes"] = notes
-    for key, value in (("poisson_ratio", args.poisson_ratio), ("mass", args.mass),
-                       ("manometer_gauge_pressure", args.manometer_pressure)):  # fmt: skip
+    for key, value in (
+        ("poisson_ratio", args.poisson_ratio),
+        ("mass", args.mass),
+        ("manometer_gauge_pressure", args.manometer_pressure),
+    ):
         if value is not None:
             meta[key] = value
     if args.mass is not None:
@@ -268,19 +337,26 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
     elif ball is not None:
         geometry = {"radius": ball.radius, "length_unit": "m"}
     else:
-        raise InvalidInputError("--radius missing: the local radius of curvature is required. Fix: add --radius R "
-                                "(in --length-unit), or --mesh with --poke-point")
+        raise InvalidInputError(
+            "--radius missing: the local radius of curvature is required. Fix: add --radius R "
+            "(in --length-unit), or --mesh with --poke-point"
+        )
     if args.radius_std is not None:
         geometry["radius_std"] = args.radius_std
     meta["geometry"] = geometry
     if args.thickness is not None and args.thickness_std is not None:
-        meta["wall"] = {"thickness": args.thickness, "thickness_std": args.thickness_std,
-                        "thickness_unit": args.thickness_unit}  # fmt: skip
+        meta["wall"] = {
+            "thickness": args.thickness,
+            "thickness_std": args.thickness_std,
+            "thickness_unit": args.thickness_unit,
+        }
     elif ball is not None and args.thickness is None:
         meta["wall"] = {"thickness": ball.thickness * 1e3, "thickness_std": 0.05, "thickness_unit": "mm"}
     else:
-        raise InvalidInputError("--thickness or --thickness-std missing: the wall is required. Fix: add both (a "
-                                "calliper reading in --thickness-unit, e.g. --thickness 0.9 --thickness-std 0.05 for mm)")
+        raise InvalidInputError(
+            "--thickness or --thickness-std missing: the wall is required. Fix: add both (a "
+            "calliper reading in --thickness-unit, e.g. --thickness 0.9 --thickness-std 0.05 for mm)"
+        )
     return meta
 
 
@@ -306,17 +382,24 @@ def cmd_acquire(args) -> int:
             if args.depth_from_channel and depth_scale is None and device is not None and device.depth_gauge:
                 depth_scale = 1.0 / device.depth_gauge.counts_per_m
             plan = AcquisitionPlan(
-                forces=_parse_forces(args.forces), trials=args.trials, hold=args.hold,
-                tolerance=args.tolerance, level_timeout=args.level_timeout,
-                depth_source="channel" if args.depth_from_channel else "prompt", depth_unit=args.depth_unit,
-                depth_scale=depth_scale, ask_level_wrinkles=not args.no_level_wrinkles,
-            )  # fmt: skip
+                forces=_parse_forces(args.forces),
+                trials=args.trials,
+                hold=args.hold,
+                tolerance=args.tolerance,
+                level_timeout=args.level_timeout,
+                depth_source="channel" if args.depth_from_channel else "prompt",
+                depth_unit=args.depth_unit,
+                depth_scale=depth_scale,
+                ask_level_wrinkles=not args.no_level_wrinkles,
+            )
             kwargs = {"calibration": SensorCalibration.load(cal_path), "plan": plan, "meta": _meta(args, out, device)}
         try:
             result = acquire(driver, out, console, operator=operator, resume=args.resume, **kwargs)
         except (KeyboardInterrupt, EOFError):
-            console.say(f"\nInterrupted. Everything received is in {out.with_suffix('')}.samples.csv; "
-                        f"continue with the same command plus --resume.")  # fmt: skip
+            console.say(
+                f"\nInterrupted. Everything received is in {out.with_suffix('')}.samples.csv; "
+                f"continue with the same command plus --resume."
+            )
             return EXIT_INTERRUPTED
         except RecordingAborted as why:
             console.say(f"Stopped ({why}). Continue later with --resume.")
@@ -325,9 +408,11 @@ def cmd_acquire(args) -> int:
             raise DeviceError(f"{error} (the recording so far is kept; continue with --resume)") from error
         finally:
             driver.close()
-    console.say(f"{result.completed_trials} trials, {result.levels} levels, {result.samples} samples "
-                f"({result.malformed} malformed lines skipped, {result.reconnects} reconnects). "
-                f"Next: shelljax estimate {out}")  # fmt: skip
+    console.say(
+        f"{result.completed_trials} trials, {result.levels} levels, {result.samples} samples "
+        f"({result.malformed} malformed lines skipped, {result.reconnects} reconnects). "
+        f"Next: shelljax estimate {out}"
+    )
     return 0
 
 
@@ -336,20 +421,30 @@ def cmd_calibrate(args) -> int:
     try:
         masses = [float(m) for m in args.masses.split(",")]
     except ValueError:
-        raise InvalidInputError(f"--masses {args.masses!r}: not a list of numbers. Fix: a comma-separated list of kg, "
-                                "e.g. 0,0.5,1,2") from None
+        raise InvalidInputError(
+            f"--masses {args.masses!r}: not a list of numbers. Fix: a comma-separated list of kg, e.g. 0,0.5,1,2"
+        ) from None
     if not masses or min(masses) != 0.0 or any(not 0 <= m <= MAX_MASS for m in masses) or len(set(masses)) < 3:
-        raise InvalidInputError(f"--masses {args.masses}: not a set of calibration weights. Fix: give 0 (unloaded) and "
-                                f"at least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5")
+        raise InvalidInputError(
+            f"--masses {args.masses}: not a set of calibration weights. Fix: give 0 (unloaded) and "
+            f"at least two other masses in kg, up to {MAX_MASS:g} kg, e.g. 0,0.5,1,2.5"
+        )
     out = check_output_file(args.out, "--out", example="sensor.toml")
     console = _console(args)
     with _source(args, console) as (driver, operator, _device):
         try:
             calibration = calibrate_sensor(
-                driver, console, masses=masses, cycles=args.cycles, hold=args.hold, model=args.model,
-                sensor=args.sensor, gravity=args.gravity, operator=operator,
+                driver,
+                console,
+                masses=masses,
+                cycles=args.cycles,
+                hold=args.hold,
+                model=args.model,
+                sensor=args.sensor,
+                gravity=args.gravity,
+                operator=operator,
                 log_path=out.with_suffix(".samples.csv"),
-            )  # fmt: skip
+            )
         except (KeyboardInterrupt, EOFError):
             console.say("\nInterrupted; no calibration written.")
             return EXIT_INTERRUPTED
@@ -362,13 +457,18 @@ def cmd_calibrate(args) -> int:
 
 def cmd_emulator(args) -> int:
     """Handler of ``shelljax sensor-emulator``: an autopilot finger pokes 5→20 N, over and over."""
-    faults = Faults(garbage_rate=0.01, corrupt_rate=0.01, disconnects=tuple(20.0 * k for k in range(1, 1000))) \
-        if args.faults else Faults()  # fmt: skip
+    faults = (
+        Faults(garbage_rate=0.01, corrupt_rate=0.01, disconnects=tuple(20.0 * k for k in range(1, 1000)))
+        if args.faults
+        else Faults()
+    )
     if args.link is not None:
         link = Path(args.link)
         if link.exists() and not link.is_symlink():
-            raise InvalidInputError(f"--link {link}: exists and is not a link; the emulator would replace it. Fix: name a "
-                                    "new path, e.g. --link /tmp/ttyEMU0")
+            raise InvalidInputError(
+                f"--link {link}: exists and is not a link; the emulator would replace it. Fix: name a "
+                "new path, e.g. --link /tmp/ttyEMU0"
+            )
         check_output_file(link, "--link", example="ttyEMU0")
     device = EmulatedDevice(faults=faults, seed=args.seed, finger_tau=0.3)
     levels = PAPER_FORCES

@@ -32,8 +32,7 @@ class TerminalConsole:
     """Prompts on stdin/stderr; the live display is a carriage-return line, redrawn ≤ 10×/s
     (only when ``stream`` is a terminal)."""
 
-    def __init__(self, stream: TextIO = sys.stderr, read: Callable[[str], str] = input,
-                 min_interval: float = 0.1):  # fmt: skip
+    def __init__(self, stream: TextIO = sys.stderr, read: Callable[[str], str] = input, min_interval: float = 0.1):
         self._stream, self._read = stream, read
         self._min_interval = min_interval
         self._last = 0.0

@@ -214,8 +214,14 @@ class SerialSensor:
                 # Not an epoch marker: hellos also answer `?` mid-stream. Resets show as the
                 # device clock going back (see _unwrap).
                 self.hello = frame
-                logger.info("sensor: %s %s, %g Hz, %d-bit, %d channel(s)", frame.firmware,
-                            frame.version, frame.rate_hz, frame.adc_bits, frame.n_channels)  # fmt: skip
+                logger.info(
+                    "sensor: %s %s, %g Hz, %d-bit, %d channel(s)",
+                    frame.firmware,
+                    frame.version,
+                    frame.rate_hz,
+                    frame.adc_bits,
+                    frame.n_channels,
+                )
                 continue
             assert isinstance(frame, RawSample)
             if self.hello is not None and max(frame.raw) >= 2**self.hello.adc_bits:

@@ -90,8 +90,9 @@ class PokedBall:
 
     def wrinkles(self) -> int:
         """Radial wrinkle count [-]: Vella's n ≈ 1.33 τ^½ (the paper's Eq. 8), rounded."""
-        n = scaling_wrinkle_count(self.gauge_pressure, self.radius, self.youngs_modulus, self.thickness,
-                                  self.poisson_ratio)  # fmt: skip
+        n = scaling_wrinkle_count(
+            self.gauge_pressure, self.radius, self.youngs_modulus, self.thickness, self.poisson_ratio
+        )
         return round(float(n))
 
 

@@ -132,8 +132,13 @@ def parse_line(line: bytes) -> Frame:
         if len(fields) != 6:
             raise MalformedLine("bad hello fields", line)
         _, firmware, version, rate, bits, channels = fields
-        if not (_NAME.match(firmware) and _NAME.match(version) and _RATE.match(rate)
-                and _UINT.match(bits) and _UINT.match(channels)):  # fmt: skip
+        if not (
+            _NAME.match(firmware)
+            and _NAME.match(version)
+            and _RATE.match(rate)
+            and _UINT.match(bits)
+            and _UINT.match(channels)
+        ):
             raise MalformedLine("bad hello fields", line)
         rate_hz, adc_bits, n_channels = float(rate), int(bits), int(channels)
         if rate_hz <= 0 or not 1 <= adc_bits <= 16 or not 1 <= n_channels <= 2:

@@ -72,12 +72,16 @@ class AcquisitionPlan:
     def check(self, calibration: SensorCalibration) -> None:
         """Raise :class:`InvalidInputError` if the plan cannot be recorded with ``calibration``."""
         if len(self.forces) < 3 or any(not f > 0 for f in self.forces):
-            raise InvalidInputError(f"--forces {self.forces}: fewer than 3 positive force levels. Fix: give at least 3 "
-                                    "levels in N, e.g. 5:20:2.5")
+            raise InvalidInputError(
+                f"--forces {self.forces}: fewer than 3 positive force levels. Fix: give at least 3 "
+                "levels in N, e.g. 5:20:2.5"
+            )
         if self.trials < 1:
             raise InvalidInputError(f"--trials {self.trials}: no trial. Fix: give at least one, e.g. --trials 3")
         if self.depth_unit not in LENGTH_UNITS:
-            raise InvalidInputError(f"--depth-unit {self.depth_unit!r}: unknown unit. Fix: use one of {', '.join(LENGTH_UNITS)}")
+            raise InvalidInputError(
+                f"--depth-unit {self.depth_unit!r}: unknown unit. Fix: use one of {', '.join(LENGTH_UNITS)}"
+            )
         if self.depth_source not in ("prompt", "channel"):
             raise InvalidInputError(f"depth source {self.depth_source!r}: unknown. Fix: use 'prompt' or 'channel'")
         if self.depth_source == "channel" and not (self.depth_scale and self.depth_scale > 0):
@@ -85,8 +89,10 @@ class AcquisitionPlan:
                 "--depth-from-channel without --depth-scale. Fix: add --depth-scale, the depth sensor's metres per count (> 0)"
             )
         if self.hold <= 0 or self.tolerance <= 0 or self.level_timeout <= self.hold:
-            raise InvalidInputError(f"--level-timeout {self.level_timeout:g} s is not longer than --hold {self.hold:g} s. "
-                                    "Fix: give --hold and --tolerance > 0 and a --level-timeout longer than --hold")
+            raise InvalidInputError(
+                f"--level-timeout {self.level_timeout:g} s is not longer than --hold {self.hold:g} s. "
+                "Fix: give --hold and --tolerance > 0 and a --level-timeout longer than --hold"
+            )
         low = min(self.forces) - self.tolerance
         high = max(self.forces) + self.tolerance
         if low < calibration.force_min or high > calibration.force_max:
@@ -113,11 +119,16 @@ class RecordingPaths:
     def for_session(cls, out: str | Path) -> "RecordingPaths":
         out = Path(out)
         if out.suffix != ".toml":
-            raise InvalidInputError(f"--out {out}: the session file must end in .toml. Fix: e.g. --out "
-                                    f"{out.with_suffix('.toml')}")
+            raise InvalidInputError(
+                f"--out {out}: the session file must end in .toml. Fix: e.g. --out {out.with_suffix('.toml')}"
+            )
         stem = out.with_suffix("")
-        return cls(out, stem.parent / f"{stem.name}_trials.csv", stem.parent / f"{stem.name}.samples.csv",
-                   stem.parent / f"{stem.name}.events.jsonl")  # fmt: skip
+        return cls(
+            out,
+            stem.parent / f"{stem.name}_trials.csv",
+            stem.parent / f"{stem.name}.samples.csv",
+            stem.parent / f"{stem.name}.events.jsonl",
+        )
 
     def existing(self) -> list[Path]:
         return [p for p in (self.session, self.trials_csv, self.samples, self.events) if p.exists()]
@@ -230,17 +241,16 @@ def _now() -> str:
 def _resumed(paths: RecordingPaths):
     """(state, calibration, plan, meta) of an interrupted recording, from its event log."""
     if not paths.events.exists():
-        raise InvalidInputError(
-            f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording"
-        )
+        raise InvalidInputError(f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording")
     state = _State.from_events(EventLog.read(paths.events), paths.events)
     start = state.start
     calibration = SensorCalibration.from_dict(start["calibration"], source=str(paths.events))
     return state, calibration, _plan_from_dict(start["plan"]), start["meta"]
 
 
-def _started(paths: RecordingPaths, calibration: SensorCalibration | None, plan: AcquisitionPlan | None,
-             meta: dict | None) -> _State:  # fmt: skip
+def _started(
+    paths: RecordingPaths, calibration: SensorCalibration | None, plan: AcquisitionPlan | None, meta: dict | None
+) -> _State:
     """The state of a new recording, after checking that nothing would be overwritten."""
     if calibration is None or plan is None or meta is None:
         raise ValueError("a new recording needs calibration, plan and meta")
@@ -249,8 +259,15 @@ def _started(paths: RecordingPaths, calibration: SensorCalibration | None, plan:
     for key in ("object", "geometry", "wall"):
         if key not in meta:
             raise InvalidInputError(f"session field '{key}' missing. Fix: pass it on the command line")
-    start = {"event": "start", "version": EVENTS_VERSION, "time": _now(), "session": paths.session.name,
-             "calibration": calibration.to_dict(), "plan": _plan_to_dict(plan), "meta": meta}  # fmt: skip
+    start = {
+        "event": "start",
+        "version": EVENTS_VERSION,
+        "time": _now(),
+        "session": paths.session.name,
+        "calibration": calibration.to_dict(),
+        "plan": _plan_to_dict(plan),
+        "meta": meta,
+    }
     return _State(start)
 
 
@@ -298,8 +315,10 @@ def acquire(
         if resume:
             trial = state.next_trial()
             events.append({"event": "resume", "time": _now(), "trial": trial, "log_row": log.n_rows})
-            console.say(f"Resuming {paths.session.name}: {len(state.wrinkles)} trial(s) complete, "
-                        f"continuing with trial {trial}.")  # fmt: skip
+            console.say(
+                f"Resuming {paths.session.name}: {len(state.wrinkles)} trial(s) complete, "
+                f"continuing with trial {trial}."
+            )
         else:
             events.append(start)
         pump = Pump(driver, calibration, log, console, on_batch=on_batch)
@@ -308,11 +327,24 @@ def acquire(
         walk = _Walk(pump, plan, meta, console, operator, events, state, paths, calibration)
         for trial in range(state.next_trial(), plan.trials + 1):
             walk.trial(trial)
-        events.append({"event": "done", "time": _now(), "samples": log.n_rows,
-                       "malformed": driver.stats.n_malformed, "reconnects": driver.stats.n_reconnects})  # fmt: skip
+        events.append(
+            {
+                "event": "done",
+                "time": _now(),
+                "samples": log.n_rows,
+                "malformed": driver.stats.n_malformed,
+                "reconnects": driver.stats.n_reconnects,
+            }
+        )
         console.say(f"Done: {paths.session} ({len(state.wrinkles)} trials); raw samples in {paths.samples.name}.")
-        return AcquisitionResult(paths, len(state.wrinkles), sum(len(v) for v in state.levels.values()),
-                                 log.n_rows, driver.stats.n_malformed, driver.stats.n_reconnects)  # fmt: skip
+        return AcquisitionResult(
+            paths,
+            len(state.wrinkles),
+            sum(len(v) for v in state.levels.values()),
+            log.n_rows,
+            driver.stats.n_malformed,
+            driver.stats.n_reconnects,
+        )
     finally:
         operator.release()
         log.close()
@@ -322,9 +354,18 @@ def acquire(
 class _Walk:
     """One recording's interactive steps (state lives in the event log)."""
 
-    def __init__(self, pump: Pump, plan: AcquisitionPlan, meta: dict, console: Console,
-                 operator: Operator, events: EventLog, state: _State, paths: RecordingPaths,
-                 calibration: SensorCalibration):  # fmt: skip
+    def __init__(
+        self,
+        pump: Pump,
+        plan: AcquisitionPlan,
+        meta: dict,
+        console: Console,
+        operator: Operator,
+        events: EventLog,
+        state: _State,
+        paths: RecordingPaths,
+        calibration: SensorCalibration,
+    ):
         self.pump, self.plan, self.meta, self.console = pump, plan, meta, console
         self.operator, self.events, self.state, self.paths = operator, events, state, paths
         self.calibration = calibration
@@ -388,9 +429,15 @@ class _Walk:
                     "sensor to the firmware's second channel, or drop --depth-from-channel"
                 )
         shift = cal.zero_shift_force(zero, min(plan.forces))
-        event = {"event": "tare", "time": _now(), "trial": trial, "zero": zero,
-                 "zero_std": float(c.std(ddof=1) / math.sqrt(len(c))), "zero_raw1": self.zero_raw1,
-                 "shift_N_at_min_force": shift}  # fmt: skip
+        event = {
+            "event": "tare",
+            "time": _now(),
+            "trial": trial,
+            "zero": zero,
+            "zero_std": float(c.std(ddof=1) / math.sqrt(len(c))),
+            "zero_raw1": self.zero_raw1,
+            "shift_N_at_min_force": shift,
+        }
         self.events.append(event)
         at_min = cal.force_from_conductance(cal.conductance_at(min(plan.forces)))
         message = f"Tare: zero moved by the equivalent of {shift:+.2f} N at {min(plan.forces):g} N since calibration"
@@ -408,8 +455,12 @@ class _Walk:
         self.console.say(f"Press to {target:g} N and hold steady ({plan.hold:g} s within ±{plan.tolerance:g} N).")
         self.operator.press(target)
         while True:
-            window = pump.wait_stable(accept_force(target, plan.tolerance), plan.hold, plan.level_timeout,
-                                      watch=lambda r: self.operator.see(r.force))  # fmt: skip
+            window = pump.wait_stable(
+                accept_force(target, plan.tolerance),
+                plan.hold,
+                plan.level_timeout,
+                watch=lambda r: self.operator.see(r.force),
+            )
             if window is not None:
                 break
             if self.retry_or_quit(f"No steady {target:g} N within {plan.level_timeout:g} s", allow_skip=True):
@@ -427,17 +478,30 @@ class _Walk:
         else:
             self.console.say(f"Captured {force.mean():.2f} N: keep still and read the depth.")
             suggestion = self.operator.suggest_depth()
-            depth = self.ask_float(f"Indentation depth at {force.mean():.2f} N [{plan.depth_unit}]",
-                                   None if suggestion is None else suggestion / unit)  # fmt: skip
+            depth = self.ask_float(
+                f"Indentation depth at {force.mean():.2f} N [{plan.depth_unit}]",
+                None if suggestion is None else suggestion / unit,
+            )
         count = None
         if plan.ask_level_wrinkles:
-            count = self.ask_int(f"Wrinkles visible at {target:g} N (Enter to skip)",
-                                 self.operator.suggest_wrinkles(), required=False)  # fmt: skip
-        event = {"event": "level", "time": _now(), "trial": trial, "target": target,
-                 "force": float(force.mean()), "force_std": float(force.std(ddof=1)), "depth": float(depth),
-                 "depth_unit": plan.depth_unit, "depth_source": plan.depth_source, "wrinkles": count,
-                 "t_device": [window[0].device_time, window[-1].device_time],
-                 "n_samples": len(window), "log_rows_to": pump.log.n_rows}  # fmt: skip
+            count = self.ask_int(
+                f"Wrinkles visible at {target:g} N (Enter to skip)", self.operator.suggest_wrinkles(), required=False
+            )
+        event = {
+            "event": "level",
+            "time": _now(),
+            "trial": trial,
+            "target": target,
+            "force": float(force.mean()),
+            "force_std": float(force.std(ddof=1)),
+            "depth": float(depth),
+            "depth_unit": plan.depth_unit,
+            "depth_source": plan.depth_source,
+            "wrinkles": count,
+            "t_device": [window[0].device_time, window[-1].device_time],
+            "n_samples": len(window),
+            "log_rows_to": pump.log.n_rows,
+        }
         self.events.append(event)
         self.state.levels.setdefault(trial, []).append(event)
         return count
@@ -494,23 +558,31 @@ class _Walk:
 
     # -- output -------------------------------------------------------------------------------
     def write_session(self) -> None:
-        write_session_files(self.paths, self.meta, self.plan, self.state.levels, self.state.wrinkles,
-                            notes_extra=self._notes())  # fmt: skip
+        write_session_files(
+            self.paths, self.meta, self.plan, self.state.levels, self.state.wrinkles, notes_extra=self._notes()
+        )
 
     def _notes(self) -> str:
         hello = self.pump.driver.hello
         stats = self.pump.driver.stats
         device = f"{hello.firmware} {hello.version} at {hello.rate_hz:g} Hz" if hello else "unknown firmware"
         cal = self.calibration
-        return (f"Recorded with `shelljax acquire` ({device}); calibration {cal.sensor or '(unnamed)'} "
-                f"{cal.model} β={cal.exponent:.3f}, range {cal.force_min:.3g}–{cal.force_max:.3g} N; "
-                f"raw samples in {self.paths.samples.name} ({self.pump.log.n_rows} rows, "
-                f"{stats.n_malformed} malformed lines skipped, {stats.n_reconnects} reconnects).")  # fmt: skip
+        return (
+            f"Recorded with `shelljax acquire` ({device}); calibration {cal.sensor or '(unnamed)'} "
+            f"{cal.model} β={cal.exponent:.3f}, range {cal.force_min:.3g}–{cal.force_max:.3g} N; "
+            f"raw samples in {self.paths.samples.name} ({self.pump.log.n_rows} rows, "
+            f"{stats.n_malformed} malformed lines skipped, {stats.n_reconnects} reconnects)."
+        )
 
 
-def write_session_files(paths: RecordingPaths, meta: dict, plan: AcquisitionPlan,
-                        levels: dict[int, list[dict]], wrinkles: dict[int, int],
-                        notes_extra: str = "") -> None:  # fmt: skip
+def write_session_files(
+    paths: RecordingPaths,
+    meta: dict,
+    plan: AcquisitionPlan,
+    levels: dict[int, list[dict]],
+    wrinkles: dict[int, int],
+    notes_extra: str = "",
+) -> None:
     """Write the trials CSV and session TOML for the completed trials (atomically)."""
     completed = sorted(wrinkles)
     lines = ["trial,force,depth"]
@@ -525,8 +597,7 @@ def write_session_files(paths: RecordingPaths, meta: dict, plan: AcquisitionPlan
         session["notes"] = notes
     session["geometry"] = meta["geometry"]
     session["wall"] = meta["wall"]
-    session["indentation"] = {"force_unit": "N", "depth_unit": plan.depth_unit,
-                              "trials_csv": paths.trials_csv.name}  # fmt: skip
+    session["indentation"] = {"force_unit": "N", "depth_unit": plan.depth_unit, "trials_csv": paths.trials_csv.name}
     session["wrinkles"] = {"counts": [int(wrinkles[t]) for t in completed]}
     header = "# Written by `shelljax acquire`; format: shelljax.session (docs/session-format.md).\n"
     _atomic_write(paths.session, header + tomli_w.dumps(session))

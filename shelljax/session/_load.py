@@ -21,9 +21,22 @@ from ._schema import SHAPE_OBSERVABLES, Session
 SCHEMA_VERSION = 1
 
 _TOP_KEYS = {
-    "schema_version", "kind", "object", "notes", "rig", "poisson_ratio", "mass", "mass_unit",
-    "manometer_gauge_pressure", "pressure_unit", "geometry", "wall", "indentation", "wrinkles", "shape",
-}  # fmt: skip
+    "schema_version",
+    "kind",
+    "object",
+    "notes",
+    "rig",
+    "poisson_ratio",
+    "mass",
+    "mass_unit",
+    "manometer_gauge_pressure",
+    "pressure_unit",
+    "geometry",
+    "wall",
+    "indentation",
+    "wrinkles",
+    "shape",
+}
 _GEOMETRY_KEYS = {"radius", "radius_std", "mesh", "poke_point", "fit_radius", "length_unit"}
 _WALL_KEYS = {"thickness", "thickness_std", "thickness_unit"}
 _INDENTATION_KEYS = {"force_unit", "depth_unit", "trials_csv", "trial", "force", "depth"}
@@ -43,17 +56,18 @@ def _check_samples(reader: _Reader, field: str, values: np.ndarray, where: list[
     if bad_finite.size:
         i = bad_finite[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} is not finite",
+            f"{field}[{i}]",
+            f"{where[i]}value {float(values[i])!r} is not finite",
             "re-measure or delete that sample (the whole row, in every column)",
-        )  # fmt: skip
+        )
     bad_sign = np.flatnonzero(values <= 0) if positive else np.empty(0, dtype=np.int64)
     if bad_sign.size:
         i = bad_sign[0]
         raise reader.fail(
-            f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} must be positive "
-            f"({bad_sign.size} non-positive samples)",
+            f"{field}[{i}]",
+            f"{where[i]}value {float(values[i])!r} must be positive ({bad_sign.size} non-positive samples)",
             f"{field} is a magnitude: write |value|; drop samples taken before contact",
-        )  # fmt: skip
+        )
 
 
 def _unit_name(table: dict, key: str, default: str) -> str:
@@ -65,9 +79,10 @@ def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
     """The rows of the CSV that ``field`` names, or an error saying the file is missing."""
     if not csv_path.is_file():
         raise reader.fail(
-            field, f"file {csv_path} does not exist",
+            field,
+            f"file {csv_path} does not exist",
             "put the CSV beside the session file or fix the path (relative to the TOML)",
-        )  # fmt: skip
+        )
     with csv_path.open(newline="") as handle:
         return list(csv.reader(handle))
 
@@ -109,7 +124,9 @@ def _read_trials_csv(reader: _Reader, csv_path: Path) -> tuple[np.ndarray, np.nd
 def _trial_ids(reader: _Reader, field: str, trial: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(trial)) or np.any(trial != np.round(trial)):
         i = int(np.flatnonzero(~np.isfinite(trial) | (trial != np.round(trial)))[0])
-        raise reader.fail(f"{field}[{i}]", f"trial id {float(trial[i])!r} is not an integer", "number trials 1, 2, 3, ...")
+        raise reader.fail(
+            f"{field}[{i}]", f"trial id {float(trial[i])!r} is not an integer", "number trials 1, 2, 3, ..."
+        )
     return trial.astype(np.int64)
 
 
@@ -125,10 +142,11 @@ def load_session(path: str | Path) -> Session:
     data = _read_toml(path)
     if _read_kind(reader, data) == "rigid_press":
         raise reader.fail(
-            "kind", '"rigid_press": a rigid-surface press (the finger pressed on a rigid table), not an '
+            "kind",
+            '"rigid_press": a rigid-surface press (the finger pressed on a rigid table), not an '
             "indentation session of an object; it serves `shelljax rig calibrate`",
             "pass it to `shelljax rig calibrate`, or load it with shelljax.session.load_rigid_press",
-        )  # fmt: skip
+        )
     input_files = {str(path): file_sha256(path)}
     reader.no_unknown_keys(data, _TOP_KEYS)
     header = _read_header(reader, data)
@@ -137,17 +155,29 @@ def load_session(path: str | Path) -> Session:
     geometry = _read_geometry(reader, data, input_files)
     if thickness >= 0.2 * geometry["radius"]:
         raise reader.fail(
-            "wall.thickness", f"h = {thickness:g} m is not thin against R = {geometry['radius']:g} m",
+            "wall.thickness",
+            f"h = {thickness:g} m is not thin against R = {geometry['radius']:g} m",
             "check thickness_unit / length_unit; the shell model needs h << R",
-        )  # fmt: skip
+        )
     trial, force, depth, depth_scale = _read_indentation(reader, data, geometry["radius"], input_files)
     wrinkle_counts, onset_depth = _read_wrinkles(reader, data, trial, depth_scale)
     shape_trial, shape_force, shape = _read_shape(reader, data, trial, input_files)
     return Session(
-        source=path, **header, **geometry, thickness=float(thickness), thickness_std=float(thickness_std),
-        trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts, onset_depth=onset_depth,
-        shape_trial=shape_trial, shape_force=shape_force, shape=shape, input_files=input_files,
-    )  # fmt: skip
+        source=path,
+        **header,
+        **geometry,
+        thickness=float(thickness),
+        thickness_std=float(thickness_std),
+        trial=trial,
+        force=force,
+        depth=depth,
+        wrinkle_counts=wrinkle_counts,
+        onset_depth=onset_depth,
+        shape_trial=shape_trial,
+        shape_force=shape_force,
+        shape=shape,
+        input_files=input_files,
+    )
 
 
 def _read_kind(reader: _Reader, data: dict) -> str:
@@ -155,9 +185,10 @@ def _read_kind(reader: _Reader, data: dict) -> str:
     kind = data.get("kind", "indentation")
     if kind not in SESSION_KINDS:
         raise reader.fail(
-            "kind", f"unknown session kind {kind!r}",
+            "kind",
+            f"unknown session kind {kind!r}",
             f"write one of {', '.join(repr(k) for k in SESSION_KINDS)} (absent means 'indentation')",
-        )  # fmt: skip
+        )
     return kind
 
 
@@ -165,7 +196,9 @@ def _read_header(reader: _Reader, data: dict) -> dict:
     """The top-level fields: object name, notes, Poisson ratio [-], mass [kg], manometer P_g [Pa]."""
     version = data.get("schema_version", SCHEMA_VERSION)
     if version != SCHEMA_VERSION:
-        raise reader.fail("schema_version", f"unsupported version {version!r}", f"write schema_version = {SCHEMA_VERSION}")
+        raise reader.fail(
+            "schema_version", f"unsupported version {version!r}", f"write schema_version = {SCHEMA_VERSION}"
+        )
     object_name = data.get("object")
     if not isinstance(object_name, str) or not object_name.strip():
         raise reader.fail("object", f"missing or empty (got {object_name!r})", 'add object = "name of the object"')
@@ -175,7 +208,9 @@ def _read_header(reader: _Reader, data: dict) -> dict:
     poisson_ratio = reader.number(data, "poisson_ratio", default=None)
     poisson_ratio = DEFAULT_POISSON_RATIO if poisson_ratio is None else poisson_ratio
     if not -1.0 < poisson_ratio < 0.5:
-        raise reader.fail("poisson_ratio", f"value {poisson_ratio} outside (-1, 0.5)", "rubbers sit at 0.3-0.5; the default is 0.4")
+        raise reader.fail(
+            "poisson_ratio", f"value {poisson_ratio} outside (-1, 0.5)", "rubbers sit at 0.3-0.5; the default is 0.4"
+        )
     mass = reader.number(data, "mass", default=None, positive=True)
     if mass is not None:
         scale = reader.unit(data, "mass_unit", "mass", "kg")
@@ -184,14 +219,28 @@ def _read_header(reader: _Reader, data: dict) -> dict:
     manometer = reader.number(data, "manometer_gauge_pressure", default=None, positive=True)
     if manometer is not None:
         scale = reader.unit(data, "pressure_unit", "pressure", "Pa")
-        check_plausible(reader, "pressure", "manometer_gauge_pressure", manometer, _unit_name(data, "pressure_unit", "Pa"),
-                         "pressure_unit")
+        check_plausible(
+            reader,
+            "pressure",
+            "manometer_gauge_pressure",
+            manometer,
+            _unit_name(data, "pressure_unit", "Pa"),
+            "pressure_unit",
+        )
         manometer *= scale
     rig_name = data.get("rig")
     if rig_name is not None and (not isinstance(rig_name, str) or not rig_name.strip()):
-        raise reader.fail("rig", f"expected the measuring chain's name, got {rig_name!r}", 'write rig = "alice-index-film3"')
-    return {"object_name": object_name.strip(), "notes": notes, "poisson_ratio": float(poisson_ratio), "mass": mass,
-            "manometer_gauge_pressure": manometer, "rig_name": rig_name and rig_name.strip()}  # fmt: skip
+        raise reader.fail(
+            "rig", f"expected the measuring chain's name, got {rig_name!r}", 'write rig = "alice-index-film3"'
+        )
+    return {
+        "object_name": object_name.strip(),
+        "notes": notes,
+        "poisson_ratio": float(poisson_ratio),
+        "mass": mass,
+        "manometer_gauge_pressure": manometer,
+        "rig_name": rig_name and rig_name.strip(),
+    }
 
 
 def _read_wall(reader: _Reader, data: dict) -> tuple[float, float]:
@@ -214,16 +263,23 @@ def _read_geometry(reader: _Reader, data: dict, input_files: dict) -> dict:
     length_scale = reader.unit(geometry, "length_unit", "length", "m", "geometry.")
     if ("radius" in geometry) == ("mesh" in geometry):
         raise reader.fail(
-            "geometry", "give exactly one of 'radius' or 'mesh'",
-            "write radius = <R> for a measured radius of curvature, or mesh = \"file\" with poke_point",
-        )  # fmt: skip
+            "geometry",
+            "give exactly one of 'radius' or 'mesh'",
+            'write radius = <R> for a measured radius of curvature, or mesh = "file" with poke_point',
+        )
     if "mesh" in geometry:
         radius, radius_std, mesh_path, poke_point, fit_radius, fit_rms, mesh_volume = _mesh_geometry(
             reader, geometry, length_scale, input_files
         )
-        return {"radius": float(radius), "radius_std": float(radius_std), "mesh_path": mesh_path,
-                "poke_point": poke_point, "fit_radius": fit_radius, "fit_rms_residual": fit_rms,
-                "enclosed_volume": mesh_volume}  # fmt: skip
+        return {
+            "radius": float(radius),
+            "radius_std": float(radius_std),
+            "mesh_path": mesh_path,
+            "poke_point": poke_point,
+            "fit_radius": fit_radius,
+            "fit_rms_residual": fit_rms,
+            "enclosed_volume": mesh_volume,
+        }
     unit = _unit_name(geometry, "length_unit", "m")
     radius = reader.number(geometry, "radius", "geometry.", positive=True)
     check_plausible(reader, "radius", "geometry.radius", radius, unit, "length_unit")
@@ -238,9 +294,10 @@ def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
     if "trials_csv" in indentation:
         if inline:
             raise reader.fail(
-                "indentation.trials_csv", f"given together with inline '{inline[0]}'",
+                "indentation.trials_csv",
+                f"given together with inline '{inline[0]}'",
                 "use either trials_csv or inline arrays, not both",
-            )  # fmt: skip
+            )
         csv_path = reader.path.parent / str(indentation["trials_csv"])
         trial, force, depth, lines = _read_trials_csv(reader, csv_path)
         input_files[str(csv_path)] = file_sha256(csv_path)
@@ -248,17 +305,19 @@ def _indentation_arrays(reader: _Reader, indentation: dict, input_files: dict):
     for key in ("force", "depth"):
         if key not in indentation:
             raise reader.fail(
-                f"indentation.{key}", "missing",
-                "give inline force/depth arrays (and optional trial) or trials_csv = \"file.csv\"",
-            )  # fmt: skip
+                f"indentation.{key}",
+                "missing",
+                'give inline force/depth arrays (and optional trial) or trials_csv = "file.csv"',
+            )
     force = reader.array(indentation, "force", "indentation.")
     depth = reader.array(indentation, "depth", "indentation.")
     trial = reader.array(indentation, "trial", "indentation.") if "trial" in indentation else np.ones_like(force)
     if not (force.size == depth.size == trial.size):
         raise reader.fail(
-            "indentation", f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
+            "indentation",
+            f"arrays differ in length (trial {trial.size}, force {force.size}, depth {depth.size})",
             "give one trial id, force and depth per sample",
-        )  # fmt: skip
+        )
     return trial, force, depth, [""] * force.size
 
 
@@ -276,8 +335,9 @@ def _read_indentation_samples(reader: _Reader, data: dict, input_files: dict, *,
     trial, force, depth, where = _indentation_arrays(reader, indentation, input_files)
     _check_samples(reader, "indentation.force", force, where)
     _check_samples(reader, "indentation.depth", depth, where, positive=positive_depth)
-    check_plausible_samples(reader, "force", "indentation.force", force, _unit_name(indentation, "force_unit", "N"),
-                             "force_unit", where)
+    check_plausible_samples(
+        reader, "force", "indentation.force", force, _unit_name(indentation, "force_unit", "N"), "force_unit", where
+    )
     trial = _trial_ids(reader, "indentation.trial", trial)
     return trial, force * force_scale, depth * depth_scale, depth_scale, where
 
@@ -287,15 +347,17 @@ def _read_indentation(reader: _Reader, data: dict, radius: float, input_files: d
     trial, force, depth, depth_scale, where = _read_indentation_samples(reader, data, input_files)
     if np.unique(force).size < MIN_FORCE_LEVELS:
         raise reader.fail(
-            "indentation.force", f"only {np.unique(force).size} distinct force level(s) {np.unique(force).tolist()} N",
+            "indentation.force",
+            f"only {np.unique(force).size} distinct force level(s) {np.unique(force).tolist()} N",
             f"record at least {MIN_FORCE_LEVELS} levels (the paper uses 5-20 N in 2.5 N steps)",
-        )  # fmt: skip
+        )
     deepest = float(depth.max())
     if deepest >= radius:
         raise reader.fail(
-            "indentation.depth", f"deepest indentation {deepest:g} m exceeds the radius {radius:g} m",
-            "depths look like millimetres written as metres: set depth_unit = \"mm\"",
-        )  # fmt: skip
+            "indentation.depth",
+            f"deepest indentation {deepest:g} m exceeds the radius {radius:g} m",
+            'depths look like millimetres written as metres: set depth_unit = "mm"',
+        )
     unit = _unit_name(data["indentation"], "depth_unit", "m")
     check_plausible_samples(reader, "depth", "indentation.depth", depth / depth_scale, unit, "depth_unit", where)
     check_forwards(reader, trial, force, depth / depth_scale, unit, where)
@@ -313,27 +375,37 @@ def _read_wrinkles(reader: _Reader, data: dict, trial: np.ndarray, depth_scale: 
     if "onset_depth" in wrinkles:
         onset_depth = reader.array(wrinkles, "onset_depth", "wrinkles.")
         _check_samples(reader, "wrinkles.onset_depth", onset_depth, [""] * onset_depth.size)
-        check_plausible_samples(reader, "depth", "wrinkles.onset_depth", onset_depth,
-                                 _unit_name(data["indentation"], "depth_unit", "m"), "depth_unit in [indentation]",
-                                 [""] * onset_depth.size)
+        check_plausible_samples(
+            reader,
+            "depth",
+            "wrinkles.onset_depth",
+            onset_depth,
+            _unit_name(data["indentation"], "depth_unit", "m"),
+            "depth_unit in [indentation]",
+            [""] * onset_depth.size,
+        )
         onset_depth = onset_depth * depth_scale
     return wrinkle_counts, onset_depth
 
 
 def _wrinkle_counts(reader: _Reader, counts, n_trials: int) -> np.ndarray:
     if not isinstance(counts, list) or not counts:
-        raise reader.fail("wrinkles.counts", f"expected a non-empty array, got {counts!r}", "write counts = [n1, n2, ...]")
+        raise reader.fail(
+            "wrinkles.counts", f"expected a non-empty array, got {counts!r}", "write counts = [n1, n2, ...]"
+        )
     for i, c in enumerate(counts):
         if isinstance(c, bool) or not isinstance(c, int) or c < 0:
             raise reader.fail(
-                f"wrinkles.counts[{i}]", f"{c!r} is not a non-negative integer",
+                f"wrinkles.counts[{i}]",
+                f"{c!r} is not a non-negative integer",
                 "count whole wrinkles around the poke (0 if none)",
-            )  # fmt: skip
+            )
     if len(counts) != n_trials:
         raise reader.fail(
-            "wrinkles.counts", f"{len(counts)} counts for {n_trials} trials",
+            "wrinkles.counts",
+            f"{len(counts)} counts for {n_trials} trials",
             "give exactly one wrinkle count per trial, in order of trial id",
-        )  # fmt: skip
+        )
     return np.asarray(counts, dtype=np.int64)
 
 
@@ -355,12 +427,15 @@ def _read_shape(reader: _Reader, data: dict, trial: np.ndarray, input_files: dic
     if ("shape_csv" in table) == bool(inline):
         given = f"shape_csv together with inline '{inline[0]}'" if inline else "neither"
         raise reader.fail(
-            "shape", f"give exactly one of shape_csv or inline arrays (got {given})",
-            "write shape_csv = \"file.csv\" or inline trial, force and observable arrays, not both",
-        )  # fmt: skip
+            "shape",
+            f"give exactly one of shape_csv or inline arrays (got {given})",
+            'write shape_csv = "file.csv" or inline trial, force and observable arrays, not both',
+        )
     if "shape_csv" in table:
         if not isinstance(table["shape_csv"], str) or not table["shape_csv"].strip():
-            raise reader.fail("shape.shape_csv", f"expected a file name, got {table['shape_csv']!r}", 'write shape_csv = "file.csv"')
+            raise reader.fail(
+                "shape.shape_csv", f"expected a file name, got {table['shape_csv']!r}", 'write shape_csv = "file.csv"'
+            )
         csv_path = reader.path.parent / table["shape_csv"]
         columns, lines = _read_shape_csv(reader, csv_path)
         input_files[str(csv_path)] = file_sha256(csv_path)
@@ -383,10 +458,11 @@ def _inline_shape_columns(reader: _Reader, table: dict) -> _ShapeColumns:
     if len({v.size for v in values.values()}) > 1:
         sizes = ", ".join(f"{k} {v.size}" for k, v in values.items())
         raise reader.fail(
-            "shape", f"arrays differ in length ({sizes})",
+            "shape",
+            f"arrays differ in length ({sizes})",
             "give one value per shape point in every array; to leave a point unmeasured use "
             "shape_csv with an empty cell",
-        )  # fmt: skip
+        )
     return {k: (v, np.ones(v.size, dtype=bool)) for k, v in values.items()}
 
 
@@ -397,12 +473,16 @@ def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, lis
     fix_header = (
         f"the first line names trial, force and at least one of {', '.join(SHAPE_OBSERVABLES)}, "
         "each once (units are set in the session's [shape] table)"
-    )  # fmt: skip
+    )
     for name in header:
         if name not in _SHAPE_COLUMNS:
-            raise InvalidInputError(f"{csv_path}: header column {name!r} is unknown (header {header!r}). Fix: {fix_header}")
+            raise InvalidInputError(
+                f"{csv_path}: header column {name!r} is unknown (header {header!r}). Fix: {fix_header}"
+            )
         if header.count(name) > 1:
-            raise InvalidInputError(f"{csv_path}: header column {name!r} appears {header.count(name)} times. Fix: {fix_header}")
+            raise InvalidInputError(
+                f"{csv_path}: header column {name!r} appears {header.count(name)} times. Fix: {fix_header}"
+            )
     for name in ("trial", "force"):
         if name not in header:
             raise InvalidInputError(f"{csv_path}: header {header!r} has no {name!r} column. Fix: {fix_header}")
@@ -419,7 +499,7 @@ def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, lis
                 f"{csv_path}, line {line_number}: expected {len(header)} cells ({','.join(header)}), "
                 f"got {len(row)}: {row!r}. Fix: complete or delete the row (leave a cell empty, not "
                 "absent, where an observable was not measured)"
-            )  # fmt: skip
+            )
         for name, cell in zip(header, row):
             cell = cell.strip()
             if not cell and name in SHAPE_OBSERVABLES:
@@ -429,7 +509,9 @@ def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, lis
             try:
                 values[name].append(float(cell))
             except ValueError:
-                fix = "write a plain decimal number" + ("" if name in ("trial", "force") else ", or leave it empty if not measured")
+                fix = "write a plain decimal number" + (
+                    "" if name in ("trial", "force") else ", or leave it empty if not measured"
+                )
                 raise InvalidInputError(
                     f"{csv_path}, line {line_number}, column '{name}': {cell!r} is not a number. Fix: {fix}"
                 ) from None
@@ -442,13 +524,20 @@ def _read_shape_csv(reader: _Reader, csv_path: Path) -> tuple[_ShapeColumns, lis
             raise InvalidInputError(
                 f"{csv_path}: column '{name}' is empty in every row. Fix: fill in its measured values "
                 "or delete the column"
-            )  # fmt: skip
+            )
     columns = {name: (np.asarray(values[name], dtype=np.float64), np.asarray(measured[name])) for name in header}
     return columns, lines
 
 
-def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], trial_ids: np.ndarray,
-                 length_scale: float, force_scale: float, units: tuple[str, str]):  # fmt: skip
+def _check_shape(
+    reader: _Reader,
+    columns: _ShapeColumns,
+    where: list[str],
+    trial_ids: np.ndarray,
+    length_scale: float,
+    force_scale: float,
+    units: tuple[str, str],
+):
     """Validate parsed shape columns (values as written; ``units``: the length and force units
     they are written in) and convert them to SI."""
     for name, (values, measured) in columns.items():
@@ -457,24 +546,28 @@ def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], tria
         if bad.size:
             i = bad[0]
             raise reader.fail(
-                f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} is not finite",
+                f"{field}[{i}]",
+                f"{where[i]}value {float(values[i])!r} is not finite",
                 "write the measured value; in shape_csv leave the cell empty if it was not measured",
-            )  # fmt: skip
+            )
         if name == "trial":
             bad = np.flatnonzero(values != np.round(values))
             if bad.size:
                 i = bad[0]
                 raise reader.fail(
-                    f"{field}[{i}]", f"{where[i]}trial id {float(values[i])!r} is not an integer", "number trials 1, 2, 3, ..."
-                )  # fmt: skip
+                    f"{field}[{i}]",
+                    f"{where[i]}trial id {float(values[i])!r} is not an integer",
+                    "number trials 1, 2, 3, ...",
+                )
             bad = np.flatnonzero(~np.isin(values, trial_ids))
             if bad.size:
                 i = bad[0]
                 raise reader.fail(
-                    f"{field}[{i}]", f"{where[i]}trial id {float(values[i]):g} is not among the [indentation] "
+                    f"{field}[{i}]",
+                    f"{where[i]}trial id {float(values[i]):g} is not among the [indentation] "
                     f"trial ids {trial_ids.tolist()}",
                     "give the id of the indentation trial during which the shape was measured",
-                )  # fmt: skip
+                )
             continue
         zero_ok = name == "sunken_depth"  # no dimple yet: the poke point is the highest point
         bad = np.flatnonzero(measured & ((values < 0) if zero_ok else (values <= 0)))
@@ -482,9 +575,10 @@ def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], tria
             i = bad[0]
             sign = "non-negative" if zero_ok else "positive"
             raise reader.fail(
-                f"{field}[{i}]", f"{where[i]}value {float(values[i])!r} must be {sign}",
+                f"{field}[{i}]",
+                f"{where[i]}value {float(values[i])!r} must be {sign}",
                 f"{name} is a {'force magnitude' if name == 'force' else 'length'}: write |value|",
-            )  # fmt: skip
+            )
         if name == "force":
             kind, unit, unit_key = "force", units[1], "force_unit in [shape]"
         else:
@@ -495,10 +589,11 @@ def _check_shape(reader: _Reader, columns: _ShapeColumns, where: list[str], tria
     if unmeasured.size:
         i = unmeasured[0]
         raise reader.fail(
-            f"shape[{i}]", f"{where[i]}shape point {i} (trial {columns['trial'][0][i]:g}, force "
+            f"shape[{i}]",
+            f"{where[i]}shape point {i} (trial {columns['trial'][0][i]:g}, force "
             f"{columns['force'][0][i]:g}) has no measured observable",
             "fill in what was measured at that point or delete the row",
-        )  # fmt: skip
+        )
     shape_trial = columns["trial"][0].astype(np.int64)
     shape_force = columns["force"][0] * force_scale
     shape = {k: columns[k][0] * length_scale for k in SHAPE_OBSERVABLES if k in columns}
@@ -512,8 +607,11 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
     if "poke_point" not in geometry:
         raise reader.fail("geometry.poke_point", "missing (required with mesh)", "add poke_point = [x, y, z]")
     raw_point = geometry["poke_point"]
-    if (not isinstance(raw_point, list) or len(raw_point) != 3
-            or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in raw_point)):  # fmt: skip
+    if (
+        not isinstance(raw_point, list)
+        or len(raw_point) != 3
+        or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in raw_point)
+    ):
         raise reader.fail("geometry.poke_point", f"expected [x, y, z], got {raw_point!r}", "write three numbers")
     poke_point = np.asarray(raw_point, dtype=np.float64) * length_scale
     if not np.all(np.isfinite(poke_point)):
@@ -532,7 +630,10 @@ def _mesh_geometry(reader: _Reader, geometry: dict, length_scale: float, input_f
         raise InvalidInputError(f"{reader.path}: field 'geometry.mesh': {err}") from None
     problem = implausible("radius", local.radius, "m")
     if problem is not None:
-        raise reader.fail("geometry.mesh", f"the sphere fitted at poke_point: {problem}",
-                          "check length_unit (it applies to the mesh's coordinates and poke_point) and fit_radius")
+        raise reader.fail(
+            "geometry.mesh",
+            f"the sphere fitted at poke_point: {problem}",
+            "check length_unit (it applies to the mesh's coordinates and poke_point) and fit_radius",
+        )
     input_files[str(mesh_path)] = file_sha256(mesh_path)
     return local.radius, local.radius_std, mesh_path, poke_point, fit_radius, local.rms_residual, volume

@@ -45,10 +45,11 @@ def load_rigid_press(path: str | Path) -> RigidPress:
     data = _read_toml(path)
     if _read_kind(reader, data) != "rigid_press":
         raise reader.fail(
-            "kind", f"{data.get('kind', 'absent')!r}: an indentation session of an object, not a rigid-surface press",
-            'load it with shelljax.session.load_session, or, if it records the finger pressed on a rigid '
+            "kind",
+            f"{data.get('kind', 'absent')!r}: an indentation session of an object, not a rigid-surface press",
+            "load it with shelljax.session.load_session, or, if it records the finger pressed on a rigid "
             'table, write kind = "rigid_press" and keep only object, notes and [indentation]',
-        )  # fmt: skip
+        )
     _reject_session_keys(reader, data)
     reader.no_unknown_keys(data, _PRESS_TOP_KEYS)
     header = _read_header(reader, data)  # with no session-only keys left, only the version, object and notes
@@ -57,14 +58,21 @@ def load_rigid_press(path: str | Path) -> RigidPress:
     largest = int(np.argmax(np.abs(depth)))
     if abs(depth[largest]) > _PRESS_MAX_DEPTH:
         raise reader.fail(
-            f"indentation.depth[{largest}]", f"{where[largest]}{depth[largest]:g} m is more than a finger pad compresses "
+            f"indentation.depth[{largest}]",
+            f"{where[largest]}{depth[largest]:g} m is more than a finger pad compresses "
             f"(|depth| <= {_PRESS_MAX_DEPTH:g} m)",
             'depths look like millimetres written as metres: set depth_unit = "mm"',
-        )  # fmt: skip
+        )
     return RigidPress(
-        source=path, object_name=header["object_name"], notes=header["notes"], trial=trial, force=force,
-        depth=depth, sha256=files_sha256(input_files), rig_name=header["rig_name"],
-    )  # fmt: skip
+        source=path,
+        object_name=header["object_name"],
+        notes=header["notes"],
+        trial=trial,
+        force=force,
+        depth=depth,
+        sha256=files_sha256(input_files),
+        rig_name=header["rig_name"],
+    )
 
 
 def _reject_session_keys(reader: _Reader, data: dict) -> None:
@@ -74,6 +82,7 @@ def _reject_session_keys(reader: _Reader, data: dict) -> None:
         key = foreign[0]
         what = f"[{key}] table" if isinstance(data[key], dict) else f"'{key}' key"
         raise reader.fail(
-            key, f'a rigid-surface press (kind = "rigid_press": the finger on a rigid table, no object) has no {what}',
+            key,
+            f'a rigid-surface press (kind = "rigid_press": the finger on a rigid table, no object) has no {what}',
             f'delete the {what}; if the file records an object, remove kind = "rigid_press" and load it with load_session',
-        )  # fmt: skip
+        )

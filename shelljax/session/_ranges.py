@@ -63,8 +63,11 @@ def likely_unit(name: str, value: float) -> str | None:
     range, on a log scale), or None when no unit makes it plausible."""
     limits = RANGES[name]
     middle = math.sqrt(limits.low * limits.high)
-    fitting = [(abs(math.log(value * f / middle)), u) for u, f in QUANTITY_UNITS[limits.quantity].items()
-               if value > 0 and limits.low <= value * f <= limits.high]
+    fitting = [
+        (abs(math.log(value * f / middle)), u)
+        for u, f in QUANTITY_UNITS[limits.quantity].items()
+        if value > 0 and limits.low <= value * f <= limits.high
+    ]
     return min(fitting)[1] if fitting else None
 
 
@@ -79,8 +82,9 @@ def convert_unit(value: float, quantity: str, from_unit: str, to_unit: str) -> f
 BACKWARDS_TOLERANCE = 0.1
 
 
-def check_plausible(reader: TomlReader, name: str, field: str, written: float, unit: str, unit_key: str,
-                    where: str = "") -> None:
+def check_plausible(
+    reader: TomlReader, name: str, field: str, written: float, unit: str, unit_key: str, where: str = ""
+) -> None:
     """Refuse ``written`` (in ``unit``, set by ``unit_key``) outside the plausible range of ``name``
     (``_ranges.RANGES``), naming the value as written and the unit that would make it plausible."""
     problem = implausible(name, written, unit)
@@ -89,15 +93,18 @@ def check_plausible(reader: TomlReader, name: str, field: str, written: float, u
     likely = likely_unit(name, written)
     if likely is not None and likely != unit:
         quantity = RANGES[name].quantity
-        fix = (f"if {written:g} is in {likely}, set {unit_key} = \"{likely}\" (or write "
-               f"{convert_unit(written, quantity, likely, unit):g} {unit}); else re-measure it")
+        fix = (
+            f'if {written:g} is in {likely}, set {unit_key} = "{likely}" (or write '
+            f"{convert_unit(written, quantity, likely, unit):g} {unit}); else re-measure it"
+        )
     else:
         fix = f"check the value and {unit_key}, then re-measure it"
     raise reader.fail(field, where + problem, fix, value=written)
 
 
-def check_plausible_samples(reader: TomlReader, name: str, field: str, written: np.ndarray, unit: str, unit_key: str,
-                            where: list[str]) -> None:
+def check_plausible_samples(
+    reader: TomlReader, name: str, field: str, written: np.ndarray, unit: str, unit_key: str, where: list[str]
+) -> None:
     """``check_plausible`` on every sample, naming the first one outside the range (NaN: not
     measured, skipped)."""
     for i, value in enumerate(written):
@@ -109,14 +116,16 @@ def check_spread(reader: TomlReader, field: str, std: float, value: float, unit:
     """A standard deviation as large as its value is a unit or digit mistake: refuse it."""
     if std >= value:
         raise reader.fail(
-            field, f"{std:g} {unit} is not smaller than the {of} {value:g} {unit}",
+            field,
+            f"{std:g} {unit} is not smaller than the {of} {value:g} {unit}",
             f"write the standard deviation in the same unit ({unit_key} applies to both), e.g. 5 % of the {of}",
             value=std,
         )
 
 
-def check_forwards(reader: TomlReader, trial: np.ndarray, force: np.ndarray, written: np.ndarray, unit: str,
-                   where: list[str]) -> None:
+def check_forwards(
+    reader: TomlReader, trial: np.ndarray, force: np.ndarray, written: np.ndarray, unit: str, where: list[str]
+) -> None:
     """Within a trial the depth (``written``, in ``unit``) follows the force [N] from sample to
     sample, as written: a step against it by more than ``BACKWARDS_TOLERANCE`` of the deeper depth
     is refused, naming both samples. Where the force falls and the depth with it (a new sweep in

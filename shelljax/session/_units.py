@@ -7,9 +7,4 @@ FORCE_UNITS = {"N": 1.0, "mN": 1e-3, "kN": 1e3}
 PRESSURE_UNITS = {"Pa": 1.0, "hPa": 1e2, "kPa": 1e3, "mbar": 1e2, "bar": 1e5, "psi": 6894.757293168}
 MASS_UNITS = {"kg": 1.0, "g": 1e-3}
 
-QUANTITY_UNITS = {
-    "length": LENGTH_UNITS,
-    "force": FORCE_UNITS,
-    "pressure": PRESSURE_UNITS,
-    "mass": MASS_UNITS,
-}
+QUANTITY_UNITS = {"length": LENGTH_UNITS, "force": FORCE_UNITS, "pressure": PRESSURE_UNITS, "mass": MASS_UNITS}

@@ -31,7 +31,7 @@ def _vector(argument: str, values, writer: str = "write_session") -> np.ndarray:
         raise InvalidInputError(
             f"{writer}: argument '{argument}' must be a non-empty 1-D array, got shape "
             f"{array.shape}. Fix: pass one value per sample"
-        )  # fmt: skip
+        )
     return array
 
 
@@ -49,21 +49,21 @@ def _shape_csv(shape: dict) -> str:
     missing = [k for k in ("trial", "force") if k not in shape]
     observables = [k for k in SHAPE_OBSERVABLES if k in shape]
     if unknown or missing or not observables:
-        problem = (f"unknown key {unknown[0]!r}" if unknown else f"missing key {missing[0]!r}" if missing
-                   else "no observable")  # fmt: skip
+        problem = (
+            f"unknown key {unknown[0]!r}" if unknown else f"missing key {missing[0]!r}" if missing else "no observable"
+        )
         raise InvalidInputError(
             f"write_session: argument 'shape': {problem} (keys {sorted(shape)}). Fix: give 'trial', "
             f"'force' [N] and at least one of {', '.join(SHAPE_OBSERVABLES)} [m]"
-        )  # fmt: skip
+        )
     columns = {k: _vector(f"shape['{k}']", shape[k]) for k in ("trial", "force", *observables)}
     sizes = {k: v.size for k, v in columns.items()}
     if len(set(sizes.values())) > 1:
         raise InvalidInputError(
             f"write_session: argument 'shape': arrays differ in length ({sizes}). Fix: give one "
             "value per shape point in every array, NaN where an observable was not measured"
-        )  # fmt: skip
-    cells = {"trial": [str(t) for t in _ids(columns["trial"])],
-             "force": [repr(float(f)) for f in columns["force"]]}  # fmt: skip
+        )
+    cells = {"trial": [str(t) for t in _ids(columns["trial"])], "force": [repr(float(f)) for f in columns["force"]]}
     for k in observables:
         cells[k] = ["" if math.isnan(v) else repr(float(v)) for v in columns[k]]
     rows = [",".join(cells[k][i] for k in cells) for i in range(columns["trial"].size)]
@@ -123,11 +123,21 @@ def write_session(
     if path.suffix != ".toml":
         raise InvalidInputError(f"write_session: path {path} does not end in .toml. Fix: name the session NAME.toml")
     doc = _session_document(
-        object_name=object_name, radius=radius, radius_std=radius_std, thickness=thickness,
-        thickness_std=thickness_std, trial=trial, force=force, depth=depth, wrinkle_counts=wrinkle_counts,
-        manometer_gauge_pressure=manometer_gauge_pressure, mass=mass, poisson_ratio=poisson_ratio, notes=notes,
+        object_name=object_name,
+        radius=radius,
+        radius_std=radius_std,
+        thickness=thickness,
+        thickness_std=thickness_std,
+        trial=trial,
+        force=force,
+        depth=depth,
+        wrinkle_counts=wrinkle_counts,
+        manometer_gauge_pressure=manometer_gauge_pressure,
+        mass=mass,
+        poisson_ratio=poisson_ratio,
+        notes=notes,
         rig_name=rig_name,
-    )  # fmt: skip
+    )
     files: dict[str, str] = {}
     if shape is not None:
         csv_name = f"{path.stem}_shape.csv"
@@ -138,8 +148,9 @@ def write_session(
     return load_session(path)
 
 
-def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth, notes: str = "",
-                      rig_name: str | None = None) -> RigidPress:
+def write_rigid_press(
+    path: str | Path, *, object_name: str, trial, force, depth, notes: str = "", rig_name: str | None = None
+) -> RigidPress:
     """Write a rigid-surface press TOML (``kind = "rigid_press"``); return it as loaded.
 
     Every value is in SI units and is written in SI units (inline arrays, ``force_unit = "N"``,
@@ -172,15 +183,33 @@ def write_rigid_press(path: str | Path, *, object_name: str, trial, force, depth
     if rig_name:
         doc["rig"] = rig_name
     doc["indentation"] = {
-        "force_unit": "N", "depth_unit": "m", "trial": _ids(_vector("trial", trial, writer)),
-        "force": _vector("force", force, writer).tolist(), "depth": _vector("depth", depth, writer).tolist(),
-    }  # fmt: skip
+        "force_unit": "N",
+        "depth_unit": "m",
+        "trial": _ids(_vector("trial", trial, writer)),
+        "force": _vector("force", force, writer).tolist(),
+        "depth": _vector("depth", depth, writer).tolist(),
+    }
     _write_if_valid(path, {path.name: _HEADER.format(writer=writer) + tomli_w.dumps(doc)}, load_rigid_press)
     return load_rigid_press(path)
 
 
-def _session_document(*, object_name, radius, radius_std, thickness, thickness_std, trial, force, depth,
-                      wrinkle_counts, manometer_gauge_pressure, mass, poisson_ratio, notes, rig_name) -> dict:  # fmt: skip
+def _session_document(
+    *,
+    object_name,
+    radius,
+    radius_std,
+    thickness,
+    thickness_std,
+    trial,
+    force,
+    depth,
+    wrinkle_counts,
+    manometer_gauge_pressure,
+    mass,
+    poisson_ratio,
+    notes,
+    rig_name,
+) -> dict:
     """The session TOML's tables, every value in SI units (see :func:`write_session`)."""
     doc: dict = {"schema_version": SCHEMA_VERSION, "object": object_name}
     if notes:
@@ -195,9 +224,12 @@ def _session_document(*, object_name, radius, radius_std, thickness, thickness_s
     doc["geometry"] = {"radius": float(radius), "radius_std": float(radius_std), "length_unit": "m"}
     doc["wall"] = {"thickness": float(thickness), "thickness_std": float(thickness_std), "thickness_unit": "m"}
     doc["indentation"] = {
-        "force_unit": "N", "depth_unit": "m", "trial": _ids(_vector("trial", trial)),
-        "force": _vector("force", force).tolist(), "depth": _vector("depth", depth).tolist(),
-    }  # fmt: skip
+        "force_unit": "N",
+        "depth_unit": "m",
+        "trial": _ids(_vector("trial", trial)),
+        "force": _vector("force", force).tolist(),
+        "depth": _vector("depth", depth).tolist(),
+    }
     if wrinkle_counts is not None:
         doc["wrinkles"] = {"counts": np.asarray(wrinkle_counts).tolist()}
     return doc

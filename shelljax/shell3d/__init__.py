@@ -22,7 +22,15 @@ differentiation (:func:`implicit_equilibrium`).
 
 from ._config import ContactConfig, ModelConfig
 from ._continuation import continuation
-from ._energy import ShellGeometry, elastic_energy, face_energy, fundamental_forms, gas_energy, rest_geometry, total_energy
+from ._energy import (
+    ShellGeometry,
+    elastic_energy,
+    face_energy,
+    fundamental_forms,
+    gas_energy,
+    rest_geometry,
+    total_energy,
+)
 from ._energy import volume as enclosed_volume
 from ._hessian import face_hessians, hessian_values
 from ._hessian import rank_one as gas_rank_one

@@ -115,9 +115,7 @@ def jit_config(config: ModelConfig) -> ModelConfig:
     """``config`` with μ > 0 normalised to 1 (μ then travels in ``params``): the compile key."""
     if not config.contact.has_friction:
         return config
-    contact = dataclasses.replace(
-        config.contact, friction=1.0, slip_tolerance=config.contact.friction_slip_tolerance
-    )
+    contact = dataclasses.replace(config.contact, friction=1.0, slip_tolerance=config.contact.friction_slip_tolerance)
     return dataclasses.replace(config, contact=contact)
 
 
@@ -126,7 +124,4 @@ def check_config(config: ModelConfig) -> None:
     if config.gas not in GAS_MODELS:
         raise InvalidInputError(f"gas: unknown model {config.gas!r}; use one of {GAS_MODELS}.")
     if config.contact.kind not in ("barrier", "penalty"):
-        raise InvalidInputError(
-            f"contact: unknown kind {config.contact.kind!r}; use 'barrier' or 'penalty'."
-        )
-
+        raise InvalidInputError(f"contact: unknown kind {config.contact.kind!r}; use 'barrier' or 'penalty'.")

@@ -82,7 +82,6 @@ def friction_coefficient(params, config):
     return config.contact.friction if params.friction_coefficient is None else params.friction_coefficient
 
 
-
 def friction_potential(x, params, config) -> Float[Array, ""]:
     """Lagged smoothed Coulomb friction energy [J] of all vertices on all planes (0 if μ = 0)."""
     if not config.contact.has_friction:
@@ -131,7 +130,6 @@ def stacked_friction_forces(q, params, config):
     return jnp.stack(out)
 
 
-
 #: The line search's projection (:meth:`EquilibriumProblem.feasible_trial`) keeps at least this
 #: fraction of its gap to a body for every vertex within the barrier's range: a log barrier's
 #: Newton model overshoots where a vertex starts far above its equilibrium gap (docs/shell3d.md).
@@ -175,5 +173,3 @@ def body_gaps(q, config: ModelConfig) -> list:
     q = np.asarray(q, dtype=np.float64)
     x, c = q[: 3 * config.n_vertices].reshape(-1, 3), q[3 * config.n_vertices :]
     return [body_gap_and_normal(x, c, config, body)[0] for body in range(n_bodies(config))]
-
-

@@ -108,7 +108,9 @@ def bending_energy(p: Stencil, rest_metric, rest_curvature, rest_area, thickness
     return rest_area * bending_density(rest_metric, rest_curvature, b, thickness, young_modulus, poisson_ratio)
 
 
-def face_energy(p: Stencil, rest_metric, rest_curvature, rest_area, thickness, young_modulus, poisson_ratio, gauge_pressure):
+def face_energy(
+    p: Stencil, rest_metric, rest_curvature, rest_area, thickness, young_modulus, poisson_ratio, gauge_pressure
+):
     """Membrane + bending energy [J] of one face minus gauge_pressure [Pa] × its volume share [m³].
 
     The pressure term makes the per-face Hessian include P ∂²V; for a sealed gas the current
@@ -174,8 +176,14 @@ def elastic_energy(x, params, geometry):
     """Membrane + bending energy [J] of the whole shell."""
     p = x[geometry.stencil]
     e = jax.vmap(face_energy, in_axes=(0, 0, 0, 0, None, None, None, None))(
-        p, geometry.rest_metric, geometry.rest_curvature, geometry.rest_area,
-        params.thickness, params.young_modulus, params.poisson_ratio, 0.0,
+        p,
+        geometry.rest_metric,
+        geometry.rest_curvature,
+        geometry.rest_area,
+        params.thickness,
+        params.young_modulus,
+        params.poisson_ratio,
+        0.0,
     )
     return jnp.sum(e)
 

@@ -17,7 +17,9 @@ def plot_state(state, path) -> None:
     obs = state.observables()
     fig = plt.figure(figsize=(10, 4.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
-    ax.plot_trisurf(x[:, 0], x[:, 1], x[:, 2], triangles=faces, cmap="viridis", linewidth=0.05, edgecolor="k", alpha=0.9)
+    ax.plot_trisurf(
+        x[:, 0], x[:, 1], x[:, 2], triangles=faces, cmap="viridis", linewidth=0.05, edgecolor="k", alpha=0.9
+    )
     span = np.ptp(x, axis=0).max() / 2
     mid = 0.5 * (x.max(axis=0) + x.min(axis=0))
     for set_lim, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid):

@@ -22,6 +22,7 @@ from ._contact import contact_potential, contact_stiffness, friction_coefficient
 from ._energy import face_energy, gas_energy, rest_geometry, total_energy, volume
 from ._sparse import assemble_values, element_positions
 
+
 @functools.partial(jax.jit, static_argnames=("config",))
 def linearized_gradient(q, params, geometry, config) -> tuple[Array, jax.tree_util.Partial]:
     """(∇E(q) [N], v ↦ H(q) v [N]): the gradient and the exact Hessian (sealed gas's rank-one part
@@ -70,6 +71,7 @@ def _contact_hessians(q, params, geometry, config):
     blocks = []
     k = contact_stiffness(geometry, config.contact)
     if config.contact.indenter_radius is not None:
+
         def pair(y, kv):
             gap = sphere_gap(y[:3], y[3:], config.contact.indenter_radius)
             return contact_potential(gap, kv, config.contact)
@@ -135,7 +137,9 @@ def barrier_softening(q, gradient, geometry, config) -> Float[Array, "V 3 3"]:
         pressed = push > 0.0
         ratio = 1.0 + (vertex_gradient @ normal) / jnp.where(pressed, push, 1.0)
         factor = jnp.where(pressed, jnp.clip(ratio, BARRIER_SOFTENING_FLOOR, 1.0), 1.0)
-        blocks = blocks + ((factor - 1.0) * curvature(gap, k, config.contact))[:, None, None] * jnp.outer(normal, normal)
+        blocks = blocks + ((factor - 1.0) * curvature(gap, k, config.contact))[:, None, None] * jnp.outer(
+            normal, normal
+        )
     return blocks
 
 
@@ -216,7 +220,6 @@ def hessian_values(q, params, geometry, config, maps, nnz, gradient=None):
     return jax.lax.fori_loop(0, n_chunks, add_chunk, data)
 
 
-
 @functools.partial(jax.jit, static_argnames=("config",))
 def rank_one(q, params, geometry, config):
     """(Π''(V), ∇_q V) for the dense rank-one part of a sealed gas's Hessian."""
@@ -225,7 +228,6 @@ def rank_one(q, params, geometry, config):
     vol, dvol = jax.value_and_grad(vol_fn)(x.reshape(-1))
     c2 = jax.grad(jax.grad(gas_energy), argnums=0)(vol, params, config)
     return c2, jnp.concatenate([dvol, jnp.zeros(3)])
-
 
 
 def _face_energy_from_rest(p, rest_p, thickness, young_modulus, poisson_ratio):

@@ -67,7 +67,9 @@ class Shell:
             raise InvalidInputError(f"thickness: must be a positive length in m, got {self.thickness}.")
 
 
-def ball(radius: float, thickness: float, n_triangles: int = 5000, *, pole_refinement: float = 3.0, growth: float = 0.25) -> Shell:
+def ball(
+    radius: float, thickness: float, n_triangles: int = 5000, *, pole_refinement: float = 3.0, growth: float = 0.25
+) -> Shell:
     """A spherical ball of ``radius`` [m] and wall ``thickness`` [m], meshed with about
     ``n_triangles`` faces refined ``pole_refinement``× at the top (indenter) and bottom (ground)."""
     if not radius > 0:
@@ -133,8 +135,15 @@ class IndentationState:
         of ``ring_width`` [m] up to ``max_radius`` [m] from the indentation axis: see
         :func:`shelljax.shell3d.wrinkle_spectrum` (``.count`` is the wrinkle count)."""
         reference = self.sim.q_reference[:-3].reshape(-1, 3)
-        return wrinkle_spectrum(reference, self.vertices, self.sim.model.mesh.faces, reference[self.sim.top],
-                                max_radius=max_radius, ring_width=ring_width, max_mode=max_mode)  # fmt: skip
+        return wrinkle_spectrum(
+            reference,
+            self.vertices,
+            self.sim.model.mesh.faces,
+            reference[self.sim.top],
+            max_radius=max_radius,
+            ring_width=ring_width,
+            max_mode=max_mode,
+        )
 
     def export(self, path) -> None:
         """Write the deformed mesh (OBJ, PLY, STL: by suffix) [m]."""
@@ -169,8 +178,15 @@ def _shell_properties(properties, shell: Shell) -> tuple[float, float, float]:
     return float(properties.young_modulus), float(properties.poisson_ratio), float(properties.gauge_pressure)
 
 
-def _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
-                     friction_iterations, max_newton_iterations) -> None:
+def _check_arguments(
+    young_modulus,
+    poisson_ratio,
+    gauge_pressure,
+    indenter_radius,
+    rest_shape,
+    friction_iterations,
+    max_newton_iterations,
+) -> None:
     """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
     if not young_modulus > 0:
         raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
@@ -240,8 +256,15 @@ class Indentation:
         friction_iterations: int = 2,
     ):
         young_modulus, poisson_ratio, gauge_pressure = _shell_properties(properties, shell)
-        _check_arguments(young_modulus, poisson_ratio, gauge_pressure, indenter_radius, rest_shape,
-                         friction_iterations, max_newton_iterations)  # fmt: skip
+        _check_arguments(
+            young_modulus,
+            poisson_ratio,
+            gauge_pressure,
+            indenter_radius,
+            rest_shape,
+            friction_iterations,
+            max_newton_iterations,
+        )
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
@@ -251,9 +274,13 @@ class Indentation:
         self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
         self.max_step = max_step or 0.02 * self.size
         #: The model parameters at the indenter's start (:class:`ShellParams`, SI).
-        self.base_params = ShellParams(young_modulus=young_modulus, poisson_ratio=poisson_ratio,
-                                       thickness=float(shell.thickness), gauge_pressure=gauge_pressure,
-                                       mass=None if mass is None else float(mass))  # fmt: skip
+        self.base_params = ShellParams(
+            young_modulus=young_modulus,
+            poisson_ratio=poisson_ratio,
+            thickness=float(shell.thickness),
+            gauge_pressure=gauge_pressure,
+            mass=None if mass is None else float(mass),
+        )
         self.top, self.bottom = int(np.argmax(scan[:, 2])), int(np.argmin(scan[:, 2]))
         self._fixed = rigid_mode_pins(scan)
         reference = inflated_reference(shell, self.base_params, vertices=scan, rest_shape=rest_shape, atol=self.atol)
@@ -261,8 +288,9 @@ class Indentation:
         #: Largest distance [m] between the pressurized reference state and the scan.
         self.rest_mismatch = reference.rest_mismatch
         if gas != "prescribed":
-            self.base_params = self.base_params.replace(reference_volume=self.reference_volume,
-                                                        atmospheric_pressure=ATMOSPHERIC_PRESSURE)  # fmt: skip
+            self.base_params = self.base_params.replace(
+                reference_volume=self.reference_volume, atmospheric_pressure=ATMOSPHERIC_PRESSURE
+            )
         self.indenter_radius = float(indenter_radius)
         #: The indenter's start (3,) [m], at first touch above the inflated top vertex.
         self.top_height = float(reference.inflated[self.top, 2])
@@ -271,13 +299,18 @@ class Indentation:
         self.q_reference = np.concatenate([reference.inflated.ravel(), self.touch_center])
         planes = (Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), name="ground"),) if ground else ()
         contact_cfg = ContactConfig(
-            indenter_radius=float(indenter_radius), planes=planes, kind=contact,
-            activation_distance=float(self.activation_distance), reference_pressure=float(max(gauge_pressure, 1e3)),
-            friction=friction, slip_tolerance=slip_tolerance,
-        )  # fmt: skip
+            indenter_radius=float(indenter_radius),
+            planes=planes,
+            kind=contact,
+            activation_distance=float(self.activation_distance),
+            reference_pressure=float(max(gauge_pressure, 1e3)),
+            friction=friction,
+            slip_tolerance=slip_tolerance,
+        )
         self.friction = contact_cfg.friction
-        self.model = ShellModel(shell.mesh, self.rest, ModelConfig(shell.mesh.n_vertices, gas=gas, contact=contact_cfg),
-                                self._fixed)  # fmt: skip
+        self.model = ShellModel(
+            shell.mesh, self.rest, ModelConfig(shell.mesh.n_vertices, gas=gas, contact=contact_cfg), self._fixed
+        )
         self._force_model = None
         self._kept_factorization = (None, None)
 
@@ -322,14 +355,19 @@ class Indentation:
         lagged ``friction`` data, or ``indenter_force`` [N])."""
         return self.base_params.replace(indenter_center=q[-3:], **extra)
 
-
     def _step(self, model, q_guess, params, label, q_prev=None):
         q0 = feasible_start(q_guess, model.config, self.activation_distance, q_prev)
         # The last load step's last factorization preconditions this one (same control mode only).
         control = "force" if model.config.force_control else "depth"
         kept_control, kept = self._kept_factorization
-        res = model.equilibrium(q0, params, atol=self.atol, max_steps=self.max_newton_iterations,
-                                factorization=kept if kept_control == control else None, name=label)  # fmt: skip
+        res = model.equilibrium(
+            q0,
+            params,
+            atol=self.atol,
+            max_steps=self.max_newton_iterations,
+            factorization=kept if kept_control == control else None,
+            name=label,
+        )
         self._kept_factorization = (control, res.state)
         return res
 
@@ -362,7 +400,9 @@ class Indentation:
         res = dataclasses.replace(res, iterations=iterations, stats=stats)
         return res, lagged, change
 
-    def solve(self, depth: float | None = None, *, force: float | None = None, steps: int | None = None) -> IndentationState:
+    def solve(
+        self, depth: float | None = None, *, force: float | None = None, steps: int | None = None
+    ) -> IndentationState:
         """Equilibrium at indenter travel ``depth`` [m] (from first touch) or at ``force`` [N]."""
         if (depth is None) == (force is None):
             raise InvalidInputError("solve: give exactly one of depth= [m] or force= [N].")
@@ -399,8 +439,18 @@ class Indentation:
                 res, lagged, change = self._depth_step(history, d)
                 slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.value)
                 history.append((d, res.value))
-            return IndentationState(self, res.value, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.stats["factorizations"], res.stats["products"])  # fmt: skip
+            return IndentationState(
+                self,
+                res.value,
+                depth,
+                res.iterations,
+                res.history,
+                lagged,
+                change,
+                slip[0],
+                res.stats["factorizations"],
+                res.stats["products"],
+            )
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
 
@@ -415,8 +465,9 @@ class Indentation:
         ``history`` [(travel, q)], secant-predicted: (Solution, friction params, lag change)."""
         guess = secant_predict(history, depth)
         guess[-3:] = self.touch_center - np.array([0.0, 0.0, depth])
-        return self._lagged_step(self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m",
-                                 history[-1][1])  # fmt: skip
+        return self._lagged_step(
+            self.model, guess, self.params_at(guess), f"indentation depth {depth:.4g} m", history[-1][1]
+        )
 
     def force_curve(self, forces) -> list[IndentationState]:
         """Force-controlled continuation through increasing indenter ``forces`` [N]."""
@@ -434,8 +485,18 @@ class Indentation:
             slip[0] = accumulate_slip(slip[0], self.model.config, self.activation_distance, q_start, res.value)
             history.append((force, res.value))
             depth = float(self.touch_center[2] - res.value[-1])
-            return IndentationState(self, res.value, depth, res.iterations, res.history, lagged, change, slip[0],
-                                    res.stats["factorizations"], res.stats["products"])  # fmt: skip
+            return IndentationState(
+                self,
+                res.value,
+                depth,
+                res.iterations,
+                res.history,
+                lagged,
+                change,
+                slip[0],
+                res.stats["factorizations"],
+                res.stats["products"],
+            )
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
 
@@ -445,13 +506,13 @@ class Indentation:
         ``on_solve`` (resuming and checkpointing a long run)."""
         return solve_travels(self, travels, solved=solved, on_solve=on_solve)
 
-    def states_at_forces(self, forces, *, tolerance: float, solved=None, on_solve=None,
-                         max_solves: int = 40) -> list[tuple[float, np.ndarray]]:
+    def states_at_forces(
+        self, forces, *, tolerance: float, solved=None, on_solve=None, max_solves: int = 40
+    ) -> list[tuple[float, np.ndarray]]:
         """[(force [N], state q)] at each of the indenter ``forces`` (increasing) to within
         ``tolerance`` [N], solved under displacement control at the travel that matches each
         force: see :func:`shelljax.shell3d.match_forces`."""
-        return match_forces(self, forces, tolerance=tolerance, solved=solved, on_solve=on_solve,
-                            max_solves=max_solves)  # fmt: skip
+        return match_forces(self, forces, tolerance=tolerance, solved=solved, on_solve=on_solve, max_solves=max_solves)
 
     # ------------------------------------------------------------------------------------------
     def force_function(self, depth: float):

@@ -31,9 +31,7 @@ class ShellMesh:
         v = np.asarray(vertices, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
-            raise InvalidInputError(
-                f"{name}: vertices must be (V, 3) and faces (F, 3); got {v.shape} and {f.shape}."
-            )
+            raise InvalidInputError(f"{name}: vertices must be (V, 3) and faces (F, 3); got {v.shape} and {f.shape}.")
         if not np.all(np.isfinite(v)):
             raise InvalidInputError(f"{name}: vertex coordinates contain NaN or inf.")
         if f.size == 0 or f.min() < 0 or f.max() >= len(v):

@@ -159,7 +159,6 @@ class ShellModel(eqx.Module):
             params = params.replace(friction_coefficient=self.config.contact.friction)
         return params
 
-
     def host_energy(self, q, params) -> float:
         """Energy [J] for Newton's line search (+inf where infeasible)."""
         return float(search_energy(jnp.asarray(q), self.host_params(params), self.geometry, self.jit_config))
@@ -183,6 +182,7 @@ class ShellModel(eqx.Module):
         if gradient is not None and softens(self.config):
             blocks = barrier_softening(q, jnp.asarray(gradient), self.geometry, config)
         if not linearizes(self.mesh.n_faces):
+
             def product(v):
                 hv = hessian_vector_product(q, params, self.geometry, config, v)
                 return hv if blocks is None else plus_vertex_blocks(hv, blocks, v)
@@ -218,8 +218,17 @@ class ShellModel(eqx.Module):
             rank = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank
 
-    def equilibrium(self, q0, params, *, atol: float, max_steps: int = 60, factorization=None,
-                    name: str = "shell Newton", barrier_aids: bool = True) -> Solution:
+    def equilibrium(
+        self,
+        q0,
+        params,
+        *,
+        atol: float,
+        max_steps: int = 60,
+        factorization=None,
+        name: str = "shell Newton",
+        barrier_aids: bool = True,
+    ) -> Solution:
         """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]: a
         :class:`shelljax.Solution` (raises NoConvergenceError where Newton fails).
 
@@ -307,4 +316,3 @@ def rigid_mode_pins(vertices, n_extra: int = 3, fixed_extra=(True, True, True)) 
     fixed[[3 * top, 3 * top + 1, 3 * bottom, 3 * bottom + 1, 3 * side + 1]] = True
     fixed[3 * len(v) :] = np.asarray(fixed_extra, dtype=bool)
     return fixed
-

@@ -205,8 +205,10 @@ class _NewtonRun:
                 if reused:  # a stale factorization is no reason to fail: refactorize and retry
                     self.reusable = None
                     continue
-                self.failure = (f"line search failed at iteration {it} (no sufficient decrease after "
-                                f"{self.max_halvings} halvings; step norm {np.linalg.norm(step):.3e}).")  # fmt: skip
+                self.failure = (
+                    f"line search failed at iteration {it} (no sufficient decrease after "
+                    f"{self.max_halvings} halvings; step norm {np.linalg.norm(step):.3e})."
+                )
                 return self._result(it, RESULTS.line_search_failed)
             self._accept(x_try, e_try, alpha, reused)
         if self.history[-1] <= self.atol:
@@ -239,8 +241,9 @@ class _NewtonRun:
             slope = self.problem.slope(self.g, d)
             if np.all(np.isfinite(d)) and slope < 0.0:
                 return d, slope, False
-        self.failure = (f"no descent direction at iteration {it} (Hessian singular or indefinite "
-                        "even after projection and shift).")  # fmt: skip
+        self.failure = (
+            f"no descent direction at iteration {it} (Hessian singular or indefinite even after projection and shift)."
+        )
         return None, None, False
 
     def _reused_direction(self):
@@ -249,9 +252,12 @@ class _NewtonRun:
         if not self.inexact:
             return np.where(free, -reusable.apply_inverse(self.g), 0.0)
         product = self.problem.hessian_operator(self.x, self.current)
-        d, used = _preconditioned_cg(lambda v: np.where(free, product(v), 0.0),
-                                     lambda r: np.where(free, reusable.apply_inverse(r), 0.0), self.g,
-                                     self.forcing)  # fmt: skip
+        d, used = _preconditioned_cg(
+            lambda v: np.where(free, product(v), 0.0),
+            lambda r: np.where(free, reusable.apply_inverse(r), 0.0),
+            self.g,
+            self.forcing,
+        )
         self.products += used
         if d is None:
             self.reusable = None

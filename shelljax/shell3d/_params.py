@@ -59,8 +59,13 @@ class ShellParams(eqx.Module):
                 f"expected a physics.ShellProperties, got {type(properties).__name__}. Fix: "
                 "ShellProperties(gauge_pressure=…, young_modulus=…, thickness=…, poisson_ratio=…)"
             )
-        return cls(young_modulus=properties.young_modulus, poisson_ratio=properties.poisson_ratio,
-                   thickness=properties.thickness, gauge_pressure=properties.gauge_pressure, **extra)
+        return cls(
+            young_modulus=properties.young_modulus,
+            poisson_ratio=properties.poisson_ratio,
+            thickness=properties.thickness,
+            gauge_pressure=properties.gauge_pressure,
+            **extra,
+        )
 
     @property
     def outside_pressure(self) -> Float[Array, ""]:

@@ -37,8 +37,12 @@ def membrane_strain(scan, faces, params) -> tuple[float, float]:
     edges1, edges2 = scan[faces[:, 1]] - scan[faces[:, 0]], scan[faces[:, 2]] - scan[faces[:, 0]]
     area = 0.5 * np.linalg.norm(np.cross(edges1, edges2), axis=1).sum()
     radius = 3.0 * signed_volume(scan, faces) / area
-    p, nu, e, h = (float(params.gauge_pressure), float(params.poisson_ratio), float(params.young_modulus),
-                   float(params.thickness))  # fmt: skip
+    p, nu, e, h = (
+        float(params.gauge_pressure),
+        float(params.poisson_ratio),
+        float(params.young_modulus),
+        float(params.thickness),
+    )
     return p * radius * (1 - nu) / (2 * e * h), area
 
 
@@ -85,8 +89,9 @@ class RestShapeProblem(AbstractRootProblem):
 
     def jacobian(self, x):
         stencil = jnp.asarray(self.model.mesh.stencil)
-        data = rest_jacobian_values(jnp.asarray(self.scan), jnp.asarray(self._rest(x)), stencil, self.params,
-                                    self.model.pattern)  # fmt: skip
+        data = rest_jacobian_values(
+            jnp.asarray(self.scan), jnp.asarray(self._rest(x)), stencil, self.params, self.model.pattern
+        )
         return self.model.pattern.matrix(data)
 
 
@@ -96,8 +101,17 @@ def _newton_rest(model, scan, q_scan, rest, params, atol, max_steps, final):
     steps can overshoot on stiff short modes."""
     problem = RestShapeProblem(model, scan, q_scan, params)
     x0 = np.concatenate([np.asarray(rest).ravel(), np.zeros(3)])
-    res = newton(problem, x0, atol=atol if final else 1e3 * atol, max_steps=max_steps, max_halvings=20,
-                 armijo=0.0, reuse_factorization=False, name="rest shape", throw=False)  # fmt: skip
+    res = newton(
+        problem,
+        x0,
+        atol=atol if final else 1e3 * atol,
+        max_steps=max_steps,
+        max_halvings=20,
+        armijo=0.0,
+        reuse_factorization=False,
+        name="rest shape",
+        throw=False,
+    )
     if not bool(res.converged):
         last = res.history[-1] if res.history else float("nan")
         raise NoConvergenceError(
@@ -164,8 +178,9 @@ class InflatedReference:
     rest_mismatch: float
 
 
-def inflated_reference(shell, params: ShellParams, *, vertices=None, rest_shape: str = "solve",
-                       atol: float | None = None) -> InflatedReference:
+def inflated_reference(
+    shell, params: ShellParams, *, vertices=None, rest_shape: str = "solve", atol: float | None = None
+) -> InflatedReference:
     """The rest shape and pressurized reference state of ``shell`` (a :class:`Shell`; its mesh is
     the pressurized scan [m]) under ``params`` (E [Pa], ν, h [m], P_g [Pa], mass), free of contacts.
 
@@ -200,5 +215,9 @@ def inflated_reference(shell, params: ShellParams, *, vertices=None, rest_shape:
     # The free shell is done with: its factor would otherwise live on through the caller's
     # contact model's compilation, until that model's first factorization.
     release_factorizations()
-    return InflatedReference(rest=rest, inflated=inflated, reference_volume=volume,
-                             rest_mismatch=float(np.max(np.linalg.norm(inflated - scan, axis=1))))  # fmt: skip
+    return InflatedReference(
+        rest=rest,
+        inflated=inflated,
+        reference_volume=volume,
+        rest_mismatch=float(np.max(np.linalg.norm(inflated - scan, axis=1))),
+    )

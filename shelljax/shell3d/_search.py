@@ -40,8 +40,9 @@ def solve_travel(sim, solved: list, travel: float, halvings: int = 3) -> None:
         solved.sort(key=lambda s: s[0])
 
 
-def solve_travels(sim, travels, *, solved: list | None = None,
-                  on_solve: Callable | None = None) -> list[tuple[float, np.ndarray]]:
+def solve_travels(
+    sim, travels, *, solved: list | None = None, on_solve: Callable | None = None
+) -> list[tuple[float, np.ndarray]]:
     """[(travel [m], state q)] at each of ``travels`` [m] (increasing); travels already in
     ``solved`` are not solved again, and ``on_solve(solved)`` runs after each new one."""
     solved = [] if solved is None else solved
@@ -67,8 +68,9 @@ def _next_travel(solved: list, target: float, max_step: float) -> float:
     return tb + min((target - fb) / slope if slope > 0 else np.inf, max_step)
 
 
-def match_forces(sim, forces, *, tolerance: float, solved: list | None = None,
-                 on_solve: Callable | None = None, max_solves: int = 40) -> list[tuple[float, np.ndarray]]:
+def match_forces(
+    sim, forces, *, tolerance: float, solved: list | None = None, on_solve: Callable | None = None, max_solves: int = 40
+) -> list[tuple[float, np.ndarray]]:
     """[(force [N], state q)] at each of ``forces`` [N] (increasing), each within ``tolerance``
     [N], solved under displacement control (module docstring). Raises RuntimeError when a level
     takes more than ``max_solves`` solves."""

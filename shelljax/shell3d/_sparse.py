@@ -154,11 +154,7 @@ def element_positions(base, stride, size: int):
     n, m = base.shape[0], base.shape[1]
     block = size // m
     r = np.arange(block, dtype=np.int32)
-    positions = (
-        base[:, :, None, :, None]
-        + stride[:, :, None, None, None] * r[:, None, None]
-        + r
-    )
+    positions = base[:, :, None, :, None] + stride[:, :, None, None, None] * r[:, None, None] + r
     return positions.reshape(n, size, size)
 
 
@@ -252,14 +248,7 @@ class SparseSolver:
     numerically singular.
     """
 
-    def __init__(
-        self,
-        matrix: sp.csr_matrix,
-        rank_one=None,
-        *,
-        symmetric: bool = False,
-        definite: bool = False,
-    ):
+    def __init__(self, matrix: sp.csr_matrix, rank_one=None, *, symmetric: bool = False, definite: bool = False):
         matrix = sp.csr_matrix(matrix, dtype=np.float64)
         matrix.sum_duplicates()  # canonical CSR (sorted, unique): the ordering cache relies on it
         ordering = _nested_dissection(matrix)
@@ -287,7 +276,7 @@ class SparseSolver:
 
     @property
     def method(self) -> str:
-        """"cholesky" or "lu": which factorization holds K."""
+        """ "cholesky" or "lu": which factorization holds K."""
         return "lu" if self._cholesky is None else "cholesky"
 
     def apply_inverse(self, rhs) -> np.ndarray:
@@ -409,7 +398,9 @@ class _CholeskyAnalysis:
 
         cholmod.options["supernodal"] = 2  # always supernodal (BLAS-3): simplicial is far slower here
         n = matrix.shape[0]
-        positions = sp.csr_matrix((np.arange(1, matrix.nnz + 1, dtype=np.float64), matrix.indices, matrix.indptr), shape=(n, n))
+        positions = sp.csr_matrix(
+            (np.arange(1, matrix.nnz + 1, dtype=np.float64), matrix.indices, matrix.indptr), shape=(n, n)
+        )
         lower = sp.tril(positions, format="csc")
         lower.sort_indices()
         lower_map = lower.data.astype(np.int64) - 1

@@ -43,7 +43,9 @@ def accumulate_slip(slip, config: ModelConfig, activation_distance: float, q_sta
     within ``activation_distance`` [m] of the ground (the first plane) at ``q_end``."""
     if slip is None:
         return None
-    point, normal = (np.asarray(v, dtype=np.float64) for v in (config.contact.planes[0].point, config.contact.planes[0].normal))
+    point, normal = (
+        np.asarray(v, dtype=np.float64) for v in (config.contact.planes[0].point, config.contact.planes[0].normal)
+    )
     x0, x1 = q_start[:-3].reshape(-1, 3), q_end[:-3].reshape(-1, 3)
     touching = (x1 - point) @ normal < activation_distance
     d = x1 - x0

@@ -61,11 +61,17 @@ def wrinkle_spectrum(
     cur = np.asarray(deformed, float)
     tri = np.asarray(faces)
     if ref.shape != cur.shape or ref.ndim != 2 or ref.shape[1] != 3:
-        raise InvalidInputError(f"reference and deformed must both be (V, 3) arrays in m, got {ref.shape} and {cur.shape}.")
+        raise InvalidInputError(
+            f"reference and deformed must both be (V, 3) arrays in m, got {ref.shape} and {cur.shape}."
+        )
     if tri.ndim != 2 or tri.shape[1] != 3 or tri.size == 0 or tri.min() < 0 or tri.max() >= ref.shape[0]:
-        raise InvalidInputError(f"faces must be an (F, 3) array of vertex indices below {ref.shape[0]}, got shape {tri.shape}.")
+        raise InvalidInputError(
+            f"faces must be an (F, 3) array of vertex indices below {ref.shape[0]}, got shape {tri.shape}."
+        )
     if not (ring_width > 0 and max_radius > ring_width):
-        raise InvalidInputError(f"need 0 < ring_width < max_radius [m], got ring_width={ring_width}, max_radius={max_radius}.")
+        raise InvalidInputError(
+            f"need 0 < ring_width < max_radius [m], got ring_width={ring_width}, max_radius={max_radius}."
+        )
     normals = trimesh.Trimesh(ref, tri, process=False).vertex_normals
     w = np.sum((cur - ref) * normals, axis=1)
     dx, dy = ref[:, 0] - axis_point[0], ref[:, 1] - axis_point[1]
@@ -79,7 +85,9 @@ def wrinkle_spectrum(
             continue
         resolvable = modes <= ring.sum() // 4
         m = np.concatenate([[1], modes[resolvable]])  # mode 1 fitted so that it does not leak into others
-        design = np.concatenate([np.ones((ring.sum(), 1)), np.cos(np.outer(phi[ring], m)), np.sin(np.outer(phi[ring], m))], axis=1)
+        design = np.concatenate(
+            [np.ones((ring.sum(), 1)), np.cos(np.outer(phi[ring], m)), np.sin(np.outer(phi[ring], m))], axis=1
+        )
         coef, *_ = np.linalg.lstsq(design, w[ring], rcond=None)
         amp = np.full(modes.size, np.nan)
         amp[resolvable] = np.hypot(coef[2 : 1 + m.size], coef[2 + m.size :])
@@ -87,11 +95,17 @@ def wrinkle_spectrum(
         amps.append(amp)
         means.append(coef[0])
     if not radii:
-        raise InvalidInputError(f"no ring of ≥ 8 vertices within {max_radius} m of the axis: raise max_radius or ring_width.")
+        raise InvalidInputError(
+            f"no ring of ≥ 8 vertices within {max_radius} m of the axis: raise max_radius or ring_width."
+        )
     amplitude = np.array(amps)
     power = np.nansum(amplitude**2, axis=0)
     best = int(np.argmax(power))
     return WrinkleSpectrum(
-        ring_radius=np.array(radii), modes=modes, amplitude=amplitude, count=int(modes[best]),
-        count_amplitude=float(np.nanmax(amplitude[:, best])), axisymmetric_rms=float(np.sqrt(np.mean(np.square(means)))),
-    )  # fmt: skip
+        ring_radius=np.array(radii),
+        modes=modes,
+        amplitude=amplitude,
+        count=int(modes[best]),
+        count_amplitude=float(np.nanmax(amplitude[:, best])),
+        axisymmetric_rms=float(np.sqrt(np.mean(np.square(means)))),
+    )

@@ -16,17 +16,30 @@ from ._hand import HandControl
 from ._headless import Replay, replay
 from ._play import DEFAULT_SCRIPT, check_replay_outputs, play_headless, play_live, play_scene
 from ._scene import Scene, load_scene, resolve_source
-from ._script import (
-    ACTION_KINDS,
-    Action,
-    Hand,
-    InteractionScript,
-    ScriptPlane,
-    load_script,
-)
+from ._script import ACTION_KINDS, Action, Hand, InteractionScript, ScriptPlane, load_script
 
-__all__ = ["ACTION_KINDS", "DEFAULT_SCRIPT", "Action", "check_replay_outputs", "Hand", "HandControl", "InteractionScript", "Replay", "Scene", "ScriptPlane",
-           "load_scene", "load_script", "play_headless", "play_live", "play_scene", "replay", "require_viser", "resolve_source", "serve", "write_gif"]  # fmt: skip
+__all__ = [
+    "ACTION_KINDS",
+    "DEFAULT_SCRIPT",
+    "Action",
+    "check_replay_outputs",
+    "Hand",
+    "HandControl",
+    "InteractionScript",
+    "Replay",
+    "Scene",
+    "ScriptPlane",
+    "load_scene",
+    "load_script",
+    "play_headless",
+    "play_live",
+    "play_scene",
+    "replay",
+    "require_viser",
+    "resolve_source",
+    "serve",
+    "write_gif",
+]
 
 
 def require_viser():

@@ -21,18 +21,29 @@ def _caption(replay: Replay, row: int, blown: bool) -> str:
     row = min(row, replay.time_s.size - 1)
     if row < 0:
         return "blow-up before the first frame"
-    forces = "  ".join(f"{name} {np.linalg.norm(replay.plane_forces_N[row, i]):.1f} N" for i, name in enumerate(replay.plane_names))
+    forces = "  ".join(
+        f"{name} {np.linalg.norm(replay.plane_forces_N[row, i]):.1f} N" for i, name in enumerate(replay.plane_names)
+    )
     hand = np.linalg.norm(replay.collider_force_N[row])
     action = replay.action[row] or "free"
-    text = (f"t = {replay.time_s[row]:.2f} s  {action}{'  (held)' if replay.holding[row] else ''}\n"
-            f"P_g {replay.gauge_pressure_Pa[row]:.0f} Pa   hand {hand:.1f} N\n{forces}   RT ×{replay.real_time_factor[row]:.1f}")
+    text = (
+        f"t = {replay.time_s[row]:.2f} s  {action}{'  (held)' if replay.holding[row] else ''}\n"
+        f"P_g {replay.gauge_pressure_Pa[row]:.0f} Pa   hand {hand:.1f} N\n{forces}   RT ×{replay.real_time_factor[row]:.1f}"
+    )
     return "BLOW-UP: simulation stopped\n" + text if blown else text
 
 
 def _hand_sphere(ax, centre, radius: float) -> None:
     u, v = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, 13), np.linspace(0.0, np.pi, 7))
-    ax.plot_surface(centre[0] + radius * np.cos(u) * np.sin(v), centre[1] + radius * np.sin(u) * np.sin(v),
-                    centre[2] + radius * np.cos(v), color=(1.0, 0.55, 0.1), linewidth=0, zorder=4, shade=True)  # fmt: skip
+    ax.plot_surface(
+        centre[0] + radius * np.cos(u) * np.sin(v),
+        centre[1] + radius * np.sin(u) * np.sin(v),
+        centre[2] + radius * np.cos(v),
+        color=(1.0, 0.55, 0.1),
+        linewidth=0,
+        zorder=4,
+        shade=True,
+    )
 
 
 def _view(replay: Replay) -> tuple[np.ndarray, float]:
@@ -77,4 +88,3 @@ def write_gif(replay: Replay, path: str | Path, *, hand_radius: float, gif_fps: 
     FuncAnimation(fig, draw, frames=len(replay.shape_frames)).save(path, writer=PillowWriter(fps=gif_fps), dpi=dpi)
     plt.close(fig)
     return Path(path)
-

@@ -51,8 +51,14 @@ class HandControl:
             self.ball.set_collider(None)
             self.active = False
         else:
-            self.ball.set_collider(Collider(a=tuple(self.position), radius=self.hand.radius, velocity=tuple(velocity),
-                                            friction=self.hand.friction))  # fmt: skip
+            self.ball.set_collider(
+                Collider(
+                    a=tuple(self.position),
+                    radius=self.hand.radius,
+                    velocity=tuple(velocity),
+                    friction=self.hand.friction,
+                )
+            )
             self.active = True
         self.position = self.position + velocity * frame_dt
 
@@ -69,8 +75,8 @@ class HandControl:
 
     def hold(self, target, target_velocity, frame_dt: float) -> None:
         """Pull the centre of mass towards ``target`` (3,) [m] moving at ``target_velocity`` (3,)
-        [m/s] (at most ``hand.max_speed``) over the next frame of ``frame_dt`` [s], with at most
-    ``HOLD_MAX_ACCEL`` [m/s²] and the weight carried; the hand is drawn there."""
+            [m/s] (at most ``hand.max_speed``) over the next frame of ``frame_dt`` [s], with at most
+        ``HOLD_MAX_ACCEL`` [m/s²] and the weight carried; the hand is drawn there."""
         self.ball.set_collider(None)
         self.active, self.holding = False, True
         com, vcom = self.ball.com()

@@ -51,21 +51,33 @@ class Replay:
     def summary(self) -> dict:
         """Peaks and medians of the replay (units in the keys)."""
         return {
-            "frames": int(self.time_s.size), "simulated_s": float(self.time_s[-1]) if self.time_s.size else 0.0,
+            "frames": int(self.time_s.size),
+            "simulated_s": float(self.time_s[-1]) if self.time_s.size else 0.0,
             "peak_gauge_pressure_Pa": float(self.gauge_pressure_Pa.max(initial=0.0)),
             "peak_collider_force_N": float(np.linalg.norm(self.collider_force_N, axis=-1).max(initial=0.0)),
-            "peak_plane_force_N": {n: float(np.linalg.norm(self.plane_forces_N[:, i], axis=-1).max(initial=0.0))
-                                   for i, n in enumerate(self.plane_names)},
+            "peak_plane_force_N": {
+                n: float(np.linalg.norm(self.plane_forces_N[:, i], axis=-1).max(initial=0.0))
+                for i, n in enumerate(self.plane_names)
+            },
             "real_time_factor_median": float(np.median(self.real_time_factor)) if self.time_s.size else 0.0,
             "real_time_factor_p01": float(np.percentile(self.real_time_factor, 1)) if self.time_s.size else 0.0,
             "blow_up": self.blow_up,
-        }  # fmt: skip
+        }
 
     def write_json(self, path: str | Path) -> Path:
         """The per-frame records (not the shapes) and the summary as JSON, units in the keys."""
         body = {"summary": self.summary(), "plane_names": list(self.plane_names), "action": self.action}
-        for name in ("time_s", "gauge_pressure_Pa", "collider_force_N", "plane_forces_N", "com_m", "com_velocity_m_per_s",
-                     "real_time_factor", "hand_m", "holding"):  # fmt: skip
+        for name in (
+            "time_s",
+            "gauge_pressure_Pa",
+            "collider_force_N",
+            "plane_forces_N",
+            "com_m",
+            "com_velocity_m_per_s",
+            "real_time_factor",
+            "hand_m",
+            "holding",
+        ):
             body[name] = np.where(np.isnan(a := np.asarray(getattr(self, name), dtype=float)), None, a).tolist()
         Path(path).write_text(json.dumps(body, indent=1))
         return Path(path)
@@ -93,8 +105,20 @@ def replay(scene: Scene, *, shape_every: int | None = None, on_frame=None) -> Re
             break
         wall = _time.perf_counter() - start
         hand_at = hand.position if (hand.active or hand.holding) else np.full(3, np.nan)
-        rows.append((frame.time_s, frame.gauge_pressure_Pa, frame.collider_force_N, frame.plane_forces_N, frame.com_m,
-                     frame.com_velocity_m_per_s, dt / max(wall, 1e-9), hand_at, hand.holding, driver.label))  # fmt: skip
+        rows.append(
+            (
+                frame.time_s,
+                frame.gauge_pressure_Pa,
+                frame.collider_force_N,
+                frame.plane_forces_N,
+                frame.com_m,
+                frame.com_velocity_m_per_s,
+                dt / max(wall, 1e-9),
+                hand_at,
+                hand.holding,
+                driver.label,
+            )
+        )
         if k % every == 0:
             shapes.append(ball.x.copy())
             shape_frames.append(k)
@@ -119,9 +143,20 @@ def _collect(rows, shapes, shape_frames, ball, blow_up) -> Replay:
     as_array = lambda i, shape: np.array(columns[i], dtype=float).reshape(shape)
     n = len(rows)
     return Replay(
-        time_s=as_array(0, (n,)), gauge_pressure_Pa=as_array(1, (n,)), collider_force_N=as_array(2, (n, 3)),
-        plane_forces_N=as_array(3, (n, n_planes, 3)), com_m=as_array(4, (n, 3)), com_velocity_m_per_s=as_array(5, (n, 3)),
-        real_time_factor=as_array(6, (n,)), hand_m=as_array(7, (n, 3)), holding=np.array(columns[8], dtype=bool),
-        action=list(columns[9]), shapes_m=np.array(shapes).reshape(len(shapes), -1, 3), shape_frames=np.array(shape_frames, dtype=int),
-        faces=ball.faces.copy(), plane_names=tuple(ball.plane_names), planes=ball.planes.copy(), blow_up=None if blow_up is None else str(blow_up),
-    )  # fmt: skip
+        time_s=as_array(0, (n,)),
+        gauge_pressure_Pa=as_array(1, (n,)),
+        collider_force_N=as_array(2, (n, 3)),
+        plane_forces_N=as_array(3, (n, n_planes, 3)),
+        com_m=as_array(4, (n, 3)),
+        com_velocity_m_per_s=as_array(5, (n, 3)),
+        real_time_factor=as_array(6, (n,)),
+        hand_m=as_array(7, (n, 3)),
+        holding=np.array(columns[8], dtype=bool),
+        action=list(columns[9]),
+        shapes_m=np.array(shapes).reshape(len(shapes), -1, 3),
+        shape_frames=np.array(shape_frames, dtype=int),
+        faces=ball.faces.copy(),
+        plane_names=tuple(ball.plane_names),
+        planes=ball.planes.copy(),
+        blow_up=None if blow_up is None else str(blow_up),
+    )

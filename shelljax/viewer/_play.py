@@ -25,7 +25,9 @@ def play_scene(source, script_path=None, *, mesh_faces: int | None = None, gas: 
     script = DEFAULT_SCRIPT if script_path is None else load_script(script_path)
     if mesh_faces is not None:
         if mesh_faces < 20:
-            raise InvalidInputError(f"--mesh-faces {mesh_faces}: need at least 20 triangles. Fix: e.g. --mesh-faces 500")
+            raise InvalidInputError(
+                f"--mesh-faces {mesh_faces}: need at least 20 triangles. Fix: e.g. --mesh-faces 500"
+            )
         script = dataclasses.replace(script, mesh_faces=int(mesh_faces))
     return load_scene(source, script, gas=gas)
 
@@ -36,14 +38,17 @@ def check_replay_outputs(record: str | Path | None, records_json: str | Path | N
     if record is not None:
         check_output_file(record, "--record", example="play.gif")
         if Path(record).suffix.lower() != ".gif":
-            raise InvalidInputError(f"--record {record}: the replay is written as a GIF. Fix: name a .gif file, e.g. "
-                                    f"--record {Path(record).with_suffix('.gif')}")
+            raise InvalidInputError(
+                f"--record {record}: the replay is written as a GIF. Fix: name a .gif file, e.g. "
+                f"--record {Path(record).with_suffix('.gif')}"
+            )
     if records_json is not None:
         check_output_file(records_json, "--records", example="records.json")
 
 
-def play_headless(scene: Scene, *, record: str | Path | None = None, records_json: str | Path | None = None,
-                  dpi: int = 72) -> Replay:  # fmt: skip
+def play_headless(
+    scene: Scene, *, record: str | Path | None = None, records_json: str | Path | None = None, dpi: int = 72
+) -> Replay:
     """Replay the scene's script; write the GIF to ``record`` and the per-frame records to
     ``records_json`` where given (both checked before the replay, their folders created after it).
     A blow-up still writes both (up to the failing frame, the GIF's last frame marked) and is then
@@ -51,8 +56,10 @@ def play_headless(scene: Scene, *, record: str | Path | None = None, records_jso
     check_replay_outputs(record, records_json)
     script = scene.script
     if not script.actions:
-        raise InvalidInputError(f"{script.source or 'the script'}: field 'actions': none to replay. Fix: add [[actions]] "
-                                "tables (drop, poke, throw, wait; docs/realtime.md#viewer)")  # fmt: skip
+        raise InvalidInputError(
+            f"{script.source or 'the script'}: field 'actions': none to replay. Fix: add [[actions]] "
+            "tables (drop, poke, throw, wait; docs/realtime.md#viewer)"
+        )
     try:
         result = replay(scene)
     except BlowUpError as err:

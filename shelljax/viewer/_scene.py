@@ -58,7 +58,9 @@ def _session_properties(session):
     from ..physics import ShellProperties
 
     p_g, e, _ = estimated_parameters(session, "closed-form", {})
-    return ShellProperties(gauge_pressure=p_g, young_modulus=e, thickness=session.thickness, poisson_ratio=session.poisson_ratio)
+    return ShellProperties(
+        gauge_pressure=p_g, young_modulus=e, thickness=session.thickness, poisson_ratio=session.poisson_ratio
+    )
 
 
 def resolve_source(source: str | Path) -> Path:
@@ -71,9 +73,11 @@ def resolve_source(source: str | Path) -> Path:
         return path
     if path.is_file() and path.suffix == ".toml":
         return path
-    raise InvalidInputError(f"{source}: neither a replica directory (with replica.json) nor a session TOML file. "
-                            "Fix: give a directory written by `shelljax replica`, a session such as "
-                            "bundled:sessions/pezzi.toml, or its path")  # fmt: skip
+    raise InvalidInputError(
+        f"{source}: neither a replica directory (with replica.json) nor a session TOML file. "
+        "Fix: give a directory written by `shelljax replica`, a session such as "
+        "bundled:sessions/pezzi.toml, or its path"
+    )
 
 
 def load_scene(source: str | Path, script: InteractionScript, *, gas: str = "adiabatic") -> Scene:
@@ -89,7 +93,9 @@ def load_scene(source: str | Path, script: InteractionScript, *, gas: str = "adi
     else:
         session = load_session(path)
         properties = _session_properties(session)
-        ball = RealtimeShell.from_session(session, properties, n_faces=script.mesh_faces, gas=gas, rest_shape="small-strain")
+        ball = RealtimeShell.from_session(
+            session, properties, n_faces=script.mesh_faces, gas=gas, rest_shape="small-strain"
+        )
         label = f"{session.object_name} (closed-form estimate)"
     label += f": P_g {ball.p_gauge:.0f} Pa, E {ball.E / 1e6:.3g} MPa, {ball.faces.shape[0]} faces"
     return Scene.settle(ball, script, label)

@@ -113,9 +113,13 @@ def _plane(r: TomlReader, i: int, table) -> ScriptPlane:
     name = table.get("name", f"plane{i}")
     if not isinstance(name, str):
         raise r.fail(prefix + "name", "expected a string", 'write e.g. name = "ground"', value=name)
-    return ScriptPlane(name=name, point=r.vector(table, "point_m", prefix, 3), normal=tuple(np.asarray(normal) / np.linalg.norm(normal)),
-                       friction=r.number(table, "friction", prefix, default=0.5, nonnegative=True),
-                       damping=r.number(table, "damping_N_s_per_m", prefix, default=5.0, nonnegative=True))  # fmt: skip
+    return ScriptPlane(
+        name=name,
+        point=r.vector(table, "point_m", prefix, 3),
+        normal=tuple(np.asarray(normal) / np.linalg.norm(normal)),
+        friction=r.number(table, "friction", prefix, default=0.5, nonnegative=True),
+        damping=r.number(table, "damping_N_s_per_m", prefix, default=5.0, nonnegative=True),
+    )
 
 
 def _hand(r: TomlReader, data: dict) -> Hand:
@@ -124,16 +128,27 @@ def _hand(r: TomlReader, data: dict) -> Hand:
         return Hand()
     p = "hand."
     default = Hand()
-    return Hand(radius=r.number(table, "radius_m", p, default=default.radius, positive=True,
-                                fix="write the finger's or hand's radius in m, e.g. radius_m = 0.03"),
-                friction=r.number(table, "friction", p, default=default.friction, nonnegative=True),
-                start=r.vector(table, "start_m", p, 3, default=list(default.start)),
-                max_speed=r.number(table, "max_speed_m_per_s", p, default=default.max_speed, positive=True))  # fmt: skip
+    return Hand(
+        radius=r.number(
+            table,
+            "radius_m",
+            p,
+            default=default.radius,
+            positive=True,
+            fix="write the finger's or hand's radius in m, e.g. radius_m = 0.03",
+        ),
+        friction=r.number(table, "friction", p, default=default.friction, nonnegative=True),
+        start=r.vector(table, "start_m", p, 3, default=list(default.start)),
+        max_speed=r.number(table, "max_speed_m_per_s", p, default=default.max_speed, positive=True),
+    )
 
 
 def _unit(r: TomlReader, table: dict, key: str, prefix: str) -> tuple[float, float, float]:
-    value = np.asarray(r.direction(table, key, prefix, fix="give the direction the hand moves in, e.g. [0, 0, -1]",
-                                   default=[0.0, 0.0, -1.0]))  # fmt: skip
+    value = np.asarray(
+        r.direction(
+            table, key, prefix, fix="give the direction the hand moves in, e.g. [0, 0, -1]", default=[0.0, 0.0, -1.0]
+        )
+    )
     return tuple(float(c) for c in value / np.linalg.norm(value))
 
 
@@ -146,34 +161,58 @@ def _action(r: TomlReader, i: int, table) -> Action:
     at = r.number(table, "at_s", prefix, nonnegative=True, fix="write the start time in s, e.g. at_s = 0.5")
     if kind == "drop":
         xy = table.get("centre_xy_m")
-        return Action(kind, at, height=r.number(table, "height_m", prefix, nonnegative=True, fix="write e.g. height_m = 0.3"),
-                      velocity=r.vector(table, "velocity_m_per_s", prefix, 3, default=[0.0, 0.0, 0.0]),
-                      centre_xy=None if xy is None else r.vector(table, "centre_xy_m", prefix, 2))  # fmt: skip
+        return Action(
+            kind,
+            at,
+            height=r.number(table, "height_m", prefix, nonnegative=True, fix="write e.g. height_m = 0.3"),
+            velocity=r.vector(table, "velocity_m_per_s", prefix, 3, default=[0.0, 0.0, 0.0]),
+            centre_xy=None if xy is None else r.vector(table, "centre_xy_m", prefix, 2),
+        )
     if kind == "poke":
-        return Action(kind, at, duration=r.number(table, "duration_s", prefix, positive=True, fix="write e.g. duration_s = 0.6"),
-                      direction=_unit(r, table, "direction", prefix),
-                      depth=r.number(table, "depth_m", prefix, positive=True, fix="write how far in, e.g. depth_m = 0.03"))  # fmt: skip
+        return Action(
+            kind,
+            at,
+            duration=r.number(table, "duration_s", prefix, positive=True, fix="write e.g. duration_s = 0.6"),
+            direction=_unit(r, table, "direction", prefix),
+            depth=r.number(table, "depth_m", prefix, positive=True, fix="write how far in, e.g. depth_m = 0.03"),
+        )
     if kind == "throw":
-        return Action(kind, at, duration=r.number(table, "hold_s", prefix, positive=True, fix="write the wind-up in s, e.g. hold_s = 0.3"),
-                      velocity=r.vector(table, "velocity_m_per_s", prefix, 3))  # fmt: skip
-    return Action(kind, at, duration=r.number(table, "duration_s", prefix, positive=True, fix="write e.g. duration_s = 0.5"))
+        return Action(
+            kind,
+            at,
+            duration=r.number(table, "hold_s", prefix, positive=True, fix="write the wind-up in s, e.g. hold_s = 0.3"),
+            velocity=r.vector(table, "velocity_m_per_s", prefix, 3),
+        )
+    return Action(
+        kind, at, duration=r.number(table, "duration_s", prefix, positive=True, fix="write e.g. duration_s = 0.5")
+    )
 
 
 def _check_timeline(r: TomlReader, actions: list[Action], duration: float) -> None:
     """Actions in time order, each starting after the previous one ends and before the end."""
     for i, action in enumerate(actions):
         if action.at >= duration:
-            raise r.fail(f"actions[{i}].at_s", f"starts at or after the end of the script ({duration:g} s)",
-                         f"start it before {duration:g} s or raise duration_s", value=action.at)  # fmt: skip
+            raise r.fail(
+                f"actions[{i}].at_s",
+                f"starts at or after the end of the script ({duration:g} s)",
+                f"start it before {duration:g} s or raise duration_s",
+                value=action.at,
+            )
         if i and action.at < actions[i - 1].end - 1e-12:
-            raise r.fail(f"actions[{i}].at_s", f"starts before actions[{i - 1}] ({actions[i - 1].kind}) ends at {actions[i - 1].end:g} s",
-                         f"set at_s >= {actions[i - 1].end:g} (actions run one after another, in time order)", value=action.at)  # fmt: skip
+            raise r.fail(
+                f"actions[{i}].at_s",
+                f"starts before actions[{i - 1}] ({actions[i - 1].kind}) ends at {actions[i - 1].end:g} s",
+                f"set at_s >= {actions[i - 1].end:g} (actions run one after another, in time order)",
+                value=action.at,
+            )
 
 
 def load_script(path: str | Path) -> InteractionScript:
     """The validated :class:`InteractionScript` of the TOML file at ``path``; raises
     ``InvalidInputError`` with one line naming the file, the field and the fix."""
-    data = read_toml(path, "interaction script", fix_missing="give the path of an interaction TOML, e.g. configs/interaction.toml")
+    data = read_toml(
+        path, "interaction script", fix_missing="give the path of an interaction TOML, e.g. configs/interaction.toml"
+    )
     r = TomlReader(path, doc=_DOC)
     r.no_unknown_keys(data, _TOP_KEYS)
     duration = r.number(data, "duration_s", positive=True, fix="write the replay's length in s, e.g. duration_s = 4.0")
@@ -182,11 +221,17 @@ def load_script(path: str | Path) -> InteractionScript:
         raise r.fail("fps", "frames per second must be within 10 … 1000", "write e.g. fps = 60", value=fps)
     gif_fps = r.number(data, "gif_fps", default=15.0, positive=True)
     if gif_fps > fps:
-        raise r.fail("gif_fps", f"the GIF cannot have more frames per second than the simulation (fps = {fps:g})",
-                     f"write gif_fps <= {fps:g}", value=gif_fps)  # fmt: skip
+        raise r.fail(
+            "gif_fps",
+            f"the GIF cannot have more frames per second than the simulation (fps = {fps:g})",
+            f"write gif_fps <= {fps:g}",
+            value=gif_fps,
+        )
     planes = data.get("planes", [{"name": "ground", "point_m": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}])
     if not isinstance(planes, list) or not planes:
-        raise r.fail("planes", "no plane (the first is the ground that drops fall onto)", "add a [[planes]] table", value=planes)
+        raise r.fail(
+            "planes", "no plane (the first is the ground that drops fall onto)", "add a [[planes]] table", value=planes
+        )
     actions = data.get("actions", [])
     if not isinstance(actions, list):
         raise r.fail("actions", "expected an array of tables", "write each action as [[actions]]", value=actions)
@@ -194,8 +239,13 @@ def load_script(path: str | Path) -> InteractionScript:
     _check_timeline(r, parsed, duration)
     name = data.get("name", Path(path).stem)
     return InteractionScript(
-        duration=duration, fps=fps, gif_fps=gif_fps, mesh_faces=r.integer(data, "mesh_faces", default=500, minimum=20),
-        planes=tuple(_plane(r, i, p) for i, p in enumerate(planes)), hand=_hand(r, data), actions=tuple(parsed),
-        name=str(name), source=Path(path),
-    )  # fmt: skip
-
+        duration=duration,
+        fps=fps,
+        gif_fps=gif_fps,
+        mesh_faces=r.integer(data, "mesh_faces", default=500, minimum=20),
+        planes=tuple(_plane(r, i, p) for i, p in enumerate(planes)),
+        hand=_hand(r, data),
+        actions=tuple(parsed),
+        name=str(name),
+        source=Path(path),
+    )

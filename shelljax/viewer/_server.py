@@ -30,8 +30,10 @@ def require_viser():
     try:
         import viser
     except ImportError:
-        raise InvalidInputError('the live viewer needs viser, which is not installed. Fix: pip install "shelljax[viewer]" '
-                                "(or run with --headless)") from None  # fmt: skip
+        raise InvalidInputError(
+            'the live viewer needs viser, which is not installed. Fix: pip install "shelljax[viewer]" '
+            "(or run with --headless)"
+        ) from None
     return viser
 
 
@@ -54,8 +56,15 @@ class ViewerApp:
     "grab"), ``height`` (the drop-height slider [m]) and ``status`` (the status line) are the GUI
     handles; :meth:`stop` ends the thread and the server."""
 
-    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 8080, fps: float | None = None,
-                 start_paused: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        fps: float | None = None,
+        start_paused: bool = False,
+    ):
         viser = require_viser()
         self.scene, self.ball = scene, scene.ball
         self.frame_dt = 1.0 / (fps or scene.script.fps)
@@ -69,8 +78,14 @@ class ViewerApp:
         self._pointer = np.array(scene.script.hand.start, dtype=float)
         self._pointer_before = self._pointer.copy()
         self._pointer_velocity = np.zeros(3)
-        self.readouts = {"time_s": 0.0, "real_time_factor": 0.0, "gauge_pressure_Pa": self.ball.p_gauge,
-                         "hand_force_N": 0.0, "plane_forces_N": [0.0] * len(scene.script.planes), "frames": 0}  # fmt: skip
+        self.readouts = {
+            "time_s": 0.0,
+            "real_time_factor": 0.0,
+            "gauge_pressure_Pa": self.ball.p_gauge,
+            "hand_force_N": 0.0,
+            "plane_forces_N": [0.0] * len(scene.script.planes),
+            "frames": 0,
+        }
         self.server = viser.ViserServer(host=host, port=port, label="shelljax play", verbose=False)
         self._build_scene()
         self._build_gui()
@@ -89,15 +104,32 @@ class ViewerApp:
         com, _ = self.ball.com()
         size = float(np.ptp(self.ball.x, axis=0).max())
         for i, plane in enumerate(self.scene.script.planes):
-            foot = com - ((com - np.asarray(plane.point)) @ np.asarray(plane.normal)) * np.asarray(plane.normal)  # under the shell
+            foot = com - ((com - np.asarray(plane.point)) @ np.asarray(plane.normal)) * np.asarray(
+                plane.normal
+            )  # under the shell
             corners, tris = _plane_quad(foot, plane.normal, 4.0 * size + 0.5)
-            s.add_mesh_simple(f"/planes/{plane.name or i}", corners, tris, color=(170, 170, 170), opacity=0.45, side="double",
-                              cast_shadow=False)  # fmt: skip
-        self.mesh = s.add_mesh_simple("/shell", self.ball.x.astype(np.float32), self.ball.faces.astype(np.uint32),
-                                      color=SHELL_RGB, flat_shading=False)  # fmt: skip
-        self.gizmo = s.add_transform_controls("/pointer", scale=0.25, disable_rotations=True, position=tuple(self._pointer))
-        self.hand_sphere = s.add_icosphere("/hand", radius=self.scene.script.hand.radius, color=HAND_RGB, subdivisions=2,
-                                           position=tuple(self._pointer))  # fmt: skip
+            s.add_mesh_simple(
+                f"/planes/{plane.name or i}",
+                corners,
+                tris,
+                color=(170, 170, 170),
+                opacity=0.45,
+                side="double",
+                cast_shadow=False,
+            )
+        self.mesh = s.add_mesh_simple(
+            "/shell",
+            self.ball.x.astype(np.float32),
+            self.ball.faces.astype(np.uint32),
+            color=SHELL_RGB,
+            flat_shading=False,
+        )
+        self.gizmo = s.add_transform_controls(
+            "/pointer", scale=0.25, disable_rotations=True, position=tuple(self._pointer)
+        )
+        self.hand_sphere = s.add_icosphere(
+            "/hand", radius=self.scene.script.hand.radius, color=HAND_RGB, subdivisions=2, position=tuple(self._pointer)
+        )
         self.gizmo.on_update(self._on_pointer)
         self.server.initial_camera.position = tuple(com + np.array([1.2, -1.6, 0.9]) * max(size, 0.2) * 1.8)
         self.server.initial_camera.look_at = tuple(com)
@@ -107,13 +139,24 @@ class ViewerApp:
         g.add_markdown(f"**{self.scene.label}**")
         self.status = g.add_markdown("running")
         self.time_s = g.add_number("time [s]", 0.0, step=0.001, disabled=True)
-        self.rt_factor = g.add_number("real-time factor [-]", 0.0, step=0.01, disabled=True,
-                                      hint="simulated time / compute time of the last frame (≥ 1: keeps up with real time)")
+        self.rt_factor = g.add_number(
+            "real-time factor [-]",
+            0.0,
+            step=0.01,
+            disabled=True,
+            hint="simulated time / compute time of the last frame (≥ 1: keeps up with real time)",
+        )
         self.pressure = g.add_number("gauge pressure [Pa]", float(self.ball.p_gauge), step=0.1, disabled=True)
         self.hand_force = g.add_number("hand force [N]", 0.0, step=0.01, disabled=True)
-        self.plane_forces = [g.add_number(f"{p.name} force [N]", 0.0, step=0.01, disabled=True) for p in self.scene.script.planes]
-        self.mode = g.add_dropdown("hand", ("poke", "grab"), initial_value="poke",
-                                   hint="poke: the sphere pushes the shell; grab: drag the gizmo onto the shell to hold it, move, let go to throw")
+        self.plane_forces = [
+            g.add_number(f"{p.name} force [N]", 0.0, step=0.01, disabled=True) for p in self.scene.script.planes
+        ]
+        self.mode = g.add_dropdown(
+            "hand",
+            ("poke", "grab"),
+            initial_value="poke",
+            hint="poke: the sphere pushes the shell; grab: drag the gizmo onto the shell to hold it, move, let go to throw",
+        )
         self.height = g.add_slider("drop height [m]", min=0.0, max=1.5, step=0.05, initial_value=0.3)
         g.add_button("Drop").on_click(lambda _: self.command("drop"))
         g.add_button("Reset").on_click(lambda _: self.command("reset"))
@@ -210,10 +253,13 @@ class ViewerApp:
                 return
             x = self.ball.x.astype(np.float32)
             self.readouts = {
-                "time_s": frame.time_s, "real_time_factor": self.frame_dt / max(frame.wall_s, 1e-9),
-                "gauge_pressure_Pa": frame.gauge_pressure_Pa, "hand_force_N": float(np.linalg.norm(frame.collider_force_N)),
-                "plane_forces_N": [float(np.linalg.norm(f)) for f in frame.plane_forces_N], "frames": self.readouts["frames"] + 1,
-            }  # fmt: skip
+                "time_s": frame.time_s,
+                "real_time_factor": self.frame_dt / max(frame.wall_s, 1e-9),
+                "gauge_pressure_Pa": frame.gauge_pressure_Pa,
+                "hand_force_N": float(np.linalg.norm(frame.collider_force_N)),
+                "plane_forces_N": [float(np.linalg.norm(f)) for f in frame.plane_forces_N],
+                "frames": self.readouts["frames"] + 1,
+            }
             hand_at = self.hand.position.copy()
         self._publish(x, hand_at)
 
