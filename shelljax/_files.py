@@ -101,15 +101,21 @@ def read_json(path: str | Path, what: str, *, fix: str) -> Any:
         raise InvalidInputError(f"{path}: not a whole {what} ({type(err).__name__}: {err}). Fix: {fix}") from None
 
 
-def atomic_write_text(path: str | Path, text: str, *, check: Callable[[Path], object] | None = None) -> Path:
+def atomic_write_text(
+    path: str | Path, text: str, *, check: Callable[[Path], object] | None = None, durable: bool = False
+) -> Path:
     """Write ``text`` to ``path`` through a temporary file renamed into place (readable by all), so
     a reader or a killed run never sees half a file; ``check(temporary_path)`` may refuse the
-    content by raising before the rename, leaving ``path`` as it was."""
+    content by raising before the rename, leaving ``path`` as it was; ``durable``: the content is
+    fsync-ed to the disk before the rename, so the file also survives a power cut (a recording)."""
     path = Path(path)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(handle, "w") as out:
             out.write(text)
+            if durable:
+                out.flush()
+                os.fsync(out.fileno())
         os.chmod(temporary, 0o644)
         if check is not None:
             check(Path(temporary))

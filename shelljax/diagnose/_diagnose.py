@@ -395,6 +395,19 @@ def _sessions_record(study: Study) -> list[dict]:
     ]
 
 
+def _with_measurement(
+    effects: tuple[str, ...], baseline_free: tuple[str, ...], measurement: MeasurementPrior | None
+) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """The candidates, the baseline's free parameters and the candidates the measuring chain already
+    holds, once a calibrated ``measurement`` (if any) joins the baseline."""
+    if measurement is None:
+        return effects, baseline_free, ()
+    baseline_free += tuple(p for p in measurement.parameters if p not in baseline_free)
+    # a candidate whose parameters the calibrated chain already fits would be the baseline again
+    in_baseline = tuple(e for e in effects if set(EFFECTS[e].parameters) <= set(measurement.parameters))
+    return tuple(e for e in effects if e not in in_baseline), baseline_free, in_baseline
+
+
 def diagnose(
     sessions: Sequence[Session | str | Path],
     *,
@@ -425,13 +438,7 @@ def diagnose(
     study = build_study(sessions, None if measurement is None else measurement.noise)
     base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
     base = measured_baseline(base, measurement)
-    baseline_free = object_unknowns(study)
-    in_baseline = ()
-    if measurement is not None:
-        baseline_free += tuple(p for p in measurement.parameters if p not in baseline_free)
-        # a candidate whose parameters the calibrated chain already fits would be the baseline again
-        in_baseline = tuple(e for e in effects if set(EFFECTS[e].parameters) <= set(measurement.parameters))
-        effects = tuple(e for e in effects if e not in in_baseline)
+    effects, baseline_free, in_baseline = _with_measurement(effects, object_unknowns(study), measurement)
     report_progress = _progress_reporter(progress, 1 + len(effects))
     fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
     ranking, chosen = _ranking(fits, scores, effects)

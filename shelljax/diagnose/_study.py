@@ -222,6 +222,61 @@ def object_unknowns(study: Study) -> tuple[str, ...]:
     )
 
 
+def _trial_units(
+    sessions: tuple[Session, ...], min_trials: int
+) -> tuple[list[tuple[int, int]], dict[tuple[int, int], int]]:
+    """The leave-one-out units, (session index, trial id) each, and each one's index; refuses a study
+    with fewer than ``min_trials`` trials or ``MIN_DEPTHS`` depth samples."""
+    units, unit_of = [], {}
+    for si, s in enumerate(sessions):
+        for t in s.trial_ids:
+            unit_of[(si, t)] = len(units)
+            units.append((si, t))
+    n_depth = sum(s.depth.size for s in sessions)
+    if len(units) < min_trials or n_depth < MIN_DEPTHS:
+        raise InvalidInputError(
+            f"the study is too small to rank candidate effects: {len(units)} trials with {n_depth} depth samples "
+            f"in {len(sessions)} session(s) (need at least {min_trials} trials and {MIN_DEPTHS} samples: "
+            "leave-one-trial-out needs trials to leave out). Fix: add sessions or trials"
+        )
+    return units, unit_of
+
+
+def _depth_noise(
+    sessions: tuple[Session, ...],
+    levels: list[np.ndarray],
+    depth: np.ndarray,
+    noise: tuple[float, tuple[float, float]] | None,
+) -> tuple[float, tuple[float, float], np.ndarray]:
+    """The trial offset std τ_t [m], the scatter (a [m²], b [-]) and each depth sample's marginal
+    std [m]: ``noise`` where given, else estimated from the replicates."""
+    tau, scatter = _anova(sessions, levels) if noise is None else noise
+    if scatter is None:  # no replicated levels: model-free scatter about a line in force, per session
+        noise = np.sqrt(np.mean([depth_noise_from_scatter(s.force, s.depth) ** 2 for s in sessions]))
+        scatter = (float(noise**2), 0.0)
+    depth_std = np.sqrt(np.maximum(scatter[0] + scatter[1] * depth**2, DEPTH_NOISE_FLOOR**2))
+    return tau, scatter, depth_std
+
+
+def _starting_values(sessions: tuple[Session, ...]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per session the manometer's gauge pressure [Pa] (NaN: none) and the starting pressure [Pa];
+    the shared starting Young's modulus [Pa]."""
+    manometer = np.array(
+        [np.nan if s.manometer_gauge_pressure is None else s.manometer_gauge_pressure for s in sessions]
+    )
+    # start: the manometer where there is one, else the closed form's P_g with the paper's k_s
+    start_pressure = np.array(
+        [m if np.isfinite(m) else pressure_slope(s)[0].value / PAPER_KS for m, s in zip(manometer, sessions)]
+    )
+    # E from the wrinkle law at the starting pressures (the manometer's where known, not k_s's)
+    moduli = [
+        modulus_from_wrinkles(p, s.radius, s.thickness, float(np.mean(s.wrinkle_counts)), s.poisson_ratio)
+        for p, s in zip(start_pressure, sessions)
+        if np.mean(s.wrinkle_counts) > 0
+    ]
+    return manometer, start_pressure, float(np.exp(np.mean(np.log(moduli)))) if moduli else 1e6
+
+
 def build_study(
     sessions: Sequence[Session],
     noise: tuple[float, tuple[float, float]] | None = None,
@@ -240,46 +295,19 @@ def build_study(
     if not sessions:
         raise InvalidInputError("no sessions given. Fix: pass the session TOML files of one object")
     _check_one_object(sessions, command)
-    units, unit_of = [], {}
-    for si, s in enumerate(sessions):
-        for t in s.trial_ids:
-            unit_of[(si, t)] = len(units)
-            units.append((si, t))
-    n_depth = sum(s.depth.size for s in sessions)
-    if len(units) < min_trials or n_depth < MIN_DEPTHS:
-        raise InvalidInputError(
-            f"the study is too small to rank candidate effects: {len(units)} trials with {n_depth} depth samples "
-            f"in {len(sessions)} session(s) (need at least {min_trials} trials and {MIN_DEPTHS} samples: "
-            "leave-one-trial-out needs trials to leave out). Fix: add sessions or trials"
-        )
+    units, unit_of = _trial_units(sessions, min_trials)
     # one protocol for the study: force levels are clustered over all sessions together
     all_levels = _levels(np.concatenate([s.force for s in sessions]))
     levels = np.split(all_levels, np.cumsum([s.force.size for s in sessions])[:-1])
-    tau, scatter = _anova(sessions, levels) if noise is None else noise
     depth = np.concatenate([s.depth for s in sessions])
-    if scatter is None:  # no replicated levels: model-free scatter about a line in force, per session
-        noise = np.sqrt(np.mean([depth_noise_from_scatter(s.force, s.depth) ** 2 for s in sessions]))
-        scatter = (float(noise**2), 0.0)
-    depth_std = np.sqrt(np.maximum(scatter[0] + scatter[1] * depth**2, DEPTH_NOISE_FLOOR**2))
+    tau, scatter, depth_std = _depth_noise(sessions, levels, depth, noise)
     depth_session = np.concatenate([np.full(s.depth.size, i) for i, s in enumerate(sessions)])
     depth_unit = np.concatenate([[unit_of[(i, t)] for t in s.trial] for i, s in enumerate(sessions)]).astype(int)
     count_session = np.concatenate([np.full(s.trial_ids.size, i) for i, s in enumerate(sessions)])
     count_unit = np.array([unit_of[(i, t)] for i, s in enumerate(sessions) for t in s.trial_ids])
     shape = _shape_points(sessions, unit_of)
     radius = np.array([s.radius for s in sessions])
-    manometer = np.array(
-        [np.nan if s.manometer_gauge_pressure is None else s.manometer_gauge_pressure for s in sessions]
-    )
-    # start: the manometer where there is one, else the closed form's P_g with the paper's k_s
-    start_pressure = np.array(
-        [m if np.isfinite(m) else pressure_slope(s)[0].value / PAPER_KS for m, s in zip(manometer, sessions)]
-    )
-    # E from the wrinkle law at the starting pressures (the manometer's where known, not k_s's)
-    moduli = [
-        modulus_from_wrinkles(p, s.radius, s.thickness, float(np.mean(s.wrinkle_counts)), s.poisson_ratio)
-        for p, s in zip(start_pressure, sessions)
-        if np.mean(s.wrinkle_counts) > 0
-    ]
+    manometer, start_pressure, start_modulus = _starting_values(sessions)
     masses = [s.mass for s in sessions if s.mass is not None]
     volumes = [
         s.enclosed_volume / (4.0 / 3.0 * math.pi * s.radius**3)
@@ -313,7 +341,7 @@ def build_study(
         poisson_ratio=sessions[0].poisson_ratio,
         mass=float(np.mean(masses)) if masses else None,
         gas_volume_ratio=float(np.mean(volumes)) if volumes else 1.0,
-        start_modulus=float(np.exp(np.mean(np.log(moduli)))) if moduli else 1e6,
+        start_modulus=start_modulus,
         trial_offset_std=tau,
         depth_noise=scatter,
         units=tuple(units),

@@ -210,6 +210,66 @@ def _estimate_from_log(center, lo, hi, log_std, method) -> Estimate:
     return Estimate(value, value * log_std, (math.exp(lo), math.exp(hi)), "Pa", method)
 
 
+def _fit_rig_model(base, study, rig: Rig, model, quantities, method: str, draws: int, seed: int, source):
+    """(the report's record, the mixture's entry or None where the fit failed) of the session(s)
+    under one rig model: its fit, its Laplace estimates [Pa] and evidence and, for "bayes", its
+    importance draws."""
+    record = {"terms": list(model.terms), "weight": model.weight}
+    fit = fit_model(
+        base,
+        study,
+        model.terms,
+        rig.wrinkle_law,
+        _start(base, study, model),
+        rig_prior=(model.parameters, model.mean, model.covariance) if model.parameters else None,
+    )
+    if not fit.converged:
+        warnings.warn(
+            f"{source}: the fit under rig model {'+'.join(model.terms) or 'ideal'} failed "
+            f"({fit.message}); the other models carry its weight",
+            RigWarning,
+            stacklevel=3,
+        )
+        return {**record, "status": "failed", "message": fit.message}, None
+    laplace = {}
+    for name, index in quantities:
+        u, std = laplace_interval(fit, index)
+        laplace[name] = (u + _log_reference(fit.data, index, study.n_sessions), std)
+    record["estimates"] = {n: {"value": math.exp(m), "relative_std": s, "unit": "Pa"} for n, (m, s) in laplace.items()}
+    record["chi2"] = fit.chi2
+    record["log_evidence"] = _log_evidence(fit, model)
+    entry = {"weight": model.weight, "laplace": laplace, "fit": fit, "log_evidence": record["log_evidence"]}
+    if method == "bayes":
+        n_draws = max(MIN_DRAWS, int(round(draws * model.weight)))
+        entry["draws"], entry["draw_weights"], k_hat = _importance(fit, rig, quantities, study, n_draws, seed)
+        record["pareto_k"] = k_hat
+        if k_hat > PARETO_K_LIMIT:
+            warnings.warn(
+                f"{source}: PSIS k̂ = {k_hat:.2f} > {PARETO_K_LIMIT} under rig model "
+                f"{'+'.join(model.terms) or 'ideal'}: its posterior draws are unreliable",
+                RigWarning,
+                stacklevel=3,
+            )
+    record["status"] = "ok"
+    return record, entry
+
+
+def _mixture_estimate(name: str, mixture: list[dict], weights: np.ndarray, method: str, label: str) -> Estimate:
+    """The quantity ``name`` [Pa] over the rig models' mixture: their Laplace normals ("fit") or their
+    pooled importance draws ("bayes"), weighted by ``weights``."""
+    if method == "fit":
+        center, lo, hi, log_std = normal_mixture(
+            [e["laplace"][name][0] for e in mixture], [e["laplace"][name][1] for e in mixture], weights
+        )
+    else:
+        values = np.concatenate([e["draws"][name] for e in mixture])
+        w = np.concatenate([wm * e["draw_weights"] for wm, e in zip(weights, mixture)])
+        center, lo, hi = (_weighted_quantile(values, w, q) for q in (0.5, 0.025, 0.975))
+        mean = float(np.sum(w * values) / np.sum(w))
+        log_std = math.sqrt(float(np.sum(w * (values - mean) ** 2) / np.sum(w)))
+    return _estimate_from_log(center, lo, hi, log_std, label)
+
+
 def estimate_with_rig(
     sessions: Session | str | Path | Sequence[Session | str | Path],
     rig: Rig,
@@ -238,48 +298,10 @@ def estimate_with_rig(
     quantities = _quantities(study)
     per_model, mixture = [], []
     for model in rig.models:
-        record = {"terms": list(model.terms), "weight": model.weight}
-        fit = fit_model(
-            base,
-            study,
-            model.terms,
-            rig.wrinkle_law,
-            _start(base, study, model),
-            rig_prior=(model.parameters, model.mean, model.covariance) if model.parameters else None,
-        )
-        if not fit.converged:
-            warnings.warn(
-                f"{sessions[0].source}: the fit under rig model {'+'.join(model.terms) or 'ideal'} failed "
-                f"({fit.message}); the other models carry its weight",
-                RigWarning,
-                stacklevel=2,
-            )
-            per_model.append({**record, "status": "failed", "message": fit.message})
-            continue
-        laplace = {}
-        for name, index in quantities:
-            u, std = laplace_interval(fit, index)
-            laplace[name] = (u + _log_reference(fit.data, index, study.n_sessions), std)
-        record["estimates"] = {
-            n: {"value": math.exp(m), "relative_std": s, "unit": "Pa"} for n, (m, s) in laplace.items()
-        }
-        record["chi2"] = fit.chi2
-        record["log_evidence"] = _log_evidence(fit, model)
-        entry = {"weight": model.weight, "laplace": laplace, "fit": fit, "log_evidence": record["log_evidence"]}
-        if method == "bayes":
-            n_draws = max(MIN_DRAWS, int(round(draws * model.weight)))
-            entry["draws"], entry["draw_weights"], k_hat = _importance(fit, rig, quantities, study, n_draws, seed)
-            record["pareto_k"] = k_hat
-            if k_hat > PARETO_K_LIMIT:
-                warnings.warn(
-                    f"{sessions[0].source}: PSIS k̂ = {k_hat:.2f} > {PARETO_K_LIMIT} under rig model "
-                    f"{'+'.join(model.terms) or 'ideal'}: its posterior draws are unreliable",
-                    RigWarning,
-                    stacklevel=2,
-                )
-        record["status"] = "ok"
+        record, entry = _fit_rig_model(base, study, rig, model, quantities, method, draws, seed, sessions[0].source)
         per_model.append(record)
-        mixture.append(entry)
+        if entry is not None:
+            mixture.append(entry)
     if not mixture:
         raise NoConvergenceError(
             f"{sessions[0].source}: no rig model's fit converged ({'; '.join(r.get('message', '') for r in per_model)})"
@@ -287,20 +309,8 @@ def estimate_with_rig(
     weights = updated_weights([e["weight"] for e in mixture], [e["log_evidence"] for e in mixture])
     for record, weight in zip([r for r in per_model if r["status"] == "ok"], weights):
         record["updated_weight"] = float(weight)
-    estimates = {}
     label = f"{method} through a rig of {len(rig.models)} model(s)"
-    for name, _ in quantities:
-        if method == "fit":
-            center, lo, hi, log_std = normal_mixture(
-                [e["laplace"][name][0] for e in mixture], [e["laplace"][name][1] for e in mixture], weights
-            )
-        else:
-            values = np.concatenate([e["draws"][name] for e in mixture])
-            w = np.concatenate([wm * e["draw_weights"] for wm, e in zip(weights, mixture)])
-            center, lo, hi = (_weighted_quantile(values, w, q) for q in (0.5, 0.025, 0.975))
-            mean = float(np.sum(w * values) / np.sum(w))
-            log_std = math.sqrt(float(np.sum(w * (values - mean) ** 2) / np.sum(w)))
-        estimates[name] = _estimate_from_log(center, lo, hi, log_std, label)
+    estimates = {name: _mixture_estimate(name, mixture, weights, method, label) for name, _ in quantities}
     return RigEstimate(
         estimates=estimates,
         models=tuple(per_model),

@@ -158,24 +158,10 @@ def _read_model(check: TomlReader, table: dict, i: int) -> RigModel:
     )
 
 
-def load_rig(path: str | Path) -> Rig:
-    """Read and check a rig file written by :func:`write_rig`.
-
-    Raises:
-        InvalidInputError: an unreadable file, another format or shelljax version, or any field
-            that is missing or makes no sense (the message names the field and the fix).
-    """
+def _checked_version(check: TomlReader, data: dict) -> str:
+    """The shelljax version that wrote the rig file, once its format and version are this shelljax's."""
     from .. import __version__
 
-    path = Path(path)
-    data = read_toml(
-        path,
-        "rig file",
-        fix_missing=f"make one with `shelljax rig calibrate SESSIONS... --out {path}`",
-        fix_syntax="re-create it with `shelljax rig calibrate`",
-    )
-    # a rig file is written by `shelljax rig calibrate`, so every field's fix is to write it again
-    check = TomlReader(path, fix="re-create the file with `shelljax rig calibrate`", doc="docs/rig.md")
     fmt = data.get("format")
     if fmt is None:
         is_session = "object" in data or "indentation" in data
@@ -197,7 +183,11 @@ def load_rig(path: str | Path) -> Rig:
             f"made by shelljax {version}, incompatible with {__version__} (the models may differ)",
             "re-calibrate the rig with this version",
         )
-    fm = check.typed(data, "forward_model", dict)
+    return version
+
+
+def _read_reference_and_noise(check: TomlReader, data: dict) -> tuple[float, float, tuple[float, tuple[float, float]]]:
+    """(reference force [N], indenter radius [m], depth noise (τ_t [m], (a [m²], b [-]))), checked."""
     ref = check.typed(data, "reference", dict)
     noise = check.typed(data, "noise", dict)
     force_ref = check.typed(ref, "force_ref", float, "reference.")
@@ -213,6 +203,11 @@ def load_rig(path: str | Path) -> Rig:
             raise check.fail(field, f"{value!r} is negative")
     if a + b <= 0:
         raise check.fail("noise.depth_scatter_a", "the depth scatter is zero")
+    return force_ref, radius, (tau, (a, b))
+
+
+def _read_models(check: TomlReader, data: dict) -> tuple[RigModel, ...]:
+    """The rig's models, each checked, their weights adding up to 1."""
     tables = check.typed(data, "model", list)
     if not tables:
         raise check.fail("model", "no model")
@@ -220,6 +215,29 @@ def load_rig(path: str | Path) -> Rig:
     total = sum(m.weight for m in models)
     if abs(total - 1.0) > 1e-6:
         raise check.fail("model.weight", f"the weights add up to {total:.6g}, not 1")
+    return models
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read and check a rig file written by :func:`write_rig`.
+
+    Raises:
+        InvalidInputError: an unreadable file, another format or shelljax version, or any field
+            that is missing or makes no sense (the message names the field and the fix).
+    """
+    path = Path(path)
+    data = read_toml(
+        path,
+        "rig file",
+        fix_missing=f"make one with `shelljax rig calibrate SESSIONS... --out {path}`",
+        fix_syntax="re-create it with `shelljax rig calibrate`",
+    )
+    # a rig file is written by `shelljax rig calibrate`, so every field's fix is to write it again
+    check = TomlReader(path, fix="re-create the file with `shelljax rig calibrate`", doc="docs/rig.md")
+    version = _checked_version(check, data)
+    fm = check.typed(data, "forward_model", dict)
+    force_ref, radius, (tau, (a, b)) = _read_reference_and_noise(check, data)
+    models = _read_models(check, data)
     selection = data.get("selection", {})
     from ..diagnose._model import WRINKLE_LAWS
 

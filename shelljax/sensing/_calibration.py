@@ -32,8 +32,10 @@ from pathlib import Path
 
 import numpy as np
 import tomli_w
+from jaxtyping import Float
 
 from .._errors import InvalidInputError
+from .._files import atomic_write_text
 from .._toml import REQUIRED, TomlReader, read_toml
 
 SCHEMA_KIND = "shelljax-force-sensor-calibration"
@@ -195,7 +197,7 @@ class SensorCalibration:
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as TOML (SI: forces in N; c dimensionless)."""
-        Path(path).write_text(_HEADER + tomli_w.dumps(self.to_dict()))
+        atomic_write_text(path, _HEADER + tomli_w.dumps(self.to_dict()))
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "<dict>") -> "SensorCalibration":
@@ -280,6 +282,39 @@ _HEADER = (
 )
 
 
+def _unloaded_zero(zeros: Sequence[LoadPoint]) -> tuple[float, float]:
+    """The unloaded reading c0 [-] (the readings' mean, weighted by their sample counts) and its std [-]."""
+    zero_values = np.array([p.c_mean for p in zeros])
+    zero_weights = np.array([max(p.n, 1) for p in zeros], dtype=np.float64)
+    c0 = float(np.average(zero_values, weights=zero_weights))
+    # Spread of repeated tares if there are several, else the noise of the mean of one.
+    if len(zeros) > 1:
+        zero_std = float(np.std(zero_values, ddof=1))
+    else:
+        zero_std = float(zeros[0].c_std / math.sqrt(max(zeros[0].n, 1)))
+    return c0, zero_std
+
+
+def _fit_log_law(
+    x: Float[np.ndarray, " n"], y: Float[np.ndarray, " n"], model: str
+) -> tuple[float, float, Float[np.ndarray, "2 2"], float]:
+    """(log a, β, the 2×2 covariance of (log a, β), the residual variance s²) of y = log a + β x by
+    least squares, x = log F [log N] and y = log(c − c0) [-]; β = 1 for ``"linear_conductance"``."""
+    if model == "power":
+        design = np.stack([np.ones_like(x), x], axis=1)
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        dof = len(y) - 2
+        resid = y - design @ coef
+        s2 = float(resid @ resid / dof) if dof > 0 else 0.0
+        cov = s2 * np.linalg.inv(design.T @ design)
+        return float(coef[0]), float(coef[1]), cov, s2
+    log_a = float(np.mean(y - x))
+    resid = y - x - log_a
+    dof = len(y) - 1
+    s2 = float(resid @ resid / dof) if dof > 0 else 0.0
+    return log_a, 1.0, np.array([[s2 / len(y), 0.0], [0.0, 0.0]]), s2
+
+
 def fit_calibration(
     loads: Sequence[LoadPoint],
     *,
@@ -314,14 +349,7 @@ def fit_calibration(
             f"calibration: {len({p.force for p in loaded})} distinct loads, need at least {n_needed} "
             f"for model {model!r}. Fix: add more known weights spanning the working range (e.g. 0.5–2.5 kg)"
         )
-    zero_values = np.array([p.c_mean for p in zeros])
-    zero_weights = np.array([max(p.n, 1) for p in zeros], dtype=np.float64)
-    c0 = float(np.average(zero_values, weights=zero_weights))
-    # Spread of repeated tares if there are several, else the noise of the mean of one.
-    if len(zeros) > 1:
-        zero_std = float(np.std(zero_values, ddof=1))
-    else:
-        zero_std = float(zeros[0].c_std / math.sqrt(max(zeros[0].n, 1)))
+    c0, zero_std = _unloaded_zero(zeros)
     force = np.array([p.force for p in loaded])
     excess = np.array([p.c_mean for p in loaded]) - c0
     if np.any(excess <= 0):
@@ -330,21 +358,7 @@ def fit_calibration(
             f"calibration: the reading under {bad:.3g} N is not above the unloaded reading (c={c0:.4g}). "
             "Fix: check that the weight rests on the sensor's active area and the sensor is wired"
         )
-    x, y = np.log(force), np.log(excess)
-    if model == "power":
-        design = np.stack([np.ones_like(x), x], axis=1)
-        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-        dof = len(y) - 2
-        resid = y - design @ coef
-        s2 = float(resid @ resid / dof) if dof > 0 else 0.0
-        cov = s2 * np.linalg.inv(design.T @ design)
-        log_a, beta = float(coef[0]), float(coef[1])
-    else:
-        log_a, beta = float(np.mean(y - x)), 1.0
-        resid = y - x - log_a
-        dof = len(y) - 1
-        s2 = float(resid @ resid / dof) if dof > 0 else 0.0
-        cov = np.array([[s2 / len(y), 0.0], [0.0, 0.0]])
+    log_a, beta, cov, s2 = _fit_log_law(np.log(force), np.log(excess), model)
     if not beta > 0:
         raise InvalidInputError(
             f"calibration: fitted exponent β={beta:.3g} is not positive (the reading falls with load). "

@@ -40,6 +40,13 @@ def emulated_calibration_path() -> Path:
 
 def register(subparsers) -> None:
     """Add ``acquire``, ``sensor-calibrate`` and ``sensor-emulator`` to an argparse subparsers object."""
+    _register_acquire(subparsers)
+    _register_calibrate(subparsers)
+    _register_emulator(subparsers)
+
+
+def _register_acquire(subparsers) -> None:
+    """Add ``shelljax acquire``: the source, the output, the session's fields and the protocol."""
     acq = subparsers.add_parser(
         "acquire",
         help="record an indentation session from the force sensor (or the emulator)",
@@ -90,6 +97,9 @@ def register(subparsers) -> None:
     proto.add_argument("--no-level-wrinkles", action="store_true", help="ask for the wrinkle count only once per trial")
     acq.set_defaults(func=cmd_acquire)
 
+
+def _register_calibrate(subparsers) -> None:
+    """Add ``shelljax sensor-calibrate``: the source, the output, the known masses and the curve."""
     cal = subparsers.add_parser("sensor-calibrate", help="calibrate the force sensor with known weights")
     _add_source(cal)
     cal.add_argument("--out", required=True, help="calibration TOML to write (checked before the first weight)")
@@ -105,6 +115,9 @@ def register(subparsers) -> None:
     cal.add_argument("--gravity", type=real(9.7, 9.9, unit="m/s^2"), default=9.80665, help="[m/s^2] local gravity")
     cal.set_defaults(func=cmd_calibrate)
 
+
+def _register_emulator(subparsers) -> None:
+    """Add ``shelljax sensor-emulator``: the emulated sensor served on a pseudo-terminal."""
     emu = subparsers.add_parser(
         "sensor-emulator",
         help="serve the emulated sensor on a pseudo-terminal (try the hardware path without hardware)",

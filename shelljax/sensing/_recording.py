@@ -27,9 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
-import json
 import math
-import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -37,16 +35,14 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
-from .._files import check_output_file
+from .._files import atomic_write_text, check_output_file
 from ..paper import PAPER_FORCES
 from ..session import LENGTH_UNITS
 from ._calibration import ADC_SATURATED, SensorCalibration
 from ._capture import HumanOperator, Operator, Pump, Reading, SampleLog, accept_force
 from ._console import Console
 from ._driver import SerialSensor
-
-
-EVENTS_VERSION = 1
+from ._events import EVENTS_VERSION, EventLog, RecordingState
 
 
 class RecordingAborted(Exception):
@@ -144,74 +140,6 @@ class RecordingPaths:
             )
 
 
-class EventLog:
-    """Append-only JSON-lines file, fsync-ed per event. A torn last line is ignored on reading."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        self._file = open(path, "ab", buffering=0)
-        if path.stat().st_size and not path.read_bytes().endswith(b"\n"):
-            self._file.write(b"\n")
-
-    def append(self, event: dict) -> None:
-        self._file.write((json.dumps(event, sort_keys=True) + "\n").encode())
-        os.fsync(self._file.fileno())
-
-    def close(self) -> None:
-        self._file.close()
-
-    @staticmethod
-    def read(path: Path) -> list[dict]:
-        events = []
-        for line in path.read_text().splitlines():
-            if not line.strip():
-                continue
-            try:
-                events.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue  # torn by a crash in mid-write; the event after it was never acted on
-        return events
-
-
-@dataclasses.dataclass
-class _State:
-    """What the event log says has been recorded."""
-
-    start: dict
-    levels: dict[int, list[dict]] = dataclasses.field(default_factory=dict)
-    skipped: dict[int, set[float]] = dataclasses.field(default_factory=dict)
-    wrinkles: dict[int, int] = dataclasses.field(default_factory=dict)
-
-    @classmethod
-    def from_events(cls, events: list[dict], path: Path) -> "_State":
-        if not events or events[0].get("event") != "start":
-            raise InvalidInputError(
-                f"{path}: no start event, so there is nothing to resume. Fix: start a new recording "
-                "without --resume (delete or move the old files first)"
-            )
-        if events[0].get("version") != EVENTS_VERSION:
-            raise InvalidInputError(f"{path}: event log version {events[0].get('version')!r} unknown")
-        state = cls(events[0])
-        for event in events[1:]:
-            kind, trial = event.get("event"), event.get("trial")
-            if kind == "level":
-                state.levels.setdefault(trial, []).append(event)
-            elif kind == "skip":
-                state.skipped.setdefault(trial, set()).add(event["target"])
-            elif kind == "trial":
-                state.wrinkles[trial] = event["wrinkles"]
-        return state
-
-    def done_targets(self, trial: int) -> set[float]:
-        return {e["target"] for e in self.levels.get(trial, [])} | self.skipped.get(trial, set())
-
-    def next_trial(self) -> int:
-        trial = 1
-        while trial in self.wrinkles:
-            trial += 1
-        return trial
-
-
 @dataclasses.dataclass(frozen=True)
 class AcquisitionResult:
     """Where the recording went and what it holds."""
@@ -242,7 +170,7 @@ def _resumed(paths: RecordingPaths):
     """(state, calibration, plan, meta) of an interrupted recording, from its event log."""
     if not paths.events.exists():
         raise InvalidInputError(f"--resume: {paths.events} not found. Fix: pass the --out of the interrupted recording")
-    state = _State.from_events(EventLog.read(paths.events), paths.events)
+    state = RecordingState.from_events(EventLog.read(paths.events), paths.events)
     start = state.start
     calibration = SensorCalibration.from_dict(start["calibration"], source=str(paths.events))
     return state, calibration, _plan_from_dict(start["plan"]), start["meta"]
@@ -250,7 +178,7 @@ def _resumed(paths: RecordingPaths):
 
 def _started(
     paths: RecordingPaths, calibration: SensorCalibration | None, plan: AcquisitionPlan | None, meta: dict | None
-) -> _State:
+) -> RecordingState:
     """The state of a new recording, after checking that nothing would be overwritten."""
     if calibration is None or plan is None or meta is None:
         raise ValueError("a new recording needs calibration, plan and meta")
@@ -268,7 +196,7 @@ def _started(
         "plan": _plan_to_dict(plan),
         "meta": meta,
     }
-    return _State(start)
+    return RecordingState(start)
 
 
 def acquire(
@@ -362,7 +290,7 @@ class _Walk:
         console: Console,
         operator: Operator,
         events: EventLog,
-        state: _State,
+        state: RecordingState,
         paths: RecordingPaths,
         calibration: SensorCalibration,
     ):
@@ -589,7 +517,7 @@ def write_session_files(
     for trial in completed:
         for event in sorted(levels.get(trial, []), key=lambda e: e["target"]):
             lines.append(f"{trial},{event['force']!r},{event['depth']!r}")
-    _atomic_write(paths.trials_csv, "\n".join(lines) + "\n")
+    atomic_write_text(paths.trials_csv, "\n".join(lines) + "\n", durable=True)
     session = {"schema_version": 1}
     session.update({k: v for k, v in meta.items() if k not in ("geometry", "wall", "notes")})
     notes = "\n".join(n for n in (meta.get("notes", ""), notes_extra) if n)
@@ -600,13 +528,4 @@ def write_session_files(
     session["indentation"] = {"force_unit": "N", "depth_unit": plan.depth_unit, "trials_csv": paths.trials_csv.name}
     session["wrinkles"] = {"counts": [int(wrinkles[t]) for t in completed]}
     header = "# Written by `shelljax acquire`; format: shelljax.session (docs/session-format.md).\n"
-    _atomic_write(paths.session, header + tomli_w.dumps(session))
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
+    atomic_write_text(paths.session, header + tomli_w.dumps(session), durable=True)

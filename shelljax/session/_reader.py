@@ -1,7 +1,8 @@
-"""The session files' use of the one TOML reader (shelljax._toml): their units, arrays and hash."""
+"""The session files' use of the one TOML reader (shelljax._toml): their units, arrays, CSV rows and hash."""
 
 from __future__ import annotations
 
+import csv
 import hashlib
 from pathlib import Path
 from typing import Any
@@ -43,3 +44,20 @@ class _Reader(TomlReader):
 
 def _read_toml(path: Path) -> dict[str, Any]:
     return read_toml(path, "session file", fix_missing="check the path")
+
+
+def _unit_name(table: dict, key: str, default: str) -> str:
+    """The unit ``key`` names (already checked by ``_Reader.unit``), or ``default``."""
+    return table.get(key, default)
+
+
+def _csv_rows(reader: _Reader, field: str, csv_path: Path) -> list[list[str]]:
+    """The rows of the CSV that ``field`` names, or an error saying the file is missing."""
+    if not csv_path.is_file():
+        raise reader.fail(
+            field,
+            f"file {csv_path} does not exist",
+            "put the CSV beside the session file or fix the path (relative to the TOML)",
+        )
+    with csv_path.open(newline="") as handle:
+        return list(csv.reader(handle))
