@@ -395,7 +395,7 @@ def _sessions_record(study: Study) -> list[dict]:
     ]
 
 
-def _with_measurement(
+def _candidates_beside_measurement(
     effects: tuple[str, ...], baseline_free: tuple[str, ...], measurement: MeasurementPrior | None
 ) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """The candidates, the baseline's free parameters and the candidates the measuring chain already
@@ -438,7 +438,7 @@ def diagnose(
     study = build_study(sessions, None if measurement is None else measurement.noise)
     base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
     base = measured_baseline(base, measurement)
-    effects, baseline_free, in_baseline = _with_measurement(effects, object_unknowns(study), measurement)
+    effects, baseline_free, in_baseline = _candidates_beside_measurement(effects, object_unknowns(study), measurement)
     report_progress = _progress_reporter(progress, 1 + len(effects))
     fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
     ranking, chosen = _ranking(fits, scores, effects)

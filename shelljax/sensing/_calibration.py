@@ -32,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 import tomli_w
-from jaxtyping import Float
 
 from .._errors import InvalidInputError
 from .._files import atomic_write_text
@@ -295,11 +294,10 @@ def _unloaded_zero(zeros: Sequence[LoadPoint]) -> tuple[float, float]:
     return c0, zero_std
 
 
-def _fit_log_law(
-    x: Float[np.ndarray, " n"], y: Float[np.ndarray, " n"], model: str
-) -> tuple[float, float, Float[np.ndarray, "2 2"], float]:
-    """(log a, β, the 2×2 covariance of (log a, β), the residual variance s²) of y = log a + β x by
-    least squares, x = log F [log N] and y = log(c − c0) [-]; β = 1 for ``"linear_conductance"``."""
+def _fit_log_law(x: np.ndarray, y: np.ndarray, model: str) -> tuple[float, float, np.ndarray, float]:
+    """(log a, β, the (2, 2) covariance of (log a, β), the residual variance s²) of y = log a + β x by
+    least squares over the (n,) loads, x = log F [log N] and y = log(c − c0) [-]; β = 1 for
+    ``"linear_conductance"``. (Plain NumPy annotations: the data layer depends on numpy only.)"""
     if model == "power":
         design = np.stack([np.ones_like(x), x], axis=1)
         coef, *_ = np.linalg.lstsq(design, y, rcond=None)
