@@ -18,9 +18,10 @@ Files, for ``--out NAME.toml``:
 * ``NAME.samples.csv``: every received sample, appended and fsync-ed per batch (see
   :mod:`._capture`), with the force and flags computed at the time;
 * ``NAME.events.jsonl``: append-only event log (start, tare, level, skip, trial, resume, done),
-  fsync-ed per event; the state a ``--resume`` continues from;
+  fsync-ed per event; the state a ``--resume`` continues from (see :mod:`._events`);
 * ``NAME_trials.csv`` and ``NAME.toml``: the session (format of :mod:`shelljax.session`),
-  rewritten atomically after every completed trial, so they always hold the completed trials.
+  rewritten atomically and fsync-ed (``_files.atomic_write_text``) after every completed trial, so
+  they always hold the completed trials.
 """
 
 from __future__ import annotations

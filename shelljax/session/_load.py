@@ -1,7 +1,8 @@
 """Reading and validating session TOML files (format: docs/session-format.md).
 
 Every check raises :class:`InvalidInputError` naming the file, the field, the value and the fix.
-Nothing is dropped or reordered: samples keep the order in which they were written.
+Nothing is dropped or reordered: samples keep the order in which they were written. The optional
+[shape] table is read by :mod:`._shape`.
 """
 
 from __future__ import annotations
