@@ -85,7 +85,7 @@ def _stage_bar(name: str, args):
     for how long, and with ``--verbose`` the stage's wall time and what JAX compiled in it."""
     from tqdm.auto import tqdm
 
-    from .runner._compile_log import stage
+    from .runner import stage
 
     # shown after a second: an input refused at once leaves its one-line error alone on stderr
     with tqdm(total=1, desc=name, unit="stage", disable=args.quiet, delay=1.0) as bar, stage(name, args.verbose):
@@ -208,7 +208,7 @@ def _cmd_diagnose(args) -> int:
     if args.out is not None:
         check_output_dir(args.out, "--out")
     measurement, gas, wrinkle_law = diagnosis_baseline(args.rig, args.gas, args.wrinkle_law)
-    from .runner._compile_log import stage
+    from .runner import stage
 
     with stage("diagnose", args.verbose):
         result = diagnose(
@@ -716,9 +716,9 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("sessions", nargs="+", help="session TOML files (indentation sessions or rigid-surface presses)")
     val.set_defaults(func=_cmd_validate)
 
-    from .sensing import _cli as sensing_cli
+    from .sensing.internal import register as register_sensing
 
-    sensing_cli.register(sub)
+    register_sensing(sub)
     return parser
 
 

@@ -34,6 +34,7 @@ import numpy as np
 import tomli_w
 
 from .._errors import InvalidInputError
+from .._files import atomic_write_text
 from .._toml import REQUIRED, TomlReader, read_toml
 
 SCHEMA_KIND = "shelljax-force-sensor-calibration"
@@ -195,7 +196,7 @@ class SensorCalibration:
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as TOML (SI: forces in N; c dimensionless)."""
-        Path(path).write_text(_HEADER + tomli_w.dumps(self.to_dict()))
+        atomic_write_text(path, _HEADER + tomli_w.dumps(self.to_dict()))
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "<dict>") -> "SensorCalibration":
