@@ -367,6 +367,11 @@ def test_the_finger_radius_default_is_the_papers():
         (r"arange\(5", None),  # the force levels are listed once, in paper.py
         (r"(?m)^\s*GAS_EXPONENTS = ", "physics/_gas.py"),  # the gas laws' names and κ, for every engine
         (r"(?m)^class ShellProperties\b", "physics/_properties.py"),  # P_g, E, h, ν, R: one object
+        # docs/architecture.md's other "one X": the TOML reader, the sphere builder, the plane, the defaults
+        (r"(?m)^\s*(import|from) tomllib\b", "_toml.py"),
+        (r"trimesh\.creation\.(icosphere|uv_sphere)\(", "geometry/_primitives.py"),
+        (r"(?m)^class Plane\b", "physics/_contact.py"),
+        (r"(?m)^DEFAULT_OPTIONS = ", "_options.py"),
     ],
 )
 def test_each_law_is_defined_once(pattern, home):
