@@ -3,8 +3,9 @@ back with a one-line error when one is not whole.
 
 A command checks every output path it was given (:func:`check_output_file`,
 :func:`check_output_dir`) before it computes anything and creates nothing while checking, so a
-refused path costs no fit and leaves nothing behind; every writer of a result a reader may open
-meanwhile goes through :func:`atomic_write_text`.
+refused path costs no fit and leaves nothing behind; every result file is written whole through
+:func:`atomic_write_text`, :func:`atomic_write_bytes` or, for a library that writes to a path
+itself (matplotlib's ``savefig``, trimesh's ``export``), :func:`atomic_write`.
 """
 
 from __future__ import annotations
@@ -101,21 +102,12 @@ def read_json(path: str | Path, what: str, *, fix: str) -> Any:
         raise InvalidInputError(f"{path}: not a whole {what} ({type(err).__name__}: {err}). Fix: {fix}") from None
 
 
-def atomic_write_text(
-    path: str | Path, text: str, *, check: Callable[[Path], object] | None = None, durable: bool = False
-) -> Path:
-    """Write ``text`` to ``path`` through a temporary file renamed into place (readable by all), so
-    a reader or a killed run never sees half a file; ``check(temporary_path)`` may refuse the
-    content by raising before the rename, leaving ``path`` as it was; ``durable``: the content is
-    fsync-ed to the disk before the rename, so the file also survives a power cut (a recording)."""
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+def _replace_whole(path: Path, write: Callable[[Path], object], suffix: str, check) -> Path:
+    """``write(temporary)``, then ``check(temporary)``, then the temporary file renamed to ``path``."""
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    os.close(handle)
     try:
-        with os.fdopen(handle, "w") as out:
-            out.write(text)
-            if durable:
-                out.flush()
-                os.fsync(out.fileno())
+        write(Path(temporary))
         os.chmod(temporary, 0o644)
         if check is not None:
             check(Path(temporary))
@@ -123,3 +115,34 @@ def atomic_write_text(
     finally:
         Path(temporary).unlink(missing_ok=True)
     return path
+
+
+def atomic_write_text(
+    path: str | Path, text: str, *, check: Callable[[Path], object] | None = None, durable: bool = False
+) -> Path:
+    """Write ``text`` to ``path`` through a temporary file renamed into place (readable by all), so
+    a reader or a killed run never sees half a file; ``check(temporary_path)`` may refuse the
+    content by raising before the rename, leaving ``path`` as it was; ``durable``: the content is
+    fsync-ed to the disk before the rename, so the file also survives a power cut (a recording)."""
+
+    def write(temporary: Path) -> None:
+        with open(temporary, "w") as out:
+            out.write(text)
+            if durable:
+                out.flush()
+                os.fsync(out.fileno())
+
+    return _replace_whole(Path(path), write, ".tmp", check)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes, *, check: Callable[[Path], object] | None = None) -> Path:
+    """:func:`atomic_write_text` for ``data`` given as bytes."""
+    return _replace_whole(Path(path), lambda temporary: temporary.write_bytes(data), ".tmp", check)
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """``write(temporary_path)`` writes the whole file, which is then renamed to ``path``: for a
+    library that writes to a path itself. The temporary path ends in ``path``'s suffix, from which
+    matplotlib's ``savefig`` and trimesh's ``export`` take the format."""
+    path = Path(path)
+    return _replace_whole(path, write, path.suffix, None)

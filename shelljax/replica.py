@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InvalidInputError
-from ._files import atomic_write_text, check_output_dir, read_json
+from ._files import atomic_write, atomic_write_text, check_output_dir, read_json
 
 REPLICA_VERSION = 1
 _QUANTITIES = ("gauge_pressure_Pa", "youngs_modulus_Pa", "poisson_ratio", "thickness_m", "mass_kg", "cor")
@@ -40,7 +40,7 @@ def write_replica(out_dir: str | Path, shell, quantities: dict, *, gas: str, sou
     out = check_output_dir(out_dir, "--out")
     out.mkdir(parents=True, exist_ok=True)
     mesh_path = out / "replica.glb"
-    trimesh.Trimesh(shell.mesh.vertices, shell.mesh.faces, process=False).export(mesh_path)
+    atomic_write(mesh_path, trimesh.Trimesh(shell.mesh.vertices, shell.mesh.faces, process=False).export)
     body = {
         "replica_version": REPLICA_VERSION,
         "mesh": mesh_path.name,

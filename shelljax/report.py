@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ._errors import InvalidInputError
-from ._files import atomic_write_text
+from ._files import atomic_write, atomic_write_text
 
 
 def jsonable(value):
@@ -44,23 +43,11 @@ def write_diagnosis(diagnosis, out_dir: str | Path) -> list[Path]:
     if out.exists() and not out.is_dir():
         raise InvalidInputError(f"--out {out}: exists and is not a directory. Fix: name a directory")
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, write in (
-        ("diagnosis.json", lambda p: p.write_text(json.dumps(jsonable(diagnosis.report), indent=2))),
-        ("diagnosis.png", lambda p: plot_diagnosis(diagnosis, p)),
-        ("report.md", lambda p: p.write_text(diagnosis_markdown(diagnosis.report))),
-    ):
-        fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=Path(name).suffix)
-        os.close(fd)
-        try:
-            write(Path(tmp))
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, out / name)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        written.append(out / name)
-    return written
+    return [
+        atomic_write_text(out / "diagnosis.json", json.dumps(jsonable(diagnosis.report), indent=2)),
+        atomic_write(out / "diagnosis.png", lambda path: plot_diagnosis(diagnosis, path)),
+        atomic_write_text(out / "report.md", diagnosis_markdown(diagnosis.report)),
+    ]
 
 
 def _image(path: str, caption: str) -> str:

@@ -90,6 +90,43 @@ def _imported_tops(path: Path) -> set[str]:
     return tops
 
 
+def _imported_modules(path: Path):
+    """(line, module parts under shelljax, imported names) of each shelljax import in ``path``."""
+    rel = path.relative_to(PACKAGE).parts
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("shelljax."):
+                    yield node.lineno, a.name.split(".")[1:], []
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                if node.module and node.module.startswith("shelljax."):
+                    yield node.lineno, node.module.split(".")[1:], [a.name for a in node.names]
+            elif node.level <= len(rel):
+                base = list(rel[: len(rel) - node.level])
+                yield node.lineno, base + (node.module.split(".") if node.module else []), [a.name for a in node.names]
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def test_no_module_imports_another_packages_private_module():
+    # a package's private modules and names are its own; what it lends other packages is in its
+    # __init__ or its `internal` module; shelljax's top-level private modules (_files, _errors,
+    # _toml, _options, ...) are shared by every package (docs/architecture.md, "Public names")
+    reached = []
+    for path in _package_files():
+        own = _top(path)
+        for line, parts, names in _imported_modules(path):
+            if not parts or parts[0].removesuffix(".py") == own:
+                continue  # `from .. import pkg` names top-level modules, shared alike
+            private = [p for p in parts[1:] if _private(p)] + [n for n in names if _private(n)]
+            if private:
+                reached.append(f"{path.relative_to(ROOT)}:{line} imports {'.'.join(parts)}: {', '.join(private)}")
+    assert not reached, "import what a package lends from its __init__ or its internal module:\n" + "\n".join(reached)
+
+
 def test_every_package_module_has_a_layer():
     missing = {_top(p) for p in _package_files() if _top(p) != "__init__"} - set(LAYERS)
     assert not missing, f"add these to LAYERS here and to docs/architecture.md: {sorted(missing)}"
@@ -164,6 +201,54 @@ def test_no_package_function_is_over_80_lines():
     assert not long, "split these into named steps:\n" + "\n".join(long)
 
 
+# The writers of files that must stream, or that move a set of files into place together, each
+# with its reason; every other file is written whole through shelljax/_files.py.
+STREAMING_WRITERS = {
+    ("shelljax/estimate/_bayes.py", "open('a')"): "emcee's HDF5 chain, appended by h5py block by block as it samples",
+    ("shelljax/sensing/_capture.py", "open('ab')"): "the live sample log, appended row by row, fsync-ed",
+    ("shelljax/sensing/_recording.py", "open('ab')"): "the recording's event log, appended event by event, fsync-ed",
+    ("shelljax/session/_write.py", "write_text"): "a session's TOML and CSVs, written and read back in a scratch "
+    "folder, then renamed into place together",
+}
+
+
+def _file_writes(path: Path):
+    """(line, what) of each ``.write_text(``, ``.write_bytes(`` and ``open(`` for writing in ``path``."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not isinstance(node, ast.Call):
+            continue
+        name = getattr(node.func, "attr", getattr(node.func, "id", None))
+        if name in ("write_text", "write_bytes"):
+            yield node.lineno, name
+        elif name in ("open", "fdopen"):
+            given = [*node.args, *(k.value for k in node.keywords if k.arg == "mode")]
+            for mode in (a.value for a in given if isinstance(a, ast.Constant) and isinstance(a.value, str)):
+                if set(mode) <= set("rwaxbt+") and set(mode) & set("wax+"):
+                    yield node.lineno, f"open({mode!r})"
+
+
+def test_result_files_are_written_only_through_files_module():
+    found = {
+        (str(p.relative_to(ROOT)), what): line
+        for p in _package_files()
+        if p.name != "_files.py" or p.parent != PACKAGE
+        for line, what in _file_writes(p)
+    }
+    unchecked = [
+        f"{path}:{line} {what}" for (path, what), line in found.items() if (path, what) not in STREAMING_WRITERS
+    ]
+    assert not unchecked, "write result files through shelljax._files (atomic_write_text, ...):\n" + "\n".join(
+        unchecked
+    )
+    stale = sorted(set(STREAMING_WRITERS) - set(found))
+    assert not stale, f"these exempt writers no longer write: remove them from STREAMING_WRITERS: {stale}"
+
+
+def test_the_file_write_check_sees_writes():
+    # the check above is vacuous if it finds nothing: the exempt writers must be found
+    assert {what for p in [PACKAGE / "_files.py"] for _, what in _file_writes(p)} >= {"write_text", "write_bytes"}
+
+
 def _script_sources():
     for path in sorted([*(ROOT / "experiments").glob("*.py"), *(ROOT / "tools").glob("*.py")]):
         yield path, path.read_text()
@@ -180,6 +265,47 @@ def test_scripts_and_notebooks_use_public_names_only(path, source):
     assert "sys.path" not in source, f"{path.name} patches sys.path; use an editable install"
     assert not private_module, f"{path.name} imports private modules: {sorted(set(private_module))}"
     assert not private_attribute, f"{path.name} reaches private attributes: {sorted(set(private_attribute))}"
+
+
+TEXT_SUFFIXES = {".py", ".md", ".ipynb", ".toml", ".txt", ".cfg", ".ini", ".yaml", ".yml", ".ino", ".sh", ".rst"}
+OUTSIDE_FILES = ("DESIGN" + ".md", ".." + "/shared")  # written split, so this file does not name them
+
+
+def _text_files():
+    for path in sorted(ROOT.rglob("*")):
+        parts = path.relative_to(ROOT).parts
+        if path.is_file() and path.suffix in TEXT_SUFFIXES and not any(p.startswith(".") for p in parts):
+            yield path
+
+
+def test_no_text_refers_to_files_outside_the_repository():
+    cited = [
+        f"{p.relative_to(ROOT)}:{n}: {name}"
+        for p in _text_files()
+        for n, line in enumerate(p.read_text(errors="replace").splitlines(), 1)
+        for name in OUTSIDE_FILES
+        if name in line
+    ]
+    assert not cited, "say it here, or cite the paper by its title and authors:\n" + "\n".join(cited)
+
+
+def _layout_block() -> str:
+    readme = (ROOT / "README.md").read_text()
+    return readme.split("## Layout", 1)[1].split("\n## ", 1)[0]
+
+
+def test_readme_layout_names_every_package_and_module():
+    layout = set(re.findall(r"[\w.]+/?", _layout_block()))
+    modules = [f"{p.name}/" for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()]
+    modules += [p.name for p in PACKAGE.glob("*.py") if p.name != "__init__.py"]
+    missing = sorted(set(modules) - layout)
+    assert not missing, f"the README's layout leaves out {missing}"
+
+
+def test_experiments_readme_lists_every_script():
+    listed = set(re.findall(r"`(\w+\.py)`", (ROOT / "experiments" / "README.md").read_text()))
+    missing = sorted(p.name for p in (ROOT / "experiments").glob("*.py") if p.name not in listed)
+    assert not missing, f"experiments/README.md does not list {missing}"
 
 
 def test_no_test_patches_sys_path():
@@ -241,6 +367,11 @@ def test_the_finger_radius_default_is_the_papers():
         (r"arange\(5", None),  # the force levels are listed once, in paper.py
         (r"(?m)^\s*GAS_EXPONENTS = ", "physics/_gas.py"),  # the gas laws' names and κ, for every engine
         (r"(?m)^class ShellProperties\b", "physics/_properties.py"),  # P_g, E, h, ν, R: one object
+        # docs/architecture.md's other "one X": the TOML reader, the sphere builder, the plane, the defaults
+        (r"(?m)^\s*(import|from) tomllib\b", "_toml.py"),
+        (r"trimesh\.creation\.(icosphere|uv_sphere)\(", "geometry/_primitives.py"),
+        (r"(?m)^class Plane\b", "physics/_contact.py"),
+        (r"(?m)^DEFAULT_OPTIONS = ", "_options.py"),
     ],
 )
 def test_each_law_is_defined_once(pattern, home):

@@ -22,7 +22,7 @@ from shelljax import InvalidInputError
 from shelljax import dynamics as d
 from shelljax.cli import main
 from shelljax.config import bundled_data_dir
-from shelljax.dynamics._shell import PATTERNS, _pattern_key
+from shelljax.dynamics._shell import _pattern_key
 from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, adiabatic_gas_energy, isothermal_gas_energy
 from shelljax.replica import load_replica, replica_volume, write_replica
 from shelljax.scenario import SCENARIO_CHUNK, eqx_replace_damping, load_scenario
@@ -123,9 +123,9 @@ def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_
     adiabatic = d.shell_system(shell, BALL, gas="adiabatic", mass=MASS, planes=system.planes)
     # one mesh, one sparsity pattern: its key (a static field) lets both systems share compiled
     # steps; the key is the pattern's content, so another set of fixed dofs is another key
-    assert adiabatic.pattern_key == system.pattern_key
-    pattern = PATTERNS[system.pattern_key]
-    assert _pattern_key(dataclasses.replace(pattern, free=~pattern.free)) != system.pattern_key
+    assert adiabatic.sparsity.key == system.sparsity.key
+    pattern = system.sparsity.pattern
+    assert _pattern_key(dataclasses.replace(pattern, free=~pattern.free)) != system.sparsity.key
     newton = d.SparseNewton(reuse_matrix=False)
     traj = d.simulate(
         adiabatic, _impact_state(adiabatic, 0.02), 2.5e-4, 50 * 2.5e-4, minimiser=newton, progress=False, chunk=CHUNK
@@ -164,6 +164,23 @@ def test_kept_newton_matrix_gives_the_same_bounce_with_fewer_factorisations(syst
     assert np.max(np.abs(kept["position_m"] - fresh["position_m"])) < 2 * n_steps * tolerance
     assert np.all(fresh["newton_matrices"] == fresh["newton_iterations"])
     assert np.sum(kept["newton_matrices"]) < 0.5 * np.sum(fresh["newton_matrices"])
+
+
+def test_release_factorizations_frees_the_dynamics_host_caches_and_a_system_still_steps(system):
+    from shelljax.shell3d import _sparse as sparse_module
+
+    state, dt = _impact_state(system, 0.02), 6e-4
+
+    def run():
+        return d.simulate(system, state, dt, 10 * dt, minimiser=d.SparseNewton(), progress=False, chunk=CHUNK)
+
+    before = run()
+    assert sparse_module._KEPT and sparse_module._ASSEMBLIES and sparse_module._ANALYSED
+    s3.release_factorizations()
+    assert not sparse_module._KEPT and not sparse_module._ASSEMBLIES and not sparse_module._ANALYSED
+    # the system carries its own sparsity pattern: after the release it steps, rebuilding what it needs
+    after = run()
+    np.testing.assert_array_equal(after["position_m"], before["position_m"])
 
 
 def test_a_wild_acceleration_changes_newtons_start_not_the_step(system):

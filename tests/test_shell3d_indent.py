@@ -166,7 +166,7 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     )
     scan_volume = signed_volume(ball.mesh.vertices, ball.mesh.faces)
     assert float(sim.model.volume(sim.q_reference)) == pytest.approx(scan_volume, rel=1e-6)
-    # DESIGN.md's small-strain rest radius R0 = R / (1 + P R (1−ν) / (2 E h)); strain ε = 0.024 here,
+    # a thin sphere's small-strain rest radius R0 = R / (1 + P R (1−ν) / (2 E h)); strain ε = 0.024 here,
     # so the Neo-Hookean answer differs at O(ε²) ≈ 6e-4 (measured 2.8e-4).
     scale = (signed_volume(np.asarray(sim.rest), ball.mesh.faces) / scan_volume) ** (1 / 3)
     assert scale == pytest.approx(1 / (1 + PG * R * (1 - NU) / (2 * E * H)), rel=1e-3)

@@ -1,4 +1,4 @@
-"""Rest shape from the pressurized-radius convention (DESIGN.md).
+"""Rest shape from the pressurized-radius convention: a ball's radius is its inflated one.
 
 The given radius R [m] is the *inflated* radius at gauge pressure P_g [Pa]. For a sphere of rest
 radius R0 under uniform stretch λ the energy is 4πR0² W(λ; R0) − P_g (4/3)πR0³λ³, with W the

@@ -30,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._errors import InvalidInputError
 from ..physics import Plane, barrier_energy
-from ..physics._contact import check_nonnegative, check_positive  # noqa: F401 (the dynamics modules take them from here)
+from ..physics.internal import check_nonnegative, check_positive  # noqa: F401 (the dynamics modules take them from here)
 
 # 16-point Gauss–Legendre nodes and weights on [−1, 1]: the energy ∫₀^δ F of a smooth curve to ~1e-15.
 _GL_NODES, _GL_WEIGHTS = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(16))

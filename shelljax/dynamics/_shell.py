@@ -51,9 +51,6 @@ from ..shell3d import (
 from ._contact import Plane, check_positive
 from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
 
-#: Host sparsity patterns of the shells' Hessians, by ``ShellDynamicSystem.pattern_key``.
-PATTERNS: dict[int, object] = {}
-
 
 def _pattern_key(pattern) -> int:
     """A key equal for equal patterns: systems on one mesh topology share the compiled step programs."""
@@ -71,13 +68,29 @@ def _pattern_key(pattern) -> int:
     return int.from_bytes(digest.digest()[:8], "little")
 
 
+class KeyedPattern:
+    """The host sparsity ``pattern`` of a shell's Hessian with its content ``key``: a system's
+    static field, equal and hashed by the key, so systems on one mesh topology share the compiled
+    step programs, and the host solve reads the pattern from the system it serves."""
+
+    def __init__(self, pattern):
+        self.pattern = pattern
+        self.key = _pattern_key(pattern)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, KeyedPattern) and other.key == self.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+
 class ShellDynamicSystem(AbstractDynamicSystem):
     """A closed Neo-Hookean shell with gas, gravity and planes (see the module docstring).
 
     ``params``: the engine's :class:`ShellParams` (E [Pa], ν, h [m], P_g [Pa], the sealed gas's
     reference volume [m³]); ``geometry``: rest data; ``config``: the engine's static setup (gas
     model, γ); ``node_masses`` (V,) [kg]; ``faces`` (F, 3); ``inflated`` (3V,) [m]: the pressurized
-    equilibrium at rest; ``maps``, ``nnz``, ``pattern_key``: the sparse Hessian's pattern;
+    equilibrium at rest; ``maps``, ``nnz``, ``sparsity``: the sparse Hessian's pattern;
     ``prescribed_vertices`` (static indices) and ``prescribed``: held vertices and their motion.
     """
 
@@ -91,7 +104,7 @@ class ShellDynamicSystem(AbstractDynamicSystem):
     gravity: Float[Array, "3"]
     maps: tuple
     nnz: int = eqx.field(static=True)
-    pattern_key: int = eqx.field(static=True)
+    sparsity: KeyedPattern = eqx.field(static=True)
     prescribed_vertices: tuple[int, ...] = eqx.field(static=True, default=())
     prescribed: PrescribedRotation | None = None
 
@@ -245,8 +258,6 @@ def shell_system(
     model = ShellModel(shell.mesh, reference.rest, config, fixed)
     if gas != "prescribed":
         params = params.replace(reference_volume=reference.reference_volume, atmospheric_pressure=ATMOSPHERIC_PRESSURE)
-    key = _pattern_key(model.pattern)
-    PATTERNS.setdefault(key, model.pattern)
     return ShellDynamicSystem(
         params=params,
         geometry=model.geometry,
@@ -258,7 +269,7 @@ def shell_system(
         gravity=gravity_vector(gravity),
         maps=model.pattern.maps,
         nnz=model.pattern.nnz,
-        pattern_key=key,
+        sparsity=KeyedPattern(model.pattern),
     )
 
 

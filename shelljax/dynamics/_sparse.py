@@ -15,8 +15,9 @@ computed in JAX; the factorisation (CHOLMOD through :class:`shelljax.shell3d.Spa
 symbolic analysis cached per pattern) runs on the host through ``jax.pure_callback``. The implicit
 derivative of a step solves with the same assembly, so ``jax.grad`` through a roll-out stays sparse.
 Newton's matrix is kept across iterations and steps while it contracts (``reuse_matrix``,
-:func:`simplified_newton_loop`); the host keeps recent factorisations by content
-(:func:`shelljax.shell3d.kept_factorization`, which owns every factorisation cache;
+:func:`simplified_newton_loop`); the host keeps recent factorisations by content and the
+assembly of each pattern's free-dof matrix (:func:`shelljax.shell3d.kept_factorization` and
+:func:`shelljax.shell3d.kept_assembly`: ``shell3d`` owns every host cache, and
 :func:`shelljax.shell3d.release_factorizations` frees them).
 Newton's step shifts a Hessian that is not positive definite by a multiple of its mean diagonal;
 the implicit derivative's solve is never shifted.
@@ -36,9 +37,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ..shell3d import SparseSolver, kept_factorization
+from ..shell3d import SparseSolver, kept_assembly, kept_factorization
 from ._minimise import AbstractMinimiser, KeptMatrix, newton_loop, simplified_newton_loop
-from ._shell import PATTERNS, ShellDynamicSystem
+from ._shell import KeyedPattern, ShellDynamicSystem
 
 
 def _woodbury(solver, columns, coeffs):
@@ -123,20 +124,13 @@ class _FreeAssembly:
         return sp.csr_matrix((values, self.indices, self.indptr), shape=(m, m))
 
 
-_ASSEMBLIES: dict = {}
+def _free_assembly(sparsity: KeyedPattern, n: int, free: np.ndarray) -> _FreeAssembly:
+    """The :class:`_FreeAssembly` of ``sparsity`` and these free dofs, kept by ``shell3d``."""
+    key = (sparsity.key, n, zlib.crc32(free.tobytes()))
+    return kept_assembly(key, lambda: _FreeAssembly.build(sparsity.pattern, n, free))
 
 
-def _free_assembly(key: int, n: int, free: np.ndarray) -> _FreeAssembly:
-    """The cached :class:`_FreeAssembly` of pattern ``key`` and these free dofs."""
-    cache_key = (key, n, zlib.crc32(free.tobytes()))
-    if cache_key not in _ASSEMBLIES:
-        if len(_ASSEMBLIES) >= 8:
-            _ASSEMBLIES.pop(next(iter(_ASSEMBLIES)))
-        _ASSEMBLIES[cache_key] = _FreeAssembly.build(PATTERNS[key], n, free)
-    return _ASSEMBLIES[cache_key]
-
-
-def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
+def _factorised(sparsity, shift, data, blocks, diag, c2, u, columns, coeffs, free):
     """rhs ↦ (K + blockdiag + diag + c u uᵀ + Σ_p d_p v_p v_pᵀ)⁻¹ rhs on the free dofs (host; None if not
     positive definite); v_p = ``columns`` (P, n), d_p = ``coeffs`` (P,): the body dashpots.
 
@@ -144,13 +138,13 @@ def _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free):
     mean diagonal until it is (Newton's step then is a descent direction)."""
     arrays = [np.asarray(a, dtype=np.float64) for a in (data, blocks, diag, c2, u, coeffs, columns)]
     free = np.asarray(free, dtype=np.int64)
-    fingerprint = (int(key), bool(shift), free.size, hash(b"".join(a.tobytes() for a in arrays) + free.tobytes()))
-    return kept_factorization(fingerprint, lambda: _factorise(key, shift, *arrays, free))
+    fingerprint = (sparsity.key, bool(shift), free.size, hash(b"".join(a.tobytes() for a in arrays) + free.tobytes()))
+    return kept_factorization(fingerprint, lambda: _factorise(sparsity, shift, *arrays, free))
 
 
-def _factorise(key, shift, data, blocks, diag, c2, u, coeffs, columns, free):
+def _factorise(sparsity, shift, data, blocks, diag, c2, u, coeffs, columns, free):
     """The solve of :func:`_factorised`, made afresh."""
-    assembly = _free_assembly(int(key), blocks.shape[0] * 3, free)
+    assembly = _free_assembly(sparsity, blocks.shape[0] * 3, free)
     values = assembly.values(data, blocks, diag[free])
     rank = (float(c2), u[free]) if float(c2) != 0.0 else None
     mean = float(np.mean(np.abs(values[assembly.diagonal])))
@@ -169,9 +163,9 @@ def _factorise(key, shift, data, blocks, diag, c2, u, coeffs, columns, free):
     return apply
 
 
-def _host_solve(key, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
+def _host_solve(sparsity, shift, data, blocks, diag, c2, u, columns, coeffs, free, rhs):
     """The solve of :func:`_factorised` applied to ``rhs`` (NaN where the matrix is not positive definite)."""
-    apply = _factorised(key, shift, data, blocks, diag, c2, u, columns, coeffs, free)
+    apply = _factorised(sparsity, shift, data, blocks, diag, c2, u, columns, coeffs, free)
     if apply is None:
         return np.full(rhs.shape, np.nan)
     return np.asarray(apply(np.asarray(rhs)), dtype=np.float64)
@@ -235,7 +229,7 @@ class SparseNewton(AbstractMinimiser):
 
     def _apply(self, potential, matrix, rhs, shift: bool):
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
-        solve = functools.partial(_host_solve, potential.system.pattern_key, shift)
+        solve = functools.partial(_host_solve, potential.system.sparsity, shift)
         data, blocks, diag, c2, u, columns, coeffs = matrix
         return jax.pure_callback(
             solve, out, data, blocks, diag, c2, u, columns, coeffs, potential.free_dofs, rhs, vmap_method="sequential"

@@ -37,11 +37,17 @@ import numpy as np
 from .. import __version__
 from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, build_study, fit_candidate, loo_score, study_arrays
-from ..diagnose._diagnose import WIN_NATS, WIN_SE
-from ..diagnose._effects import MANOMETER_STD, PRIOR_STD
-from ..diagnose._measurement import widened_grid, with_measurement
-from ..diagnose._study import object_unknowns
-from ..diagnose._model import WRINKLE_LAWS, physical
+from ..diagnose.internal import (
+    MANOMETER_STD,
+    PRIOR_STD,
+    WIN_NATS,
+    WIN_SE,
+    WRINKLE_LAWS,
+    object_unknowns,
+    physical,
+    widened_grid,
+    with_measurement,
+)
 from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES
 from ..paper import PAPER_INDENTER_RADIUS
 from ..session import RigidPress, Session, files_sha256, load_rigid_press, load_session

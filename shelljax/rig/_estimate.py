@@ -33,12 +33,19 @@ from scipy import optimize, stats
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, MeasurementPrior, build_study, study_arrays
-from ..diagnose._effects import LINEAR_SCALE
-from ..diagnose._loo import laplace_interval
-from ..diagnose._model import engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
+from ..diagnose.internal import (
+    LINEAR_SCALE,
+    engine_inputs,
+    laplace_interval,
+    log_prior,
+    physical,
+    predict,
+    solve_curves,
+    unit_log_likelihood,
+    widened_grid,
+)
 from ..estimate import Estimate
 from ..session import Session, load_session
-from ..diagnose._measurement import widened_grid
 from ._calibrate import Rig, RigWarning, fit_model
 
 ESTIMATE_GRID_SPAN = (0.7, 1.4)  # the engine's grid covers the true forces of every rig model, with room

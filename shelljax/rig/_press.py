@@ -17,9 +17,15 @@ import numpy as np
 from scipy import optimize
 
 from .._errors import InvalidInputError
-from ..diagnose._effects import LINEAR_SCALE, PRIOR_STD
-from ..diagnose._loo import held_out_units
-from ..diagnose._study import DEPTH_NOISE_FLOOR, _anova, _levels, _whitening
+from ..diagnose.internal import (
+    DEPTH_NOISE_FLOOR,
+    LINEAR_SCALE,
+    PRIOR_STD,
+    depth_whitening,
+    force_level_of_samples,
+    held_out_units,
+    trial_anova,
+)
 from ..estimate import depth_noise_from_scatter
 from ._terms import fixed_values, freed_parameters
 
@@ -58,9 +64,10 @@ def press_data(presses: Sequence) -> PressData:
     """Lay out rigid presses (``shelljax.session.RigidPress``) with the noise model of their replicates."""
     presses = tuple(presses)
     levels = np.split(
-        _levels(np.concatenate([p.force for p in presses])), np.cumsum([p.force.size for p in presses])[:-1]
+        force_level_of_samples(np.concatenate([p.force for p in presses])),
+        np.cumsum([p.force.size for p in presses])[:-1],
     )
-    tau, scatter = _anova(presses, levels)
+    tau, scatter = trial_anova(presses, levels)
     depth = np.concatenate([p.depth for p in presses])
     if scatter is None:
         scatter = (float(np.mean([depth_noise_from_scatter(p.force, p.depth) ** 2 for p in presses])), 0.0)
@@ -70,7 +77,7 @@ def press_data(presses: Sequence) -> PressData:
         for t in p.trial_ids:
             unit_of[(k, t)] = len(unit_of)
     unit = np.array([unit_of[(k, t)] for k, p in enumerate(presses) for t in p.trial])
-    whitening = _whitening(unit, std, tau)
+    whitening = depth_whitening(unit, std, tau)
     log_jac = np.array(
         [
             np.sum(np.log(np.abs(np.diag(whitening)[unit == u]))) - 0.5 * np.sum(unit == u) * math.log(2 * math.pi)

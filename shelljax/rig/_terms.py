@@ -26,7 +26,7 @@ import dataclasses
 
 from .._errors import InvalidInputError
 from ..diagnose import GLOBAL_PARAMETERS
-from ..diagnose._effects import LINEAR_SCALE
+from ..diagnose.internal import LINEAR_SCALE
 
 HERTZ_EXPONENT = 2.0 / 3.0  # [-] a Hertzian contact's compression grows as F^(2/3)
 

@@ -136,7 +136,7 @@ def diagnose_studies(
         InvalidInputError: a bad option or rig, bad executor options, an unreachable scheduler.
         KeyboardInterrupt: after cancelling the studies in flight; the finished ones stay on disk.
     """
-    from ..diagnose._effects import check_effect_names
+    from ..diagnose.internal import check_effect_names
 
     if effects is not None:
         effects = list(check_effect_names(effects))

@@ -20,7 +20,7 @@ from tqdm.auto import tqdm
 
 from .. import __version__
 from .._errors import InvalidInputError
-from .._files import check_output_dir
+from .._files import atomic_write_text, check_output_dir
 from ..config import ExperimentConfig, load_config
 from ..estimate import Estimate, EstimatorOptions, calibrate_ks, paper_k_s
 from ..executor import ExecutorOptions, WorkItem, check_executor, read_item, run_items
@@ -126,7 +126,7 @@ def _write_manifest(run_dir: Path, config: ExperimentConfig, items: list[WorkIte
         "shelljax_version": __version__,
         "items": [item.key for item in items],
     }
-    (run_dir / MANIFEST).write_text(json.dumps(manifest, indent=1))
+    atomic_write_text(run_dir / MANIFEST, json.dumps(manifest, indent=1))
 
 
 def _resumed_config(run_dir: Path, config_path: str | Path | None) -> Path:
@@ -203,7 +203,7 @@ def _write_results(
             plot_estimate_summary(summary_rows, run_dir / "figures" / "estimates.png")
             results["summary_figure"] = "figures/estimates.png"
     results["compilation"] = {"stages": stages, "unit": "s", "total_seconds": sum(s["total_seconds"] for s in stages)}
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2))
+    atomic_write_text(run_dir / "results.json", json.dumps(results, indent=2))
     write_run_report(results, run_dir, summary_table(results))
 
 

@@ -43,5 +43,5 @@ from ._params import ShellParams
 from ._observables import observables
 from ._rest import InflatedReference, inflated_reference, solve_rest_shape
 from ._search import match_forces, solve_travels
-from ._sparse import SparseSolver, SparsityPattern, kept_factorization, release_factorizations
+from ._sparse import SparseSolver, SparsityPattern, kept_assembly, kept_factorization, release_factorizations
 from ._wrinkles import WrinkleSpectrum, wrinkle_spectrum

@@ -4,7 +4,8 @@ A scan (photogrammetry) shows the object inflated. We seek rest vertices X such 
 is an equilibrium of the shell under the prescribed gauge pressure: r(X) = ∇ₓE(x_s; X) = 0 on the
 free dofs. Newton on X with the sparse, nonsymmetric Jacobian ∂r/∂X (per-face 18×18 blocks by
 autodiff, same sparsity as the Hessian) converges quadratically from the small-strain guess
-X₀ = c + (x_s − c) / (1 + P R (1−ν) / (2 E h)) (DESIGN.md; c the centroid, R = 3V/A). The rigid
+X₀ = c + (x_s − c) / (1 + P R (1−ν) / (2 E h)) (c the centroid, R = 3V/A: the scan shrunk by the
+membrane strain of a thin sphere whose wall carries the stress P R / (2h) both ways). The rigid
 motions of X (which leave r unchanged) are removed by holding X at the same pinned dofs as x; the
 matching equations (net force and torque) hold identically.
 
@@ -128,8 +129,8 @@ def solve_rest_scale(model, scan, params, *, atol: float, rtol: float = 1e-6, ma
     equilibrium encloses the scan's volume to ``rtol``.
 
     Exact for a sphere (the equilibrium of a uniformly shrunk sphere is a uniformly inflated one,
-    up to mesh effects); for other shapes it is the small-strain approximation of DESIGN.md
-    generalised to a volume match. Returns ``(rest (V, 3) [m], q_equilibrium, max vertex
+    up to mesh effects); for other shapes it is the small-strain guess of :func:`solve_rest_shape`
+    (the scan shrunk by 1 + P R (1−ν) / (2 E h)) generalised to a volume match. Returns ``(rest (V, 3) [m], q_equilibrium, max vertex
     mismatch from the scan [m])``. Robust where the exact inverse (:func:`solve_rest_shape`)
     stalls. The fixed point s ← s (V_scan / V(s))^(1/3) contracts by about the membrane strain.
     """

@@ -442,33 +442,51 @@ _CHOLESKY_KEPT = 1
 _ANALYSED: list = []  # orderings holding a Cholesky analysis, oldest first
 
 
-#: Factorizations kept by content (a fingerprint of the matrix), oldest first: the dynamics' kept
-#: Newton matrix is factorized once however many steps it serves. This module owns every host
-#: factorization cache, so that one call releases them all.
+#: Host data kept by content, oldest first: factorizations by a fingerprint of their matrix (the
+#: dynamics' kept Newton matrix is factorized once however many steps it serves) and the dynamics'
+#: assemblies of a pattern's matrix on its free dofs. This module owns every host cache of the
+#: package, so that one call releases them all.
 _KEPT: dict = {}
+_ASSEMBLIES: dict = {}
+
+
+def _kept(store: dict, key, make, keep: int):
+    """``store[key]``, made by ``make()`` and kept among the ``keep`` newest if it is not there yet."""
+    if key in store:
+        return store[key]
+    value = make()
+    if len(store) >= keep:
+        store.pop(next(iter(store)))
+    store[key] = value
+    return value
 
 
 def kept_factorization(fingerprint, factorize, keep: int = 4):
     """The factorization (whatever ``factorize()`` returns) kept under the hashable
     ``fingerprint``, made and kept among the ``keep`` newest if it is not there yet."""
-    if fingerprint in _KEPT:
-        return _KEPT[fingerprint]
-    value = factorize()
-    if len(_KEPT) >= keep:
-        _KEPT.pop(next(iter(_KEPT)))
-    _KEPT[fingerprint] = value
-    return value
+    return _kept(_KEPT, fingerprint, factorize, keep)
+
+
+def kept_assembly(key, assemble, keep: int = 8):
+    """The symbolic assembly of a pattern's matrix (whatever ``assemble()`` returns: index maps,
+    no values) kept under the hashable ``key``, made and kept among the ``keep`` newest if it is
+    not there yet."""
+    return _kept(_ASSEMBLIES, key, assemble, keep)
 
 
 def release_factorizations(keep_analyses: bool = False) -> None:
-    """Free every cached factorization: the factorizations kept by content and the Cholesky
-    analyses (and with them their factor storage) unless ``keep_analyses``.
+    """Free every cached factorization: the factorizations kept by content, and unless
+    ``keep_analyses`` the Cholesky analyses (and with them their factor storage) and the kept
+    assemblies.
 
     For a caller done with a sparsity pattern: a later factorization of that pattern redoes its
-    symbolic analysis (orderings stay cached). ``keep_analyses``: only the numeric
-    factorizations go (e.g. to time a numeric factorization on its own).
+    symbolic analysis (orderings, a permutation per pattern and 16 at most, stay cached).
+    ``keep_analyses``: only the numeric factorizations go (e.g. to time a numeric factorization on
+    its own).
     """
     _KEPT.clear()
+    if not keep_analyses:
+        _ASSEMBLIES.clear()
     while _ANALYSED and not keep_analyses:
         _ANALYSED.pop(0)._cholesky.clear()
 

@@ -9,18 +9,22 @@ import json
 import sys
 from pathlib import Path
 
-from ._arguments import OneLineParser, real, whole
-from ._errors import InvalidInputError, ShelljaxError
-from ._files import check_output_dir, check_output_file
-from ._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, METHODS, MIN_MAX_STEPS, MIN_WALKERS, WRINKLE_LAWS
-from .physics import GAS_LAWS
-from .replica import MESH_FACES
-from .report import summary_text
+from .._arguments import OneLineParser, real, whole
+from .._errors import InvalidInputError, ShelljaxError
+from .._files import check_output_file
+from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, METHODS, MIN_MAX_STEPS, MIN_WALKERS, WRINKLE_LAWS
+from ..physics import GAS_LAWS
+from ..replica import MESH_FACES
+from ..report import summary_text
+from . import _diagnose, _rig
+from ._common import resumed_out
+
+__all__ = ["build_parser", "main", "summary_text"]  # summary_text: the diagnosis's summary, for notebooks
 
 
 def _cmd_run(args) -> int:
-    from .executor import executor_options
-    from .runner import run_experiment, summary_table
+    from ..executor import executor_options
+    from ..runner import run_experiment, summary_table
 
     given = args.workers is not None or args.cluster is not None or args.cache_dir is not None
     try:
@@ -40,8 +44,8 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .estimate import Estimate, EstimatorOptions, run_estimator
-    from .session import load_session
+    from ..estimate import Estimate, EstimatorOptions, run_estimator
+    from ..session import load_session
 
     if args.rig is not None:
         return _estimate_with_rig(args)
@@ -85,7 +89,7 @@ def _stage_bar(name: str, args):
     for how long, and with ``--verbose`` the stage's wall time and what JAX compiled in it."""
     from tqdm.auto import tqdm
 
-    from .runner._compile_log import stage
+    from ..runner import stage
 
     # shown after a second: an input refused at once leaves its one-line error alone on stderr
     with tqdm(total=1, desc=name, unit="stage", disable=args.quiet, delay=1.0) as bar, stage(name, args.verbose):
@@ -113,7 +117,7 @@ def _print_estimates(out: dict, estimates: dict, as_json: bool, sources: tuple[s
 
 
 def _estimate_with_rig(args) -> int:
-    from .rig import estimate_with_rig, load_rig
+    from ..rig import estimate_with_rig, load_rig
 
     if args.method == "closed-form" or args.model != "axisym" or args.nuisance:
         raise ShelljaxError(
@@ -149,143 +153,9 @@ def _estimate_with_rig(args) -> int:
     return 0
 
 
-def _cmd_rig_calibrate(args) -> int:
-    from .rig import calibrate_rig, physical_parameter, write_rig
-    from .session import session_kind
-
-    check_output_file(args.out, "--out", example="rig.toml")  # before the fit: a refused path costs nothing
-    kinds = [session_kind(path) for path in args.sessions]
-    presses = [p for p, kind in zip(args.sessions, kinds) if kind == "rigid_press"]
-    sessions = [p for p, kind in zip(args.sessions, kinds) if kind != "rigid_press"]
-    rig = calibrate_rig(
-        sessions,
-        gas=args.gas,
-        wrinkle_law=args.wrinkle_law,
-        terms=args.terms,
-        presses=presses,
-        manometer_std=args.manometer_std,
-        progress=not args.quiet,
-    )
-    write_rig(rig, args.out)
-    print(f"rig: {len(rig.models)} model(s) the calibration cannot exclude (weights: pseudo-BMA+)")
-    for m in rig.models:
-        stds = [float(v) for v in (m.covariance.diagonal() ** 0.5)]
-        values = ", ".join(
-            f"{n} = {v:.4g} ± {e:.2g}"
-            for n, (v, e) in (
-                (n, physical_parameter(n, float(u), s, rig.indenter_radius))
-                for n, u, s in zip(m.parameters, m.mean, stds)
-            )
-        )
-        print(
-            f"  {'+'.join(m.terms) or 'ideal':<40s} weight {m.weight:5.2f}  Δelpd {m.delta:6.2f} ± {m.delta_se:4.2f}  {values}"
-        )
-    if rig.not_identified:
-        print(f"not identified: {', '.join(rig.not_identified)}")
-    for f in rig.failed:
-        print(f"  {'+'.join(f['terms'])}: FAILED, left out ({f['message']})")
-    print(f"written: {args.out}")
-    return 0
-
-
-def _cmd_diagnose(args) -> int:
-    from .diagnose import diagnose
-    from .report import jsonable, write_diagnosis
-    from .runner import diagnosis_baseline
-
-    if args.study:
-        return _diagnose_studies(args)
-    if not args.sessions:
-        raise ShelljaxError(
-            "no sessions given. Fix: shelljax diagnose S1.toml S2.toml ... (one object), or --study DIR "
-            "--study DIR ... --out DIR (many studies)"
-        )
-    if args.workers is not None or args.cluster is not None or args.resume is not None:
-        raise ShelljaxError(
-            "--workers/--cluster/--resume run many studies (--study), and one study is one piece of work. "
-            "Fix: give each study as --study DIR_OR_PATTERN, or leave them out"
-        )
-    if args.out is not None:
-        check_output_dir(args.out, "--out")
-    measurement, gas, wrinkle_law = diagnosis_baseline(args.rig, args.gas, args.wrinkle_law)
-    from .runner._compile_log import stage
-
-    with stage("diagnose", args.verbose):
-        result = diagnose(
-            args.sessions,
-            effects=args.effects,
-            baseline=args.baseline,
-            gas=gas,
-            wrinkle_law=wrinkle_law or DEFAULT_OPTIONS.wrinkle_law,
-            progress=not args.quiet and not args.json,
-            measurement=measurement,
-        )
-    if args.out is not None:
-        written = write_diagnosis(result, args.out)
-        if not args.json:
-            print(f"written: {', '.join(str(p) for p in written)}")
-    if args.json:
-        json.dump(jsonable(result.report), sys.stdout, indent=2)
-        print()
-    else:
-        print(summary_text(result.report))
-    return 0
-
-
-def _diagnose_studies(args) -> int:
-    """``shelljax diagnose --study A --study B ... --out DIR``: one work item per study."""
-    from .executor import executor_options
-    from .runner import diagnose_studies, diagnoses_table, study_groups
-
-    if args.sessions:
-        raise ShelljaxError(
-            f"session files ({args.sessions[0]} ...) and --study both given. Fix: give one study as "
-            "session files, or every study as --study"
-        )
-    out = _resumed_out(args)
-    if out is None:
-        raise ShelljaxError(
-            "--study needs --out DIR: each study's diagnosis is written to DIR/<study>/. Fix: add --out DIR"
-        )
-    try:
-        summary = diagnose_studies(
-            study_groups(args.study),
-            out,
-            effects=args.effects,
-            baseline=args.baseline,
-            gas=args.gas,
-            wrinkle_law=args.wrinkle_law,
-            rig=args.rig,
-            executor=executor_options(args),
-            progress=None if not args.quiet else False,
-            resume=args.resume is not None,
-        )
-    except KeyboardInterrupt:
-        return 130  # the finished studies' diagnoses and records stay in --out
-    if args.json:
-        json.dump(summary, sys.stdout, indent=2)
-        print()
-    else:
-        print(diagnoses_table(summary))
-        print(f"results: {out}/diagnoses.json")
-    return 0
-
-
-def _resumed_out(args):
-    """The output directory of many studies or a sweep: --out, or the --resume directory it continues."""
-    from pathlib import Path
-
-    if args.resume is not None and args.out is not None and Path(args.resume).resolve() != Path(args.out).resolve():
-        raise ShelljaxError(
-            f"--resume {args.resume} and --out {args.out} name two directories. Fix: give --resume alone "
-            "(it continues in that directory)"
-        )
-    return args.resume if args.resume is not None else args.out
-
-
 def _cmd_simulate(args) -> int:
-    from .executor import executor_options
-    from .scenario import load_scenario, run_scenario
+    from ..executor import executor_options
+    from ..scenario import load_scenario, run_scenario
 
     scenario = load_scenario(args.config)
     if scenario.sweep is not None:
@@ -321,9 +191,9 @@ def _cmd_simulate(args) -> int:
 def _simulate_sweep(scenario, args, executor) -> int:
     from pathlib import Path
 
-    from .scenario import run_sweep, sweep_table
+    from ..scenario import run_sweep, sweep_table
 
-    out = _resumed_out(args)
+    out = resumed_out(args)
     try:
         summary = run_sweep(
             scenario,
@@ -341,7 +211,7 @@ def _simulate_sweep(scenario, args, executor) -> int:
 
 
 def _cmd_replica(args) -> int:
-    from .replica import export_replica
+    from ..replica import export_replica
 
     written = export_replica(
         args.session,
@@ -358,7 +228,7 @@ def _cmd_replica(args) -> int:
 
 
 def _cmd_validate(args) -> int:
-    from .session import load_rigid_press, load_session, session_kind
+    from ..session import load_rigid_press, load_session, session_kind
 
     for path in args.sessions:
         if session_kind(path) == "rigid_press":
@@ -373,7 +243,7 @@ def _cmd_validate(args) -> int:
 
 
 def _cmd_play(args) -> int:
-    from .viewer import check_replay_outputs, play_headless, play_live, play_scene, require_viser
+    from ..viewer import check_replay_outputs, play_headless, play_live, play_scene, require_viser
 
     if args.headless and args.script is None:
         raise ShelljaxError("--headless replays a script. Fix: add --script configs/interaction.toml")
@@ -439,112 +309,9 @@ def _register_play(sub) -> None:
     play.set_defaults(func=_cmd_play)
 
 
-def _register_diagnose(sub) -> None:
-    """``shelljax diagnose``."""
-    diag = sub.add_parser(
-        "diagnose",
-        help="sim-to-real gap: where the shell model misfits sessions of one object, "
-        "which candidate effect explains it, how far the gap shrinks",
-    )
-    diag.add_argument("sessions", nargs="*", help="session TOML files of one object (e.g. at several pressures)")
-    diag.add_argument(
-        "--study",
-        action="append",
-        default=None,
-        metavar="DIR_OR_PATTERN",
-        help="many studies instead (repeat it): a directory of one object's session files, or a pattern "
-        "such as 'dir/ball_*.toml' ('bundled:' for the package's); one work item per study, written to "
-        "--out/<study>/ and summed up in --out/diagnoses.json (docs/cluster.md)",
-    )
-    diag.add_argument("--out", default=None, help="directory for diagnosis.json, diagnosis.png and report.md (created)")
-    diag.add_argument("--json", action="store_true", help="print the diagnosis JSON on stdout")
-    diag.add_argument(
-        "--baseline",
-        choices=["estimator", "paper"],
-        default="estimator",
-        help="baseline model: the fitted estimator's (sealed isothermal gas) or the paper's (prescribed pressure)",
-    )
-    diag.add_argument(
-        "--gas",
-        choices=GAS_LAWS,
-        default=None,
-        help="gas law of the baseline (default: the baseline's; with --rig, the rig's)",
-    )
-    diag.add_argument(
-        "--wrinkle-law",
-        choices=WRINKLE_LAWS,
-        default=None,
-        help=f"wrinkle count: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics) (default: "
-        f"{DEFAULT_OPTIONS.wrinkle_law}; with --rig, the rig's)",
-    )
-    diag.add_argument(
-        "--rig",
-        default=None,
-        help="rig file from `shelljax rig calibrate`: its measuring chain is the "
-        "baseline, and its gas and wrinkle law the model's",
-    )
-    diag.add_argument(
-        "--effects",
-        nargs="+",
-        default=None,
-        metavar="EFFECT",
-        help="candidate effects to try (default: all of shelljax.diagnose.EFFECTS)",
-    )
-    diag.add_argument("--quiet", action="store_true", help="no progress bar")
-    diag.add_argument(
-        "--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)"
-    )
-    from .executor import add_executor_arguments
-
-    add_executor_arguments(diag)  # the studies of --study (docs/cluster.md); --resume: the --out of an interrupted one
-    diag.set_defaults(func=_cmd_diagnose)
-
-
-def _register_rig(sub) -> None:
-    """``shelljax rig calibrate``."""
-    rig = sub.add_parser("rig", help="the measuring chain: calibrate it once where the pressure is known (docs/rig.md)")
-    rig_sub = rig.add_subparsers(dest="rig_command", required=True)
-    cal = rig_sub.add_parser("calibrate", help="fit and select the rig's terms on sessions with manometer readings")
-    cal.add_argument(
-        "sessions",
-        nargs="+",
-        help="session TOML files with manometer readings, of one or more objects, "
-        'and optionally rigid-surface press sessions (kind = "rigid_press", docs/session-format.md)',
-    )
-    cal.add_argument("--out", required=True, help="rig TOML file to write (checked before the fit; folders created)")
-    cal.add_argument(
-        "--gas",
-        choices=ESTIMATOR_GASES,
-        default=DEFAULT_OPTIONS.gas,
-        help="gas law of the forward model (every estimate through the rig uses it; a poke is slow, so a "
-        "sealed object's gas is isothermal)",
-    )
-    cal.add_argument(
-        "--wrinkle-law",
-        choices=WRINKLE_LAWS,
-        default=DEFAULT_OPTIONS.wrinkle_law,
-        help="wrinkle count of the forward model: n = 1.33 tau^1/2 (scaling) or the engine's (mechanics)",
-    )
-    cal.add_argument(
-        "--terms",
-        nargs="+",
-        default=None,
-        metavar="TERM",
-        help="candidate terms (default: all of shelljax.rig.RIG_TERMS)",
-    )
-    cal.add_argument(
-        "--manometer-std",
-        type=real(0.0, 1.0, low_open=True),
-        default=0.02,
-        help="the manometer readings' relative standard deviation [-] (0.02: 2 %%)",
-    )
-    cal.add_argument("--quiet", action="store_true", help="no progress bar")
-    cal.set_defaults(func=_cmd_rig_calibrate)
-
-
 def _register_run(sub) -> None:
     """``shelljax run``."""
-    from .executor import add_executor_arguments
+    from ..executor import add_executor_arguments
 
     run = sub.add_parser("run", help="run an experiment config into a fresh run directory")
     run.add_argument(
@@ -638,7 +405,7 @@ def _register_estimate(sub) -> None:
 
 def _register_simulate(sub) -> None:
     """``shelljax simulate``."""
-    from .executor import add_executor_arguments
+    from ..executor import add_executor_arguments
 
     sim = sub.add_parser("simulate", help="run a dynamic scenario config (drop, bounce) into --out")
     sim.add_argument("config", help="scenario config TOML, e.g. configs/drop.toml")
@@ -697,7 +464,7 @@ def _register_replica(sub) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``shelljax`` command: every subcommand's --help shows its
     defaults and units, and every usage error is one line (``shelljax._arguments``)."""
-    from . import __version__
+    from .. import __version__
 
     parser = OneLineParser(prog="shelljax", description=__doc__.partition(";")[0] + ".")
     parser.add_argument("--version", action="version", version=f"shelljax {__version__}")
@@ -705,10 +472,10 @@ def build_parser() -> argparse.ArgumentParser:
     for register in (
         _register_run,
         _register_estimate,
-        _register_diagnose,
+        _diagnose.register,
         _register_simulate,
         _register_replica,
-        _register_rig,
+        _rig.register,
         _register_play,
     ):
         register(sub)
@@ -716,9 +483,9 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("sessions", nargs="+", help="session TOML files (indentation sessions or rigid-surface presses)")
     val.set_defaults(func=_cmd_validate)
 
-    from .sensing import _cli as sensing_cli
+    from ..sensing.internal import register as register_sensing
 
-    sensing_cli.register(sub)
+    register_sensing(sub)
     return parser
 
 
@@ -739,7 +506,3 @@ def main(argv: list[str] | None = None) -> int:
 def _one_line(err: ShelljaxError) -> str:
     """An input error on one line (a solver's error keeps its residual history on the lines after it)."""
     return " ".join(str(err).split()) if isinstance(err, InvalidInputError) else str(err)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

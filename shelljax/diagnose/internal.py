@@ -1,0 +1,42 @@
+"""What the diagnosis lends the measuring-chain calibration (``shelljax.rig``) and the runner: its
+priors, its joint model's pieces and its noise model, shared so the rig fits the very model the
+diagnosis scores. Not for users: these names may change with the diagnosis; the public ones are in
+``shelljax.diagnose``.
+"""
+
+from ._diagnose import WIN_NATS, WIN_SE
+from ._effects import LINEAR_SCALE, MANOMETER_STD, MIN_INDENTER_FRACTION, PRIOR_STD, UNITS, check_effect_names
+from ._loo import held_out_units, laplace_interval
+from ._measurement import widened_grid, with_measurement
+from ._model import WRINKLE_LAWS, engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
+from ._study import DEPTH_NOISE_FLOOR, object_unknowns
+from ._study import _anova as trial_anova  # (τ_t [m], (a [m²], b [-])): the trial offset and depth scatter
+from ._study import _levels as force_level_of_samples  # each sample's force level [N]
+from ._study import _whitening as depth_whitening  # block-diagonal W [1/m], Wᵀ W = Σ⁻¹ of the depths
+
+__all__ = [
+    "DEPTH_NOISE_FLOOR",
+    "LINEAR_SCALE",
+    "MANOMETER_STD",
+    "MIN_INDENTER_FRACTION",
+    "PRIOR_STD",
+    "UNITS",
+    "WIN_NATS",
+    "WIN_SE",
+    "WRINKLE_LAWS",
+    "check_effect_names",
+    "depth_whitening",
+    "engine_inputs",
+    "force_level_of_samples",
+    "held_out_units",
+    "laplace_interval",
+    "log_prior",
+    "object_unknowns",
+    "physical",
+    "predict",
+    "solve_curves",
+    "trial_anova",
+    "unit_log_likelihood",
+    "widened_grid",
+    "with_measurement",
+]
