@@ -116,7 +116,7 @@ def _check_one_object(sessions: Sequence[Session], command: str) -> None:
             )
 
 
-def _levels(force: np.ndarray) -> np.ndarray:
+def force_level_of_samples(force: np.ndarray) -> np.ndarray:
     """Force level [N] of each sample: samples within LEVEL_ROUNDING of the previous one join its level."""
     order = np.argsort(force)
     level = np.empty_like(force)
@@ -128,7 +128,7 @@ def _levels(force: np.ndarray) -> np.ndarray:
     return level
 
 
-def _anova(sessions, levels):
+def trial_anova(sessions, levels):
     """(τ_t [m], a [m²], b [-]): trial offsets and scatter σ² = a + b d² from trial × level tables."""
     trial_ms, trial_dof, cells = 0.0, 0, []
     for s, lev in zip(sessions, levels):
@@ -168,7 +168,7 @@ def _anova(sessions, levels):
     return math.sqrt(tau_sq), (float(a), float(b))
 
 
-def _whitening(depth_unit, depth_std, tau):
+def depth_whitening(depth_unit, depth_std, tau):
     """Block-diagonal W with Wᵀ W = Σ⁻¹, Σ = diag(σ²) + τ² 11ᵀ within each unit."""
     n = depth_unit.size
     w = np.zeros((n, n))
@@ -202,7 +202,7 @@ def _shape_points(sessions, unit_of):
         sq, dof = 0.0, 0
         for s in np.unique(si):
             sel = (kind == k) & (si == s)
-            lev = _levels(force[sel])
+            lev = force_level_of_samples(force[sel])
             for g in np.unique(lev):
                 vals = value[sel][lev == g]
                 if vals.size > 1:
@@ -250,7 +250,7 @@ def _depth_noise(
 ) -> tuple[float, tuple[float, float], np.ndarray]:
     """The trial offset std τ_t [m], the scatter (a [m²], b [-]) and each depth sample's marginal
     std [m]: ``noise`` where given, else estimated from the replicates."""
-    tau, scatter = _anova(sessions, levels) if noise is None else noise
+    tau, scatter = trial_anova(sessions, levels) if noise is None else noise
     if scatter is None:  # no replicated levels: model-free scatter about a line in force, per session
         noise = np.sqrt(np.mean([depth_noise_from_scatter(s.force, s.depth) ** 2 for s in sessions]))
         scatter = (float(noise**2), 0.0)
@@ -297,7 +297,7 @@ def build_study(
     _check_one_object(sessions, command)
     units, unit_of = _trial_units(sessions, min_trials)
     # one protocol for the study: force levels are clustered over all sessions together
-    all_levels = _levels(np.concatenate([s.force for s in sessions]))
+    all_levels = force_level_of_samples(np.concatenate([s.force for s in sessions]))
     levels = np.split(all_levels, np.cumsum([s.force.size for s in sessions])[:-1])
     depth = np.concatenate([s.depth for s in sessions])
     tau, scatter, depth_std = _depth_noise(sessions, levels, depth, noise)
@@ -321,7 +321,7 @@ def build_study(
         force=np.concatenate([s.force for s in sessions]),
         depth=depth,
         depth_std=depth_std,
-        whitening=_whitening(depth_unit, depth_std, tau),
+        whitening=depth_whitening(depth_unit, depth_std, tau),
         level=np.concatenate(levels),
         count_session=count_session,
         count_unit=count_unit,

@@ -9,10 +9,7 @@ from ._effects import LINEAR_SCALE, MANOMETER_STD, MIN_INDENTER_FRACTION, PRIOR_
 from ._loo import held_out_units, laplace_interval
 from ._measurement import widened_grid, with_measurement
 from ._model import WRINKLE_LAWS, engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
-from ._study import DEPTH_NOISE_FLOOR, object_unknowns
-from ._study import _anova as trial_anova  # (τ_t [m], (a [m²], b [-])): the trial offset and depth scatter
-from ._study import _levels as force_level_of_samples  # each sample's force level [N]
-from ._study import _whitening as depth_whitening  # block-diagonal W [1/m], Wᵀ W = Σ⁻¹ of the depths
+from ._study import DEPTH_NOISE_FLOOR, depth_whitening, force_level_of_samples, object_unknowns, trial_anova
 
 __all__ = [
     "DEPTH_NOISE_FLOOR",
