@@ -22,7 +22,7 @@ from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import GAS_EXPONENTS, GAS_LAWS, ShellProperties
+from ..physics import AbstractGasLaw, AdiabaticGas, PolytropicGas, PrescribedGas, ShellProperties
 from ._energy import (
     WRINKLED_HOOP_CAPACITY,
     Config,
@@ -45,20 +45,17 @@ from ._tracing import tied_to
 # units of the radius, so similar balls stay similar.
 FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
 
-# the named laws of ``physics.GAS_LAWS``, and "polytropic": the sealed gas whose κ is the traced
-# ``CurvePhysics.gas_exponent`` (the adiabatic gas compiles to it, with κ = γ by default)
-SETUP_GASES = GAS_LAWS + ("polytropic",)
-
 
 class Setup(eqx.Module):
     """Static description of an indentation experiment on a ball (all lengths in m).
 
     ``radius`` R: inflated radius; ``n_elements``: meridian elements pole to pole (made odd);
-    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: one of ``physics.GAS_LAWS``,
-    "prescribed" (constant P_g, the paper's model), "isothermal" or "adiabatic" (sealed ideal gas,
-    P_g is the gauge pressure before indentation), or "polytropic" (sealed gas with p V^κ constant,
-    κ the traced ``CurvePhysics.gas_exponent``, so that one program serves every law; "adiabatic"
-    is this program with κ = γ unless ``CurvePhysics.gas_exponent`` says otherwise); ``relax``:
+    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: a ``physics.AbstractGasLaw``,
+    ``PrescribedGas()`` (constant P_g, the paper's model), ``IsothermalGas()`` or ``AdiabaticGas()``
+    (sealed ideal gas, P_g is the gauge pressure before indentation), or ``PolytropicGas(κ)``
+    (sealed gas with p V^κ constant, κ the traced ``CurvePhysics.gas_exponent``, by default the
+    law's own, so that one program serves every law; the adiabatic gas is this program with
+    κ = γ unless ``CurvePhysics.gas_exponent`` says otherwise); ``relax``:
     relaxation of compressive hoop stress (wrinkled shell), which saturates at ``hoop_capacity``
     [-] classical buckling resultants E h²/(R0 √(3(1−ν²))) (default calibrated on a 3D curve,
     see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
@@ -77,7 +74,7 @@ class Setup(eqx.Module):
     radius: float = eqx.field(static=True, default=0.13)
     n_elements: int = eqx.field(static=True, default=101)
     grading: float = eqx.field(static=True, default=0.85)
-    gas: str = eqx.field(static=True, default="prescribed")
+    gas: AbstractGasLaw = eqx.field(static=True, default=PrescribedGas())
     relax: bool = eqx.field(static=True, default=True)
     indenter_radius: float = eqx.field(static=True, default=PAPER_INDENTER_RADIUS)
     contact_stiffness: float = eqx.field(static=True, default=1e11)
@@ -90,10 +87,10 @@ class Setup(eqx.Module):
     friction_slip_tolerance: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
-        if self.gas not in SETUP_GASES:
+        if not isinstance(self.gas, AbstractGasLaw):
             raise InvalidInputError(
-                f"Setup: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(SETUP_GASES)} "
-                "('polytropic': a sealed gas of κ = CurvePhysics.gas_exponent)"
+                f"Setup: gas = {self.gas!r} is no gas law. Fix: pass a physics.AbstractGasLaw, e.g. "
+                "physics.IsothermalGas(), or physics.gas_law(name) for a name"
             )
         if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
             raise InvalidInputError(
@@ -135,15 +132,16 @@ class CurvePhysics(eqx.Module):
     :func:`~shelljax.axisym.indentation_curves_raw`. ``indenter_radius`` a [m] (the finger);
     ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, the sealed gases: 1 for a ball, an
     object's enclosed volume over 4/3 π R³ when only its poke region is a sphere); ``gas_exponent``
-    κ [-] (gases "polytropic" and "adiabatic": p V^κ constant; 0 is the prescribed gauge pressure,
-    1 isothermal, 1.4 adiabatic, ``physics.GAS_EXPONENTS``); ``stiffening`` s = 1/J_m [-] (Gent
+    κ [-] (the polytropic and adiabatic gases: p V^κ constant; 0 is the prescribed gauge pressure,
+    1 isothermal, 1.4 adiabatic, ``physics.AbstractGasLaw.exponent``); ``stiffening`` s = 1/J_m [-] (Gent
     stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
     default: frictionless); ``contact_stiffness`` k_c [N/m³] (None: the Setup's, a compile-time
     constant). Every field has a default: ``indenter_radius`` None is the Setup's finger and
-    ``gas_exponent`` None the κ of the Setup's gas (1 for "polytropic"); :meth:`resolved` fills
+    ``gas_exponent`` None the κ of the Setup's gas (if it compiles to the polytropic program);
+    :meth:`resolved` fills
     them in, :meth:`defaults` is the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
@@ -164,7 +162,7 @@ class CurvePhysics(eqx.Module):
         """Every field a float64 array, of shape (batch,) when ``batch`` is given: the finger and κ
         left None are ``setup``'s (its finger, its gas's κ); ``contact_stiffness`` may stay None."""
         # the prescribed and isothermal programs never read κ: they keep the polytropic default, 1
-        kappa = GAS_EXPONENTS["adiabatic"] if setup.gas == "adiabatic" else GAS_EXPONENTS["isothermal"]
+        kappa = setup.gas.exponent if isinstance(_compiled_gas(setup.gas), PolytropicGas) else PolytropicGas().exponent
         filled = dataclasses.replace(
             self,
             indenter_radius=setup.indenter_radius if self.indenter_radius is None else self.indenter_radius,
@@ -297,12 +295,16 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
     return r0, y0, p
 
 
+def _compiled_gas(law: AbstractGasLaw) -> AbstractGasLaw:
+    """The compiled program's gas law of a Setup's ``law``: the adiabatic and every polytropic gas
+    are the one polytropic program, its κ traced (``CurvePhysics.resolved``)."""
+    return PolytropicGas() if isinstance(law, (AdiabaticGas, PolytropicGas)) else law
+
+
 def _indentation_config(setup: Setup) -> Config:
-    # the adiabatic gas is the polytropic program, its κ traced (``CurvePhysics.resolved``)
-    gas = "polytropic" if setup.gas == "adiabatic" else setup.gas
     return Config(
         theta=setup.theta(),
-        gas=gas,
+        gas=_compiled_gas(setup.gas),
         loading="sphere",
         ground=True,
         pin_bottom=False,

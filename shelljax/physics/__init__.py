@@ -12,13 +12,26 @@ from ._contact import (
     plane_gap,
     sphere_gap,
 )
+from ._contact_laws import (
+    AbstractContactLaw,
+    BarrierContact,
+    CompressionCurve,
+    PowerLawContact,
+    TabulatedCompressionCurve,
+    ground,
+)
 from ._gas import (
     AIR_HEAT_CAPACITY_RATIO,
     ATMOSPHERIC_PRESSURE,
-    GAS_EXPONENTS,
     GAS_LAWS,
+    AbstractGasLaw,
+    AdiabaticGas,
+    IsothermalGas,
+    PolytropicGas,
+    PrescribedGas,
     adiabatic_gas_energy,
     adiabatic_gauge_pressure,
+    gas_law,
     isothermal_gas_energy,
     isothermal_gauge_pressure,
     polytropic_gas_energy,

@@ -35,6 +35,7 @@ from .._errors import InvalidInputError, NoConvergenceError
 from ..diagnose import GLOBAL_PARAMETERS, MeasurementPrior, build_study, study_arrays
 from ..diagnose._effects import LINEAR_SCALE
 from ..diagnose._loo import laplace_interval
+from ..physics import gas_law
 from ..diagnose._model import engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
 from ..estimate import Estimate
 from ..session import Session, load_session
@@ -158,7 +159,7 @@ def _prepare(sessions, rig: Rig):
                 "Fix: add one count per trial"
             )
     study = build_study(sessions, rig.noise, min_trials=1, command="estimate --rig")
-    base = study_arrays(study, gas=rig.gas, indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
+    base = study_arrays(study, gas=gas_law(rig.gas), indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
     return sessions, study, widened_grid(base, _true_forces(rig, study.force), ESTIMATE_GRID_SPAN)
 
 
