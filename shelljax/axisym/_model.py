@@ -11,7 +11,9 @@ area-weighted penalty: contact pressure = k_c × penetration, so the penetration
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -444,58 +446,88 @@ def curve_single(
     schedule, first_load = _load_schedule(setup, forces)
     # the ground first carries the first force and the wall's weight
     load = first_load + physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
-    opts = setup.options()
+    curve = _Curve(
+        setup, cfg, setup.options(), physics, (young, thick, nu, pressure), r0, bending_scale, load, p_inflation
+    )
+    return _scan_levels(curve, y_inflation, schedule, nearby_guesses, return_states)
 
-    def indentation(y_inf):
-        """(z_c at first contact [m], the indentation's Params, the first load step's carry) of the
-        inflated state y_inf [m]."""
-        x_inf, _ = split(y_inf, cfg.n_nodes)
-        zc_contact = x_inf[-1, 1] + physics.indenter_radius
-        base = _params(
-            young,
-            thick,
-            nu,
-            r0,
-            pressure,
-            setup,
-            ref_volume=enclosed_volume(x_inf),
-            ground_z=x_inf[0, 1],
-            bending_scale=bending_scale,
-            physics=physics,
-        )
-        y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
-        return zc_contact, base, _initial_carry(y_start, cfg, base, load)
 
-    # The inflation is the scan's first step, so that one Newton solve (one copy of the engine in
-    # the compiled program, and in its derivatives) serves it and every load step.
-    def step(carry, level):
-        y_inf, zc_contact, base, loading = carry
-        force, nearby, inflating = level
-        p = _where(inflating, p_inflation, _with_load(base, force, loading[-1]))
-        guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
-        if nearby_guesses is not None:
-            guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
-        sol = equilibrium(cfg, opts, p, guess)
-        y, res, it = sol.value, sol.stats["residual"], sol.iterations
-        y_inf = jnp.where(inflating, y, y_inf)
-        inflated_zc, inflated_base, first = indentation(y_inf)
-        zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))
-        # (the inflation's row is dropped; observed with the indentation's parameters it stays finite)
-        obs = observables(cfg, _where(inflating, _with_load(base, force, first[-1]), p), y, y_inf, zc_contact)
-        obs.update(residual=res, iterations=it)
-        if return_states:
-            obs.update(state=y, friction_anchor=loading[-1][0], friction_normal_force=loading[-1][1])
-        loading = _where(inflating, first, (y, loading[0], force, loading[2], _friction_lag(y, cfg, base)))
-        return (y_inf, zc_contact, base, loading), obs
+class _Curve(NamedTuple):
+    """What every step of one curve shares: the Setup, its Config and SolverOptions, the resolved
+    CurvePhysics, the shell (E [Pa], h [m], ν [-], P_g [Pa]), the rest radius R0 [m], the bending
+    scale [-], the first step's ground load [N] and the inflation's Params."""
 
+    setup: Setup
+    cfg: Config
+    opts: SolverOptions
+    physics: CurvePhysics
+    shell: tuple
+    r0: Float[Array, ""]
+    bending_scale: Float[Array, ""]
+    load: Float[Array, ""]
+    p_inflation: Params
+
+
+def _indentation(curve: _Curve, y_inf):
+    """(z_c at first contact [m], the indentation's Params, the first load step's carry) of the
+    inflated state y_inf [m]."""
+    young, thick, nu, pressure = curve.shell
+    x_inf, _ = split(y_inf, curve.cfg.n_nodes)
+    zc_contact = x_inf[-1, 1] + curve.physics.indenter_radius
+    base = _params(
+        young,
+        thick,
+        nu,
+        curve.r0,
+        pressure,
+        curve.setup,
+        ref_volume=enclosed_volume(x_inf),
+        ground_z=x_inf[0, 1],
+        bending_scale=curve.bending_scale,
+        physics=curve.physics,
+    )
+    y_start = _start_state(curve.setup, x_inf, zc_contact, pressure, curve.load)
+    return zc_contact, base, _initial_carry(y_start, curve.cfg, base, curve.load)
+
+
+def _curve_step(curve: _Curve, y_inflation, with_nearby: bool, return_states: bool, carry, level):
+    """One step of the curve's scan: the inflation (the first) or one load step, its observables."""
+    setup, cfg = curve.setup, curve.cfg
+    y_inf, zc_contact, base, loading = carry
+    force, nearby, inflating = level
+    p = _where(inflating, curve.p_inflation, _with_load(base, force, loading[-1]))
+    guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
+    if with_nearby:
+        guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
+    sol = equilibrium(cfg, curve.opts, p, guess)
+    y, res, it = sol.value, sol.stats["residual"], sol.iterations
+    y_inf = jnp.where(inflating, y, y_inf)
+    inflated_zc, inflated_base, first = _indentation(curve, y_inf)
+    zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))
+    # (the inflation's row is dropped; observed with the indentation's parameters it stays finite)
+    obs = observables(cfg, _where(inflating, _with_load(base, force, first[-1]), p), y, y_inf, zc_contact)
+    obs.update(residual=res, iterations=it)
+    if return_states:
+        obs.update(state=y, friction_anchor=loading[-1][0], friction_normal_force=loading[-1][1])
+    loading = _where(inflating, first, (y, loading[0], force, loading[2], _friction_lag(y, cfg, base)))
+    return (y_inf, zc_contact, base, loading), obs
+
+
+def _scan_levels(curve: _Curve, y_inflation, schedule, nearby_guesses, return_states: bool) -> dict:
+    """The curve's outputs at the requested levels (:func:`curve_single`).
+
+    The inflation is the scan's first step, so that one Newton solve (one copy of the engine in
+    the compiled program, and in its derivatives) serves it and every load step."""
+    setup = curve.setup
     n_ramp, m = len(setup.ramp), setup.substeps
     nearby = _nearby_per_step(nearby_guesses, schedule.shape[0], n_ramp, m)
     if nearby is not None:
         nearby = jnp.concatenate([nearby_guesses[:1], nearby])
     levels = (jnp.concatenate([jnp.zeros(1), schedule]), nearby, jnp.arange(1 + schedule.shape[0]) == 0)
-    _, obs = jax.lax.scan(step, (y_inflation, *indentation(y_inflation)), levels)
+    step = functools.partial(_curve_step, curve, y_inflation, nearby_guesses is not None, return_states)
+    _, obs = jax.lax.scan(step, (y_inflation, *_indentation(curve, y_inflation)), levels)
     out = _levels(jax.tree_util.tree_map(lambda v: v[1:], obs), n_ramp, m)
-    out["rest_radius"] = r0
+    out["rest_radius"] = curve.r0
     out["inflation_residual"] = obs["residual"][0]
     if return_states:
         out["state"] = jnp.concatenate([obs["state"][:1], out["state"]])
