@@ -1,6 +1,7 @@
-"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions, and the
-closed-form results of shell theory (SI units), and the one :class:`ShellProperties` (P_g, E, h, ν,
-R) the engines and estimators take."""
+"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions, the laws
+as objects (the gas laws, :class:`AbstractGasLaw`; the contact laws a :class:`Plane` carries,
+:class:`AbstractContactLaw`), the closed-form results of shell theory (SI units), and the one
+:class:`ShellProperties` (P_g, E, h, ν, R) the engines and estimators take."""
 
 from ._contact import (
     Plane,
