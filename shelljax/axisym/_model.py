@@ -135,16 +135,15 @@ class CurvePhysics(eqx.Module):
     ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, the sealed gases: 1 for a ball, an
     object's enclosed volume over 4/3 π R³ when only its poke region is a sphere); ``gas_exponent``
     κ [-] (the polytropic and adiabatic gases: p V^κ constant; 0 is the prescribed gauge pressure,
-    1 isothermal, 1.4 adiabatic, ``physics.AbstractGasLaw.exponent``); ``stiffening`` s = 1/J_m [-] (Gent
-    stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
+    1 isothermal, 1.4 adiabatic, ``physics.AbstractGasLaw.exponent``); ``stiffening`` s = 1/J_m
+    [-] (Gent stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
     default: frictionless); ``contact_stiffness`` k_c [N/m³] (None: the Setup's, a compile-time
     constant). Every field has a default: ``indenter_radius`` None is the Setup's finger and
     ``gas_exponent`` None the κ of the Setup's gas (if it compiles to the polytropic program);
-    :meth:`resolved` fills
-    them in, :meth:`defaults` is the default physics.
+    :meth:`resolved` fills them in, :meth:`defaults` is the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume

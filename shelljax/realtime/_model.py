@@ -111,8 +111,8 @@ class RealtimeShell(_Loading, _StableTimeStep):
     e.g. the inflated equilibrium), ``masses`` (V,) [kg], ``young_modulus`` E [Pa],
     ``poisson_ratio`` ν [-], ``thickness`` h [m], ``gas`` (a ``physics.PrescribedGas``,
     ``IsothermalGas`` or ``AdiabaticGas``, with its γ [-]), ``gauge_pressure`` P_g [Pa] (prescribed,
-    or the sealed gas's at ``reference_volume`` [m³]), ``planes`` (``physics.Plane``s or scenario plane specs: point,
-    normal, friction μ, damping c [N·s/m], the centre-of-mass dashpot of the reference),
+    or the sealed gas's at ``reference_volume`` [m³]), ``planes`` (``physics.Plane``s or scenario
+    plane specs: point, normal, friction μ, damping c [N·s/m], the centre-of-mass dashpot of the reference),
     ``gravity`` [m/s²] (g down, or a 3-vector), ``contact_stiffness`` k [N/m] per vertex (default:
     k_i = 0.25 m_i ω_max², ω_max the stiffest internal mode: it shortens the stable Δt by 11 %),
     ``contact_damping_ratio`` ζ [-] of each vertex's normal damper c_i = 2ζ√(k m_i) (default 0: the
