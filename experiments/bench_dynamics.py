@@ -30,7 +30,7 @@ import numpy as np
 
 import shelljax.shell3d as s3
 from shelljax import dynamics as d
-from shelljax.physics import ShellProperties
+from shelljax.physics import ShellProperties, gas_law
 
 jax.config.update("jax_enable_x64", True)
 
@@ -52,7 +52,7 @@ def _system(faces: int, gas: str):
     return shell, d.shell_system(
         shell,
         ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=shell.thickness, poisson_ratio=0.4),
-        gas=gas,
+        gas=gas_law(gas),
         mass=0.8,
         planes=[ground],
     )

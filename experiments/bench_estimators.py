@@ -28,6 +28,7 @@ import numpy as np
 import shelljax
 from shelljax.config import bundled_data_dir
 from shelljax.estimate import ConvergenceWarning, fit_session, forward_model_for, padded_problem, sample_posterior
+from shelljax.physics import gas_law
 from shelljax.session import load_session
 
 
@@ -80,7 +81,7 @@ def main(argv=None):
     parser.add_argument("--out", default="bench_estimators.json")
     args = parser.parse_args(argv)
     session = load_session(args.session)
-    options = {"gas": args.gas, "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
+    options = {"gas": gas_law(args.gas), "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
     model = forward_model_for(session, args.model, **options)
 
     t0 = time.perf_counter()

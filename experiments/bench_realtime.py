@@ -35,6 +35,7 @@ from shelljax.dynamics import BarrierContact
 from shelljax.geometry import sphere_mesh
 from shelljax.physics import Plane, ShellProperties
 from shelljax.shell3d import Shell, ShellMesh
+from shelljax.physics import AdiabaticGas
 
 PEZZI = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 0.9e-3, "poisson_ratio": 0.4, "radius": 0.13}
 MASS = 0.8
@@ -57,7 +58,7 @@ def ball(n_faces, contact="barrier", **options):
         shell,
         ShellProperties(**PEZZI),
         mass=MASS,
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         rest_shape="small-strain",
         planes=planes(contact),
         **options,
@@ -266,7 +267,7 @@ def hammer_rows(duration):
                 shell,
                 props,
                 mass=0.09,
-                gas="adiabatic",
+                gas=AdiabaticGas(),
                 rest_shape="small-strain",
                 safety=safety,
                 planes=[Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], friction=0.5, damping=1.0)],

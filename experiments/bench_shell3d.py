@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from shelljax.physics import IsothermalGas
 
 DEPTHS = [0.02 * (i + 1) / 7 for i in range(7)]
 
@@ -39,7 +40,7 @@ def run_one(n_triangles: int, repeats: int) -> dict:
     t0 = time.perf_counter()
     pezzi = ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=0.9e-3, poisson_ratio=0.4)
     ball = s3.ball(radius=0.13, thickness=pezzi.thickness, n_triangles=n_triangles)
-    sim = s3.Indentation(ball, pezzi, gas="isothermal", indenter_radius=0.008, progress=False)
+    sim = s3.Indentation(ball, pezzi, gas=IsothermalGas(), indenter_radius=0.008, progress=False)
     setup = time.perf_counter() - t0
     t0 = time.perf_counter()
     states = sim.curve(DEPTHS)

@@ -36,7 +36,7 @@ import numpy as np
 
 from shelljax.executor import WorkItem, add_executor_arguments, executor_options, run_items
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from shelljax.physics import ShellProperties, scaling_wrinkle_count
+from shelljax.physics import PolytropicGas, ShellProperties, scaling_wrinkle_count
 
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 SHAPE_FORCES = (10.0, 20.0)  # [N]
@@ -104,7 +104,7 @@ def reality_curves(obj, truth, pressure, true_forces):
         shell,
         np.asarray(true_forces) / scale**2,
         n_elements=REALITY_ELEMENTS,
-        gas="polytropic",
+        gas=PolytropicGas(),
         physics=physics,
         workers=1,
     )

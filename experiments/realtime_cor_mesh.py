@@ -27,6 +27,7 @@ from shelljax import realtime as rt
 from shelljax.dynamics import BarrierContact
 from shelljax.physics import Plane, ShellProperties
 from shelljax.shell3d import Shell, ShellMesh
+from shelljax.physics import AdiabaticGas
 
 ROOT = Path(__file__).resolve().parents[1]
 PEZZI = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 0.9e-3, "poisson_ratio": 0.4, "radius": 0.13}
@@ -52,7 +53,7 @@ def drop_cor(faces: int, height: float, safety: float = SAFETY) -> dict:
         shell,
         ShellProperties(**PEZZI),
         mass=MASS,
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         rest_shape="small-strain",
         planes=[ground],
         safety=safety,

@@ -41,6 +41,7 @@ from shelljax.physics import (
     tau,
     vella_linear_stiffness,
 )
+from shelljax.physics import PrescribedGas, gas_law
 
 PEZZI = (1300.0, 2.34e6, 0.9e-3, NU, 0.13)
 OBJECTS = {  # bundled objects (shelljax/data/README.md): P_g, E, h, ν, R
@@ -158,7 +159,7 @@ def section_ks():
     for name, obj in OBJECTS.items():
         p, e, h, nu, r = obj
         for gas in ("prescribed", "isothermal"):
-            c = _curves(obj, PAPER_FORCES, gas=gas)
+            c = _curves(obj, PAPER_FORCES, gas=gas_law(gas))
             lp2 = p * r**3 / (e * h)
             rows.append(
                 dict(
@@ -300,7 +301,11 @@ def section_cross3d():
         p, e, h, nu, r = PEZZI
         ball = s3.ball(radius=r, thickness=h, n_triangles=4000)
         sim = s3.Indentation(
-            ball, _shell(p, e, ball.thickness, nu), gas="prescribed", indenter_radius=PAPER_INDENTER_RADIUS, ground=True
+            ball,
+            _shell(p, e, ball.thickness, nu),
+            gas=PrescribedGas(),
+            indenter_radius=PAPER_INDENTER_RADIUS,
+            ground=True,
         )
         states = sim.force_curve([5.0, 10.0])
         obs3 = [s.observables() for s in states]

@@ -50,6 +50,7 @@ import numpy as np
 from shelljax.executor import WorkItem, add_executor_arguments, executor_options, run_items
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
 from shelljax.physics import ShellProperties, scaling_wrinkle_count
+from shelljax.physics import PolytropicGas
 
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
 N_TRIALS = 3
@@ -149,7 +150,12 @@ def reality_w0(obj, rig, pressure, forces):
         radius=REALITY_RADIUS,
     )
     curve = indentation_curves(
-        shell, np.asarray(forces) / scale**2, n_elements=REALITY_ELEMENTS, gas="polytropic", physics=physics, workers=1
+        shell,
+        np.asarray(forces) / scale**2,
+        n_elements=REALITY_ELEMENTS,
+        gas=PolytropicGas(),
+        physics=physics,
+        workers=1,
     )
     return scale * np.asarray(curve.w0[0])
 

@@ -38,7 +38,7 @@ import numpy as np
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax import dynamics as d
-from shelljax.physics import STANDARD_GRAVITY as G, ShellProperties
+from shelljax.physics import AdiabaticGas, IsothermalGas, STANDARD_GRAVITY as G, ShellProperties
 
 jax.config.update("jax_enable_x64", True)
 
@@ -51,7 +51,7 @@ def _shell(radius, thickness, faces):
     return s3.ball(radius, thickness, n_triangles=faces)
 
 
-def make_system(args, gas="isothermal", gravity=G, faces=None):
+def make_system(args, gas=IsothermalGas(), gravity=G, faces=None):
     shell = _shell(args.radius, args.thickness, faces or args.faces)
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(args.ghat, 1e3), name="ground")
     return d.shell_system(
@@ -205,7 +205,7 @@ def part_model(args, report):
 
 
 def part_adiabatic(args, report):
-    report["adiabatic"] = drop(make_system(args, gas="adiabatic"), args, 2.5e-4, args.duration)
+    report["adiabatic"] = drop(make_system(args, gas=AdiabaticGas()), args, 2.5e-4, args.duration)
 
 
 def bounce_cor(impacts):

@@ -54,6 +54,7 @@ from shelljax import realtime as rt
 from shelljax.physics import Plane, ShellProperties
 from shelljax.realtime import SAFETY
 from shelljax.shell3d import Shell, ShellMesh
+from shelljax.physics import AdiabaticGas, IsothermalGas
 
 PEZZI = {"gauge_pressure": 1300.0, "young_modulus": 2.34e6, "thickness": 0.9e-3, "poisson_ratio": 0.4}
 RADIUS, MASS = 0.13, 0.8
@@ -169,7 +170,7 @@ def build_system(faces, case, damping, friction, slip_tolerance=1e-4):
     return d.shell_system(
         shell,
         ShellProperties(**PEZZI),
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         mass=MASS,
         planes=planes_for(case, damping, friction, slip_tolerance=slip_tolerance),
     )
@@ -317,7 +318,7 @@ def poke(
     if path is not None and path.is_file():
         ref = json.loads(path.read_text())
     else:
-        sim = s3.Indentation(shell, props, gas="isothermal", indenter_radius=radius, ground=True)
+        sim = s3.Indentation(shell, props, gas=IsothermalGas(), indenter_radius=radius, ground=True)
         state = sim.solve(depth=depth)
         ref = {
             "force_N": float(state.observables()["force"]),
@@ -327,7 +328,7 @@ def poke(
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(json.dumps(ref))
-    system = d.shell_system(shell, props, gas="isothermal", mass=MASS, gravity=0.0)
+    system = d.shell_system(shell, props, gas=IsothermalGas(), mass=MASS, gravity=0.0)
     # The engine's indenter and ground are frictionless (``friction`` 0 here too: the realtime's
     # velocity-regularised friction cannot hold a static load, it only slows the creep). A static
     # reading does not need the dynamic default spring (≈ 1 mm under the indenter): the force

@@ -27,6 +27,7 @@ import numpy as np
 import shelljax.shell3d as s3
 from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties, lame_constants_2d, vella_linear_stiffness
 from shelljax.shell3d import ModelConfig, ShellModel, rigid_mode_pins
+from shelljax.physics import IsothermalGas
 
 E, NU = 1.0e6, 0.3
 
@@ -147,7 +148,7 @@ def main(argv=None):
     sim = s3.Indentation(
         ball,
         ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=ball.thickness, poisson_ratio=0.4),
-        gas="isothermal",
+        gas=IsothermalGas(),
         indenter_radius=0.008,
         progress=False,
     )

@@ -27,7 +27,6 @@ from ._toml import TomlReader, read_toml
 from .executor import ExecutorOptions
 from .paper import PAPER_KS
 
-GAS_MODELS = ESTIMATOR_GASES
 _TOP_KEYS = {
     "name",
     "description",
@@ -237,7 +236,7 @@ def estimator_settings(
         through_origin=reader.flag(estimators, "through_origin", p, default=d.through_origin),
         seed=seed,
         forward_model=reader.choice(estimators, "forward_model", p, FORWARD_MODELS, d.forward_model, what="model"),
-        gas=reader.choice(estimators, "gas", p, GAS_MODELS, gas, what="gas model"),
+        gas=reader.choice(estimators, "gas", p, ESTIMATOR_GASES, gas, what="gas model"),
         wrinkle_law=reader.choice(estimators, "wrinkle_law", p, WRINKLE_LAWS, d.wrinkle_law, what="wrinkle law"),
         nuisance=_nuisance(reader, estimators.get("nuisance", list(d.nuisance))),
         walkers=reader.integer(

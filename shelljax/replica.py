@@ -75,6 +75,7 @@ def export_replica(
     from . import shell3d as s3
     from .estimate import DEFAULT_OPTIONS
     from .object_estimate import estimated_parameters
+    from .physics import gas_law
     from .session import load_session
 
     session = load_session(session_path)
@@ -88,7 +89,7 @@ def export_replica(
             "triangles. Fix: e.g. --mesh-faces 2000"
         )
     check_output_dir(out_dir, "--out")  # before the estimate: a refused path costs no fit
-    estimator_gas = "prescribed" if gas == "prescribed" else DEFAULT_OPTIONS.gas
+    estimator_gas = DEFAULT_OPTIONS.gas if gas_law(gas).sealed else "prescribed"
     if rig is not None:
         from .rig import load_rig
 
@@ -129,7 +130,7 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
     also returns the replica's dictionary: ``(system, replica)``."""
     from . import dynamics as d
     from . import shell3d as s3
-    from .physics import STANDARD_GRAVITY, ShellProperties
+    from .physics import STANDARD_GRAVITY, ShellProperties, gas_law
 
     directory = Path(directory)
     path = directory / "replica.json"
@@ -152,7 +153,7 @@ def load_replica(directory: str | Path, *, planes=(), gravity=None):
     system = d.shell_system(
         shell,
         properties,
-        gas=replica["gas"],
+        gas=gas_law(replica["gas"]),
         mass=value("mass_kg"),
         planes=planes,
         gravity=STANDARD_GRAVITY if gravity is None else gravity,

@@ -34,7 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from .paper import DEFAULT_POISSON_RATIO, PAPER_FORCES, PAPER_INDENTER_RADIUS
-from .physics import ShellProperties, scaling_wrinkle_count, tau
+from .physics import PrescribedGas, ShellProperties, scaling_wrinkle_count, tau
 
 CURVES_PATH = Path(__file__).resolve().parent / "data" / "virtual" / "curves.json"
 RADIUS = 0.13  # [m]
@@ -219,7 +219,7 @@ def solve_curve(
     sim = s3.Indentation(
         shell,
         properties,
-        gas="prescribed",
+        gas=PrescribedGas(),
         indenter_radius=PAPER_INDENTER_RADIUS,
         ground=True,
         progress=False,

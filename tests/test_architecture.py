@@ -369,7 +369,10 @@ def test_the_finger_radius_default_is_the_papers():
         (r"(?m)^def tau\(", "paper.py"),
         (r"(?m)^def \w*signed_volume\(", "geometry/_mesh.py"),
         (r"arange\(5", None),  # the force levels are listed once, in paper.py
-        (r"(?m)^\s*GAS_EXPONENTS = ", "physics/_gas.py"),  # the gas laws' names and κ, for every engine
+        (r"(?m)^class AbstractGasLaw\b", "physics/_gas.py"),  # the gas laws, objects every engine takes
+        (r"(?m)^def gas_law\(", "physics/_gas.py"),  # the one map from a gas's name to its law
+        (r"(?m)^class AbstractContactLaw\b", "physics/_contact_laws.py"),  # the laws a Plane carries
+        (r"(?m)^\s*WRINKLE_LAWS = ", "_options.py"),  # the wrinkle laws' names, in one order
         (r"(?m)^class ShellProperties\b", "physics/_properties.py"),  # P_g, E, h, ν, R: one object
         # docs/architecture.md's other "one X": the TOML reader, the sphere builder, the plane, the defaults
         (r"(?m)^\s*(import|from) tomllib\b", "_toml.py"),
@@ -389,3 +392,23 @@ def test_each_group_of_test_files_sharing_programs_has_several_files():
     groups = collections.Counter(g for p in (ROOT / "tests").glob("test_*.py") if (g := programs_group(p)))
     lone = sorted(g for g, n in groups.items() if n < 2)
     assert groups and not lone, f"SHARED_PROGRAMS groups of a single file (a misspelt name?): {lone}"
+
+
+# the modules past the edge (TOML, session and rig files, CLI options): they take gas laws as objects
+GAS_OBJECT_PACKAGES = ("axisym", "shell3d", "dynamics", "estimate", "diagnose", "realtime", "physics")
+GAS_NAME = r'"(?:prescribed|isothermal|adiabatic|polytropic)"'
+GAS_NAME_COMPARISON = re.compile(rf"[=!]=\s*{GAS_NAME}|{GAS_NAME}\s*[=!]=|\bin\s*[(\[{{][^)\]}}]*{GAS_NAME}")
+
+
+def test_gas_names_are_compared_only_at_the_edge():
+    compared = [
+        f"{path.relative_to(PACKAGE)}:{source[: match.start()].count(chr(10)) + 1}"
+        for path in _package_files()
+        if _top(path) in GAS_OBJECT_PACKAGES
+        for source in [path.read_text()]
+        for match in GAS_NAME_COMPARISON.finditer(source)
+    ]
+    assert not compared, (
+        f"gas laws compared by name past the edge (take a physics.AbstractGasLaw, ask it .sealed or "
+        f"isinstance; physics.gas_law maps a name at the edge): {compared}"
+    )

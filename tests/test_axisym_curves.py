@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas
 import shelljax
 from shelljax.axisym import Setup, indentation_curves, indentation_curves_raw
 from shelljax.physics import ShellProperties
@@ -141,7 +142,7 @@ def test_a_walked_batch_saves_iterations_and_differentiates_alike():
 
 def test_sealed_gas_conserves_pv(batch_result):
     params, pref = batch_result
-    res = indentation_curves(shell(params), FORCES, radius=RADIUS, gas="isothermal", **KW)
+    res = indentation_curves(shell(params), FORCES, radius=RADIUS, gas=IsothermalGas(), **KW)
     p_abs = np.asarray(res.pressure) + shelljax.physics.ATMOSPHERIC_PRESSURE
     v = np.asarray(res.volume)
     # Isothermal ideal gas: p·V is the same at every force level ...

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import AdiabaticGas, IsothermalGas, PolytropicGas, PrescribedGas, gas_law
 import shelljax
 from shelljax.axisym import (
     CurvePhysics,
@@ -225,7 +226,7 @@ def test_assembled_hessian_and_gradient_include_every_effect():
     setup = Setup(radius=0.13, n_elements=21)
     cfg = Config(
         theta=setup.theta(),
-        gas="polytropic",
+        gas=PolytropicGas(),
         loading="sphere",
         ground=True,
         pin_bottom=False,
@@ -267,7 +268,7 @@ RADIUS = 0.13
 PEZZI = np.array([1300.0, 2.34e6, 9e-4, 0.4])  # P_g [Pa], E [Pa], h [m], ν
 FORCES = np.array([5.0, 10.0])
 N_ELEMENTS = 41
-SETUP = Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="polytropic")
+SETUP = Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas=PolytropicGas())
 FIELDS = ("indenter_radius", "gas_volume_ratio", "gas_exponent", "stiffening", "areal_weight")
 DEFAULT = dict(indenter_radius=8e-3, gas_volume_ratio=1.0, gas_exponent=1.0, stiffening=0.0, areal_weight=0.0)
 # Named rows of the walked batch, followed by ten rows of central differences around FD_BASE.
@@ -337,14 +338,14 @@ def test_polytropic_exponents_one_and_zero_are_the_isothermal_and_prescribed_gas
     # κ = 1 with a traced finger and gas volume: the isothermal law's own program, its finger the
     # Setup's and its gas volume traced
     isothermal = _cold(
-        Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="isothermal", indenter_radius=6e-3),
+        Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas=IsothermalGas(), indenter_radius=6e-3),
         CurvePhysics(gas_volume_ratio=np.full(1, 2.5)),
     )
     _assert_same_curve(cases["isothermal_override"], isothermal)
     # the named adiabatic gas is the polytropic program at κ = γ, by default
-    adiabatic = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="adiabatic"))
+    adiabatic = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas=AdiabaticGas()))
     _assert_same_curve(cases["adiabatic"], adiabatic)
-    prescribed = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas="prescribed"))
+    prescribed = _cold(Setup(radius=RADIUS, n_elements=N_ELEMENTS, gas=PrescribedGas()))
     _assert_same_curve(cases["prescribed"], prescribed)
     np.testing.assert_allclose(cases["prescribed"].pressure, PEZZI[0], rtol=1e-9)
     # not vacuous: the sealed gas stiffens the ball by far more than the tolerance
@@ -429,7 +430,7 @@ def test_similar_balls_give_similar_curves(walked):
     scale = radius / RADIUS
     physics = dict(indenter_radius=9e-3, gas_volume_ratio=1.3, gas_exponent=1.4, stiffening=0.2, areal_weight=10.0)
     big = Setup(
-        radius=radius, n_elements=N_ELEMENTS, gas="polytropic", contact_stiffness=SETUP.contact_stiffness / scale
+        radius=radius, n_elements=N_ELEMENTS, gas=PolytropicGas(), contact_stiffness=SETUP.contact_stiffness / scale
     )
     at_radius = _cold(big, _physics([physics]))
     reference = _physics([physics]).similar(1.0 / scale)
@@ -458,4 +459,4 @@ def test_checked_api_validates_the_physics():
     with pytest.raises(shelljax.InvalidInputError, match="gas"):
         Setup(gas="steam")
     # the named laws are the 3D engine's and the dynamics' (physics.GAS_LAWS)
-    assert all(Setup(gas=name).gas == name for name in GAS_LAWS)
+    assert all(Setup(gas=gas_law(name)).gas == gas_law(name) for name in GAS_LAWS)

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas
 from shelljax.axisym import Config, CurvePhysics, Setup, curve_single
 from shelljax.axisym._energy import ground_friction_energy, rest_nodes
 from shelljax.axisym._hessian import hessian_at
@@ -18,7 +19,7 @@ from shelljax.axisym._model import _params
 
 from _shells import shell
 
-SETUP = Setup(radius=0.13, n_elements=41, gas="isothermal")
+SETUP = Setup(radius=0.13, n_elements=41, gas=IsothermalGas())
 THETA = (1300.0, 2.34e6, 0.9e-3, 0.4)  # P_g [Pa], E [Pa], h [m], ν [-]: the Pezzi-like ball
 FORCES = jnp.array([5.0, 10.0, 15.0])  # [N]
 MU0, DMU = 0.5, 1e-2  # FD point and half step of dw0/dμ

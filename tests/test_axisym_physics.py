@@ -13,6 +13,7 @@ import jax
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas
 from shelljax.axisym import (
     Setup,
     inflate,
@@ -128,7 +129,7 @@ def test_sealed_gas_of_another_volume_loses_the_volume_the_wall_sweeps():
     fields = dict.fromkeys(Params.__dataclass_fields__, 1.0) | dict(gauge_pressure=p0, reference_volume=v_ref)
     params = Params(**{k: np.float64(v) for k, v in fields.items() if k != "inflating"})  # a sealed gas
     for ratio in (1.0, 2.94):
-        cfg = Config(theta=(0.0, 1.0), gas="isothermal")
+        cfg = Config(theta=(0.0, 1.0), gas=IsothermalGas())
         params = eqx.tree_at(lambda p: p.gas_volume_ratio, params, np.float64(ratio))
         for swept in (-5e-4, 0.0, 2e-4):
             expected = isothermal_gauge_pressure(ratio * v_ref + swept, ratio * v_ref, p0)
@@ -137,7 +138,7 @@ def test_sealed_gas_of_another_volume_loses_the_volume_the_wall_sweeps():
                 float(expected), rel=1e-12, abs=1e-8
             )
     # a larger gas volume stiffens less: the same swept volume raises the pressure less
-    cfg = Config(theta=(0.0, 1.0), gas="isothermal")
+    cfg = Config(theta=(0.0, 1.0), gas=IsothermalGas())
     small = gauge_pressure_at(v_ref - 5e-4, cfg, eqx.tree_at(lambda p: p.gas_volume_ratio, params, np.float64(1.0)))
     large = gauge_pressure_at(v_ref - 5e-4, cfg, eqx.tree_at(lambda p: p.gas_volume_ratio, params, np.float64(2.94)))
     assert p0 < float(large) < float(small)

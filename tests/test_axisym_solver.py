@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas, PrescribedGas, gas_law
 import shelljax.axisym._newton as newton
 from shelljax.axisym import CurvePhysics, Setup
 from shelljax.axisym._energy import Config, constrained_mask, enclosed_volume, split, total_energy
@@ -98,7 +99,7 @@ def _indented_states(setup):
 
 
 # the indented states the Hessians are compared at (21 elements, sealed gas)
-STATES_SETUP = Setup(radius=0.13, n_elements=21, gas="isothermal")
+STATES_SETUP = Setup(radius=0.13, n_elements=21, gas=IsothermalGas())
 
 # Jitted: run op by op, the dense autodiff Hessian compiled ≈ 900 single-operation programs
 # (≈ 45 s of the suite's time from an empty compilation cache).
@@ -117,13 +118,13 @@ def test_assembled_hessian_equals_the_dense_autodiff_hessian(gas, loading):
     # (one compiled curve, shared with the inflation test below), whatever its own gas, and its
     # inflated state and rest radius (the inflation is the same for every gas: the sealed gas
     # is off while inflating, test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem).
-    setup = Setup(radius=0.13, n_elements=21, gas=gas)
+    setup = Setup(radius=0.13, n_elements=21, gas=gas_law(gas))
     curve = _indented_curve(STATES_SETUP)
     states, r0 = curve["state"], curve["rest_radius"]
     x_inflated, _ = split(states[0], len(setup.theta()))
     cfg = Config(
         theta=setup.theta(),
-        gas=gas,
+        gas=gas_law(gas),
         loading=loading,
         ground=loading != "none",
         pin_bottom=loading == "none",
@@ -165,7 +166,7 @@ def test_contact_springs_model_the_penalty_of_a_node_entering_contact():
     setup = Setup(radius=0.13, n_elements=21)
     cfg = Config(
         theta=setup.theta(),
-        gas="prescribed",
+        gas=PrescribedGas(),
         loading="sphere",
         ground=True,
         pin_bottom=False,
@@ -281,7 +282,7 @@ def test_a_node_hovering_over_the_ground_does_not_freeze_newton(monkeypatch):
     # hovers 4 nm above the plane, where the contact-predicted model's pull k·gap cancels its
     # true load and the predicted step vanished (1e-17 m): Newton repeated it until max_steps.
     # (found with c_w = 2.5, the default then: with other c_w the Newton path misses that state)
-    setup = Setup(radius=0.08, gas="isothermal", hoop_capacity=2.5)
+    setup = Setup(radius=0.08, gas=IsothermalGas(), hoop_capacity=2.5)
     physics = CurvePhysics(gas_volume_ratio=2.936825663641749)
     forces = np.array([5.192942604266566, 7.838569549712717, 10.484196495158868, 13.12982344060502])
     params = (4322.770123333427, 197785522.1706926, 0.00030831352398951936, 0.4)
@@ -337,7 +338,7 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
     # the same solve, inside the curve's program and in a program of its own here: equal to round-off
     np.testing.assert_allclose(np.asarray(_indented_states(setup)[0]), np.asarray(y), rtol=0, atol=1e-14)
     assert float(res) <= setup.atol
-    plain = Config(theta=setup.theta(), gas="prescribed", loading="none", ground=False, pin_bottom=True, relax=False)
+    plain = Config(theta=setup.theta(), gas=PrescribedGas(), loading="none", ground=False, pin_bottom=True, relax=False)
     p = _params(*PEZZI[1:], r0, PEZZI[0], setup)
     force = jax.jit(newton.residual, static_argnums=1)
     # The plain problem's out-of-balance force at the state is the curve's own residual (2.7e-8 N
@@ -351,7 +352,7 @@ def test_the_curves_inflation_is_the_equilibrium_of_the_plain_inflation_problem(
         float(
             jnp.max(
                 jnp.abs(
-                    force(y, Config(theta=setup.theta(), gas="isothermal", loading="none", pin_bottom=True), sealed)
+                    force(y, Config(theta=setup.theta(), gas=IsothermalGas(), loading="none", pin_bottom=True), sealed)
                 )
             )
         )

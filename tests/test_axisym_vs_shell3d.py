@@ -10,6 +10,7 @@ axisymmetric state is the 3D state).
 import numpy as np
 import pytest
 
+from shelljax.physics import PrescribedGas
 import shelljax.shell3d as s3
 from shelljax.axisym import Setup, indentation_curves_raw
 from shelljax.physics import ShellProperties
@@ -26,7 +27,7 @@ def both():
     sim = s3.Indentation(
         s3.ball(radius=R, thickness=H, n_triangles=2000),
         ball,
-        gas="prescribed",
+        gas=PrescribedGas(),
         indenter_radius=0.008,
         ground=True,
         progress=False,

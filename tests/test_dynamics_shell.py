@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import AdiabaticGas, IsothermalGas
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax import dynamics as d
@@ -48,7 +49,7 @@ def system(shell):
     ground = d.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], d.BarrierContact(GHAT, 1e3), name="ground")
     # The TINY config's system: its damping a float64 array as the scenario sets it (not a weakly
     # typed one), so that the CLI's runs reuse the programs these tests traced.
-    return d.shell_system(shell, BALL, gas="isothermal", mass=MASS, planes=[eqx_replace_damping(ground, 0.0)])
+    return d.shell_system(shell, BALL, gas=IsothermalGas(), mass=MASS, planes=[eqx_replace_damping(ground, 0.0)])
 
 
 def _impact_state(system, height):
@@ -120,7 +121,7 @@ def test_sealed_gas_energy_is_accurate_near_its_reference_volume(gas, exponent):
 
 def test_adiabatic_gas_converges_through_contact_and_its_pressure_rise_is_gamma_times_the_isothermal(shell, system):
     # 12.5 ms at 0.25 ms: contact onset (step 6, where gas-energy round-off can stall Newton) and 3 mm of compression.
-    adiabatic = d.shell_system(shell, BALL, gas="adiabatic", mass=MASS, planes=system.planes)
+    adiabatic = d.shell_system(shell, BALL, gas=AdiabaticGas(), mass=MASS, planes=system.planes)
     # one mesh, one sparsity pattern: its key (a static field) lets both systems share compiled
     # steps; the key is the pattern's content, so another set of fixed dofs is another key
     assert adiabatic.sparsity.key == system.sparsity.key
@@ -239,7 +240,7 @@ def test_replica_round_trip(shell, tmp_path):
     assert replica["cor"]["value"] == 0.75
     assert float(system.params.young_modulus) == E and float(system.params.thickness) == THICKNESS
     assert float(jnp.sum(system.node_masses)) == pytest.approx(MASS, rel=1e-12)
-    assert system.config.gas == "adiabatic"
+    assert system.config.gas == AdiabaticGas()
     # glTF stores float32 positions (7 digits); the inflated state reproduces the mesh's volume to the rest solve's 1e-6.
     assert float(system.volume(system.inflated)) == pytest.approx(replica_volume(tmp_path), rel=1e-5)
     assert float(system.gas_state(system.inflated)[0]) == pytest.approx(P_G, rel=1e-9)

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas, PrescribedGas
 from shelljax import InvalidInputError
 from shelljax.estimate import AxisymForwardModel, fit_session
 from shelljax.estimate._problem import jacobian
@@ -24,7 +25,7 @@ TRUTH = (1300.0, 2.34e6, 0.9e-3, 0.13)  # P_g [Pa], E [Pa], h [m], R [m]: the pa
 
 # The default experiment's forward model (configs/paper.toml): its compiled fit is shared with the
 # runner test on the bundled Pezzi sessions.
-OPTIONS = dict(poisson_ratio=0.4, gas="isothermal", wrinkle_law="scaling")
+OPTIONS = dict(poisson_ratio=0.4, gas=IsothermalGas(), wrinkle_law="scaling")
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +65,7 @@ def test_similarity_in_radius(model):
 def test_both_gas_laws_run_one_program(model):
     # the gas law is the traced exponent κ of the engine's polytropic gas: same pytree structure
     # (static fields included), so the prescribed-pressure model runs the isothermal one's program
-    prescribed = AxisymForwardModel.for_forces(0.13, FORCES, **{**OPTIONS, "gas": "prescribed"})
+    prescribed = AxisymForwardModel.for_forces(0.13, FORCES, **{**OPTIONS, "gas": PrescribedGas()})
     assert jax.tree_util.tree_structure(prescribed) == jax.tree_util.tree_structure(model)
     assert (prescribed.gas_exponent, model.gas_exponent) == (0.0, 1.0)
     theta = jnp.asarray(TRUTH)
@@ -136,15 +137,15 @@ def test_sealed_gas_volume_comes_from_the_session_mesh():
     hammer = load_session(bundled_data_dir() / "sessions" / "hammer.toml")
     volume = enclosed_volume(load_mesh(bundled_mesh_path("hammer.stl")))
     assert hammer.enclosed_volume == pytest.approx(volume, rel=1e-12)
-    sealed = forward_model_for(hammer, gas="isothermal")
+    sealed = forward_model_for(hammer, gas=IsothermalGas())
     # the hammer's head (R = 8 cm) belongs to a body of ≈ 2.9 spheres' volume
     assert sealed.gas_volume_ratio == pytest.approx(volume / (4 / 3 * np.pi * hammer.radius**3), rel=1e-12)
     assert 2.5 < sealed.gas_volume_ratio < 3.5
-    assert forward_model_for(hammer, gas="prescribed").gas_volume_ratio == 1.0
+    assert forward_model_for(hammer, gas=PrescribedGas()).gas_volume_ratio == 1.0
     ball = load_session(bundled_data_dir() / "sessions" / "pezzi.toml")  # radius only: no mesh volume
-    assert ball.enclosed_volume is None and forward_model_for(ball, gas="isothermal").gas_volume_ratio == 1.0
+    assert ball.enclosed_volume is None and forward_model_for(ball, gas=IsothermalGas()).gas_volume_ratio == 1.0
     with pytest.raises(InvalidInputError, match="gas_volume_ratio = -1.0 must be a positive number"):
-        forward_model_for(ball, gas="isothermal", gas_volume_ratio=-1.0)
+        forward_model_for(ball, gas=IsothermalGas(), gas_volume_ratio=-1.0)
     open_scan = dataclasses.replace(hammer, enclosed_volume=None)  # a mesh that is not watertight
     with pytest.warns(UserWarning, match="not watertight"):
-        assert forward_model_for(open_scan, gas="isothermal").gas_volume_ratio == 1.0
+        assert forward_model_for(open_scan, gas=IsothermalGas()).gas_volume_ratio == 1.0

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import AdiabaticGas, IsothermalGas
 from shelljax import realtime as rt
 from shelljax._errors import InvalidInputError, NoConvergenceError, ShelljaxError
 from shelljax.dynamics import BarrierContact
@@ -103,7 +104,7 @@ def test_bending_gradient_matches_jax_grad_of_shell3d(deformed):
 
 
 def test_gas_volume_and_pressure_force_on_a_sphere():
-    ball = _ball(2000, gas="isothermal")
+    ball = _ball(2000, gas=IsothermalGas())
     pressure, volume, force = ball.gas_state()
     # The polyhedron's own volume exactly; the inscribed polyhedron is below 4/3 π R³ by
     # O(edge²/R²) (measured 0.58 % at 1962 faces, edge/R = 0.12).
@@ -301,7 +302,7 @@ def test_replica_round_trip(tmp_path):
     write_replica(tmp_path, shell, quantities, gas="adiabatic")
     ball = rt.RealtimeShell.from_replica(tmp_path, rest_shape="small-strain")
     assert ball.total_mass == pytest.approx(MASS)
-    assert ball.gas == "adiabatic" and ball.E == E and ball.h == H
+    assert ball.gas == AdiabaticGas() and ball.E == E and ball.h == H
 
 
 def test_from_session_takes_the_sessions_mass_thickness_and_radius():

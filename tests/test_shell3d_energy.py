@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import gas_law
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax.physics import ShellProperties, lame_constants_2d
@@ -148,7 +149,7 @@ def test_gradient_and_sparse_hessian_match_central_differences(gas, monkeypatch)
     contact = ContactConfig(
         indenter_radius=0.3, planes=(((0.0, 0.0, -1.02), (0.0, 0.0, 1.0)),), activation_distance=0.05
     )
-    cfg = ModelConfig(mesh.n_vertices, gas=gas, contact=contact)
+    cfg = ModelConfig(mesh.n_vertices, gas=gas_law(gas), contact=contact)
     fixed = np.zeros(3 * mesh.n_vertices + 3, dtype=bool)
     model = ShellModel(mesh, mesh.vertices, cfg, fixed)
     x = _random_state(mesh, rng)

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError
 from shelljax.physics import ShellProperties, friction_energy, friction_force, friction_mollifier
@@ -29,7 +30,7 @@ SHARED_PROGRAMS = "shell3d_ball"
 @pytest.fixture(scope="module")
 def frictionless():
     ball = s3.ball(R, H, N_TRI)
-    return s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False)
+    return s3.Indentation(ball, PEZZI, gas=IsothermalGas(), indenter_radius=0.01, rest_shape="scan", progress=False)
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from shelljax.physics import IsothermalGas, PrescribedGas
 import shelljax.shell3d as s3
 from shelljax import InvalidInputError, NoConvergenceError
 from shelljax.physics import ATMOSPHERIC_PRESSURE, ShellProperties
@@ -36,7 +37,7 @@ def ball():
 
 @pytest.fixture(scope="module")
 def sealed(ball):
-    return s3.Indentation(ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False)
+    return s3.Indentation(ball, PEZZI, gas=IsothermalGas(), indenter_radius=0.01, rest_shape="scan", progress=False)
 
 
 def test_bad_inputs_raise_clear_errors(ball):
@@ -58,7 +59,13 @@ def test_newton_iteration_limit_is_the_users(ball):
     # One Newton iteration cannot converge a 4 mm poke from the unloaded shell: the error must say
     # so with the limit the user set, not the default 60 (the rest state is not limited by it).
     sim = s3.Indentation(
-        ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", progress=False, max_newton_iterations=1
+        ball,
+        PEZZI,
+        gas=IsothermalGas(),
+        indenter_radius=0.01,
+        rest_shape="scan",
+        progress=False,
+        max_newton_iterations=1,
     )
     with pytest.raises(NoConvergenceError, match="after 1 iterations"):
         sim.solve(depth=0.004)
@@ -76,7 +83,7 @@ def test_sealed_gas_conserves_pv_and_forces_balance(sealed):
         assert obs["pressure"] > PG  # squeezing raises the pressure
         # Independent of the gas law's bookkeeping: the sealed equilibrium must be an equilibrium
         # of the prescribed-pressure model at the gas's current pressure (same wall forces).
-        prescribed = sealed.model.with_config(dataclasses.replace(sealed.model.config, gas="prescribed"))
+        prescribed = sealed.model.with_config(dataclasses.replace(sealed.model.config, gas=PrescribedGas()))
         params = sealed.params_at(st.q, gauge_pressure=obs["pressure"])
         residual = np.where(prescribed.free, prescribed.host_gradient(st.q, params), 0.0)
         assert np.max(np.abs(residual)) < 10 * sealed.atol
@@ -108,7 +115,7 @@ def test_force_control_reproduces_displacement_control(ball):
     # well inside the 1e-6 relative (≈ 7e-7 N) asserted. With the default atol (5.5e-6 N) this
     # check passed or failed with the Newton path (a kept preconditioner from earlier solves).
     sim = s3.Indentation(
-        ball, PEZZI, gas="isothermal", indenter_radius=0.01, rest_shape="scan", force_tolerance=1e-8, progress=False
+        ball, PEZZI, gas=IsothermalGas(), indenter_radius=0.01, rest_shape="scan", force_tolerance=1e-8, progress=False
     )
     st = sim.solve(depth=0.006)
     force = st.observables()["force"]
@@ -162,7 +169,7 @@ def test_default_rest_shape_reproduces_the_scan_volume(ball, force_tolerance):
     from shelljax.geometry import signed_volume
 
     sim = s3.Indentation(
-        ball, PEZZI, gas="prescribed", indenter_radius=0.01, progress=False, force_tolerance=force_tolerance
+        ball, PEZZI, gas=PrescribedGas(), indenter_radius=0.01, progress=False, force_tolerance=force_tolerance
     )
     scan_volume = signed_volume(ball.mesh.vertices, ball.mesh.faces)
     assert float(sim.model.volume(sim.q_reference)) == pytest.approx(scan_volume, rel=1e-6)

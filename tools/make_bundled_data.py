@@ -30,6 +30,7 @@ from shelljax.config import bundled_data_dir
 from shelljax.geometry import HAMMER_HEAD_RADIUS, HAMMER_POKE_POINT, enclosed_volume, load_mesh
 from shelljax.paper import DEFAULT_POISSON_RATIO, PAPER_FORCES
 from shelljax.physics import ShellProperties, scaling_wrinkle_count, tau
+from shelljax.physics import IsothermalGas
 
 SESSIONS = bundled_data_dir() / "sessions"
 FORCE_LEVELS = np.asarray(PAPER_FORCES)  # [N]
@@ -75,7 +76,7 @@ def engine_depths(gauge_pressure, obj, radius, forces, gas_volume_ratio):
         shell,
         np.asarray(forces),
         n_elements=N_ELEMENTS,
-        gas="isothermal",
+        gas=IsothermalGas(),
         physics=CurvePhysics(gas_volume_ratio=gas_volume_ratio),
         workers=1,
     )

@@ -315,8 +315,8 @@ def indentation_curves(
     ``properties``: :class:`shelljax.physics.ShellProperties` of fields () or (batch,): P_g [Pa],
     E [Pa], h [m], ν [-], and the inflated radius R [m] (one for the batch) unless ``radius`` [m]
     gives it; ``forces`` [N]: increasing positive forces (default: the paper's 5–20 N in 2.5 N
-    steps), (k,) or each curve's own (batch, k). Further keywords go to :class:`Setup` (``n_elements``, ``grading``, ``gas`` =
-    "prescribed" | "isothermal" | "adiabatic" | "polytropic", ``relax``, ``indenter_radius`` [m],
+    steps), (k,) or each curve's own (batch, k). Further keywords go to :class:`Setup` (``n_elements``,
+    ``grading``, ``gas`` (a ``physics.AbstractGasLaw``), ``relax``, ``indenter_radius`` [m],
     ``contact_stiffness`` [N/m³], ``atol`` [N], ...). ``physics``: per-curve effects
     (:class:`CurvePhysics`, fields () or (batch,); None: the Setup's defaults).
 

@@ -30,24 +30,26 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InvalidInputError
 from ..physics import (
+    AbstractGasLaw,
+    IsothermalGas,
+    PolytropicGas,
+    PrescribedGas,
     bending_density_invariants,
     bending_stiffness,
     gent_membrane_invariants,
-    isothermal_gas_energy,
     lame_constants_2d,
     friction_energy,
     penalty_energy,
     plane_gap,
-    polytropic_gas_energy,
     prescribed_pressure_energy,
     self_weight_energy,
     sphere_gap,
 )
 from ._geometry import gauss_points_2
 
-# the compiled program's gas laws: the adiabatic one (and every other κ) is "polytropic", whose κ
-# is traced (``Params.gas_exponent``)
-GAS_MODELS = ("prescribed", "isothermal", "polytropic")
+# the compiled program's gas laws: the adiabatic one (and every other κ) is the polytropic one,
+# whose κ is traced (``Params.gas_exponent``)
+COMPILED_GAS_LAWS = (PrescribedGas, IsothermalGas, PolytropicGas)
 RELAX_WIDTH = 1e-3  # [-] smoothing width of the wrinkling switch, in units of stretch²
 # c_w [-]: hoop compression a wrinkled wall carries, in classical buckling resultants, calibrated
 # on one 3D curve (docs/axisym.md, *Post-onset F–w(0)*).
@@ -59,8 +61,9 @@ LOADINGS = ("none", "sphere", "point")
 class Config(eqx.Module):
     """Static (compile-time) description of one axisymmetric problem.
 
-    ``theta``: rest polar angles of the nodes [rad] (tuple, even count); ``gas``: "prescribed",
-    "isothermal" or "polytropic" (exponent ``Params.gas_exponent``); ``loading``: "none",
+    ``theta``: rest polar angles of the nodes [rad] (tuple, even count); ``gas``: a
+    ``physics.PrescribedGas``, ``IsothermalGas`` or ``PolytropicGas`` (whose κ is the traced
+    ``Params.gas_exponent``: the Config's own is not read); ``loading``: "none",
     "sphere" (rigid spherical indenter, force control) or
     "point" (point force on the top pole); ``ground``: rigid plane under the bottom pole;
     ``pin_bottom``: fix z of the bottom pole (removes the vertical rigid mode when nothing
@@ -69,7 +72,7 @@ class Config(eqx.Module):
     """
 
     theta: tuple = eqx.field(static=True)
-    gas: str = eqx.field(static=True, default="prescribed")
+    gas: AbstractGasLaw = eqx.field(static=True, default=PrescribedGas())
     loading: str = eqx.field(static=True, default="none")
     ground: bool = eqx.field(static=True, default=False)
     pin_bottom: bool = eqx.field(static=True, default=True)
@@ -77,8 +80,11 @@ class Config(eqx.Module):
     hoop_capacity: float = eqx.field(static=True, default=0.0)
 
     def __check_init__(self):
-        if self.gas not in GAS_MODELS:
-            raise InvalidInputError(f"Config: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(GAS_MODELS)}")
+        if type(self.gas) not in COMPILED_GAS_LAWS:
+            raise InvalidInputError(
+                f"Config: gas = {self.gas!r} is no compiled gas law. "
+                f"Fix: use one of {', '.join(law.__name__ for law in COMPILED_GAS_LAWS)}"
+            )
 
     @property
     def n_nodes(self) -> int:
@@ -95,7 +101,7 @@ class Params(eqx.Module):
     per unit penetration: penetration = contact pressure / k_c), bending_scale [-] (multiplies
     the bending energy; 1 for physical shells, < 1 only to emulate large τ in shallow-shell checks),
     gas_volume_ratio [-] (sealed gas volume over V_ref),
-    gas_exponent κ [-] (gas = "polytropic" only: p V^κ constant; 0 prescribed, 1 isothermal,
+    gas_exponent κ [-] (a ``PolytropicGas`` only: p V^κ constant; 0 prescribed, 1 isothermal,
     1.4 adiabatic), stiffening s [-] (Gent stiffening 1/J_m of the membrane; 0: Neo-Hookean),
     areal_weight q [Pa] (self-weight ρ h g per unit rest area along −z, with the ground only;
     0: no gravity); ground friction (``ground_friction_energy``, with the ground only):
@@ -291,16 +297,12 @@ def enclosed_volume(x):
 
 def gas_energy(volume, cfg: Config, p: Params):
     """Gas potential [J] of the enclosed volume [m³] (shared ``physics`` gas laws)."""
-    if cfg.gas == "prescribed":
-        return prescribed_pressure_energy(volume, p.gauge_pressure)
+    if not cfg.gas.sealed:
+        return cfg.gas.energy(volume, None, p.gauge_pressure)
     # The gas fills ratio·V_ref and loses exactly the volume the ball's wall sweeps: ΔV = V − V_ref.
     gas_volume = p.gas_volume_ratio * p.reference_volume
-    if cfg.gas == "polytropic":
-        sealed = polytropic_gas_energy(
-            volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure, p.gas_exponent
-        )
-    else:
-        sealed = isothermal_gas_energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
+    law = PolytropicGas(p.gas_exponent) if isinstance(cfg.gas, PolytropicGas) else cfg.gas  # κ is traced
+    sealed = law.energy(volume - p.reference_volume + gas_volume, gas_volume, p.gauge_pressure)
     # the gas is sealed once the ball is inflated at its gauge pressure
     return jnp.where(p.inflating, prescribed_pressure_energy(volume, p.gauge_pressure), sealed)
 

@@ -11,7 +11,9 @@ area-weighted penalty: contact pressure = k_c × penetration, so the penetration
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -22,7 +24,7 @@ from jaxtyping import Array, Float
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import GAS_EXPONENTS, GAS_LAWS, ShellProperties
+from ..physics import AbstractGasLaw, AdiabaticGas, PolytropicGas, PrescribedGas, ShellProperties
 from ._energy import (
     WRINKLED_HOOP_CAPACITY,
     Config,
@@ -45,20 +47,17 @@ from ._tracing import tied_to
 # units of the radius, so similar balls stay similar.
 FRICTION_SLIP_TOLERANCE = 4e-6 / 0.13
 
-# the named laws of ``physics.GAS_LAWS``, and "polytropic": the sealed gas whose κ is the traced
-# ``CurvePhysics.gas_exponent`` (the adiabatic gas compiles to it, with κ = γ by default)
-SETUP_GASES = GAS_LAWS + ("polytropic",)
-
 
 class Setup(eqx.Module):
     """Static description of an indentation experiment on a ball (all lengths in m).
 
     ``radius`` R: inflated radius; ``n_elements``: meridian elements pole to pole (made odd);
-    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: one of ``physics.GAS_LAWS``,
-    "prescribed" (constant P_g, the paper's model), "isothermal" or "adiabatic" (sealed ideal gas,
-    P_g is the gauge pressure before indentation), or "polytropic" (sealed gas with p V^κ constant,
-    κ the traced ``CurvePhysics.gas_exponent``, so that one program serves every law; "adiabatic"
-    is this program with κ = γ unless ``CurvePhysics.gas_exponent`` says otherwise); ``relax``:
+    ``grading`` ∈ [0, 1): refinement towards the poles; ``gas``: a ``physics.AbstractGasLaw``,
+    ``PrescribedGas()`` (constant P_g, the paper's model), ``IsothermalGas()`` or ``AdiabaticGas()``
+    (sealed ideal gas, P_g is the gauge pressure before indentation), or ``PolytropicGas(κ)``
+    (sealed gas with p V^κ constant, κ the traced ``CurvePhysics.gas_exponent``, by default the
+    law's own, so that one program serves every law; the adiabatic gas is this program with
+    κ = γ unless ``CurvePhysics.gas_exponent`` says otherwise); ``relax``:
     relaxation of compressive hoop stress (wrinkled shell), which saturates at ``hoop_capacity``
     [-] classical buckling resultants E h²/(R0 √(3(1−ν²))) (default calibrated on a 3D curve,
     see ``_energy.WRINKLED_HOOP_CAPACITY``; 0: tension field);
@@ -77,7 +76,7 @@ class Setup(eqx.Module):
     radius: float = eqx.field(static=True, default=0.13)
     n_elements: int = eqx.field(static=True, default=101)
     grading: float = eqx.field(static=True, default=0.85)
-    gas: str = eqx.field(static=True, default="prescribed")
+    gas: AbstractGasLaw = eqx.field(static=True, default=PrescribedGas())
     relax: bool = eqx.field(static=True, default=True)
     indenter_radius: float = eqx.field(static=True, default=PAPER_INDENTER_RADIUS)
     contact_stiffness: float = eqx.field(static=True, default=1e11)
@@ -90,10 +89,10 @@ class Setup(eqx.Module):
     friction_slip_tolerance: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
-        if self.gas not in SETUP_GASES:
+        if not isinstance(self.gas, AbstractGasLaw):
             raise InvalidInputError(
-                f"Setup: gas = {self.gas!r} is unknown. Fix: use one of {', '.join(SETUP_GASES)} "
-                "('polytropic': a sealed gas of κ = CurvePhysics.gas_exponent)"
+                f"Setup: gas = {self.gas!r} is no gas law. Fix: pass a physics.AbstractGasLaw, e.g. "
+                "physics.IsothermalGas(), or physics.gas_law(name) for a name"
             )
         if not (math.isfinite(self.indenter_radius) and self.indenter_radius > 0):
             raise InvalidInputError(
@@ -135,16 +134,16 @@ class CurvePhysics(eqx.Module):
     :func:`~shelljax.axisym.indentation_curves_raw`. ``indenter_radius`` a [m] (the finger);
     ``gas_volume_ratio`` [-] (sealed gas volume over 4/3 π R³, the sealed gases: 1 for a ball, an
     object's enclosed volume over 4/3 π R³ when only its poke region is a sphere); ``gas_exponent``
-    κ [-] (gases "polytropic" and "adiabatic": p V^κ constant; 0 is the prescribed gauge pressure,
-    1 isothermal, 1.4 adiabatic, ``physics.GAS_EXPONENTS``); ``stiffening`` s = 1/J_m [-] (Gent
-    stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
+    κ [-] (the polytropic and adiabatic gases: p V^κ constant; 0 is the prescribed gauge pressure,
+    1 isothermal, 1.4 adiabatic, ``physics.AbstractGasLaw.exponent``); ``stiffening`` s = 1/J_m
+    [-] (Gent stiffening of the membrane, ``physics.gent_membrane_invariants``; 0: Neo-Hookean);
     ``areal_weight`` q = ρ h g [Pa] (self-weight per unit rest area along −z, acting while the
     ball rests on the ground; 0: no gravity); ``friction_coefficient`` μ [-] (Coulomb friction of
     the ground, smoothed and lagged per load step, ``_energy.ground_friction_energy``; 0, the
     default: frictionless); ``contact_stiffness`` k_c [N/m³] (None: the Setup's, a compile-time
     constant). Every field has a default: ``indenter_radius`` None is the Setup's finger and
-    ``gas_exponent`` None the κ of the Setup's gas (1 for "polytropic"); :meth:`resolved` fills
-    them in, :meth:`defaults` is the default physics.
+    ``gas_exponent`` None the κ of the Setup's gas (if it compiles to the polytropic program);
+    :meth:`resolved` fills them in, :meth:`defaults` is the default physics.
 
     Similarity (``estimate._forward``): a ball ``scale`` times larger in every length, at the same
     pressures and moduli, has a ``scale`` times larger finger and the same κ, s, q and volume
@@ -164,7 +163,7 @@ class CurvePhysics(eqx.Module):
         """Every field a float64 array, of shape (batch,) when ``batch`` is given: the finger and κ
         left None are ``setup``'s (its finger, its gas's κ); ``contact_stiffness`` may stay None."""
         # the prescribed and isothermal programs never read κ: they keep the polytropic default, 1
-        kappa = GAS_EXPONENTS["adiabatic"] if setup.gas == "adiabatic" else GAS_EXPONENTS["isothermal"]
+        kappa = setup.gas.exponent if isinstance(_compiled_gas(setup.gas), PolytropicGas) else PolytropicGas().exponent
         filled = dataclasses.replace(
             self,
             indenter_radius=setup.indenter_radius if self.indenter_radius is None else self.indenter_radius,
@@ -297,12 +296,16 @@ def _inflation(setup: Setup, pressure, young, thick, nu, bending_scale, physics:
     return r0, y0, p
 
 
+def _compiled_gas(law: AbstractGasLaw) -> AbstractGasLaw:
+    """The compiled program's gas law of a Setup's ``law``: the adiabatic and every polytropic gas
+    are the one polytropic program, its κ traced (``CurvePhysics.resolved``)."""
+    return PolytropicGas() if isinstance(law, (AdiabaticGas, PolytropicGas)) else law
+
+
 def _indentation_config(setup: Setup) -> Config:
-    # the adiabatic gas is the polytropic program, its κ traced (``CurvePhysics.resolved``)
-    gas = "polytropic" if setup.gas == "adiabatic" else setup.gas
     return Config(
         theta=setup.theta(),
-        gas=gas,
+        gas=_compiled_gas(setup.gas),
         loading="sphere",
         ground=True,
         pin_bottom=False,
@@ -442,58 +445,88 @@ def curve_single(
     schedule, first_load = _load_schedule(setup, forces)
     # the ground first carries the first force and the wall's weight
     load = first_load + physics.areal_weight * jnp.sum(rest_zone_areas(cfg, r0))
-    opts = setup.options()
+    curve = _Curve(
+        setup, cfg, setup.options(), physics, (young, thick, nu, pressure), r0, bending_scale, load, p_inflation
+    )
+    return _scan_levels(curve, y_inflation, schedule, nearby_guesses, return_states)
 
-    def indentation(y_inf):
-        """(z_c at first contact [m], the indentation's Params, the first load step's carry) of the
-        inflated state y_inf [m]."""
-        x_inf, _ = split(y_inf, cfg.n_nodes)
-        zc_contact = x_inf[-1, 1] + physics.indenter_radius
-        base = _params(
-            young,
-            thick,
-            nu,
-            r0,
-            pressure,
-            setup,
-            ref_volume=enclosed_volume(x_inf),
-            ground_z=x_inf[0, 1],
-            bending_scale=bending_scale,
-            physics=physics,
-        )
-        y_start = _start_state(setup, x_inf, zc_contact, pressure, load)
-        return zc_contact, base, _initial_carry(y_start, cfg, base, load)
 
-    # The inflation is the scan's first step, so that one Newton solve (one copy of the engine in
-    # the compiled program, and in its derivatives) serves it and every load step.
-    def step(carry, level):
-        y_inf, zc_contact, base, loading = carry
-        force, nearby, inflating = level
-        p = _where(inflating, p_inflation, _with_load(base, force, loading[-1]))
-        guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
-        if nearby_guesses is not None:
-            guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
-        sol = equilibrium(cfg, opts, p, guess)
-        y, res, it = sol.value, sol.stats["residual"], sol.iterations
-        y_inf = jnp.where(inflating, y, y_inf)
-        inflated_zc, inflated_base, first = indentation(y_inf)
-        zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))
-        # (the inflation's row is dropped; observed with the indentation's parameters it stays finite)
-        obs = observables(cfg, _where(inflating, _with_load(base, force, first[-1]), p), y, y_inf, zc_contact)
-        obs.update(residual=res, iterations=it)
-        if return_states:
-            obs.update(state=y, friction_anchor=loading[-1][0], friction_normal_force=loading[-1][1])
-        loading = _where(inflating, first, (y, loading[0], force, loading[2], _friction_lag(y, cfg, base)))
-        return (y_inf, zc_contact, base, loading), obs
+class _Curve(NamedTuple):
+    """What every step of one curve shares: the Setup, its Config and SolverOptions, the resolved
+    CurvePhysics, the shell (E [Pa], h [m], ν [-], P_g [Pa]), the rest radius R0 [m], the bending
+    scale [-], the first step's ground load [N] and the inflation's Params."""
 
+    setup: Setup
+    cfg: Config
+    opts: SolverOptions
+    physics: CurvePhysics
+    shell: tuple
+    r0: Float[Array, ""]
+    bending_scale: Float[Array, ""]
+    load: Float[Array, ""]
+    p_inflation: Params
+
+
+def _indentation(curve: _Curve, y_inf):
+    """(z_c at first contact [m], the indentation's Params, the first load step's carry) of the
+    inflated state y_inf [m]."""
+    young, thick, nu, pressure = curve.shell
+    x_inf, _ = split(y_inf, curve.cfg.n_nodes)
+    zc_contact = x_inf[-1, 1] + curve.physics.indenter_radius
+    base = _params(
+        young,
+        thick,
+        nu,
+        curve.r0,
+        pressure,
+        curve.setup,
+        ref_volume=enclosed_volume(x_inf),
+        ground_z=x_inf[0, 1],
+        bending_scale=curve.bending_scale,
+        physics=curve.physics,
+    )
+    y_start = _start_state(curve.setup, x_inf, zc_contact, pressure, curve.load)
+    return zc_contact, base, _initial_carry(y_start, curve.cfg, base, curve.load)
+
+
+def _curve_step(curve: _Curve, y_inflation, with_nearby: bool, return_states: bool, carry, level):
+    """One step of the curve's scan: the inflation (the first) or one load step, its observables."""
+    setup, cfg = curve.setup, curve.cfg
+    y_inf, zc_contact, base, loading = carry
+    force, nearby, inflating = level
+    p = _where(inflating, curve.p_inflation, _with_load(base, force, loading[-1]))
+    guess = jnp.where(inflating, y_inflation, _predicted_start(setup, cfg, base, loading, force))
+    if with_nearby:
+        guess = jnp.concatenate([guess[None], jax.lax.stop_gradient(nearby)])
+    sol = equilibrium(cfg, curve.opts, p, guess)
+    y, res, it = sol.value, sol.stats["residual"], sol.iterations
+    y_inf = jnp.where(inflating, y, y_inf)
+    inflated_zc, inflated_base, first = _indentation(curve, y_inf)
+    zc_contact, base = _where(inflating, (inflated_zc, inflated_base), (zc_contact, base))
+    # (the inflation's row is dropped; observed with the indentation's parameters it stays finite)
+    obs = observables(cfg, _where(inflating, _with_load(base, force, first[-1]), p), y, y_inf, zc_contact)
+    obs.update(residual=res, iterations=it)
+    if return_states:
+        obs.update(state=y, friction_anchor=loading[-1][0], friction_normal_force=loading[-1][1])
+    loading = _where(inflating, first, (y, loading[0], force, loading[2], _friction_lag(y, cfg, base)))
+    return (y_inf, zc_contact, base, loading), obs
+
+
+def _scan_levels(curve: _Curve, y_inflation, schedule, nearby_guesses, return_states: bool) -> dict:
+    """The curve's outputs at the requested levels (:func:`curve_single`).
+
+    The inflation is the scan's first step, so that one Newton solve (one copy of the engine in
+    the compiled program, and in its derivatives) serves it and every load step."""
+    setup = curve.setup
     n_ramp, m = len(setup.ramp), setup.substeps
     nearby = _nearby_per_step(nearby_guesses, schedule.shape[0], n_ramp, m)
     if nearby is not None:
         nearby = jnp.concatenate([nearby_guesses[:1], nearby])
     levels = (jnp.concatenate([jnp.zeros(1), schedule]), nearby, jnp.arange(1 + schedule.shape[0]) == 0)
-    _, obs = jax.lax.scan(step, (y_inflation, *indentation(y_inflation)), levels)
+    step = functools.partial(_curve_step, curve, y_inflation, nearby_guesses is not None, return_states)
+    _, obs = jax.lax.scan(step, (y_inflation, *_indentation(curve, y_inflation)), levels)
     out = _levels(jax.tree_util.tree_map(lambda v: v[1:], obs), n_ramp, m)
-    out["rest_radius"] = r0
+    out["rest_radius"] = curve.r0
     out["inflation_residual"] = obs["residual"][0]
     if return_states:
         out["state"] = jnp.concatenate([obs["state"][:1], out["state"]])

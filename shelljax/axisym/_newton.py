@@ -211,7 +211,7 @@ def _direction(hess, g, y, cfg: Config, p: Params, free):
 
 def _gas_energy_scale(cfg: Config, p: Params):
     """Size [J] of a sealed gas's p_abs·V energy, whose round-off the line search must tolerate."""
-    if cfg.gas not in ("isothermal", "polytropic"):
+    if not cfg.gas.sealed:
         return 0.0
     scale = (
         (ATMOSPHERIC_PRESSURE + jnp.abs(p.gauge_pressure)) * jnp.abs(p.reference_volume) * jnp.abs(p.gas_volume_ratio)

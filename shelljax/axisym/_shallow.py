@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from ._energy import Config, hoop_tension, rest_nodes, split
-from ..physics import ShellProperties
+from ..physics import PrescribedGas, ShellProperties
 from ._model import Setup, _params, _shell, inflate
 from ._newton import SolverOptions, equilibrium
 from ._observables import compressive_annulus
@@ -34,7 +34,7 @@ def pinch_setup(n_elements=201, grading=0.9, radius=0.1):
 
 
 def pinch_config(setup: Setup, relax=False) -> Config:
-    return Config(theta=setup.theta(), gas="prescribed", loading="point", ground=False, pin_bottom=True, relax=relax)
+    return Config(theta=setup.theta(), gas=PrescribedGas(), loading="point", ground=False, pin_bottom=True, relax=relax)
 
 
 def pinch_state(setup: Setup, properties: ShellProperties, force, bending_scale=1.0, guess=None, relax=False):

@@ -13,7 +13,7 @@ from .._arguments import OneLineParser, real, whole
 from .._errors import InvalidInputError, ShelljaxError
 from .._files import check_output_file
 from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, METHODS, MIN_MAX_STEPS, MIN_WALKERS, WRINKLE_LAWS
-from ..physics import GAS_LAWS
+from ..physics import GAS_LAWS, gas_law
 from ..replica import MESH_FACES
 from ..report import summary_text
 from . import _diagnose, _rig
@@ -252,7 +252,7 @@ def _cmd_play(args) -> int:
     if not args.headless:
         require_viser()  # before the object loads: say at once what is missing
     check_replay_outputs(args.record, args.records)
-    scene = play_scene(args.source, args.script, mesh_faces=args.mesh_faces, gas=args.gas)
+    scene = play_scene(args.source, args.script, mesh_faces=args.mesh_faces, gas=gas_law(args.gas))
     if not args.headless:
         return play_live(scene, host=args.host, port=args.port)
     result = play_headless(scene, record=args.record, records_json=args.records)

@@ -29,12 +29,13 @@ from scipy import stats
 
 from .._errors import InvalidInputError, NoConvergenceError
 from ..estimate import DEFAULT_OPTIONS
-from ..physics import GAS_EXPONENTS
+from .._options import WRINKLE_LAWS
+from ..physics import gas_law
 from ..session import Session, load_session
 from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
 from ._measurement import MeasurementPrior, measured_baseline
-from ._model import WRINKLE_LAWS, StudyArrays, physical, study_arrays
+from ._model import StudyArrays, physical, study_arrays
 from ._robust import not_excluded, robust_range, separating
 from ._study import SHAPE_OBSERVABLES, Study, build_study, object_unknowns
 
@@ -256,8 +257,7 @@ def _checked_options(effects, baseline: str, gas: str | None, wrinkle_law: str) 
     if baseline not in BASELINES:
         raise InvalidInputError(f"unknown baseline {baseline!r}. Fix: choose from {', '.join(BASELINES)}")
     gas = gas or BASELINES[baseline]
-    if gas not in GAS_EXPONENTS:
-        raise InvalidInputError(f"unknown gas {gas!r}. Fix: choose from {', '.join(GAS_EXPONENTS)}")
+    gas_law(gas)  # an unknown name fails here, with the valid ones
     if wrinkle_law not in WRINKLE_LAWS:
         raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: choose from {', '.join(WRINKLE_LAWS)}")
     return effects, gas
@@ -436,7 +436,7 @@ def diagnose(
     effects, gas = _checked_options(effects, baseline, gas, wrinkle_law)
     sessions = [s if isinstance(s, Session) else load_session(s) for s in sessions]
     study = build_study(sessions, None if measurement is None else measurement.noise)
-    base = study_arrays(study, gas=gas, force_ref=None if measurement is None else measurement.force_ref)
+    base = study_arrays(study, gas=gas_law(gas), force_ref=None if measurement is None else measurement.force_ref)
     base = measured_baseline(base, measurement)
     effects, baseline_free, in_baseline = _candidates_beside_measurement(effects, object_unknowns(study), measurement)
     report_progress = _progress_reporter(progress, 1 + len(effects))

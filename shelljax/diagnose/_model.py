@@ -32,7 +32,15 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..axisym import CurvePhysics, Setup, indentation_curves_raw, inflation_stretch
-from ..physics import GAS_EXPONENTS, STANDARD_GRAVITY, ShellProperties, Similarity, scaling_wrinkle_count
+from ..physics import (
+    STANDARD_GRAVITY,
+    AbstractGasLaw,
+    IsothermalGas,
+    PolytropicGas,
+    ShellProperties,
+    Similarity,
+    scaling_wrinkle_count,
+)
 from ..estimate import FAILED_RESIDUAL, count_log_likelihood
 from ..paper import PAPER_INDENTER_RADIUS
 from ._effects import (
@@ -54,7 +62,6 @@ R_REF = 0.2  # [m] the engine's radius; every object is reached by similarity
 N_GRID = 12  # forces per curve
 GRID_SPAN = (0.6, 1.3)  # the grid covers [0.6 F_min, 1.3 F_max]: room for gain and exponent
 N_ELEMENTS = 101  # meridian elements, as the fitted estimator's forward model
-WRINKLE_LAWS = ("scaling", "mechanics")
 _INDEX = {name: i for i, name in enumerate(GLOBAL_PARAMETERS)}
 
 
@@ -107,13 +114,14 @@ class StudyArrays(eqx.Module):
 def study_arrays(
     study: Study,
     *,
-    gas: str = "isothermal",
+    gas: AbstractGasLaw = IsothermalGas(),
     indenter_radius: float = PAPER_INDENTER_RADIUS,
     force_ref: float | None = None,
     manometer_std: float = MANOMETER_STD,
 ) -> StudyArrays:
     """The arrays of ``study`` with the baseline's priors (free mask: gauge pressures only).
 
+    ``gas``: the baseline's gas law (a ``physics.AbstractGasLaw``: its κ [-] is the engine's);
     ``force_ref`` [N]: the force about which the sensor's and the pad's power laws are written
     (None: the study's mid force; a rig carries its own to every later study); ``manometer_std``
     [-]: the manometer readings' relative standard deviation.
@@ -163,7 +171,7 @@ def study_arrays(
         poisson_ratio=f(study.poisson_ratio),
         mass_ref=f(study.mass if study.mass is not None else UNWEIGHED_MASS),
         indenter_radius=f(indenter_radius),
-        gas_exponent=f(GAS_EXPONENTS[gas]),
+        gas_exponent=f(gas.exponent),
         gas_volume_ratio=f(study.gas_volume_ratio),
         force_ref=f(force_ref),
         grid=f(np.linspace(*engine_force_bounds(study.radius, study.force, GRID_SPAN), N_GRID)),
@@ -256,7 +264,7 @@ def engine_inputs(phys, data: StudyArrays):
 
 def engine_setup() -> Setup:
     """The engine's static setup: reference radius, sealed polytropic gas, relaxed wrinkling."""
-    return Setup(radius=R_REF, n_elements=N_ELEMENTS, gas="polytropic", indenter_radius=PAPER_INDENTER_RADIUS)
+    return Setup(radius=R_REF, n_elements=N_ELEMENTS, gas=PolytropicGas(), indenter_radius=PAPER_INDENTER_RADIUS)
 
 
 def solve_curves(shell: ShellProperties, physics, data: StudyArrays, chunk: int = 0):

@@ -150,7 +150,7 @@ def shape_sensitivity(
     """Change [%] of H, D_u, D_l and d of a ball (P_g [Pa], R [m], h [m], E [Pa], ν [-]) at
     ``force`` [N] under each of :data:`SHAPE_VARIANTS`, with the values [m]."""
     from ..axisym import CurvePhysics, indentation_curves, inflation_stretch
-    from ..physics import STANDARD_GRAVITY, ShellProperties
+    from ..physics import STANDARD_GRAVITY, PolytropicGas, ShellProperties
 
     rows, keys = [], tuple(PAPER_SHAPE_ERROR)
     for label, change, factor in SHAPE_VARIANTS:
@@ -172,7 +172,9 @@ def shape_sensitivity(
             poisson_ratio=poisson_ratio,
             radius=radius,
         )
-        curve = indentation_curves(shell, np.array([5.0, force * factor]), gas="polytropic", physics=physics, workers=1)
+        curve = indentation_curves(
+            shell, np.array([5.0, force * factor]), gas=PolytropicGas(), physics=physics, workers=1
+        )
         rows.append({"label": label, "values_m": {k: float(getattr(curve, k)[0, -1]) for k in keys}})
     base = rows[0]["values_m"]
     for row in rows:

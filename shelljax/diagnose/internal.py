@@ -8,7 +8,7 @@ from ._diagnose import WIN_NATS, WIN_SE
 from ._effects import LINEAR_SCALE, MANOMETER_STD, MIN_INDENTER_FRACTION, PRIOR_STD, UNITS, check_effect_names
 from ._loo import held_out_units, laplace_interval
 from ._measurement import widened_grid, with_measurement
-from ._model import WRINKLE_LAWS, engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
+from ._model import engine_inputs, log_prior, physical, predict, solve_curves, unit_log_likelihood
 from ._study import DEPTH_NOISE_FLOOR, depth_whitening, force_level_of_samples, object_unknowns, trial_anova
 
 __all__ = [
@@ -20,7 +20,6 @@ __all__ = [
     "UNITS",
     "WIN_NATS",
     "WIN_SE",
-    "WRINKLE_LAWS",
     "check_effect_names",
     "depth_whitening",
     "engine_inputs",

@@ -6,7 +6,7 @@ differentiable ``rollout``), read its impacts with ``measured_cor`` and write th
 ``write_results``. See docs/dynamics.md.
 """
 
-from ._contact import (
+from ..physics import (
     AbstractContactLaw,
     BarrierContact,
     CompressionCurve,

@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int, Scalar
 
 from .._errors import InvalidInputError, NoConvergenceError
-from ._contact import check_positive
+from ..physics.internal import check_positive
 from ._integrators import AbstractIntegrator, Newmark, Rayleigh
 from ._minimise import AbstractMinimiser, DenseNewton, solve_step
 from ._potential import incremental_potential, lagged_contact, stage_potential

@@ -33,7 +33,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._errors import InvalidInputError
-from ..physics import AIR_HEAT_CAPACITY_RATIO, ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY, ShellProperties
+from ..physics import ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY, AbstractGasLaw, IsothermalGas, ShellProperties
 from ..shell3d import (
     ModelConfig,
     Shell,
@@ -48,7 +48,8 @@ from ..shell3d import (
     hessian_values,
     inflated_reference,
 )
-from ._contact import Plane, check_positive
+from ..physics import Plane
+from ..physics.internal import check_positive
 from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
 
 
@@ -189,7 +190,7 @@ class ShellDynamicSystem(AbstractDynamicSystem):
         gas's per-face part; 3 trailing pinned dofs) and the sealed gas's rank-one c u uᵀ (c, u)."""
         q = self._q(x)
         data = hessian_values(q, self.params, self.geometry, self.config, self.maps, self.nnz)
-        if self.config.gas == "prescribed":
+        if not self.config.gas.sealed:
             return data, jnp.asarray(0.0), jnp.zeros_like(x)
         c2, u = gas_rank_one(q, self.params, self.geometry, self.config)
         return data, c2, u[:-3]
@@ -222,17 +223,16 @@ def shell_system(
     shell: Shell,
     properties: ShellProperties,
     *,
-    gas: str = "isothermal",
+    gas: AbstractGasLaw = IsothermalGas(),
     mass: float | None = None,
     wall_density: float | None = None,
     planes=(),
     gravity=STANDARD_GRAVITY,
-    heat_capacity_ratio: float = AIR_HEAT_CAPACITY_RATIO,
 ) -> ShellDynamicSystem:
     """A :class:`ShellDynamicSystem` of ``shell`` (its mesh the inflated shape [m]) with the E [Pa],
     ν [-] and gauge pressure P_g [Pa] of ``properties`` (a ``physics.ShellProperties`` whose
-    thickness is the shell's; its radius is not read), ``gas`` (one of ``physics.GAS_LAWS``:
-    "prescribed", "isothermal", "adiabatic", the last with ``heat_capacity_ratio`` γ [-]), the mass
+    thickness is the shell's; its radius is not read), ``gas`` (a ``physics.AbstractGasLaw``:
+    ``PrescribedGas()``, ``IsothermalGas()`` or ``AdiabaticGas(γ)``), the mass
     from ``mass`` [kg] (spread by rest area) or ``wall_density`` [kg/m³] × h × area, ``planes``
     and ``gravity`` (g [m/s²] down, or a 3-vector). Its ``inflated`` state is in equilibrium, in the
     mesh's frame (its lowest vertex where the mesh has it).
@@ -252,11 +252,11 @@ def shell_system(
     reference = inflated_reference(shell, params)
     inflated = reference.inflated.reshape(-1)
     n = shell.mesh.n_vertices
-    config = ModelConfig(n, gas=gas, heat_capacity_ratio=heat_capacity_ratio)
+    config = ModelConfig(n, gas=gas)
     fixed = np.zeros(3 * n + 3, dtype=bool)
     fixed[-3:] = True
     model = ShellModel(shell.mesh, reference.rest, config, fixed)
-    if gas != "prescribed":
+    if gas.sealed:
         params = params.replace(reference_volume=reference.reference_volume, atmospheric_pressure=ATMOSPHERIC_PRESSURE)
     return ShellDynamicSystem(
         params=params,

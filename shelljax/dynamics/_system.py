@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int, Scalar
 
-from ._contact import Plane
+from ..physics import Plane
 
 ENERGY_KINDS = ("elastic", "gas", "gravity")
 

@@ -18,7 +18,8 @@ from jaxtyping import Array, Float, Int
 
 from .._errors import InvalidInputError
 from ..physics import STANDARD_GRAVITY, ATMOSPHERIC_PRESSURE, polytropic_gas_energy, polytropic_gauge_pressure
-from ._contact import Plane, check_nonnegative, check_positive
+from ..physics import Plane
+from ..physics.internal import check_nonnegative, check_positive
 from ._system import AbstractDynamicSystem, PrescribedRotation, gravity_vector
 
 

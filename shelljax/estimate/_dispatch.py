@@ -6,6 +6,7 @@ from pathlib import Path
 
 from .._errors import InvalidInputError
 from .._options import DEFAULT_OPTIONS, METHODS, EstimatorOptions  # noqa: F401 - re-exported
+from ..physics import gas_law
 from ..session import Session
 from ._bayes import PosteriorResult, compile_posterior_ahead, sample_posterior
 from ._closed_form import ClosedFormResult, estimate_session
@@ -17,7 +18,9 @@ EstimatorResult = ClosedFormResult | FitResult | PosteriorResult
 
 def options_forward_model(session: Session, options: EstimatorOptions) -> AbstractForwardModel:
     """The forward model ``options`` name, set up for ``session``."""
-    engine = {"gas": options.gas, "wrinkle_law": options.wrinkle_law} if options.forward_model == "axisym" else {}
+    engine = (
+        {"gas": gas_law(options.gas), "wrinkle_law": options.wrinkle_law} if options.forward_model == "axisym" else {}
+    )
     return forward_model_for(session, options.forward_model, **engine)
 
 

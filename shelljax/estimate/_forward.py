@@ -20,7 +20,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._options import FORWARD_MODELS, WRINKLE_LAWS
 from ..paper import DEFAULT_POISSON_RATIO, PAPER_KS
-from ..physics import ShellProperties, Similarity, scaling_wrinkle_count
+from ..physics import IsothermalGas, PolytropicGas, ShellProperties, Similarity, scaling_wrinkle_count
 
 
 class Prediction(eqx.Module):
@@ -118,7 +118,6 @@ class AxisymForwardModel(AbstractForwardModel):
         ``gas_volume_ratio`` [-] (sealed gas volume / 4/3 π R³, a traced ``CurvePhysics`` field; default 1)."""
         from .._errors import InvalidInputError
         from ..axisym import Setup
-        from ..physics import GAS_EXPONENTS
 
         if wrinkle_law not in WRINKLE_LAWS:
             raise InvalidInputError(f"unknown wrinkle_law {wrinkle_law!r}. Fix: use one of {', '.join(WRINKLE_LAWS)}")
@@ -135,10 +134,9 @@ class AxisymForwardModel(AbstractForwardModel):
             radius=ENGINE_RADIUS,
             indenter_radius=ENGINE_RADIUS,
             contact_stiffness=Setup().contact_stiffness,
-            gas="polytropic",
+            gas=PolytropicGas(),
         )
-        # a "polytropic" Setup carries no κ: the engine's default, CurvePhysics.defaults' isothermal κ = 1
-        gas_exponent = GAS_EXPONENTS["isothermal" if given.gas == "polytropic" else given.gas]
+        gas_exponent = given.gas.exponent
         return cls(
             reference_radius=float(radius),
             force_min=float(forces.min()),
@@ -214,7 +212,7 @@ class AxisymForwardModel(AbstractForwardModel):
 def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwardModel:
     """The forward model ``kind`` ("axisym" or "scaling") set up for ``session``.
 
-    ``options`` go to the axisymmetric engine's Setup (e.g. ``gas="isothermal"``,
+    ``options`` go to the axisymmetric engine's Setup (e.g. ``gas=physics.IsothermalGas()``,
     ``n_elements``) or, for "scaling", ``k_s``. With the sealed gas and a session whose mesh
     encloses a volume V [m³], the gas fills V, not the local sphere's 4/3 π R³
     (``gas_volume_ratio`` = V / (4/3 π R³), unless given).
@@ -223,7 +221,7 @@ def forward_model_for(session, kind: str = "axisym", **options) -> AbstractForwa
 
     if kind == "axisym":
         volume = getattr(session, "enclosed_volume", None)
-        if options.get("gas") == "isothermal" and "gas_volume_ratio" not in options:
+        if isinstance(options.get("gas"), IsothermalGas) and "gas_volume_ratio" not in options:
             if volume is not None:
                 options = {**options, "gas_volume_ratio": volume / (4.0 / 3.0 * jnp.pi * session.radius**3)}
             elif getattr(session, "mesh_path", None) is not None:

@@ -1,6 +1,7 @@
-"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions, and the
-closed-form results of shell theory (SI units), and the one :class:`ShellProperties` (P_g, E, h, ν,
-R) the engines and estimators take."""
+"""Physics layer: material, gas, contact and self-weight energies as pure JAX functions, the laws
+as objects (the gas laws, :class:`AbstractGasLaw`; the contact laws a :class:`Plane` carries,
+:class:`AbstractContactLaw`), the closed-form results of shell theory (SI units), and the one
+:class:`ShellProperties` (P_g, E, h, ν, R) the engines and estimators take."""
 
 from ._contact import (
     Plane,
@@ -12,13 +13,26 @@ from ._contact import (
     plane_gap,
     sphere_gap,
 )
+from ._contact_laws import (
+    AbstractContactLaw,
+    BarrierContact,
+    CompressionCurve,
+    PowerLawContact,
+    TabulatedCompressionCurve,
+    ground,
+)
 from ._gas import (
     AIR_HEAT_CAPACITY_RATIO,
     ATMOSPHERIC_PRESSURE,
-    GAS_EXPONENTS,
     GAS_LAWS,
+    AbstractGasLaw,
+    AdiabaticGas,
+    IsothermalGas,
+    PolytropicGas,
+    PrescribedGas,
     adiabatic_gas_energy,
     adiabatic_gauge_pressure,
+    gas_law,
     isothermal_gas_energy,
     isothermal_gauge_pressure,
     polytropic_gas_energy,

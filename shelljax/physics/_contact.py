@@ -24,7 +24,7 @@ to μ λ once ‖u‖ ≥ ε (sliding) and growing linearly, with stiffness 2 μ
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -33,6 +33,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import InvalidInputError
+
+if TYPE_CHECKING:  # the laws' module builds planes: it imports this one
+    from ._contact_laws import AbstractContactLaw
 
 
 def _concrete(value) -> bool:
@@ -152,7 +155,7 @@ def friction_force(
 class Plane(eqx.Module):
     """A rigid plane through ``point`` (3,) [m] with unit ``normal`` (3,) pointing to the free side.
 
-    ``law``: its contact law (a ``dynamics.AbstractContactLaw``; None in the 3D engine's static
+    ``law``: its contact law (an :class:`AbstractContactLaw`; None in the 3D engine's static
     setup, whose ``ContactConfig`` sets the law and friction of all its planes); ``friction`` μ [-]
     (lagged, smoothed Coulomb) with slip tolerance ε [m]; ``damping`` c [N·s/m]: the normal contact
     damping of each touching point, the dashpot of the potential (c / 2Δt) Σ wᵢ ((xᵢ − xᵢⁿ)·n)²;
@@ -164,7 +167,7 @@ class Plane(eqx.Module):
 
     point: Float[Array, "3"] = eqx.field(converter=jnp.asarray)
     normal: Float[Array, "3"]
-    law: Any
+    law: AbstractContactLaw | None
     friction: Float[Array, ""] = eqx.field(converter=jnp.asarray)
     slip_tolerance: Float[Array, ""] = eqx.field(converter=jnp.asarray)
     damping: Float[Array, ""] = eqx.field(converter=jnp.asarray)

@@ -15,10 +15,12 @@ gauge pressure acting on the wall. All pressures in Pa, volumes in m³, energies
 
 Here p₀ = P_atm + P_g0 is the absolute pressure at the reference volume V₀.
 
-The named laws and their κ are :data:`GAS_EXPONENTS` (:data:`GAS_LAWS`): "prescribed" (κ = 0),
-"isothermal" (κ = 1) and "adiabatic" (κ = γ of air). Both engines and the dynamics take a gas by
-these names; the axisymmetric engine also has "polytropic", its sealed gas whose κ is a traced
-per-curve value (``axisym.CurvePhysics.gas_exponent``), so that one compiled program serves every law.
+The laws are objects, :class:`AbstractGasLaw`'s final subclasses :class:`PrescribedGas` (κ = 0),
+:class:`IsothermalGas` (κ = 1), :class:`AdiabaticGas` (κ = γ, air's by default) and
+:class:`PolytropicGas` (any κ, which may be traced: the axisymmetric engine's one compiled program
+for every sealed law, ``axisym.CurvePhysics.gas_exponent``); each gives its energy and gauge
+pressure as functions of V, and the engines and the dynamics take them. Names exist only at the
+edge (TOML, session files, CLI options): :func:`gas_law` maps one of :data:`GAS_LAWS` to its law.
 
 The sealed gases' energies vanish at V₀ and are evaluated from the volume change u = (V − V₀)/V₀
 as ln(V / V₀) = log1p(u) and (V₀ / V)^(γ−1) − 1 = expm1(−(γ − 1) log1p(u)), so they carry the
@@ -30,16 +32,18 @@ potential, and its line search then stalls.
 
 from __future__ import annotations
 
+import abc
 import math
+from typing import ClassVar
 
+import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import InvalidInputError
 
 ATMOSPHERIC_PRESSURE = 101_325.0  # [Pa], standard atmosphere
 AIR_HEAT_CAPACITY_RATIO = 1.4  # [-], diatomic ideal gas
-
-#: κ [-] of each named gas law (p V^κ constant); their names are the engines' ``gas`` values.
-GAS_EXPONENTS = {"prescribed": 0.0, "isothermal": 1.0, "adiabatic": AIR_HEAT_CAPACITY_RATIO}
-GAS_LAWS = tuple(GAS_EXPONENTS)
 
 # φ(x) = (eˣ − 1)/x = Σ xⁿ/(n + 1)! is evaluated by its Taylor series for |x| < 0.1, where the
 # closed form's derivatives lose digits (d²/dx² of expm1(x)/x cancels to ≈ eps/x² relative): the
@@ -138,3 +142,141 @@ def polytropic_gauge_pressure(
     return (atmospheric_pressure + reference_gauge_pressure) * jnp.exp(
         -exponent * jnp.log(volume / reference_volume)
     ) - atmospheric_pressure
+
+
+class AbstractGasLaw(eqx.Module):
+    """The gas inside a shell: its potential energy Π(V) [J] and gauge pressure −dΠ/dV [Pa] as
+    functions of the enclosed volume V [m³].
+
+    Every law takes the same arguments: V [m³], the reference volume V₀ [m³] and the gauge pressure
+    P_g0 [Pa] there (the prescribed law's constant P_g; it reads no V₀), and the outside
+    (atmospheric) pressure P_atm [Pa]. ``exponent`` is κ [-] of p V^κ constant; ``sealed`` says
+    whether the gas is a fixed amount (its pressure follows V) or held at P_g.
+    """
+
+    sealed: ClassVar[bool]
+
+    @property
+    @abc.abstractmethod
+    def exponent(self) -> float | Float[Array, ""]:
+        """κ [-] of p V^κ constant (0: a prescribed gauge pressure)."""
+
+    @abc.abstractmethod
+    def energy(
+        self,
+        volume: Float[ArrayLike, "*shape"],
+        reference_volume: Float[ArrayLike, ""] | None,
+        reference_gauge_pressure: Float[ArrayLike, ""],
+        atmospheric_pressure: Float[ArrayLike, ""] = ATMOSPHERIC_PRESSURE,
+    ) -> Float[Array, "*shape"]:
+        """Π(V) [J]."""
+
+    @abc.abstractmethod
+    def gauge_pressure(
+        self,
+        volume: Float[ArrayLike, "*shape"],
+        reference_volume: Float[ArrayLike, ""] | None,
+        reference_gauge_pressure: Float[ArrayLike, ""],
+        atmospheric_pressure: Float[ArrayLike, ""] = ATMOSPHERIC_PRESSURE,
+    ) -> Float[Array, "*shape"]:
+        """P_g(V) = −dΠ/dV [Pa]."""
+
+
+class PrescribedGas(AbstractGasLaw):
+    """A constant gauge pressure P_g [Pa] (the paper's model): Π = −P_g V; V₀ and P_atm are not read."""
+
+    sealed: ClassVar[bool] = False
+
+    @property
+    def exponent(self) -> float:
+        return 0.0
+
+    def energy(self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE):
+        return prescribed_pressure_energy(volume, reference_gauge_pressure)
+
+    def gauge_pressure(
+        self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE
+    ):
+        return jnp.broadcast_to(jnp.asarray(reference_gauge_pressure, float), jnp.shape(volume))
+
+
+class IsothermalGas(AbstractGasLaw):
+    """A sealed ideal gas at constant temperature: p V constant (κ = 1)."""
+
+    sealed: ClassVar[bool] = True
+
+    @property
+    def exponent(self) -> float:
+        return 1.0
+
+    def energy(self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE):
+        return isothermal_gas_energy(volume, reference_volume, reference_gauge_pressure, atmospheric_pressure)
+
+    def gauge_pressure(
+        self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE
+    ):
+        return isothermal_gauge_pressure(volume, reference_volume, reference_gauge_pressure, atmospheric_pressure)
+
+
+class AdiabaticGas(AbstractGasLaw):
+    """A sealed ideal gas compressed without heat exchange: p V^γ constant, ``heat_capacity_ratio``
+    γ [-] > 1 (air's by default), a compile-time constant."""
+
+    sealed: ClassVar[bool] = True
+    heat_capacity_ratio: float = eqx.field(static=True, default=AIR_HEAT_CAPACITY_RATIO)
+
+    def __check_init__(self):
+        if not (math.isfinite(self.heat_capacity_ratio) and self.heat_capacity_ratio > 1.0):
+            raise InvalidInputError(
+                f"AdiabaticGas: heat_capacity_ratio = {self.heat_capacity_ratio!r} must be > 1. "
+                f"Fix: air's is {AIR_HEAT_CAPACITY_RATIO}"
+            )
+
+    @property
+    def exponent(self) -> float:
+        return self.heat_capacity_ratio
+
+    def energy(self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE):
+        return adiabatic_gas_energy(
+            volume, reference_volume, reference_gauge_pressure, self.heat_capacity_ratio, atmospheric_pressure
+        )
+
+    def gauge_pressure(
+        self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE
+    ):
+        return adiabatic_gauge_pressure(
+            volume, reference_volume, reference_gauge_pressure, self.heat_capacity_ratio, atmospheric_pressure
+        )
+
+
+class PolytropicGas(AbstractGasLaw):
+    """A sealed gas with p V^κ constant, κ = ``exponent`` [-] ≥ 0 a value that may be traced, so
+    one compiled program spans every law (0: the gauge pressure P_g0 held, Π = −P_g0 (V − V₀);
+    1: isothermal; γ: adiabatic). Smooth in V and κ, through κ = 1 included."""
+
+    sealed: ClassVar[bool] = True
+    exponent: float | Float[Array, "*batch"] = 1.0
+
+    def energy(self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE):
+        return polytropic_gas_energy(
+            volume, reference_volume, reference_gauge_pressure, self.exponent, atmospheric_pressure
+        )
+
+    def gauge_pressure(
+        self, volume, reference_volume, reference_gauge_pressure, atmospheric_pressure=ATMOSPHERIC_PRESSURE
+    ):
+        return polytropic_gauge_pressure(
+            volume, reference_volume, reference_gauge_pressure, self.exponent, atmospheric_pressure
+        )
+
+
+_NAMED_LAWS = {"prescribed": PrescribedGas, "isothermal": IsothermalGas, "adiabatic": AdiabaticGas}
+#: The gas laws' names at the edge (TOML, session files, CLI options), each :func:`gas_law`'s.
+GAS_LAWS = tuple(_NAMED_LAWS)
+
+
+def gas_law(name: str) -> AbstractGasLaw:
+    """The gas law of ``name``, one of :data:`GAS_LAWS` (the adiabatic one with air's γ)."""
+    if name not in _NAMED_LAWS:
+        raise InvalidInputError(f"gas: unknown law {name!r}. Fix: use one of {', '.join(GAS_LAWS)}")
+    return _NAMED_LAWS[name]()

@@ -31,6 +31,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..physics import AdiabaticGas, IsothermalGas, PrescribedGas
 from ._contact import contact_forces
 
 # Status codes of ``advance``.
@@ -38,8 +39,8 @@ OK = 0
 NOT_FINITE = 1
 TUNNELLED = 2
 
-# Gas laws, as integers for the kernels (physics.GAS_LAWS order).
-GAS_CODES = {"prescribed": 0, "isothermal": 1, "adiabatic": 2}
+# Gas laws, as integers for the kernels (``gas_pressure_energy``): the code of each law's class.
+GAS_CODES = {PrescribedGas: 0, IsothermalGas: 1, AdiabaticGas: 2}
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..geometry import signed_volume
-from ..physics import GAS_LAWS, STANDARD_GRAVITY, ShellProperties
+from ..physics import GAS_LAWS, STANDARD_GRAVITY, AdiabaticGas, ShellProperties, gas_law
 from ..shell3d import rest_geometry
 from ..shell3d._rest import membrane_strain
 from ._checks import _check
@@ -44,7 +44,6 @@ class _Loading:
             "gas": gas,
             "gauge_pressure": float(params.gauge_pressure),
             "reference_volume": None if params.reference_volume is None else float(params.reference_volume),
-            "heat_capacity_ratio": float(system.config.heat_capacity_ratio),
             "atmospheric_pressure": float(params.outside_pressure),
             "planes": tuple(system.planes),
             "gravity": np.asarray(system.gravity),
@@ -60,7 +59,7 @@ class _Loading:
         *,
         mass=None,
         wall_density=None,
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         planes=(),
         gravity=STANDARD_GRAVITY,
         rest_shape="solve",
@@ -151,7 +150,7 @@ class _Loading:
         *,
         mass,
         n_faces=2000,
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         planes=(),
         gravity=STANDARD_GRAVITY,
         pole_refinement=1.0,
@@ -174,7 +173,7 @@ class _Loading:
 
     @classmethod
     def from_session(
-        cls, session, properties: ShellProperties, *, n_faces=2000, gas="adiabatic", planes=(), mesh=None, **options
+        cls, session, properties: ShellProperties, *, n_faces=2000, gas=AdiabaticGas(), planes=(), mesh=None, **options
     ) -> RealtimeShell:
         """From a session (a path or a loaded ``Session``: its mass [kg], h [m], ν [-], radius R
         [m] or mesh) and the estimates ``properties`` (P_g [Pa], E [Pa]; its h, ν, R where given
@@ -247,7 +246,7 @@ class _Loading:
             shell,
             properties,
             mass=values["mass_kg"],
-            gas=replica["gas"],
+            gas=gas_law(replica["gas"]),
             planes=planes,
             gravity=gravity,
             rest_shape=rest_shape,

@@ -25,7 +25,7 @@ import time as _time
 import numpy as np
 
 from .._errors import InvalidInputError
-from ..physics import AIR_HEAT_CAPACITY_RATIO, ATMOSPHERIC_PRESSURE, GAS_LAWS, STANDARD_GRAVITY
+from ..physics import ATMOSPHERIC_PRESSURE, STANDARD_GRAVITY, AdiabaticGas
 from . import _kernels as K
 from ._checks import _check, _planes_array
 from ._contact import plane_clamps, planes_energy
@@ -109,10 +109,10 @@ class RealtimeShell(_Loading, _StableTimeStep):
     Arguments: ``stencil`` (F, 6) int, ``rest_metric`` (F, 2, 2) [m²], ``rest_curvature`` (F, 2, 2)
     [m], ``rest_area`` (F,) [m²], ``vertex_area`` (V,) [m²], ``positions`` (V, 3) [m] (the start,
     e.g. the inflated equilibrium), ``masses`` (V,) [kg], ``young_modulus`` E [Pa],
-    ``poisson_ratio`` ν [-], ``thickness`` h [m], ``gas`` (one of ``physics.GAS_LAWS``),
-    ``gauge_pressure`` P_g [Pa] (prescribed, or the sealed gas's at ``reference_volume`` [m³]),
-    ``heat_capacity_ratio`` γ [-], ``planes`` (``physics.Plane``s or scenario plane specs: point,
-    normal, friction μ, damping c [N·s/m], the centre-of-mass dashpot of the reference),
+    ``poisson_ratio`` ν [-], ``thickness`` h [m], ``gas`` (a ``physics.PrescribedGas``,
+    ``IsothermalGas`` or ``AdiabaticGas``, with its γ [-]), ``gauge_pressure`` P_g [Pa] (prescribed,
+    or the sealed gas's at ``reference_volume`` [m³]), ``planes`` (``physics.Plane``s or scenario
+    plane specs: point, normal, friction μ, damping c [N·s/m], the centre-of-mass dashpot of the reference),
     ``gravity`` [m/s²] (g down, or a 3-vector), ``contact_stiffness`` k [N/m] per vertex (default:
     k_i = 0.25 m_i ω_max², ω_max the stiffest internal mode: it shortens the stable Δt by 11 %),
     ``contact_damping_ratio`` ζ [-] of each vertex's normal damper c_i = 2ζ√(k m_i) (default 0: the
@@ -140,10 +140,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         young_modulus,
         poisson_ratio,
         thickness,
-        gas="adiabatic",
+        gas=AdiabaticGas(),
         gauge_pressure,
         reference_volume=None,
-        heat_capacity_ratio=AIR_HEAT_CAPACITY_RATIO,
         atmospheric_pressure=ATMOSPHERIC_PRESSURE,
         planes=(),
         gravity=STANDARD_GRAVITY,
@@ -159,16 +158,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         velocities=None,
         dt_method="spectral",
     ):
-        self._set_material(
-            gas,
-            young_modulus,
-            poisson_ratio,
-            thickness,
-            gauge_pressure,
-            heat_capacity_ratio,
-            atmospheric_pressure,
-            safety,
-        )
+        self._set_material(gas, young_modulus, poisson_ratio, thickness, gauge_pressure, atmospheric_pressure, safety)
         self._set_rest_geometry(stencil, rest_metric, rest_curvature, rest_area, vertex_area)
         self._set_bodies(positions, velocities, masses, gravity)
         self.slip_velocity = _check("slip_velocity [m/s]", slip_velocity)
@@ -195,26 +185,19 @@ class RealtimeShell(_Loading, _StableTimeStep):
         self._energy_start = None
 
     def _set_material(
-        self,
-        gas,
-        young_modulus,
-        poisson_ratio,
-        thickness,
-        gauge_pressure,
-        heat_capacity_ratio,
-        atmospheric_pressure,
-        safety,
+        self, gas, young_modulus, poisson_ratio, thickness, gauge_pressure, atmospheric_pressure, safety
     ) -> None:
         """E [Pa], ν [-], h [m], the gas and its pressures [Pa], the Lamé-like α, β [Pa] and the Δt safety."""
-        if gas not in GAS_LAWS:
-            raise InvalidInputError(f"gas: expected one of {GAS_LAWS}; got {gas!r}.")
+        if type(gas) not in K.GAS_CODES:
+            laws = ", ".join(f"physics.{law.__name__}" for law in K.GAS_CODES)
+            raise InvalidInputError(f"gas: expected one of {laws}; got {gas!r}.")
         self.E = _check("young_modulus [Pa]", young_modulus)
         self.nu = _check("poisson_ratio [-]", poisson_ratio, positive=False)
         if not self.nu < 0.5:
             raise InvalidInputError(f"poisson_ratio [-]: must be in [0, 0.5); got {poisson_ratio!r}.")
         self.h = _check("thickness [m]", thickness)
         self.p_gauge = _check("gauge_pressure [Pa]", gauge_pressure, positive=False)
-        self.gamma = _check("heat_capacity_ratio [-]", heat_capacity_ratio)
+        self.gamma = float(gas.exponent)  # read by the adiabatic law's kernel only
         self.p_atm = _check("atmospheric_pressure [Pa]", atmospheric_pressure)
         self.safety = _check("safety [-]", safety)
         self.gas = gas
@@ -255,7 +238,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         """The gas's reference volume [m³], the mean edge [m], the tunnelling depth [m] and the mean vertex area [m²]."""
         volume_grad = np.zeros_like(self.x)
         volume = K.volume_and_gradient(self.x, self.faces, volume_grad)
-        if self.gas == "prescribed":
+        if not self.gas.sealed:
             self.v_ref = volume
         else:
             self.v_ref = volume if reference_volume is None else _check("reference_volume [m³]", reference_volume)
@@ -347,7 +330,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
         grad = np.zeros_like(x)
         vol = K.volume_and_gradient(x, self.faces, grad)
         pressure, _ = K.gas_pressure_energy(
-            vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma
+            vol, K.GAS_CODES[type(self.gas)], self.p_gauge, self.v_ref, self.p_atm, self.gamma
         )
         return float(pressure), float(vol), pressure * grad
 
@@ -361,7 +344,9 @@ class RealtimeShell(_Loading, _StableTimeStep):
         e_el, _ = self.elastic_forces()
         grad = np.zeros_like(self.x)
         vol = K.volume_and_gradient(self.x, self.faces, grad)
-        _, e_gas = K.gas_pressure_energy(vol, K.GAS_CODES[self.gas], self.p_gauge, self.v_ref, self.p_atm, self.gamma)
+        _, e_gas = K.gas_pressure_energy(
+            vol, K.GAS_CODES[type(self.gas)], self.p_gauge, self.v_ref, self.p_atm, self.gamma
+        )
         e_grav = float(-np.sum(self.masses * (self.x @ self.gravity)))
         e_con = float(planes_energy(self.x, self.planes, self._clamps, self.k_contact))
         out = {
@@ -462,7 +447,7 @@ class RealtimeShell(_Loading, _StableTimeStep):
             self.alpha,
             self.beta,
             self.with_bending,
-            K.GAS_CODES[self.gas],
+            K.GAS_CODES[type(self.gas)],
             self.p_gauge,
             self.v_ref,
             self.p_atm,

@@ -42,14 +42,14 @@ from ..diagnose.internal import (
     PRIOR_STD,
     WIN_NATS,
     WIN_SE,
-    WRINKLE_LAWS,
     object_unknowns,
     physical,
     widened_grid,
     with_measurement,
 )
-from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES
+from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, WRINKLE_LAWS
 from ..paper import PAPER_INDENTER_RADIUS
+from ..physics import gas_law
 from ..session import RigidPress, Session, files_sha256, load_rigid_press, load_session
 from ._press import PressFit, fit_press, press_data
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
@@ -302,7 +302,11 @@ def _objects(sessions, gas, force_ref, manometer_std):
     objects = []
     for study in studies:
         base = study_arrays(
-            study, gas=gas, indenter_radius=PAPER_INDENTER_RADIUS, force_ref=force_ref, manometer_std=manometer_std
+            study,
+            gas=gas_law(gas),
+            indenter_radius=PAPER_INDENTER_RADIUS,
+            force_ref=force_ref,
+            manometer_std=manometer_std,
         )
         objects.append((widened_grid(base, forces, CALIBRATION_GRID_SPAN), study))
     return objects, noise

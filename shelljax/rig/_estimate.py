@@ -44,6 +44,7 @@ from ..diagnose.internal import (
     unit_log_likelihood,
     widened_grid,
 )
+from ..physics import gas_law
 from ..estimate import Estimate
 from ..session import Session, load_session
 from ._calibrate import Rig, RigWarning, fit_model
@@ -165,7 +166,7 @@ def _prepare(sessions, rig: Rig):
                 "Fix: add one count per trial"
             )
     study = build_study(sessions, rig.noise, min_trials=1, command="estimate --rig")
-    base = study_arrays(study, gas=rig.gas, indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
+    base = study_arrays(study, gas=gas_law(rig.gas), indenter_radius=rig.indenter_radius, force_ref=rig.force_ref)
     return sessions, study, widened_grid(base, _true_forces(rig, study.force), ESTIMATE_GRID_SPAN)
 
 

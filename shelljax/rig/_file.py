@@ -16,7 +16,8 @@ import tomli_w
 from .._files import atomic_write_text
 from .._toml import TomlReader, read_toml
 from ..diagnose.internal import LINEAR_SCALE, MIN_INDENTER_FRACTION, UNITS
-from ._calibrate import ESTIMATOR_GASES, Rig, RigModel
+from .._options import ESTIMATOR_GASES, WRINKLE_LAWS
+from ._calibrate import Rig, RigModel
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 FORMAT = 1
@@ -239,8 +240,6 @@ def load_rig(path: str | Path) -> Rig:
     force_ref, radius, (tau, (a, b)) = _read_reference_and_noise(check, data)
     models = _read_models(check, data)
     selection = data.get("selection", {})
-    from ..diagnose.internal import WRINKLE_LAWS
-
     gas = check.typed(fm, "gas", str, "forward_model.")
     law = check.typed(fm, "wrinkle_law", str, "forward_model.")
     if gas not in ESTIMATOR_GASES or law not in WRINKLE_LAWS:

@@ -18,7 +18,7 @@ from .._errors import InvalidInputError
 from .._toml import TomlReader, read_toml
 from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
 from ..estimate import METHODS, EstimatorOptions
-from ..physics import GAS_LAWS
+from ..physics import GAS_LAWS, gas_law
 
 _TABLES = {
     "object": {
@@ -420,7 +420,7 @@ def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
     estimators_table = _table(r, data, "estimators")
     rig = rig_settings(path, _table(r, data, "rig"), estimators_table)
     _, estimators = estimator_settings(
-        path, {**estimators_table, **(rig[1] if rig else {})}, gas="prescribed" if gas == "prescribed" else "isothermal"
+        path, {**estimators_table, **(rig[1] if rig else {})}, gas="isothermal" if gas_law(gas).sealed else "prescribed"
     )
     dt = r.number(integ, "dt_s", "integrator.", positive=True, fix="give the time step in s, e.g. 1e-3")
     duration = r.number(integ, "duration_s", "integrator.", positive=True, fix="give the duration in s, e.g. 1.0")

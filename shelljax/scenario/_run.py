@@ -16,7 +16,7 @@ from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from .._files import check_output_dir
 from ..object_estimate import estimated_parameters
-from ..physics import ShellProperties
+from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
 from ..runner._compile_log import stage
 from ..session import load_session
@@ -109,7 +109,7 @@ def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
         poisson_ratio=obj.poisson_ratio,
     )
     return d.shell_system(
-        obj.shell, properties, gas=scenario.gas, mass=obj.mass, wall_density=obj.wall_density, planes=planes
+        obj.shell, properties, gas=gas_law(scenario.gas), mass=obj.mass, wall_density=obj.wall_density, planes=planes
     )
 
 

@@ -3,10 +3,10 @@
 Quick start (SI units)::
 
     import shelljax.shell3d as s3
-    from shelljax.physics import ShellProperties
+    from shelljax.physics import IsothermalGas, ShellProperties
     ball = s3.ball(radius=0.13, thickness=0.9e-3, n_triangles=5000)
     pezzi = ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=0.9e-3, poisson_ratio=0.4)
-    sim = s3.Indentation(ball, pezzi, gas="isothermal", indenter_radius=0.008, ground=True)
+    sim = s3.Indentation(ball, pezzi, gas=IsothermalGas(), indenter_radius=0.008, ground=True)
     state = sim.solve(depth=0.02)      # or sim.curve(depths), sim.solve(force=10.0)
     print(state.observables())         # force [N], w0/H/D_u/D_l/d [m], pressure [Pa], volume [m³]
     state.export("poked.obj"); state.plot("poked.png")

@@ -6,9 +6,7 @@ import dataclasses
 import math
 
 from .._errors import InvalidInputError
-from ..physics import AIR_HEAT_CAPACITY_RATIO, GAS_LAWS, Plane
-
-GAS_MODELS = GAS_LAWS  # the shared named laws: "prescribed", "isothermal", "adiabatic"
+from ..physics import AbstractGasLaw, Plane, PrescribedGas
 
 #: Default friction slip tolerance ε = ĝ/100: well below the slip friction is meant to stop
 #: (docs/shell3d.md, *Model*, ground friction).
@@ -94,13 +92,12 @@ class ContactConfig:
 
 @dataclasses.dataclass(frozen=True)
 class ModelConfig:
-    """Static model setup (hashable; the jit key): vertex count, gas model ("prescribed",
-    "isothermal" or "adiabatic") with its heat capacity ratio γ [-], contacts, and whether the
-    indenter height is an unknown under a prescribed force (force control)."""
+    """Static model setup (hashable; the jit key): vertex count, gas law (a
+    ``physics.AbstractGasLaw``, e.g. ``PrescribedGas()``, ``IsothermalGas()`` or ``AdiabaticGas(γ)``),
+    contacts, and whether the indenter height is an unknown under a prescribed force (force control)."""
 
     n_vertices: int
-    gas: str = "prescribed"
-    heat_capacity_ratio: float = AIR_HEAT_CAPACITY_RATIO
+    gas: AbstractGasLaw = PrescribedGas()
     contact: ContactConfig = ContactConfig()
     force_control: bool = False
 
@@ -120,8 +117,10 @@ def jit_config(config: ModelConfig) -> ModelConfig:
 
 
 def check_config(config: ModelConfig) -> None:
-    """Raise InvalidInputError for an unknown gas model or contact kind."""
-    if config.gas not in GAS_MODELS:
-        raise InvalidInputError(f"gas: unknown model {config.gas!r}; use one of {GAS_MODELS}.")
+    """Raise InvalidInputError for a gas that is no gas law or an unknown contact kind."""
+    if not isinstance(config.gas, AbstractGasLaw):
+        raise InvalidInputError(
+            f"gas: {config.gas!r} is no gas law. Fix: pass a physics.AbstractGasLaw, e.g. physics.IsothermalGas()"
+        )
     if config.contact.kind not in ("barrier", "penalty"):
         raise InvalidInputError(f"contact: unknown kind {config.contact.kind!r}; use 'barrier' or 'penalty'.")

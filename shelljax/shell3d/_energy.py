@@ -27,14 +27,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ..physics import (
-    STANDARD_GRAVITY,
-    adiabatic_gas_energy,
-    bending_density,
-    isothermal_gas_energy,
-    neo_hookean_membrane_density,
-    prescribed_pressure_energy,
-)
+from ..physics import STANDARD_GRAVITY, bending_density, neo_hookean_membrane_density
 from ._config import ModelConfig, split_dofs
 from ._contact import friction_potential, min_gap, plane_contact_energy, sphere_contact_energy
 from ._mesh import ShellMesh
@@ -154,15 +147,10 @@ def volume(x: Float[Array, "V 3"], stencil) -> Float[Array, ""]:
 
 
 def gas_energy(vol, params, config: ModelConfig):
-    """Gas potential Π(V) [J] (see :mod:`shelljax.physics._gas`)."""
-    p_g = params.gauge_pressure
-    if config.gas == "prescribed":
-        return prescribed_pressure_energy(vol, p_g)
-    p_atm = params.outside_pressure
-    v0 = params.reference_volume
-    if config.gas == "isothermal":
-        return isothermal_gas_energy(vol, v0, p_g, atmospheric_pressure=p_atm)
-    return adiabatic_gas_energy(vol, v0, p_g, config.heat_capacity_ratio, atmospheric_pressure=p_atm)
+    """Gas potential Π(V) [J] of ``config.gas`` (a ``physics.AbstractGasLaw``)."""
+    if not config.gas.sealed:  # a held gauge pressure has no reference volume
+        return config.gas.energy(vol, None, params.gauge_pressure)
+    return config.gas.energy(vol, params.reference_volume, params.gauge_pressure, params.outside_pressure)
 
 
 def gauge_pressure(q, params, geometry: ShellGeometry, config: ModelConfig):

@@ -37,8 +37,8 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ..paper import PAPER_INDENTER_RADIUS
-from ..physics import ATMOSPHERIC_PRESSURE, Plane, ShellProperties
-from ._config import ContactConfig, ModelConfig
+from ..physics import ATMOSPHERIC_PRESSURE, AbstractGasLaw, Plane, PrescribedGas, ShellProperties
+from ._config import ContactConfig, ModelConfig, check_config
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
 from ._mesh import ShellMesh
@@ -212,8 +212,9 @@ class Indentation:
     Arguments (SI units): ``shell`` (:class:`Shell`), ``properties``
     (:class:`shelljax.physics.ShellProperties`: E [Pa], ν [-], the gauge pressure P_g [Pa] of the
     scanned state, and the shell's thickness h [m]; its radius is not read, the mesh is the
-    geometry); ``gas``: one of ``physics.GAS_LAWS``, "prescribed" (constant P_g, the paper's
-    model), "isothermal" or "adiabatic" (sealed ideal gas that holds P_g at the scanned volume);
+    geometry); ``gas``: a ``physics.AbstractGasLaw``, ``PrescribedGas()`` (constant P_g, the paper's
+    model), ``IsothermalGas()`` or ``AdiabaticGas()`` (sealed ideal gas that holds P_g at the scanned
+    volume);
     ``indenter_radius`` [m]; ``ground``: put a rigid plane under the shell;
     ``mass`` [kg] adds gravity; ``contact``: "barrier" (default; IPC log barrier, no
     penetration, surfaces stop within ``activation_distance`` [m] of a body) or "penalty"
@@ -240,7 +241,7 @@ class Indentation:
         shell: Shell,
         properties: ShellProperties,
         *,
-        gas: str = "prescribed",
+        gas: AbstractGasLaw = PrescribedGas(),
         indenter_radius: float = PAPER_INDENTER_RADIUS,
         ground: bool = True,
         mass: float | None = None,
@@ -266,6 +267,7 @@ class Indentation:
             max_newton_iterations,
         )
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
+        check_config(ModelConfig(shell.mesh.n_vertices, gas=gas))
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
         self.shell = shell
@@ -287,7 +289,7 @@ class Indentation:
         self.rest, self.reference_volume = reference.rest, reference.reference_volume
         #: Largest distance [m] between the pressurized reference state and the scan.
         self.rest_mismatch = reference.rest_mismatch
-        if gas != "prescribed":
+        if gas.sealed:
             self.base_params = self.base_params.replace(
                 reference_volume=self.reference_volume, atmospheric_pressure=ATMOSPHERIC_PRESSURE
             )

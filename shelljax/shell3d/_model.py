@@ -213,7 +213,7 @@ class ShellModel(eqx.Module):
             data = self.hessian_values(q, params, gradient)
         mat = self.pattern.matrix(data)
         rank = None
-        if self.config.gas != "prescribed":
+        if self.config.gas.sealed:
             c2, u = rank_one(jnp.asarray(q), self.host_params(params), self.geometry, self.jit_config)
             rank = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank

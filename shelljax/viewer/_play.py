@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .._errors import InvalidInputError
 from .._files import check_output_file
+from ..physics import AbstractGasLaw, AdiabaticGas
 from ..realtime import BlowUpError
 from ._gif import write_gif
 from ._headless import Replay, replay
@@ -19,7 +20,9 @@ from ._script import InteractionScript, load_script
 DEFAULT_SCRIPT = InteractionScript(duration=10.0)
 
 
-def play_scene(source, script_path=None, *, mesh_faces: int | None = None, gas: str = "adiabatic") -> Scene:
+def play_scene(
+    source, script_path=None, *, mesh_faces: int | None = None, gas: AbstractGasLaw = AdiabaticGas()
+) -> Scene:
     """The :class:`Scene` of ``source`` (a replica directory or session) with the script at
     ``script_path`` (None: :data:`DEFAULT_SCRIPT`), meshed with ``mesh_faces`` where given."""
     script = DEFAULT_SCRIPT if script_path is None else load_script(script_path)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InvalidInputError
+from ..physics import AbstractGasLaw, AdiabaticGas
 from ..realtime import RealtimeShell
 from ._script import InteractionScript
 
@@ -80,7 +81,7 @@ def resolve_source(source: str | Path) -> Path:
     )
 
 
-def load_scene(source: str | Path, script: InteractionScript, *, gas: str = "adiabatic") -> Scene:
+def load_scene(source: str | Path, script: InteractionScript, *, gas: AbstractGasLaw = AdiabaticGas()) -> Scene:
     """The :class:`Scene` of a replica directory (its P_g, E, ν, h, mass, gas and mesh as saved)
     or a session file (its mass, h, ν and radius or mesh, meshed with ``script.mesh_faces``
     triangles; P_g and E estimated by the closed form; ``gas`` the sealed gas law)."""

@@ -1,4 +1,4 @@
-"""Rigid planes (ground, wall) and the contact laws that push a body's contact points off them.
+"""The contact laws that push a body's contact points off a rigid plane (ground, wall).
 
 A contact law is a potential e(g) [J] of one contact point's signed gap g [m] (positive =
 separated). Its normal force is λ(g) = −de/dg [N] ≥ 0. Two kinds:
@@ -13,8 +13,9 @@ separated). Its normal force is λ(g) = −de/dg [N] ≥ 0. Two kinds:
 Each law also gives the weight w(g) ∈ [0, 1] of its point in the contact damping potential and the
 gap below which the point counts as touching (for impact detection).
 
-The plane itself is :class:`shelljax.physics.Plane`, the one plane of the package (the 3D engine's
-static contact setup uses it too), re-exported here as ``dynamics.Plane``.
+The plane itself is :class:`Plane` (``_contact``), the one plane of the package, which carries
+its law (the 3D engine's static contact setup sets one law for all its planes instead); the
+dynamics' systems read them.
 """
 
 from __future__ import annotations
@@ -29,8 +30,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._errors import InvalidInputError
-from ..physics import Plane, barrier_energy
-from ..physics.internal import check_nonnegative, check_positive  # noqa: F401 (the dynamics modules take them from here)
+from ._contact import Plane, barrier_energy, check_positive
 
 # 16-point Gauss–Legendre nodes and weights on [−1, 1]: the energy ∫₀^δ F of a smooth curve to ~1e-15.
 _GL_NODES, _GL_WEIGHTS = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(16))
