@@ -63,8 +63,8 @@ def write_gif(replay: Replay, path: str | Path, *, hand_radius: float, gif_fps: 
     rest = replay.shapes_m[0]
     strain = _render.face_strain(replay.shapes_m, replay.faces, rest)
     limit = _render.strain_limit(strain)
-    normals = list(replay.planes[:, 3:6])
-    levels = [float(p[:3] @ p[3:6]) for p in replay.planes]
+    normals = list(replay.planes.normal)
+    levels = [float(point @ normal) for point, normal in zip(replay.planes.point, replay.planes.normal)]
     centre, half = _view(replay)
     fig = plt.figure(figsize=(4.6, 4.4))
     ax = fig.add_axes((0.0, 0.0, 0.82, 0.84), projection="3d")
