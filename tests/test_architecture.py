@@ -254,3 +254,45 @@ def test_each_group_of_test_files_sharing_programs_has_several_files():
     groups = collections.Counter(g for p in (ROOT / "tests").glob("test_*.py") if (g := programs_group(p)))
     lone = sorted(g for g, n in groups.items() if n < 2)
     assert groups and not lone, f"SHARED_PROGRAMS groups of a single file (a misspelt name?): {lone}"
+
+
+#: The most parameters a function in shelljax/ takes (``self``/``cls`` not counted; ``*args`` and
+#: ``**kwargs`` count one each): more are packed into a named structure (realtime's kernels take
+#: geometry, body, material, contact and buffers).
+MAX_PARAMETERS = 10
+#: Functions over the limit outside the realtime runtime, the scenarios, the viewer and the sensor
+#: emulator, left for the integrator to decide (issue #59): module:function -> parameters today.
+PARAMETER_EXEMPTIONS = {
+    "axisym/_model.py:_params": 11,
+    "dynamics/_sparse.py:_host_solve": 11,
+    "estimate/_bayes.py:sample_posterior": 12,
+    "geometry/_primitives.py:sphere_mesh": 13,
+    "sensing/_calibrate.py:calibrate_sensor": 12,
+    "session/_write.py:write_session": 16,
+    "session/_write.py:_session_document": 14,
+    "shell3d/_indent.py:__init__": 16,
+}
+
+
+def _parameter_counts():
+    for path in _package_files():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = node.args
+                names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs]
+                if names and names[0] in ("self", "cls"):
+                    names = names[1:]
+                yield (
+                    f"{path.relative_to(PACKAGE)}:{node.name}",
+                    len(names) + (a.vararg is not None) + (a.kwarg is not None),
+                )
+
+
+def test_no_function_takes_more_than_ten_parameters():
+    over = {name: n for name, n in _parameter_counts() if n > MAX_PARAMETERS}
+    unexpected = {name: n for name, n in over.items() if PARAMETER_EXEMPTIONS.get(name) != n}
+    stale = sorted(set(PARAMETER_EXEMPTIONS) - set(over))
+    assert not unexpected, (
+        f"functions over {MAX_PARAMETERS} parameters (pack them into a named structure): {unexpected}"
+    )
+    assert not stale, f"exempted functions now within {MAX_PARAMETERS} parameters (drop their exemption): {stale}"

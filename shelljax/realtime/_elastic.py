@@ -171,9 +171,12 @@ def _unit_normal(e1, e2):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _edge_bars(t0, t1, t2, f0, f1, f2, lam, n, inv_cn, e1, e2):
-    """ē1, ē2 (3 each) of the flaps' reverse passes t_k (``_flap_back``), their forward values f_k
-    (``_flap``) and weights λ_k (3), through r = (d·e1, d·e2) and the unit normal n = c/|c|."""
+def _edge_bars(backs, flaps, lam, n, inv_cn, e1, e2):
+    """ē1, ē2 (3 each) of the flaps' reverse passes ``backs`` (t_k of ``_flap_back``), their forward
+    values ``flaps`` (f_k of ``_flap``) and weights λ_k (3), through r = (d·e1, d·e2) and the unit
+    normal n = c/|c|."""
+    t0, t1, t2 = backs
+    f0, f1, f2 = flaps
     lam0, lam1, lam2 = lam
     nx, ny, nz = n
     e1x, e1y, e1z = e1
@@ -206,11 +209,12 @@ def _edge_bars(t0, t1, t2, f0, f1, f2, lam, n, inv_cn, e1, e2):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _bending(x, f, i0, e1, e2, metric, q, geometry, material, g, with_energy):
+def _bending(x, f, e1, e2, metric, q, geometry, material, g, with_energy):
     """Bending of face f: its energy density [J/m²] (0 unless ``with_energy``); the flap vertices'
     gradient [N] into g[3:6]; and, for the caller's chain rule, x̄₀ (3) (the flaps' share), the
     increments of ā (a00, a01, a11) and ē1, ē2 (3 each)."""
     stencil = geometry.stencil
+    i0 = stencil[f, 0]
     area = geometry.rest_area[f]
     n, inv_cn = _unit_normal(e1, e2)
     # flap vertices: offsets d, in-plane coordinates (u, v), heights w
@@ -231,7 +235,7 @@ def _bending(x, f, i0, e1, e2, metric, q, geometry, material, g, with_energy):
         g[3, k] = area * t0[k]
         g[4, k] = area * t1[k]
         g[5, k] = area * t2[k]
-    bars = _edge_bars(t0, t1, t2, f0, f1, f2, (lam0, lam1, lam2), n, inv_cn, e1, e2)
+    bars = _edge_bars((t0, t1, t2), (f0, f1, f2), (lam0, lam1, lam2), n, inv_cn, e1, e2)
     return (
         energy,
         (-(t0[0] + t1[0] + t2[0]), -(t0[1] + t1[1] + t2[1]), -(t0[2] + t1[2] + t2[2])),
@@ -264,7 +268,7 @@ def _face_grad(x, f, geometry, material, g, with_energy):
     energy, ba00, ba01, ba11 = _membrane(metric, q, material, with_energy)
     if material.bending:
         eb, gx, da, bars = _bending(
-            x, f, i0, (e1x, e1y, e1z), (e2x, e2y, e2z), metric, q, geometry, material, g, with_energy
+            x, f, (e1x, e1y, e1z), (e2x, e2y, e2z), metric, q, geometry, material, g, with_energy
         )
         gx0, gy0, gz0 = gx
         b1x, b1y, b1z, b2x, b2y, b2z = bars

@@ -15,7 +15,7 @@ from .._errors import InvalidInputError
 from ..geometry import signed_volume
 from ..physics import GAS_LAWS, STANDARD_GRAVITY, ShellProperties
 from ..shell3d import rest_geometry
-from ..shell3d._rest import membrane_strain
+from ..shell3d.internal import membrane_strain
 from ._checks import _check
 from ._records import RealtimeOptions, RestShape
 
