@@ -241,6 +241,8 @@ def test_the_finger_radius_default_is_the_papers():
         (r"arange\(5", None),  # the force levels are listed once, in paper.py
         (r"(?m)^\s*GAS_EXPONENTS = ", "physics/_gas.py"),  # the gas laws' names and κ, for every engine
         (r"(?m)^class ShellProperties\b", "physics/_properties.py"),  # P_g, E, h, ν, R: one object
+        (r"\*\*\s?3 / \(12\.0 \* \(1\.0 - ", "paper.py"),  # B = E h³/(12(1 − ν²)): τ's, physics re-exports it
+        (r"(?m)^def \w*mesh_volume\(", "geometry/_mesh.py"),  # a mesh's enclosed volume, for NumPy and JAX
     ],
 )
 def test_each_law_is_defined_once(pattern, home):
