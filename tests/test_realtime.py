@@ -264,6 +264,7 @@ def test_collider_pushes_the_shell_and_feels_the_reaction():
         ({"contact_stiffness": -5.0}, "contact_stiffness"),
         ({"max_refinements": -1}, "max_refinements"),
         ({"max_refinements": 1.5}, "max_refinements"),
+        ({"no_such_option": 1.0}, "no_such_option"),  # not a RealtimeOptions field
         ({"planes": [type("P", (), {"point": [0, 0], "normal": [0, 0, 1]})()]}, "planes[0]"),
     ],
 )
