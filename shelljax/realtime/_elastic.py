@@ -42,7 +42,7 @@ def _flap(x, i0, j, e1, e2, n, metric):
     u = (a11 * r1 - a01 * r2) * inv_det
     v = (a00 * r2 - a01 * r1) * inv_det
     w = dx * nx + dy * ny + dz * nz
-    return (dx, dy, dz), r1, r2, u, v, w
+    return dx, dy, dz, r1, r2, u, v, w
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -50,7 +50,7 @@ def _flap_back(lk, gamma, flap, metric, e1, e2, n):
     """Reverse pass of one flap (``flap``: its d, r1, r2, u, v from ``_flap``) with w̄ = λ_k:
     (d̄ (3), Ā00, Ā01, Ā11, r̄1, r̄2)."""
     ga0, ga1, ga2 = gamma
-    _, r1, r2, u, v, _ = flap
+    _, _, _, r1, r2, u, v, _ = flap
     a00, a01, a11, _, inv_det = metric
     e1x, e1y, e1z = e1
     e2x, e2y, e2z = e2
@@ -123,7 +123,7 @@ def _flap_solve(u0, v0, w0, u1, v1, w1, u2, v2, w2):
     ga0 = (w0 * c00 + w1 * c10 + w2 * c20) * inv_dm
     ga1 = (w0 * c01 + w1 * c11 + w2 * c21) * inv_dm
     ga2 = (w0 * c02 + w1 * c12 + w2 * c22) * inv_dm
-    return (ga0, ga1, ga2), (c00, c01, c02), (c10, c11, c12), (c20, c21, c22), inv_dm
+    return ga0, ga1, ga2, c00, c01, c02, c10, c11, c12, c20, c21, c22, inv_dm
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -167,24 +167,20 @@ def _unit_normal(e1, e2):
     cz = e1x * e2y - e1y * e2x
     cn = math.sqrt(cx * cx + cy * cy + cz * cz)
     inv_cn = 1.0 / cn
-    return (cx * inv_cn, cy * inv_cn, cz * inv_cn), inv_cn
+    return cx * inv_cn, cy * inv_cn, cz * inv_cn, inv_cn
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _edge_bars(backs, flaps, lam, n, inv_cn, e1, e2):
-    """ē1, ē2 (3 each) of the flaps' reverse passes ``backs`` (t_k of ``_flap_back``), their forward
-    values ``flaps`` (f_k of ``_flap``) and weights λ_k (3), through r = (d·e1, d·e2) and the unit
-    normal n = c/|c|."""
-    t0, t1, t2 = backs
-    f0, f1, f2 = flaps
+def _edge_bars(r_bars, d, lam, n, inv_cn, e1, e2):
+    """ē1, ē2 (3 each) of the flaps' r̄1, r̄2 (``r_bars``: flap 0's, 1's, 2's, from ``_flap_back``),
+    their offsets d (``d``: 3 × 3, from ``_flap``) and weights λ_k (3), through r = (d·e1, d·e2)
+    and the unit normal n = c/|c| (flat tuples: Numba's parfor analysis fails on nested ones)."""
     lam0, lam1, lam2 = lam
     nx, ny, nz = n
     e1x, e1y, e1z = e1
     e2x, e2y, e2z = e2
-    d0x, d0y, d0z = f0[0]
-    d1x, d1y, d1z = f1[0]
-    d2x, d2y, d2z = f2[0]
-    r1b0, r2b0, r1b1, r2b1, r1b2, r2b2 = t0[6], t0[7], t1[6], t1[7], t2[6], t2[7]
+    d0x, d0y, d0z, d1x, d1y, d1z, d2x, d2y, d2z = d
+    r1b0, r2b0, r1b1, r2b1, r1b2, r2b2 = r_bars
     b1x = r1b0 * d0x + r1b1 * d1x + r1b2 * d2x
     b1y = r1b0 * d0y + r1b1 * d1y + r1b2 * d2y
     b1z = r1b0 * d0z + r1b1 * d1z + r1b2 * d2z
@@ -216,18 +212,22 @@ def _bending(x, f, e1, e2, metric, q, geometry, material, g, with_energy):
     stencil = geometry.stencil
     i0 = stencil[f, 0]
     area = geometry.rest_area[f]
-    n, inv_cn = _unit_normal(e1, e2)
+    nx, ny, nz, inv_cn = _unit_normal(e1, e2)
+    n = (nx, ny, nz)
     # flap vertices: offsets d, in-plane coordinates (u, v), heights w
     f0 = _flap(x, i0, stencil[f, 3], e1, e2, n, metric)
     f1 = _flap(x, i0, stencil[f, 4], e1, e2, n, metric)
     f2 = _flap(x, i0, stencil[f, 5], e1, e2, n, metric)
-    gamma, c0, c1, c2, inv_dm = _flap_solve(f0[3], f0[4], f0[5], f1[3], f1[4], f1[5], f2[3], f2[4], f2[5])
+    ga0, ga1, ga2, c00, c01, c02, c10, c11, c12, c20, c21, c22, inv_dm = _flap_solve(
+        f0[5], f0[6], f0[7], f1[5], f1[6], f1[7], f2[5], f2[6], f2[7]
+    )
+    gamma = (ga0, ga1, ga2)
     rest_b = (geometry.rest_b[f, 0], geometry.rest_b[f, 1], geometry.rest_b[f, 2])
     energy, gb0, gb1, gb2 = _bending_moment(gamma, rest_b, q, material, with_energy)
     # γ = m⁻¹ w, m⁻¹ = [c0 c1 c2]/dm: w̄_k = λ_k = c_k · γ̄ / dm, m̄_k = −λ_k γ
-    lam0 = (c0[0] * gb0 + c0[1] * gb1 + c0[2] * gb2) * inv_dm
-    lam1 = (c1[0] * gb0 + c1[1] * gb1 + c1[2] * gb2) * inv_dm
-    lam2 = (c2[0] * gb0 + c2[1] * gb1 + c2[2] * gb2) * inv_dm
+    lam0 = (c00 * gb0 + c01 * gb1 + c02 * gb2) * inv_dm
+    lam1 = (c10 * gb0 + c11 * gb1 + c12 * gb2) * inv_dm
+    lam2 = (c20 * gb0 + c21 * gb1 + c22 * gb2) * inv_dm
     t0 = _flap_back(lam0, gamma, f0, metric, e1, e2, n)
     t1 = _flap_back(lam1, gamma, f1, metric, e1, e2, n)
     t2 = _flap_back(lam2, gamma, f2, metric, e1, e2, n)
@@ -235,12 +235,23 @@ def _bending(x, f, e1, e2, metric, q, geometry, material, g, with_energy):
         g[3, k] = area * t0[k]
         g[4, k] = area * t1[k]
         g[5, k] = area * t2[k]
-    bars = _edge_bars((t0, t1, t2), (f0, f1, f2), (lam0, lam1, lam2), n, inv_cn, e1, e2)
+    r_bars = (t0[6], t0[7], t1[6], t1[7], t2[6], t2[7])
+    d = (f0[0], f0[1], f0[2], f1[0], f1[1], f1[2], f2[0], f2[1], f2[2])
+    b1x, b1y, b1z, b2x, b2y, b2z = _edge_bars(r_bars, d, (lam0, lam1, lam2), n, inv_cn, e1, e2)
     return (
         energy,
-        (-(t0[0] + t1[0] + t2[0]), -(t0[1] + t1[1] + t2[1]), -(t0[2] + t1[2] + t2[2])),
-        (t0[3] + t1[3] + t2[3], t0[4] + t1[4] + t2[4], t0[5] + t1[5] + t2[5]),
-        bars,
+        -(t0[0] + t1[0] + t2[0]),
+        -(t0[1] + t1[1] + t2[1]),
+        -(t0[2] + t1[2] + t2[2]),
+        t0[3] + t1[3] + t2[3],
+        t0[4] + t1[4] + t2[4],
+        t0[5] + t1[5] + t2[5],
+        b1x,
+        b1y,
+        b1z,
+        b2x,
+        b2y,
+        b2z,
     )
 
 
@@ -267,15 +278,13 @@ def _face_grad(x, f, geometry, material, g, with_energy):
     area = geometry.rest_area[f]
     energy, ba00, ba01, ba11 = _membrane(metric, q, material, with_energy)
     if material.bending:
-        eb, gx, da, bars = _bending(
+        eb, gx0, gy0, gz0, da00, da01, da11, b1x, b1y, b1z, b2x, b2y, b2z = _bending(
             x, f, (e1x, e1y, e1z), (e2x, e2y, e2z), metric, q, geometry, material, g, with_energy
         )
-        gx0, gy0, gz0 = gx
-        b1x, b1y, b1z, b2x, b2y, b2z = bars
         energy += eb
-        ba00 += da[0]
-        ba01 += da[1]
-        ba11 += da[2]
+        ba00 += da00
+        ba01 += da01
+        ba11 += da11
     else:
         gx0 = gy0 = gz0 = 0.0
         b1x = b1y = b1z = b2x = b2y = b2z = 0.0  # ē1, ē2 accumulators
@@ -319,13 +328,6 @@ def elastic_forces_serial(x, geometry, material, force, with_energy=True):
     return energy
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _face_grad_called(x, f, geometry, material, g, with_energy):
-    """``_face_grad`` behind a call: Numba's parfor analysis of the threaded kernel fails on the
-    small tuples it would inline."""
-    return _face_grad(x, f, geometry, material, g, with_energy)
-
-
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
 def elastic_forces_parallel(x, geometry, material, force, face_grad, face_energy, with_energy=True):
     """As ``elastic_forces_serial``, threads over faces (into ``face_grad`` (F, 6, 3)), then over
@@ -333,7 +335,7 @@ def elastic_forces_parallel(x, geometry, material, force, face_grad, face_energy
     n_faces = geometry.stencil.shape[0]
     incidence_ptr, incidence = geometry.incidence_ptr, geometry.incidence
     for f in prange(n_faces):
-        face_energy[f] = _face_grad_called(x, f, geometry, material, face_grad[f], with_energy)
+        face_energy[f] = _face_grad(x, f, geometry, material, face_grad[f], with_energy)
     for i in prange(x.shape[0]):
         fx = 0.0
         fy = 0.0
