@@ -140,17 +140,17 @@ def _plane_contact(x, v, dt, p, body, geometry, contact, buffers, depth, energy)
         plane_force[p, 1] += fy
         plane_force[p, 2] += fz
     if cbody > 0.0 and touching_area > 0.0:
-        _body_dashpot(v, p, cbody * min(1.0, touching_area / geometry.mean_area), mass, planes, force, plane_force)
+        _body_dashpot(v, p, cbody * min(1.0, touching_area / geometry.mean_area), body, planes, force, plane_force)
     return energy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _body_dashpot(v, p, c, mass, planes, force, plane_force):
+def _body_dashpot(v, p, c, body, planes, force, plane_force):
     """Plane p's centre-of-mass dashpot −c (v_com·n) n with c = c_plane W [N·s/m], spread over the
     vertices by mass, added to ``force`` and ``plane_force[p]``."""
     nx, ny, nz = planes.normal[p, 0], planes.normal[p, 1], planes.normal[p, 2]
     nv = v.shape[0]
-    total_mass = mass.sum()
+    mass, total_mass = body.masses, body.total_mass
     vcx = 0.0
     vcy = 0.0
     vcz = 0.0
@@ -168,6 +168,12 @@ def _body_dashpot(v, p, c, mass, planes, force, plane_force):
     plane_force[p, 0] += fb * nx
     plane_force[p, 1] += fb * ny
     plane_force[p, 2] += fb * nz
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def mass_sum(masses):
+    """Σ m [kg] as the kernels sum it (in order: the body's total mass, summed once)."""
+    return masses.sum()
 
 
 #: The collider's slip velocity v_ε [m/s] of its regularised Coulomb friction.

@@ -30,7 +30,7 @@ from ..physics import AIR_HEAT_CAPACITY_RATIO, ATMOSPHERIC_PRESSURE, GAS_LAWS, S
 from . import _kernels as K
 from . import _loading
 from ._checks import _check
-from ._contact import plane_clamps, planes_energy
+from ._contact import mass_sum, plane_clamps, planes_energy
 from ._elastic import elastic_forces_parallel, elastic_forces_serial
 from ._embedding import DisplayEmbedding
 from ._errors import BlowUpError
@@ -106,7 +106,7 @@ def _body(positions, masses, gravity) -> tuple[np.ndarray, Body]:
     g = np.array([0.0, 0.0, -float(g)]) if g.ndim == 0 else g.reshape(3).copy()
     if not np.all(np.isfinite(g)):
         raise InvalidInputError(f"gravity [m/s²]: must be finite; got {gravity!r}.")
-    return x, Body(masses=masses, gravity=g)
+    return x, Body(masses=masses, gravity=g, total_mass=float(mass_sum(masses)))
 
 
 def _collider_samples(faces, n_vertices, k_contact):

@@ -53,10 +53,12 @@ class Geometry(NamedTuple):
 
 
 class Body(NamedTuple):
-    """The lumped vertex ``masses`` (V,) [kg] and the ``gravity`` vector (3,) [m/s²]."""
+    """The lumped vertex ``masses`` (V,) [kg], the ``gravity`` vector (3,) [m/s²] and the
+    ``total_mass`` [kg] (``_contact.mass_sum`` of the masses)."""
 
     masses: np.ndarray
     gravity: np.ndarray
+    total_mass: float
 
 
 class Material(NamedTuple):
