@@ -91,7 +91,7 @@ def bounce_row(n_faces, duration, parallel=False, contact="barrier"):
     n = int(steps[0])
     stable = shell.stable
     return {
-        "faces": int(shell.faces.shape[0]),
+        "faces": int(shell.geometry.faces.shape[0]),
         "vertices": int(shell.x.shape[0]),
         "load_s": load_s,
         "element_dt_s": stable.element_s,
@@ -135,7 +135,7 @@ def embedding_row(n_faces=2000, display_faces=20000, duration=0.5):
         display.positions(shell.x, out)
         places.append(time.perf_counter() - w)
     return {
-        "faces": int(shell.faces.shape[0]),
+        "faces": int(shell.geometry.faces.shape[0]),
         "display_faces": len(fine_faces),
         "display_vertices": int(display.n_vertices),
         "build_s": build_s,
@@ -172,7 +172,7 @@ def kernel_comparison(n_faces=2000):
     rng = np.random.default_rng(0)
     x += 1e-3 * rng.standard_normal(x.shape)
     force = np.zeros_like(x)
-    out = {"faces": int(shell.faces.shape[0])}
+    out = {"faces": int(shell.geometry.faces.shape[0])}
     out["numba_serial_us"] = median_time(lambda: shell.elastic_forces(x, with_energy=False, out=force))
     out["numba_serial_with_gas_us"] = median_time(
         lambda: (shell.elastic_forces(x, with_energy=False, out=force), shell.gas_state(x))
@@ -181,28 +181,36 @@ def kernel_comparison(n_faces=2000):
     metric = np.linalg.inv(
         np.stack(
             [
-                np.stack([shell.rest_inv[:, 0], shell.rest_inv[:, 1]], 1),
-                np.stack([shell.rest_inv[:, 1], shell.rest_inv[:, 2]], 1),
+                np.stack([shell.geometry.rest_inv[:, 0], shell.geometry.rest_inv[:, 1]], 1),
+                np.stack([shell.geometry.rest_inv[:, 1], shell.geometry.rest_inv[:, 2]], 1),
             ],
             1,
         )
     )
     curvature = np.stack(
-        [np.stack([shell.rest_b[:, 0], shell.rest_b[:, 1]], 1), np.stack([shell.rest_b[:, 1], shell.rest_b[:, 2]], 1)],
+        [
+            np.stack([shell.geometry.rest_b[:, 0], shell.geometry.rest_b[:, 1]], 1),
+            np.stack([shell.geometry.rest_b[:, 1], shell.geometry.rest_b[:, 2]], 1),
+        ],
         1,
     )
     geometry = ShellGeometry(
-        jnp.asarray(shell.stencil),
+        jnp.asarray(shell.geometry.stencil),
         jnp.asarray(metric),
         jnp.asarray(curvature),
-        jnp.asarray(shell.rest_area),
+        jnp.asarray(shell.geometry.rest_area),
         jnp.asarray(shell.vertex_area),
     )
-    params = ShellParams(young_modulus=shell.E, poisson_ratio=shell.nu, thickness=shell.h, gauge_pressure=shell.p_gauge)
-    stencil = jnp.asarray(shell.stencil)
+    params = ShellParams(
+        young_modulus=shell.properties.young_modulus,
+        poisson_ratio=shell.properties.poisson_ratio,
+        thickness=shell.properties.thickness,
+        gauge_pressure=shell.properties.gauge_pressure,
+    )
+    stencil = jnp.asarray(shell.geometry.stencil)
 
     def energy(y):
-        return elastic_energy(y, params, geometry) - shell.p_gauge * enclosed_volume(y, stencil)
+        return elastic_energy(y, params, geometry) - shell.properties.gauge_pressure * enclosed_volume(y, stencil)
 
     grad = jax.jit(jax.grad(energy))
     xj = jnp.asarray(x)
@@ -210,7 +218,7 @@ def kernel_comparison(n_faces=2000):
     grad(xj).block_until_ready()
     out["jax_compile_s"] = time.perf_counter() - t
     out["jax_grad_us"] = median_time(lambda: grad(xj).block_until_ready())
-    masses = jnp.asarray(shell.masses)[:, None]
+    masses = jnp.asarray(shell.body.masses)[:, None]
 
     @jax.jit
     def verlet(x0, v0, dt):
@@ -275,7 +283,7 @@ def hammer_rows(duration):
             load_s = time.perf_counter() - t
             row = {
                 "mesh": name,
-                "faces": int(h.faces.shape[0]),
+                "faces": int(h.geometry.faces.shape[0]),
                 "safety": safety,
                 "load_s": load_s,
                 "element_dt_s": h.stable.element_s,

@@ -79,7 +79,7 @@ def drop_cor(faces: int, height: float, safety: float = SAFETY) -> dict:
     a = np.array(rows)
     m = impact(a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], rest_height)
     return {
-        "faces": int(ball.faces.shape[0]),
+        "faces": int(ball.geometry.faces.shape[0]),
         "height_m": height,
         "safety": safety,
         "dt_s": ball.stable.dt_s,

@@ -337,7 +337,7 @@ def poke(
     ground = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], friction=friction, name="ground")
     probe = rt.RealtimeShell.from_system(system, planes=[ground], gravity=0.0)
     ball = rt.RealtimeShell.from_system(
-        system, planes=[ground], gravity=0.0, contact_stiffness=stiffness_factor * float(probe.k_contact.max())
+        system, planes=[ground], gravity=0.0, contact_stiffness=stiffness_factor * float(probe.contact.stiffness.max())
     )
     ball.drop(0.0)
     top = int(np.argmax(ball.x[:, 2]))
@@ -373,7 +373,7 @@ def poke(
         "travel_into_free_shape_m": travel,
         "reference_activation_distance_m": ref["activation_distance_m"],
         "realtime_com_offset_m": float(np.hypot(com[0] - touch[0], com[1] - touch[1])),
-        "contact_stiffness_N_per_m": float(ball.k_contact.max()),
+        "contact_stiffness_N_per_m": float(ball.contact.stiffness.max()),
         "realtime_dt_s": ball.stable.dt_s,
         "ground_friction": friction,
         "stiffness_factor": stiffness_factor,
@@ -601,7 +601,7 @@ def main():
         # The realtime's own convergence: a quarter of its Δt, and contact springs 4× stiffer.
         fine = realtime_impacts(system, case, args, safety=0.25 * SAFETY)
         probe = rt.RealtimeShell.from_system(system)
-        stiff = realtime_impacts(system, case, args, contact_stiffness=4.0 * float(np.median(probe.k_contact)))
+        stiff = realtime_impacts(system, case, args, contact_stiffness=4.0 * float(np.median(probe.contact.stiffness)))
         refs = {f"{dt:g}": cached_impacts(case, system, args, dt) for dt in steps}
         result["cases"][case] = {
             "realtime": real,

@@ -98,9 +98,9 @@ def setup(args):
     system = build_system(scenario, obj)
     info = {
         "config": args.config,
-        "gauge_pressure_Pa": obj.gauge_pressure,
-        "youngs_modulus_Pa": obj.young_modulus,
-        "poisson_ratio": obj.poisson_ratio,
+        "gauge_pressure_Pa": obj.properties.gauge_pressure,
+        "youngs_modulus_Pa": obj.properties.young_modulus,
+        "poisson_ratio": obj.properties.poisson_ratio,
         "thickness_m": obj.shell.thickness,
         "faces": int(obj.shell.mesh.n_faces),
         "mass_kg": float(np.sum(np.asarray(system.node_masses))),

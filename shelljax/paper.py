@@ -2,10 +2,11 @@
 
 Everything a module needs to reproduce the paper's set-up lives here, once: the calibrated k_s,
 the force levels of the poke protocol, the finger radius, the assumed Poisson ratio, and the two
-laws the estimators read E by: τ and the wrinkle law n ≈ 1.33 τ^½. They are plain arithmetic, so
+laws the estimators read E by: τ (with the flexural rigidity B it is built on) and the wrinkle
+law n ≈ 1.33 τ^½. They are plain arithmetic, so
 they take numbers, NumPy and JAX arrays alike, and this module imports only ``math``: the data
 layer's sensor emulator uses them without JAX. The other results of shell theory are in
-:mod:`shelljax.physics`, which re-exports these two.
+:mod:`shelljax.physics`, which re-exports these three.
 """
 
 from __future__ import annotations
@@ -22,10 +23,16 @@ DEFAULT_POISSON_RATIO = 0.4  # [-], the paper's assumption (Section 3.4): rubber
 WRINKLE_PREFACTOR = 1.33  # [-], n ≈ 1.33 τ^½ (Vella et al. 2011; the paper's Eq. modulus-estimation-2)
 
 
+def bending_stiffness(young_modulus, thickness, poisson_ratio):
+    """Flexural rigidity B = E h³ / (12 (1 − ν²)) [N·m] from E [Pa], h [m], ν [-] (τ reads it; every
+    other module through ``physics.bending_stiffness``)."""
+    return young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
+
+
 def tau(gauge_pressure, radius, young_modulus, thickness, poisson_ratio):
     """Dimensionless pressure τ = P_g R² / √(E h B) [-] from P_g [Pa], R [m], E [Pa], h [m], ν [-],
-    with the flexural rigidity B = E h³ / (12 (1 − ν²)) [N·m] (``physics.bending_stiffness``)."""
-    bending = young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
+    with the flexural rigidity B [N·m] (:func:`bending_stiffness`)."""
+    bending = bending_stiffness(young_modulus, thickness, poisson_ratio)
     return gauge_pressure * radius**2 / _sqrt(young_modulus * thickness * bending)
 
 

@@ -379,6 +379,8 @@ def test_the_finger_radius_default_is_the_papers():
         (r"trimesh\.creation\.(icosphere|uv_sphere)\(", "geometry/_primitives.py"),
         (r"(?m)^class Plane\b", "physics/_contact.py"),
         (r"(?m)^DEFAULT_OPTIONS = ", "_options.py"),
+        (r"\*\*\s?3 / \(12\.0 \* \(1\.0 - ", "paper.py"),  # B = E h³/(12(1 − ν²)): τ's, physics re-exports it
+        (r"(?m)^def \w*mesh_volume\(", "geometry/_mesh.py"),  # a mesh's enclosed volume, for NumPy and JAX
     ],
 )
 def test_each_law_is_defined_once(pattern, home):
@@ -412,3 +414,45 @@ def test_gas_names_are_compared_only_at_the_edge():
         f"gas laws compared by name past the edge (take a physics.AbstractGasLaw, ask it .sealed or "
         f"isinstance; physics.gas_law maps a name at the edge): {compared}"
     )
+
+
+#: The most parameters a function in shelljax/ takes (``self``/``cls`` not counted; ``*args`` and
+#: ``**kwargs`` count one each): more are packed into a named structure (realtime's kernels take
+#: geometry, body, material, contact and buffers).
+MAX_PARAMETERS = 10
+#: Functions over the limit outside the realtime runtime, the scenarios, the viewer and the sensor
+#: emulator, left for the integrator to decide (issue #59): module:function -> parameters today.
+PARAMETER_EXEMPTIONS = {
+    "axisym/_model.py:_params": 11,
+    "dynamics/_sparse.py:_host_solve": 11,
+    "estimate/_bayes.py:sample_posterior": 12,
+    "geometry/_primitives.py:sphere_mesh": 13,
+    "sensing/_calibrate.py:calibrate_sensor": 12,
+    "session/_write.py:write_session": 16,
+    "session/_write.py:_session_document": 14,
+    "shell3d/_indent.py:__init__": 16,
+}
+
+
+def _parameter_counts():
+    for path in _package_files():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = node.args
+                names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs]
+                if names and names[0] in ("self", "cls"):
+                    names = names[1:]
+                yield (
+                    f"{path.relative_to(PACKAGE)}:{node.name}",
+                    len(names) + (a.vararg is not None) + (a.kwarg is not None),
+                )
+
+
+def test_no_function_takes_more_than_ten_parameters():
+    over = {name: n for name, n in _parameter_counts() if n > MAX_PARAMETERS}
+    unexpected = {name: n for name, n in over.items() if PARAMETER_EXEMPTIONS.get(name) != n}
+    stale = sorted(set(PARAMETER_EXEMPTIONS) - set(over))
+    assert not unexpected, (
+        f"functions over {MAX_PARAMETERS} parameters (pack them into a named structure): {unexpected}"
+    )
+    assert not stale, f"exempted functions now within {MAX_PARAMETERS} parameters (drop their exemption): {stale}"

@@ -370,8 +370,8 @@ def test_scenario_estimates_the_object_with_its_estimators_table(tmp_path):
     expected = run_estimator(
         "fit", load_session(session_path), EstimatorOptions(forward_model="scaling", gas="isothermal")
     )
-    assert obj.gauge_pressure == expected.estimates["gauge_pressure"].value
-    assert obj.young_modulus == expected.estimates["young_modulus"].value
+    assert obj.properties.gauge_pressure == expected.estimates["gauge_pressure"].value
+    assert obj.properties.young_modulus == expected.estimates["young_modulus"].value
     assert obj.source["estimator_options"]["forward_model"] == "scaling"
 
 

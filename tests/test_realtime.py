@@ -6,6 +6,7 @@ cache holds the kernels (the first run compiles them: ≈ 30 s)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -19,7 +20,7 @@ from shelljax._errors import InvalidInputError, NoConvergenceError, ShelljaxErro
 from shelljax.dynamics import BarrierContact
 from shelljax.physics import Plane, ShellProperties, barrier_energy, isothermal_gauge_pressure
 from shelljax.realtime import _contact as rt_contact
-from shelljax.realtime import _kernels as K
+from shelljax.realtime import _elastic as elastic
 from shelljax.shell3d import Shell, ShellMesh
 from shelljax.shell3d._energy import bending_energy, make_geometry, membrane_energy
 
@@ -42,18 +43,20 @@ def _kernel_gradient(x, mesh, geo, bending):
     rb = np.asarray(geo.rest_curvature)
     alpha, beta = E * NU / (1 - NU**2), E / (2 * (1 + NU))
     force = np.zeros_like(x)
-    e = K.elastic_forces_serial(
-        np.ascontiguousarray(x),
+    none = np.zeros(0, dtype=np.int64)  # the threaded kernel's incidence, unused here
+    geometry = rt.Geometry(
         np.asarray(mesh.stencil, dtype=np.int64),
+        np.ascontiguousarray(np.asarray(mesh.stencil, dtype=np.int64)[:, :3]),
         np.ascontiguousarray(np.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], 1)),
         np.ascontiguousarray(np.stack([rb[:, 0, 0], rb[:, 0, 1], rb[:, 1, 1]], 1)),
         np.asarray(geo.rest_area),
-        H,
-        alpha,
-        beta,
-        bending,
-        force,
+        np.asarray(geo.vertex_area),
+        float(np.mean(geo.vertex_area)),
+        none,
+        none,
     )
+    material = rt.Material(H, alpha, beta, bending, 0, 0.0, 1.0, 1.0, 1.4)
+    e = elastic.elastic_forces_serial(np.ascontiguousarray(x), geometry, material, force)
     return e, -force
 
 
@@ -110,7 +113,7 @@ def test_gas_volume_and_pressure_force_on_a_sphere():
     # O(edge²/R²) (measured 0.58 % at 1962 faces, edge/R = 0.12).
     import trimesh
 
-    polyhedron = trimesh.Trimesh(ball.x, ball.faces, process=False)
+    polyhedron = trimesh.Trimesh(ball.x, ball.geometry.faces, process=False)
     assert volume == pytest.approx(float(polyhedron.volume), rel=1e-12)
     assert volume == pytest.approx(4.0 / 3.0 * math.pi * R**3, rel=1e-2)
     assert pressure == pytest.approx(P_G, rel=1e-12)  # at its reference volume
@@ -121,16 +124,19 @@ def test_gas_volume_and_pressure_force_on_a_sphere():
     assert cos.min() > 0.999
     # P ∂V/∂xᵢ = P Σ_{f ∋ i} A_f n_f / 3: a third of the vector area of the faces around vertex i.
     area_vectors = 0.5 * np.cross(
-        ball.x[ball.faces[:, 1]] - ball.x[ball.faces[:, 0]], ball.x[ball.faces[:, 2]] - ball.x[ball.faces[:, 0]]
+        ball.x[ball.geometry.faces[:, 1]] - ball.x[ball.geometry.faces[:, 0]],
+        ball.x[ball.geometry.faces[:, 2]] - ball.x[ball.geometry.faces[:, 0]],
     )
     share = np.zeros_like(ball.x)
-    np.add.at(share, ball.faces, area_vectors[:, None, :] / 3.0)
+    np.add.at(share, ball.geometry.faces, area_vectors[:, None, :] / 3.0)
     np.testing.assert_allclose(force, P_G * share, atol=1e-12 * np.abs(force).max())
     assert np.linalg.norm(force, axis=1).sum() == pytest.approx(P_G * 4 * math.pi * R**2, rel=1e-2)
     # The sealed law away from V₀: Boyle's law.
     x = ball.x * 0.99
     p_iso, v_iso, _ = ball.gas_state(x)
-    assert p_iso == pytest.approx(float(isothermal_gauge_pressure(v_iso, ball.v_ref, P_G)), rel=1e-12)
+    assert p_iso == pytest.approx(
+        float(isothermal_gauge_pressure(v_iso, ball.material.reference_volume, P_G)), rel=1e-12
+    )
 
 
 def test_free_flight_conserves_momentum_and_energy():
@@ -144,7 +150,7 @@ def test_free_flight_conserves_momentum_and_energy():
     ball = _ball(300, gravity=0.0)
     spin = np.cross([0.0, 0.0, 3.0], ball.x - ball.x.mean(0))
     ball.set_state(ball.x, spin + np.array([0.5, 0.0, 0.2]))
-    m = ball.masses[:, None]
+    m = ball.body.masses[:, None]
     p0, l0 = (m * ball.v).sum(0), np.cross(ball.x, m * ball.v).sum(0)
     total, power = [], []
     for _ in range(60):
@@ -214,7 +220,7 @@ def test_stable_dt_bounded_at_it_and_blows_up_at_one_and_a_half():
     assert max(total) - total[0] < 1e-2 * abs(total[0])
     ball.set_state(start)
     ball.drop(0.2)
-    ball.max_refinements = 0
+    ball.options = dataclasses.replace(ball.options, max_refinements=0)
     with pytest.raises(rt.BlowUpError) as err:
         for _ in range(30):
             ball.frame(frame_dt, substeps=coarse)
@@ -259,6 +265,7 @@ def test_collider_pushes_the_shell_and_feels_the_reaction():
         ({"contact_stiffness": -5.0}, "contact_stiffness"),
         ({"max_refinements": -1}, "max_refinements"),
         ({"max_refinements": 1.5}, "max_refinements"),
+        ({"no_such_option": 1.0}, "no_such_option"),  # not a RealtimeOptions field
         ({"planes": [type("P", (), {"point": [0, 0], "normal": [0, 0, 1]})()]}, "planes[0]"),
     ],
 )
@@ -302,7 +309,7 @@ def test_replica_round_trip(tmp_path):
     write_replica(tmp_path, shell, quantities, gas="adiabatic")
     ball = rt.RealtimeShell.from_replica(tmp_path, rest_shape="small-strain")
     assert ball.total_mass == pytest.approx(MASS)
-    assert ball.gas == AdiabaticGas() and ball.E == E and ball.h == H
+    assert ball.gas == AdiabaticGas() and ball.properties.young_modulus == E and ball.properties.thickness == H
 
 
 def test_from_session_takes_the_sessions_mass_thickness_and_radius():
@@ -313,18 +320,22 @@ def test_from_session_takes_the_sessions_mass_thickness_and_radius():
     session = Path(shelljax.__file__).parent / "data" / "sessions" / "pezzi.toml"
     estimates = ShellProperties(gauge_pressure=P_G, young_modulus=E, thickness=None, poisson_ratio=None)
     ball = rt.RealtimeShell.from_session(session, estimates, n_faces=200, rest_shape="small-strain")
-    assert ball.total_mass == pytest.approx(0.8) and ball.h == pytest.approx(0.9e-3) and ball.nu == pytest.approx(0.4)
+    assert (
+        ball.total_mass == pytest.approx(0.8)
+        and ball.properties.thickness == pytest.approx(0.9e-3)
+        and ball.properties.poisson_ratio == pytest.approx(0.4)
+    )
     assert np.ptp(ball.x[:, 2]) == pytest.approx(2 * 0.13, rel=1e-6)
 
 
 def test_parallel_kernel_equals_the_serial_one():
     ball = _ball(300)
     x = ball.x + 1e-3 * np.random.default_rng(1).standard_normal(ball.x.shape)
-    args = (ball.stencil, ball.rest_inv, ball.rest_b, ball.rest_area, ball.h, ball.alpha, ball.beta, True)
+    args = (ball.geometry, ball.material._replace(bending=True))
     serial, parallel = np.zeros_like(x), np.zeros_like(x)
-    e_s = K.elastic_forces_serial(x, *args, serial, True)
-    e_p = K.elastic_forces_parallel(
-        x, *args, parallel, ball._face_grad, ball._face_energy, ball._incidence_ptr, ball._incidence, True
+    e_s = elastic.elastic_forces_serial(x, *args, serial, True)
+    e_p = elastic.elastic_forces_parallel(
+        x, *args, parallel, np.zeros((len(ball.geometry.faces), 6, 3)), np.zeros(len(ball.geometry.faces)), True
     )
     assert e_p == pytest.approx(e_s, rel=1e-12)
     np.testing.assert_allclose(parallel, serial, rtol=0, atol=1e-12 * np.abs(serial).max())
@@ -339,8 +350,9 @@ def test_scenario_planes_are_accepted():
     scenario = load_scenario(Path(__file__).resolve().parents[1] / "configs" / "bounce.toml")
     ball = _ball(200, planes=scenario.planes)
     assert ball.plane_names == ("ground", "wall")
-    np.testing.assert_allclose(ball.planes[1, :6], [0.53, 0, 0, -1, 0, 0])
-    assert ball.planes[0, 6] == 0.5  # μ
+    planes = ball.contact.planes
+    np.testing.assert_allclose(np.concatenate([planes.point[1], planes.normal[1]]), [0.53, 0, 0, -1, 0, 0])
+    assert planes.friction[0] == 0.5  # μ
 
 
 def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
@@ -358,7 +370,7 @@ def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
     )
     for _ in range(12):
         frame = ball.frame()
-    np.testing.assert_allclose(ball.collider[2], centre[2] - speed * frame.time_s, atol=1e-12)  # it moved
+    np.testing.assert_allclose(ball.contact.collider[2], centre[2] - speed * frame.time_s, atol=1e-12)  # it moved
     assert ball.collider_work > 0.0
     assert frame.collider_force_N[2] < -1.0
 
@@ -416,7 +428,7 @@ def test_display_embedding_rides_on_a_bouncing_ball():
     # inscribed coarse one) stretched by at most 2× in the impact.
     assert shown[:, 2].min() >= ball.x[:, 2].min() - 2.0 * display.offset_m.max()
     with pytest.raises(InvalidInputError, match="simulation_faces"):
-        rt.DisplayEmbedding(ball.x, ball.faces + ball.x.shape[0], fine)
+        rt.DisplayEmbedding(ball.x, ball.geometry.faces + ball.x.shape[0], fine)
 
 
 def test_impact_is_measured_below_the_vertex_chatter():
@@ -470,7 +482,7 @@ def test_barrier_plane_is_the_references_law_continued_by_the_spring():
         [np.linspace(-0.4e-3, 0.5e-3, 6), np.linspace(0.75e-3, 0.98e-3, 4), [1.2e-3, 1.5e-3]]
     )
     gap = ball.x[:, 2].copy()
-    k, clamp = ball.k_contact, ball._clamps[0, :, 0]
+    k, clamp = ball.contact.stiffness, ball.contact.clamps[0, :, 0]
     energy = jax.vmap(lambda g: barrier_energy(g, reach, kappa))
     force = jax.vmap(jax.grad(lambda g: -barrier_energy(g, reach, kappa)))
     stiffness = jax.vmap(jax.grad(jax.grad(lambda g: barrier_energy(g, reach, kappa))))
@@ -520,7 +532,7 @@ def test_contact_forces_at_rest_equal_the_springs():
     x, v, t = ball.x.copy(), ball.v.copy(), ball.time
     planes, collider = ball.contact_forces()
     depth = np.maximum(-ball.x[:, 2], 0.0)
-    assert planes[0, 2] == pytest.approx(float(np.sum(ball.k_contact * depth)), rel=1e-12)
+    assert planes[0, 2] == pytest.approx(float(np.sum(ball.contact.stiffness * depth)), rel=1e-12)
     assert np.all(collider == 0.0)
     assert np.array_equal(ball.x, x) and np.array_equal(ball.v, v) and ball.time == t
 
@@ -536,9 +548,9 @@ def test_sliding_contact_feels_the_regularised_coulomb_law():
     planes, _ = ball.contact_forces()
     depth = np.maximum(-ball.x[:, 2], 0.0)
     slip = 0.3
-    coulomb = 0.5 * ball.k_contact * depth * slip / np.hypot(slip, ball.slip_velocity)
-    expected = -np.sum(np.where(depth > 0.0, np.minimum(coulomb, ball.masses * slip / ball.stable.dt_s), 0.0))
+    coulomb = 0.5 * ball.contact.stiffness * depth * slip / np.hypot(slip, ball.options.slip_velocity)
+    expected = -np.sum(np.where(depth > 0.0, np.minimum(coulomb, ball.body.masses * slip / ball.stable.dt_s), 0.0))
     assert expected < 0.0
     assert planes[0, 0] == pytest.approx(expected, rel=1e-12)  # the same sums in another order
     assert planes[0, 1] == pytest.approx(0.0, abs=1e-12)
-    assert planes[0, 2] == pytest.approx(float(np.sum(ball.k_contact * depth)), rel=1e-12)
+    assert planes[0, 2] == pytest.approx(float(np.sum(ball.contact.stiffness * depth)), rel=1e-12)

@@ -77,7 +77,7 @@ def test_emulated_acquisition_to_estimate(tmp_path):
     # recovered up to the force calibration (≈ 2 %) and the ruler rounding: 5 % is ~2.5σ.
     assert estimate.gauge_pressure.value == pytest.approx(ball.gauge_pressure, rel=0.05)
     # E ∝ P_g / n²: the integer wrinkle count (12 for a true 12.26) shifts E by ≈ +4 %.
-    assert estimate.young_modulus.value == pytest.approx(ball.youngs_modulus, rel=0.12)
+    assert estimate.young_modulus.value == pytest.approx(ball.young_modulus, rel=0.12)
 
 
 def test_baseline_drift_is_tared_away_and_reported(tmp_path):

@@ -17,6 +17,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._errors import InvalidInputError
+from ..geometry import mesh_volume
 from ..physics import STANDARD_GRAVITY, ATMOSPHERIC_PRESSURE, polytropic_gas_energy, polytropic_gauge_pressure
 from ..physics import Plane
 from ..physics.internal import check_nonnegative, check_positive
@@ -41,12 +42,6 @@ class PointMassOnGround(AbstractDynamicSystem):
 
     def internal_energies(self, x, t):
         return {"gravity": -self.mass * (self.gravity @ x)}
-
-
-def _mesh_volume(nodes: Float[Array, "N 3"], faces: Int[Array, "F 3"]) -> Float[Array, ""]:
-    """Enclosed volume [m³] of a closed, outward-oriented triangle mesh (divergence theorem)."""
-    a, b, c = nodes[faces[:, 0]], nodes[faces[:, 1]], nodes[faces[:, 2]]
-    return jnp.sum(jnp.einsum("fi,fi->f", a, jnp.cross(b, c))) / 6.0
 
 
 class SpringBalloon(AbstractDynamicSystem):
@@ -113,7 +108,7 @@ class SpringBalloon(AbstractDynamicSystem):
             jnp.asarray(gauge_pressure, dtype=float),
             jnp.asarray(gas_exponent, dtype=float),
         )
-        self.rest_volume = _mesh_volume(self.rest_nodes, self.faces)
+        self.rest_volume = mesh_volume(self.rest_nodes, self.faces, jnp)
         if float(self.rest_volume) <= 0.0:
             raise InvalidInputError("SpringBalloon: the mesh encloses no positive volume; orient its faces outward.")
         self.planes, self.gravity = tuple(planes), gravity_vector(gravity)
@@ -124,7 +119,7 @@ class SpringBalloon(AbstractDynamicSystem):
 
     def volume(self, x: Float[Array, " n"]) -> Float[Array, ""]:
         """Enclosed volume [m³] at positions x [m]."""
-        return _mesh_volume(x.reshape(-1, 3), self.faces)
+        return mesh_volume(x.reshape(-1, 3), self.faces, jnp)
 
     def internal_energies(self, x, t):
         nodes = x.reshape(-1, 3)

@@ -12,6 +12,7 @@ from ._mesh import (
     bundled_mesh_path,
     enclosed_volume,
     load_mesh,
+    mesh_volume,
     signed_volume,
 )
 from ._primitives import (

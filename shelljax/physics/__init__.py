@@ -43,7 +43,6 @@ from ._gravity import STANDARD_GRAVITY, areal_weight_from_density, self_weight_e
 from ._material import (
     bending_density,
     bending_density_invariants,
-    bending_stiffness,
     gent_membrane_invariants,
     gent_shear_energy,
     lame_constants_2d,
@@ -55,6 +54,7 @@ from ._similarity import Similarity
 from ._shell_theory import (
     CRITICAL_W,
     WRINKLE_PREFACTOR,
+    bending_stiffness,
     reissner_stiffness,
     scaling_wrinkle_count,
     tau,

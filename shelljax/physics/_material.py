@@ -53,11 +53,6 @@ def lame_constants_2d(young_modulus, poisson_ratio) -> tuple[Scalar, Scalar]:
     return alpha, beta
 
 
-def bending_stiffness(young_modulus, thickness, poisson_ratio) -> Scalar:
-    """Flexural rigidity B = E h³ / (12 (1 − ν²)) [N·m] from E [Pa], h [m], ν [-]."""
-    return young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
-
-
 def _inv2(m: Matrix2) -> Matrix2:
     det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
     return jnp.array([[m[1, 1], -m[0, 1]], [-m[1, 0], m[0, 0]]]) / det

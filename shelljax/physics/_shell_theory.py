@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..paper import WRINKLE_PREFACTOR, scaling_wrinkle_count, tau
-from ._material import bending_stiffness
+from ..paper import WRINKLE_PREFACTOR, bending_stiffness, scaling_wrinkle_count, tau
 
 __all__ = [
     "CRITICAL_W",
     "WRINKLE_PREFACTOR",
+    "bending_stiffness",
     "reissner_stiffness",
     "scaling_wrinkle_count",
     "tau",

@@ -18,7 +18,25 @@ Quick start::
 
 from ._embedding import DisplayEmbedding
 from ._errors import BlowUpError
-from ._model import SAFETY, Collider, Frame, RealtimeShell
+from ._model import RealtimeShell
+from ._parts import Body, Buffers, Contact, Geometry, Material, Planes
+from ._records import SAFETY, Collider, Frame, RealtimeOptions, RestShape
 from ._stable import StableStep
 
-__all__ = ["SAFETY", "BlowUpError", "Collider", "DisplayEmbedding", "Frame", "RealtimeShell", "StableStep"]
+__all__ = [
+    "SAFETY",
+    "BlowUpError",
+    "Body",
+    "Buffers",
+    "Collider",
+    "Contact",
+    "DisplayEmbedding",
+    "Frame",
+    "Geometry",
+    "Material",
+    "Planes",
+    "RealtimeOptions",
+    "RealtimeShell",
+    "RestShape",
+    "StableStep",
+]

@@ -46,14 +46,14 @@ def _barrier_stiffness(s, kappa):
 
 
 def plane_clamps(planes, k_contact) -> np.ndarray:
-    """(P, V, 3) per plane and vertex: the clamp gap g_c [m], the barrier's force [N] and energy [J]
+    """(P, V, 3) per plane (``planes``: :class:`._parts.Planes`) and vertex: the clamp gap g_c [m], the barrier's force [N] and energy [J]
     there. A plane with a barrier (ĝ, κ) pushes a vertex at gap g by the reference's barrier force
     −d/dg[−κ (g − ĝ)² ln(g/ĝ)] for g_c ≤ g < ĝ and continues it linearly with the vertex's contact
     stiffness k_i [N/m] below g_c, where the barrier's stiffness reaches ``BARRIER_CLAMP_FRACTION``
     k_i: the reference's force law wherever it is that soft, and never stiffer than the stable Δt
     allows. A plane without a barrier has g_c = 0 and no force at g_c: the spring k_i δ behind it."""
-    clamps = np.zeros((planes.shape[0], k_contact.shape[0], 3))
-    for p, (reach, kappa) in enumerate(planes[:, 9:11]):
+    clamps = np.zeros((planes.point.shape[0], k_contact.shape[0], 3))
+    for p, (reach, kappa) in enumerate(zip(planes.barrier_reach, planes.barrier_stiffness)):
         if reach <= 0.0:
             continue
         lo, hi = np.full(k_contact.shape, 1e-12), np.ones(k_contact.shape)
@@ -88,48 +88,35 @@ def _plane_law(gap, k, reach, kappa, clamp):
 def planes_energy(x, planes, clamps, k_contact):
     """The planes' contact energy [J] at positions x (V, 3) [m] (see ``plane_clamps``)."""
     energy = 0.0
-    for p in range(planes.shape[0]):
-        reach = max(planes[p, 9], 0.0)
+    for p in range(planes.point.shape[0]):
+        reach = max(planes.barrier_reach[p], 0.0)
         for i in range(x.shape[0]):
             gap = (
-                (x[i, 0] - planes[p, 0]) * planes[p, 3]
-                + (x[i, 1] - planes[p, 1]) * planes[p, 4]
-                + (x[i, 2] - planes[p, 2]) * planes[p, 5]
+                (x[i, 0] - planes.point[p, 0]) * planes.normal[p, 0]
+                + (x[i, 1] - planes.point[p, 1]) * planes.normal[p, 1]
+                + (x[i, 2] - planes.point[p, 2]) * planes.normal[p, 2]
             )
             if gap < reach:
-                energy += _plane_law(gap, k_contact[i], planes[p, 9], planes[p, 10], clamps[p, i])[1]
+                energy += _plane_law(
+                    gap, k_contact[i], planes.barrier_reach[p], planes.barrier_stiffness[p], clamps[p, i]
+                )[1]
     return energy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _plane_contact(
-    x,
-    v,
-    mass,
-    dt,
-    planes,
-    clamps,
-    p,
-    vertex_area,
-    mean_area,
-    k_contact,
-    c_contact,
-    total_mass,
-    force,
-    plane_force,
-    depth,
-    energy,
-):
+def _plane_contact(x, v, dt, p, body, geometry, contact, buffers, depth, energy):
     """Plane p's contact law, dampers and friction and its centre-of-mass dashpot (see
-    ``contact_forces``), added to ``force`` and ``plane_force[p]``; ``depth[p]`` ← its deepest
-    penetration [m]. Returns ``energy`` [J] plus its contact energy."""
+    ``contact_forces``), added to ``buffers.force`` and ``buffers.plane_force[p]``; ``depth[p]`` ←
+    its deepest penetration [m]. Returns ``energy`` [J] plus its contact energy."""
+    mass, force, plane_force = body.masses, buffers.force, buffers.plane_force
+    planes, clamps, k_contact, c_contact = contact.planes, contact.clamps, contact.stiffness, contact.damping
     nv = x.shape[0]
-    ox, oy, oz = planes[p, 0], planes[p, 1], planes[p, 2]
-    nx, ny, nz = planes[p, 3], planes[p, 4], planes[p, 5]
-    mu = planes[p, 6]
-    veps = planes[p, 7]
-    cbody = planes[p, 8]
-    reach = max(planes[p, 9], 0.0)
+    ox, oy, oz = planes.point[p, 0], planes.point[p, 1], planes.point[p, 2]
+    nx, ny, nz = planes.normal[p, 0], planes.normal[p, 1], planes.normal[p, 2]
+    mu = planes.friction[p]
+    veps = planes.slip_velocity[p]
+    cbody = planes.damping[p]
+    reach = max(planes.barrier_reach[p], 0.0)
     touching_area = 0.0
     for i in range(nv):
         gap = (x[i, 0] - ox) * nx + (x[i, 1] - oy) * ny + (x[i, 2] - oz) * nz
@@ -137,9 +124,9 @@ def _plane_contact(
             continue
         depth[p] = max(depth[p], -gap)
         # the reference's lagged weight of a barrier contact, (1 − g/ĝ)², 1 behind the plane
-        touching_area += vertex_area[i] * (1.0 if gap <= 0.0 else (1.0 - gap / reach) ** 2)
+        touching_area += geometry.vertex_area[i] * (1.0 if gap <= 0.0 else (1.0 - gap / reach) ** 2)
         vn = v[i, 0] * nx + v[i, 1] * ny + v[i, 2] * nz
-        fn, e = _plane_law(gap, k_contact[i], planes[p, 9], planes[p, 10], clamps[p, i])
+        fn, e = _plane_law(gap, k_contact[i], planes.barrier_reach[p], planes.barrier_stiffness[p], clamps[p, i])
         fn -= c_contact[i] * vn
         energy += e
         if fn <= 0.0:
@@ -153,34 +140,54 @@ def _plane_contact(
         plane_force[p, 1] += fy
         plane_force[p, 2] += fz
     if cbody > 0.0 and touching_area > 0.0:
-        weight = min(1.0, touching_area / mean_area)
-        vcx = 0.0
-        vcy = 0.0
-        vcz = 0.0
-        for i in range(nv):
-            vcx += mass[i] * v[i, 0]
-            vcy += mass[i] * v[i, 1]
-            vcz += mass[i] * v[i, 2]
-        vcn = (vcx * nx + vcy * ny + vcz * nz) / total_mass
-        fb = -cbody * weight * vcn
-        for i in range(nv):
-            s = fb * mass[i] / total_mass
-            force[i, 0] += s * nx
-            force[i, 1] += s * ny
-            force[i, 2] += s * nz
-        plane_force[p, 0] += fb * nx
-        plane_force[p, 1] += fb * ny
-        plane_force[p, 2] += fb * nz
+        _body_dashpot(v, p, cbody * min(1.0, touching_area / geometry.mean_area), body, planes, force, plane_force)
     return energy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _collider_contact(
-    x, v, mass, dt, collider, sample_idx, sample_w, sample_k, veps, force, collider_force, depth, slot, energy
-):
+def _body_dashpot(v, p, c, body, planes, force, plane_force):
+    """Plane p's centre-of-mass dashpot −c (v_com·n) n with c = c_plane W [N·s/m], spread over the
+    vertices by mass, added to ``force`` and ``plane_force[p]``."""
+    nx, ny, nz = planes.normal[p, 0], planes.normal[p, 1], planes.normal[p, 2]
+    nv = v.shape[0]
+    mass, total_mass = body.masses, body.total_mass
+    vcx = 0.0
+    vcy = 0.0
+    vcz = 0.0
+    for i in range(nv):
+        vcx += mass[i] * v[i, 0]
+        vcy += mass[i] * v[i, 1]
+        vcz += mass[i] * v[i, 2]
+    vcn = (vcx * nx + vcy * ny + vcz * nz) / total_mass
+    fb = -c * vcn
+    for i in range(nv):
+        s = fb * mass[i] / total_mass
+        force[i, 0] += s * nx
+        force[i, 1] += s * ny
+        force[i, 2] += s * nz
+    plane_force[p, 0] += fb * nx
+    plane_force[p, 1] += fb * ny
+    plane_force[p, 2] += fb * nz
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def mass_sum(masses):
+    """Σ m [kg] as the kernels sum it (in order: the body's total mass, summed once)."""
+    return masses.sum()
+
+
+#: The collider's slip velocity v_ε [m/s] of its regularised Coulomb friction.
+COLLIDER_SLIP_VELOCITY = 1e-2
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _collider_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
     """The moving capsule's springs and friction at the contact points (see ``contact_forces``),
-    added to ``force`` and ``collider_force``; ``depth[slot]`` ← the deepest penetration [m].
-    Returns ``energy`` [J] plus its springs' energy."""
+    added to ``buffers.force`` and ``buffers.collider_force``; ``depth[slot]`` ← the deepest
+    penetration [m]. Returns ``energy`` [J] plus its springs' energy."""
+    mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
+    collider, sample_idx, sample_w, sample_k = contact.collider, contact.sample_idx, contact.sample_w, contact.sample_k
+    veps = COLLIDER_SLIP_VELOCITY
     radius = collider[6]
     mu = collider[10]
     # Contact points: the vertices, the edge midpoints and the face centroids (barycentric
@@ -230,84 +237,33 @@ def _collider_contact(
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def contact_forces(
-    x,
-    v,
-    mass,
-    dt,
-    planes,
-    clamps,
-    vertex_area,
-    mean_area,
-    k_contact,
-    c_contact,
-    collider,
-    sample_idx,
-    sample_w,
-    sample_k,
-    force,
-    plane_force,
-    collider_force,
-):
-    """Add contact forces [N] to ``force``; return (energy [J], deepest penetration [m] per plane).
+def contact_forces(x, v, dt, body, geometry, contact, buffers):
+    """Add contact forces [N] to ``buffers.force``; return (energy [J], deepest penetration [m] per
+    plane, then the collider's).
 
-    ``planes`` (P, 11): point (3) [m], unit normal (3), μ [-], slip velocity v_ε [m/s], body damping
-    c [N·s/m], barrier reach ĝ [m] and stiffness κ [J/m²] (0, 0: a spring behind the plane);
-    ``clamps`` (P, V, 3) from ``plane_clamps``. A vertex at gap g < max(ĝ, 0) feels the plane's law
-    f(g) (the barrier, or its linear continuation with per-vertex stiffness ``k_contact`` (V,)
-    [N/m]; without a barrier k δ, δ = −g) less c_v v_n (clamped ≥ 0) along the normal, ``c_contact``
-    (V,) [N·s/m], and regularised Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one
-    substep of it cannot reverse v_t. The plane's c is the centre-of-mass dashpot of
-    :mod:`shelljax.dynamics._shell`: −c W (v_com·n) spread over the vertices by mass,
-    W = min(1, Σ_j w_j A_j / Ā), w_j = (1 − g_j/ĝ)² within the barrier's reach, 1 behind the plane.
-    ``collider`` (11,): a, b (segment ends [m]; equal: a sphere), radius [m], velocity (3) [m/s],
-    μ [-]: a moving capsule, felt at the contact points
-    ``sample_idx`` (S, 3) int with barycentric weights ``sample_w`` (S, 3) (vertices, edge
-    midpoints, face centroids) through springs ``sample_k`` (S,) [N/m] and the same friction
-    (v_ε = 1 cm/s).
-    ``plane_force`` (P, 3) and ``collider_force`` (3,) ← the forces on the shell [N].
+    ``contact.planes`` (:class:`._parts.Planes`): point [m], unit normal, μ [-], slip velocity v_ε
+    [m/s], body damping c [N·s/m], barrier reach ĝ [m] and stiffness κ [J/m²] (0, 0: a spring
+    behind the plane); ``contact.clamps`` (P, V, 3) from ``plane_clamps``. A vertex at gap
+    g < max(ĝ, 0) feels the plane's law f(g) (the barrier, or its linear continuation with
+    per-vertex stiffness ``contact.stiffness`` (V,) [N/m]; without a barrier k δ, δ = −g) less
+    c_v v_n (clamped ≥ 0) along the normal, c_v = ``contact.damping`` (V,) [N·s/m], and regularised
+    Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one substep of it cannot reverse
+    v_t. The plane's c is the centre-of-mass dashpot of :mod:`shelljax.dynamics._shell`:
+    −c W (v_com·n) spread over the vertices by mass, W = min(1, Σ_j w_j A_j / Ā),
+    w_j = (1 − g_j/ĝ)² within the barrier's reach, 1 behind the plane. ``contact.collider`` (11,):
+    a, b (segment ends [m]; equal: a sphere), radius [m], velocity (3) [m/s], μ [-]: a moving
+    capsule, felt at the contact points ``sample_idx`` (S, 3) int with barycentric weights
+    ``sample_w`` (S, 3) (vertices, edge midpoints, face centroids) through springs ``sample_k``
+    (S,) [N/m] and the same friction (v_ε = ``COLLIDER_SLIP_VELOCITY``).
+    ``buffers.plane_force`` (P, 3) and ``buffers.collider_force`` (3,) ← the forces on the shell [N].
     """
-    n_planes = planes.shape[0]
+    n_planes = contact.planes.point.shape[0]
     energy = 0.0
     depth = np.zeros(n_planes + 1)
-    plane_force[:, :] = 0.0
-    collider_force[:] = 0.0
-    total_mass = mass.sum()
-    planes_veps = 1e-2
+    buffers.plane_force[:, :] = 0.0
+    buffers.collider_force[:] = 0.0
     for p in range(n_planes):
-        energy = _plane_contact(
-            x,
-            v,
-            mass,
-            dt,
-            planes,
-            clamps,
-            p,
-            vertex_area,
-            mean_area,
-            k_contact,
-            c_contact,
-            total_mass,
-            force,
-            plane_force,
-            depth,
-            energy,
-        )
-    if collider[6] > 0.0:
-        energy = _collider_contact(
-            x,
-            v,
-            mass,
-            dt,
-            collider,
-            sample_idx,
-            sample_w,
-            sample_k,
-            planes_veps,
-            force,
-            collider_force,
-            depth,
-            n_planes,
-            energy,
-        )
+        energy = _plane_contact(x, v, dt, p, body, geometry, contact, buffers, depth, energy)
+    if contact.collider[6] > 0.0:
+        energy = _collider_contact(x, v, dt, body, contact, buffers, depth, n_planes, energy)
     return energy, depth

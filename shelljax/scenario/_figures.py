@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dynamics._output import _plane_levels
+from ..dynamics.internal import plane_levels
 
 
 @dataclasses.dataclass
@@ -45,7 +45,7 @@ def digest(trajectory, label: str) -> RunDigest:
             heights = positions @ n
             most[p] = int(np.argmin(np.where(touching, np.ptp(heights, axis=1), np.inf)))
     steps = {0, *most.values()}
-    levels = _plane_levels(trajectory) if len(trajectory.plane_names) else np.zeros(0)
+    levels = plane_levels(trajectory) if len(trajectory.plane_names) else np.zeros(0)
     return RunDigest(
         label,
         np.asarray(trajectory["time_s"]),

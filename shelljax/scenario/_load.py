@@ -18,7 +18,7 @@ from .._errors import InvalidInputError
 from .._toml import TomlReader, read_toml
 from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
 from ..estimate import METHODS, EstimatorOptions
-from ..physics import GAS_LAWS, gas_law
+from ..physics import GAS_LAWS, ShellProperties, gas_law
 
 _TABLES = {
     "object": {
@@ -126,15 +126,11 @@ class Scenario:
     mesh: Path | None
     estimate: str
     estimator_options: dict  # EstimatorOptions keyword arguments, from [estimators]
-    gauge_pressure: float | None
-    youngs_modulus: float | None
+    properties: ShellProperties  # P_g [Pa], E [Pa], h [m], ν [-], R [m] as given (None: from the session)
     gas: str
     mesh_faces: int | None
     mass: float | None
     wall_density: float | None
-    radius: float | None
-    thickness: float | None
-    poisson_ratio: float | None
     scheme: str
     dt: float
     duration: float
@@ -394,12 +390,8 @@ def load_scenario(path: str | Path, *, value: float | None = None) -> Scenario:
     return _validated(path, _swept(data, sweep.parameter, float(value)), r)
 
 
-def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
-    """The :class:`Scenario` of a parsed config (its [sweep] table, if any, left to :func:`_sweep`)."""
-    obj, integ, diss, init, outs = (
-        _table(r, data, t) for t in ("object", "integrator", "dissipation", "initial", "outputs")
-    )
-    prescribed = _prescribed(r, _table(r, data, "prescribed")) if "prescribed" in data else None
+def _object_source(r: TomlReader, obj: dict) -> tuple[Path | None, bool]:
+    """The object's session path (or None) and whether P_g and E are given directly (both or neither)."""
     direct = [k for k in ("gauge_pressure_Pa", "youngs_modulus_Pa") if k in obj]
     if len(direct) == 1:
         raise r.fail(
@@ -415,20 +407,34 @@ def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
             "missing and P_g, E are not given",
             "name a session, or give object.gauge_pressure_Pa and object.youngs_modulus_Pa",
         )
-    gas = r.choice(obj, "gas", "object.", GAS_LAWS, "adiabatic")
-    # a poke is slow, so a sealed object's gas is isothermal while it is estimated, whatever its law in the impact
-    estimators_table = _table(r, data, "estimators")
-    rig = rig_settings(path, _table(r, data, "rig"), estimators_table)
-    _, estimators = estimator_settings(
-        path, {**estimators_table, **(rig[1] if rig else {})}, gas="isothermal" if gas_law(gas).sealed else "prescribed"
+    return session, bool(direct)
+
+
+def _properties(r: TomlReader, obj: dict, direct: bool) -> ShellProperties:
+    """The object's properties as the config gives them (the documented ``youngs_modulus_Pa`` key is
+    E); None where the session or its estimate gives them."""
+    return ShellProperties(
+        gauge_pressure=r.number(obj, "gauge_pressure_Pa", "object.", positive=True) if direct else None,
+        young_modulus=r.number(obj, "youngs_modulus_Pa", "object.", positive=True) if direct else None,
+        thickness=r.number(obj, "thickness_m", "object.", default=None, positive=True),
+        poisson_ratio=r.number(obj, "poisson_ratio", "object.", default=None, positive=True),
+        radius=r.number(obj, "radius_m", "object.", default=None, positive=True),
     )
+
+
+def _time_span(r: TomlReader, integ: dict) -> tuple[float, float]:
+    """The integrator's time step and duration [s], the step no longer than the duration."""
     dt = r.number(integ, "dt_s", "integrator.", positive=True, fix="give the time step in s, e.g. 1e-3")
     duration = r.number(integ, "duration_s", "integrator.", positive=True, fix="give the duration in s, e.g. 1.0")
     if dt > duration:
         raise r.fail(
             "integrator.dt_s", f"longer than integrator.duration_s = {duration}", "give dt_s ≤ duration_s", value=dt
         )
-    cor, damping, bracket = _dissipation(r, diss)
+    return dt, duration
+
+
+def _held_object_checked(r: TomlReader, init: dict, prescribed, cor) -> tuple[float, float, float]:
+    """The initial velocity [m/s]; a held object (``prescribed``) is neither calibrated nor thrown."""
     if prescribed is not None and cor is not None:
         raise r.fail(
             "dissipation.cor",
@@ -444,6 +450,26 @@ def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
             "write [0.0, 0.0, 0.0]",
             value=list(velocity),
         )
+    return velocity
+
+
+def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
+    """The :class:`Scenario` of a parsed config (its [sweep] table, if any, left to :func:`_sweep`)."""
+    obj, integ, diss, init, outs = (
+        _table(r, data, t) for t in ("object", "integrator", "dissipation", "initial", "outputs")
+    )
+    prescribed = _prescribed(r, _table(r, data, "prescribed")) if "prescribed" in data else None
+    session, direct = _object_source(r, obj)
+    gas = r.choice(obj, "gas", "object.", GAS_LAWS, "adiabatic")
+    # a poke is slow, so a sealed object's gas is isothermal while it is estimated, whatever its law in the impact
+    estimators_table = _table(r, data, "estimators")
+    rig = rig_settings(path, _table(r, data, "rig"), estimators_table)
+    _, estimators = estimator_settings(
+        path, {**estimators_table, **(rig[1] if rig else {})}, gas="isothermal" if gas_law(gas).sealed else "prescribed"
+    )
+    dt, duration = _time_span(r, integ)
+    cor, damping, bracket = _dissipation(r, diss)
+    velocity = _held_object_checked(r, init, prescribed, cor)
     planes = data.get("planes", [])
     if not isinstance(planes, list) or not planes:
         raise r.fail("planes", "no plane to collide with", "add a [[planes]] table (the ground)", value=planes)
@@ -456,15 +482,11 @@ def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
         mesh=_session_path(r, obj.get("mesh"), "object.mesh", "meshes/hammer-coarse.stl"),
         estimate=r.choice(obj, "estimate", "object.", METHODS, "fit"),
         estimator_options=_option_fields(estimators),
-        gauge_pressure=r.number(obj, "gauge_pressure_Pa", "object.", positive=True) if direct else None,
-        youngs_modulus=r.number(obj, "youngs_modulus_Pa", "object.", positive=True) if direct else None,
+        properties=_properties(r, obj, direct),
         gas=gas,
         mesh_faces=int(r.number(obj, "mesh_faces", "object.", positive=True)) if "mesh_faces" in obj else None,
         mass=r.number(obj, "mass_kg", "object.", default=None, positive=True),
         wall_density=r.number(obj, "wall_density_kg_per_m3", "object.", default=None, positive=True),
-        radius=r.number(obj, "radius_m", "object.", default=None, positive=True),
-        thickness=r.number(obj, "thickness_m", "object.", default=None, positive=True),
-        poisson_ratio=r.number(obj, "poisson_ratio", "object.", default=None, positive=True),
         scheme=r.choice(integ, "scheme", "integrator.", SCHEMES, "newmark", what="scheme"),
         dt=dt,
         duration=duration,

@@ -14,11 +14,11 @@ import numpy as np
 from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
-from .._files import check_output_dir
+from .._files import atomic_write_text, check_output_dir
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
-from ..runner._compile_log import stage
+from ..runner.internal import stage
 from ..session import load_session
 from . import _figures
 from ._load import Scenario
@@ -26,12 +26,11 @@ from ._load import Scenario
 
 @dataclasses.dataclass(frozen=True)
 class ObjectModel:
-    """What a scenario's object resolves to: the shell, E [Pa], ν, P_g [Pa], mass [kg], their source."""
+    """What a scenario's object resolves to: the shell, its ``properties`` (P_g [Pa], E [Pa], the
+    shell's h [m], ν [-], R [m]), the mass [kg] (or wall density [kg/m³]) and their source."""
 
     shell: object
-    young_modulus: float
-    poisson_ratio: float
-    gauge_pressure: float
+    properties: ShellProperties
     mass: float | None
     wall_density: float | None
     source: dict
@@ -43,8 +42,9 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
     path = Path(session_path) if session_path is not None else scenario.session
     session = load_session(path) if path is not None else None
     source = {"session": None if path is None else str(path)}
-    if scenario.gauge_pressure is not None and session_path is None:
-        p_g, e = scenario.gauge_pressure, scenario.youngs_modulus
+    given = scenario.properties
+    if given.gauge_pressure is not None and session_path is None:
+        p_g, e = given.gauge_pressure, given.young_modulus
         source["parameters"] = "given in the config"
     elif session is None:
         raise InvalidInputError(
@@ -67,9 +67,9 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
             )
         return float(value)
 
-    thickness = pick(scenario.thickness, "thickness", "thickness_m", "m")
-    nu = pick(scenario.poisson_ratio, "poisson_ratio", "poisson_ratio", "-")
-    radius = pick(scenario.radius, "radius", "radius_m", "m")
+    thickness = pick(given.thickness, "thickness", "thickness_m", "m")
+    nu = pick(given.poisson_ratio, "poisson_ratio", "poisson_ratio", "-")
+    radius = pick(given.radius, "radius", "radius_m", "m")
     mesh_path = scenario.mesh or (getattr(session, "mesh_path", None) if session is not None else None)
     if mesh_path:
         shell = s3.load(mesh_path, thickness)
@@ -85,7 +85,10 @@ def resolve_object(scenario: Scenario, session_path: str | Path | None = None) -
         )
     if scenario.wall_density is not None:
         mass = None
-    return ObjectModel(shell, e, nu, p_g, mass, scenario.wall_density, source)
+    properties = ShellProperties(
+        gauge_pressure=p_g, young_modulus=e, thickness=shell.thickness, poisson_ratio=nu, radius=radius
+    )
+    return ObjectModel(shell, properties, mass, scenario.wall_density, source)
 
 
 def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
@@ -102,14 +105,13 @@ def build_system(scenario: Scenario, obj: ObjectModel, damping: float = 0.0):
         )
         for p in scenario.planes
     ]
-    properties = ShellProperties(
-        gauge_pressure=obj.gauge_pressure,
-        young_modulus=obj.young_modulus,
-        thickness=obj.shell.thickness,
-        poisson_ratio=obj.poisson_ratio,
-    )
     return d.shell_system(
-        obj.shell, properties, gas=gas_law(scenario.gas), mass=obj.mass, wall_density=obj.wall_density, planes=planes
+        obj.shell,
+        obj.properties,
+        gas=gas_law(scenario.gas),
+        mass=obj.mass,
+        wall_density=obj.wall_density,
+        planes=planes,
     )
 
 
@@ -347,8 +349,6 @@ def run_scenario(
     object (``[prescribed]``) runs once into ``swing/``. ``progress``: a bar per stage on stderr;
     ``verbose``: each stage's wall time and what JAX compiled in it, on stderr.
     """
-    from tqdm.auto import tqdm
-
     out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
     obj = resolve_object(scenario, session)
     system = build_system(scenario, obj)
@@ -362,6 +362,21 @@ def run_scenario(
         with stage("calibration", verbose, stages):
             damping, calibration = _calibrate(scenario, system, progress)
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])
+    runs, digests = _run_all(scenario, system, out, progress, (verbose, stages))
+    with stage("scenario figures", verbose, stages):
+        figures = _scenario_figures(scenario, out, digests)
+    summary = _summary(scenario, obj, system, {"damping": damping, "calibration": calibration}, runs, figures, stages)
+    atomic_write_text(out / "scenario.json", json.dumps(summary, indent=1))
+    write_scenario_report(summary, out)
+    return summary
+
+
+def _run_all(scenario: Scenario, system, out: Path, progress: bool, log: tuple[bool, list]) -> tuple[list, list]:
+    """Every drop (and the swing of a held object) into ``out``: the runs' records and the drops'
+    digests for the scenario figures; ``log``: (verbose, the stages' list to append to)."""
+    from tqdm.auto import tqdm
+
+    verbose, stages = log
     runs, digests = [], []
     labels = [f"drop {h:.2f} m" for h in scenario.drop_heights] + (["swing"] if scenario.prescribed is not None else [])
     with tqdm(total=len(labels), desc=f"simulating {scenario.name}", unit="run", disable=not progress) as bar:
@@ -395,16 +410,21 @@ def run_scenario(
             with stage("swing", verbose, stages):
                 runs.append(_swing(scenario, system, out, progress))
             bar.update(1)
-    with stage("scenario figures", verbose, stages):
-        figures = _scenario_figures(scenario, out, digests)
-    summary = {
+    return runs, digests
+
+
+def _summary(scenario: Scenario, obj: ObjectModel, system, contact: dict, runs: list, figures: list, stages: list):
+    """``scenario.json``'s content: the object, its parameters (the documented ``youngs_modulus_Pa``
+    key is E), the contact damping and its ``contact`` calibration, the runs, figures and stages."""
+    p = obj.properties
+    return {
         "scenario": str(scenario.source),
         "name": scenario.name,
         "object": obj.source,
         "parameters": {
-            "gauge_pressure_Pa": obj.gauge_pressure,
-            "youngs_modulus_Pa": obj.young_modulus,
-            "poisson_ratio": obj.poisson_ratio,
+            "gauge_pressure_Pa": p.gauge_pressure,
+            "youngs_modulus_Pa": p.young_modulus,
+            "poisson_ratio": p.poisson_ratio,
             "thickness_m": obj.shell.thickness,
             "mass_kg": float(np.sum(np.asarray(system.node_masses))),
             "gas": scenario.gas,
@@ -412,12 +432,9 @@ def run_scenario(
             "dt_s": scenario.dt,
             "scheme": scenario.scheme,
         },
-        "contact_damping_N_s_per_m": damping,
-        "calibration": calibration,
+        "contact_damping_N_s_per_m": contact["damping"],
+        "calibration": contact["calibration"],
         "runs": runs,
         "figures": figures + [f for run in runs for f in run.get("figures", [])],
         "compilation": {"stages": stages, "unit": "s", "total_seconds": sum(s["total_seconds"] for s in stages)},
     }
-    (out / "scenario.json").write_text(json.dumps(summary, indent=1))
-    write_scenario_report(summary, out)
-    return summary

@@ -317,7 +317,7 @@ def _meta(args, out: Path, device: EmulatedDevice | None) -> dict:
     if ball is not None:
         notes = (notes + "\n" if notes else "") + (
             f"Emulated: R = {ball.radius} m, P_g = {ball.gauge_pressure} Pa, k_s = {ball.k_s}, "
-            f"E = {ball.youngs_modulus} Pa, h = {ball.thickness} m, nu = {ball.poisson_ratio}."
+            f"E = {ball.young_modulus} Pa, h = {ball.thickness} m, nu = {ball.poisson_ratio}."
         )
     if notes:
         meta["notes"] = notes

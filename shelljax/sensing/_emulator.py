@@ -75,13 +75,15 @@ class FilmSensor:
 
 @dataclasses.dataclass(frozen=True)
 class PokedBall:
-    """The object under the finger: F = π k_s R P_g w (the paper's Eq. for the inverted cap)."""
+    """The object under the finger: F = π k_s R P_g w (the paper's Eq. for the inverted cap). Its
+    fields are ``physics.ShellProperties``' (same names and units), kept loose: the data layer stays
+    free of JAX, which ShellProperties (an equinox module) brings."""
 
     radius: float = 0.13  # [m]
     gauge_pressure: float = 3000.0  # [Pa]
     k_s: float = PAPER_KS  # [-]
     thickness: float = 0.9e-3  # [m]
-    youngs_modulus: float = 2.34e6  # [Pa]
+    young_modulus: float = 2.34e6  # [Pa]
     poisson_ratio: float = DEFAULT_POISSON_RATIO  # [-]
 
     def depth(self, force: float) -> float:
@@ -91,7 +93,7 @@ class PokedBall:
     def wrinkles(self) -> int:
         """Radial wrinkle count [-]: Vella's n ≈ 1.33 τ^½ (the paper's Eq. 8), rounded."""
         n = scaling_wrinkle_count(
-            self.gauge_pressure, self.radius, self.youngs_modulus, self.thickness, self.poisson_ratio
+            self.gauge_pressure, self.radius, self.young_modulus, self.thickness, self.poisson_ratio
         )
         return round(float(n))
 

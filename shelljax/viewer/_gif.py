@@ -1,5 +1,5 @@
 """The GIF of a headless replay, drawn with the scenario previews' renderer
-(``shelljax.dynamics._render``: the shell at equal scale, faces coloured by membrane areal strain
+(``shelljax.dynamics.internal``: the shell at equal scale, faces coloured by membrane areal strain
 against the rest shape, faces touching a plane dark, the planes in grey), with the hand as an
 orange sphere and the time, gauge pressure [Pa], contact forces [N] and real-time factor written
 on each frame. A fixed camera frames the whole motion, so a throw is seen to travel."""
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dynamics import _render
+from ..dynamics import internal as render
 from ._headless import Replay
 
 #: Distance [m] to a plane within which a face counts as touching it (drawn dark).
@@ -61,23 +61,23 @@ def write_gif(replay: Replay, path: str | Path, *, hand_radius: float, gif_fps: 
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     rest = replay.shapes_m[0]
-    strain = _render.face_strain(replay.shapes_m, replay.faces, rest)
-    limit = _render.strain_limit(strain)
-    normals = list(replay.planes[:, 3:6])
-    levels = [float(p[:3] @ p[3:6]) for p in replay.planes]
+    strain = render.face_strain(replay.shapes_m, replay.faces, rest)
+    limit = render.strain_limit(strain)
+    normals = list(replay.planes.normal)
+    levels = [float(point @ normal) for point, normal in zip(replay.planes.point, replay.planes.normal)]
     centre, half = _view(replay)
     fig = plt.figure(figsize=(4.6, 4.4))
     ax = fig.add_axes((0.0, 0.0, 0.82, 0.84), projection="3d")
-    _render._strain_colourbar(fig, limit)
+    render.strain_colourbar(fig, limit)
     caption = fig.text(0.03, 0.985, "", va="top", fontsize=7.5, family="monospace")
     blown_at = len(replay.shape_frames) - 1 if replay.blow_up else -1
 
     def draw(j):
         ax.clear()
         nodes = replay.shapes_m[j]
-        touching = _render.contact_faces(nodes, replay.faces, normals, levels, [TOUCH_DISTANCE_M] * len(levels))
-        rgba = _render.strain_rgba(strain[j], limit, touching)
-        _render.draw_shell(ax, nodes, replay.faces, rgba, centre, half, list(zip(normals, levels)))
+        touching = render.contact_faces(nodes, replay.faces, normals, levels, [TOUCH_DISTANCE_M] * len(levels))
+        rgba = render.strain_rgba(strain[j], limit, touching)
+        render.draw_shell(ax, nodes, replay.faces, rgba, centre, half, list(zip(normals, levels)))
         row = int(replay.shape_frames[j])
         hand = replay.hand_m[min(row, len(replay.hand_m) - 1)] if len(replay.hand_m) else np.full(3, np.nan)
         if np.all(np.isfinite(hand)) and j != blown_at:

@@ -88,7 +88,7 @@ class HandControl:
         size = float(np.linalg.norm(accel))
         if size > HOLD_MAX_ACCEL:
             accel *= HOLD_MAX_ACCEL / size
-        dv = (accel - self.ball.gravity) * frame_dt
+        dv = (accel - self.ball.body.gravity) * frame_dt
         self.ball.set_state(self.ball.x, self.ball.v + dv, time=self.ball.time)
         self.position = np.asarray(target, dtype=float) + np.asarray(target_velocity) * frame_dt
 

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..realtime import BlowUpError
+from .._files import atomic_write_text
+from ..realtime import BlowUpError, Planes
 from ._driver import ScriptDriver
 from ._hand import HandControl
 from ._scene import Scene
@@ -27,8 +28,8 @@ class Replay:
     ``com_velocity_m_per_s`` (N, 3); ``real_time_factor`` (N,) [-] simulated / wall time of the
     frame; ``hand_m`` (N, 3) the hand's centre (NaN where it is off); ``holding`` (N,) bool;
     ``action`` (N,) what was under way; ``shapes_m`` (K, V, 3) the positions at frames
-    ``shape_frames`` (K,) (for the GIF); ``faces`` (F, 3); ``plane_names``; ``planes`` (P, 11) as the runtime packs them (point [m], unit
-    normal, μ, v_ε [m/s], c [N·s/m], barrier ĝ [m], κ [J/m²]); ``blow_up``: the
+    ``shape_frames`` (K,) (for the GIF); ``faces`` (F, 3); ``plane_names``; ``planes`` (``realtime.Planes``: point [m], unit normal, μ,
+    v_ε [m/s], c [N·s/m], barrier ĝ [m], κ [J/m²] per plane); ``blow_up``: the
     error's message, or None."""
 
     time_s: np.ndarray
@@ -45,7 +46,7 @@ class Replay:
     shape_frames: np.ndarray
     faces: np.ndarray
     plane_names: tuple
-    planes: np.ndarray
+    planes: Planes
     blow_up: str | None = None
 
     def summary(self) -> dict:
@@ -79,8 +80,7 @@ class Replay:
             "holding",
         ):
             body[name] = np.where(np.isnan(a := np.asarray(getattr(self, name), dtype=float)), None, a).tolist()
-        Path(path).write_text(json.dumps(body, indent=1))
-        return Path(path)
+        return atomic_write_text(path, json.dumps(body, indent=1))
 
 
 def replay(scene: Scene, *, shape_every: int | None = None, on_frame=None) -> Replay:
@@ -138,7 +138,7 @@ def replay(scene: Scene, *, shape_every: int | None = None, on_frame=None) -> Re
 
 
 def _collect(rows, shapes, shape_frames, ball, blow_up) -> Replay:
-    n_planes = ball.planes.shape[0]
+    n_planes = ball.contact.planes.count
     columns = list(zip(*rows)) if rows else [()] * 10
     as_array = lambda i, shape: np.array(columns[i], dtype=float).reshape(shape)
     n = len(rows)
@@ -155,8 +155,8 @@ def _collect(rows, shapes, shape_frames, ball, blow_up) -> Replay:
         action=list(columns[9]),
         shapes_m=np.array(shapes).reshape(len(shapes), -1, 3),
         shape_frames=np.array(shape_frames, dtype=int),
-        faces=ball.faces.copy(),
+        faces=ball.geometry.faces.copy(),
         plane_names=tuple(ball.plane_names),
-        planes=ball.planes.copy(),
+        planes=ball.contact.planes,
         blow_up=None if blow_up is None else str(blow_up),
     )

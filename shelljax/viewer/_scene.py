@@ -98,5 +98,6 @@ def load_scene(source: str | Path, script: InteractionScript, *, gas: AbstractGa
             session, properties, n_faces=script.mesh_faces, gas=gas, rest_shape="small-strain"
         )
         label = f"{session.object_name} (closed-form estimate)"
-    label += f": P_g {ball.p_gauge:.0f} Pa, E {ball.E / 1e6:.3g} MPa, {ball.faces.shape[0]} faces"
+    p = ball.properties
+    label += f": P_g {p.gauge_pressure:.0f} Pa, E {p.young_modulus / 1e6:.3g} MPa, {ball.geometry.faces.shape[0]} faces"
     return Scene.settle(ball, script, label)

@@ -81,7 +81,7 @@ class ViewerApp:
         self.readouts = {
             "time_s": 0.0,
             "real_time_factor": 0.0,
-            "gauge_pressure_Pa": self.ball.p_gauge,
+            "gauge_pressure_Pa": self.ball.properties.gauge_pressure,
             "hand_force_N": 0.0,
             "plane_forces_N": [0.0] * len(scene.script.planes),
             "frames": 0,
@@ -120,7 +120,7 @@ class ViewerApp:
         self.mesh = s.add_mesh_simple(
             "/shell",
             self.ball.x.astype(np.float32),
-            self.ball.faces.astype(np.uint32),
+            self.ball.geometry.faces.astype(np.uint32),
             color=SHELL_RGB,
             flat_shading=False,
         )
@@ -146,7 +146,9 @@ class ViewerApp:
             disabled=True,
             hint="simulated time / compute time of the last frame (≥ 1: keeps up with real time)",
         )
-        self.pressure = g.add_number("gauge pressure [Pa]", float(self.ball.p_gauge), step=0.1, disabled=True)
+        self.pressure = g.add_number(
+            "gauge pressure [Pa]", float(self.ball.properties.gauge_pressure), step=0.1, disabled=True
+        )
         self.hand_force = g.add_number("hand force [N]", 0.0, step=0.01, disabled=True)
         self.plane_forces = [
             g.add_number(f"{p.name} force [N]", 0.0, step=0.01, disabled=True) for p in self.scene.script.planes
