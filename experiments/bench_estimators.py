@@ -81,7 +81,8 @@ def main(argv=None):
     parser.add_argument("--out", default="bench_estimators.json")
     args = parser.parse_args(argv)
     session = load_session(args.session)
-    options = {"gas": gas_law(args.gas), "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
+    option_names = {"gas": args.gas, "wrinkle_law": args.wrinkle_law} if args.model == "axisym" else {}
+    options = {**option_names, "gas": gas_law(args.gas)} if option_names else {}
     model = forward_model_for(session, args.model, **options)
 
     t0 = time.perf_counter()
@@ -135,7 +136,7 @@ def main(argv=None):
             ("exact engine: same chain (extrapolated)", f"{exact_per_eval * steps * args.walkers:.0f} s"),
         ]
     print(
-        f"session {session.source.name}, model {args.model} {options}, machine: {platform.platform()}, {os.cpu_count()} CPUs"
+        f"session {session.source.name}, model {args.model} {option_names}, machine: {platform.platform()}, {os.cpu_count()} CPUs"
     )
     width = max(len(r[0]) for r in rows)
     for name, value in rows:
@@ -144,7 +145,7 @@ def main(argv=None):
         "machine": f"{platform.platform()}, {os.cpu_count()} CPUs",
         "session": str(session.source),
         "model": args.model,
-        "model_options": options,
+        "model_options": option_names,
         "fit_first_s": fit_first,
         "fit_s": fit_times,
         "fit_median_s": statistics.median(fit_times),

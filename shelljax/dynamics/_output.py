@@ -90,7 +90,7 @@ def _plots(trajectory: Trajectory, figures: Path) -> list[Path]:
     return written
 
 
-def _plane_levels(trajectory: Trajectory) -> np.ndarray:
+def plane_levels(trajectory: Trajectory) -> np.ndarray:
     """Each plane's offset along its normal [m]: the record keeps the smallest gap, so it is
     min(x·n) − min gap (at step 0; the planes do not move)."""
     nodes = trajectory["position_m"][0].reshape(-1, 3)
@@ -128,7 +128,7 @@ def _max_deformation_figure(trajectory: Trajectory, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     step, p = most_deformed_step(trajectory)
-    normal, level = trajectory.plane_normals[p], _plane_levels(trajectory)[p]
+    normal, level = trajectory.plane_normals[p], plane_levels(trajectory)[p]
     along, across = _tangents(normal)
     fig, ax = plt.subplots(figsize=(6, 3.4))
     extents = []
@@ -180,7 +180,7 @@ def _mesh_frames(
     nodes = positions.reshape(len(positions), -1, 3)
     strain = _render.face_strain(nodes[picks], trajectory.faces, nodes[0])
     limit = _render.strain_limit(strain)
-    levels = _plane_levels(trajectory) if touches else np.zeros(0)
+    levels = plane_levels(trajectory) if touches else np.zeros(0)
     frames = out / "frames"
     frames.mkdir(exist_ok=True)
     written = []

@@ -149,7 +149,7 @@ def status_line(trajectory, step: int) -> str:
     return text + f"\ngauge pressure {trajectory['gas_pressure_Pa'][step]:.0f} Pa"
 
 
-def _strain_colourbar(fig, limit: float, rect=(0.85, 0.24, 0.025, 0.5)) -> None:
+def strain_colourbar(fig, limit: float, rect=(0.85, 0.24, 0.025, 0.5)) -> None:
     import matplotlib as mpl
     from matplotlib.patches import Patch
 
@@ -176,7 +176,7 @@ def preview(trajectory, picks: np.ndarray, path: Path, strain: np.ndarray, limit
 
     fig = plt.figure(figsize=(4.6, 4.4))
     ax = fig.add_axes((0.0, 0.0, 0.82, 0.86), projection="3d")
-    _strain_colourbar(fig, limit)
+    strain_colourbar(fig, limit)
     caption = fig.text(0.03, 0.975, "", va="top", fontsize=8, family="monospace")
     nodes = trajectory["position_m"][picks].reshape(len(picks), -1, 3)
     half = 0.75 * np.ptp(nodes[0], axis=0).max()
@@ -225,7 +225,7 @@ def closeup(trajectory, step: int, plane: int, path: Path, strain: np.ndarray, l
         ax.view_init(elev=-25.0 * np.sign(normal[2]), azim=-60.0)
     else:
         ax.view_init(elev=15.0, azim=float(np.degrees(np.arctan2(-normal[1], -normal[0]))) + 35.0)
-    _strain_colourbar(fig, limit)
+    strain_colourbar(fig, limit)
     fig.text(0.03, 0.975, "largest contact: " + status_line(trajectory, step), va="top", fontsize=8, family="monospace")
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -2,9 +2,8 @@
 it may change without notice): the scenario previews' renderer (the scenario figures and the
 viewer's GIF draw with it) and a trajectory's plane levels."""
 
-from ._output import _plane_levels as plane_levels
-from ._render import _strain_colourbar as strain_colourbar
-from ._render import contact_faces, draw_shell, face_strain, strain_limit, strain_rgba
+from ._output import plane_levels
+from ._render import contact_faces, draw_shell, face_strain, strain_colourbar, strain_limit, strain_rgba
 
 __all__ = [
     "contact_faces",

@@ -18,7 +18,7 @@ from .._files import atomic_write_text, check_output_dir
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
-from ..runner.internal import stage
+from ..runner import stage
 from ..session import load_session
 from . import _figures
 from ._load import Scenario
