@@ -13,6 +13,7 @@ Run:  python experiments/sim_to_real_case.py   (writes docs/bench/sim-to-real-ca
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -55,4 +56,6 @@ def main():
 
 
 if __name__ == "__main__":
+    # no options: --help says what the script writes before it overwrites anything
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

@@ -458,3 +458,14 @@ def test_no_function_takes_more_than_ten_parameters():
         f"functions over {MAX_PARAMETERS} parameters (pack them into a named structure): {unexpected}"
     )
     assert not stale, f"exempted functions now within {MAX_PARAMETERS} parameters (drop their exemption): {stale}"
+
+
+@pytest.mark.parametrize(
+    "path", sorted([*(ROOT / "experiments").glob("*.py"), *(ROOT / "tools").glob("*.py")]), ids=lambda p: p.name
+)
+def test_every_runnable_script_parses_its_arguments(path):
+    # `python tools/x.py --help` must print help, not run: a tool without a parser regenerated (and on
+    # a failure deleted) the bundled data when asked for help
+    source = path.read_text()
+    if "__main__" in source:
+        assert "ArgumentParser(" in source, f"{path.name}: parse the command line with argparse (at least --help)"

@@ -21,6 +21,7 @@ Run:  python tools/make_bundled_data.py
 
 from __future__ import annotations
 
+import argparse
 import math
 
 import numpy as np
@@ -169,4 +170,6 @@ def main():
 
 
 if __name__ == "__main__":
+    # no options: --help says what the script writes before it overwrites anything
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

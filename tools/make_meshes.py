@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -44,4 +45,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    # no options: --help says what the script writes before it overwrites anything
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

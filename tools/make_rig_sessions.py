@@ -13,6 +13,7 @@ Run:  python tools/make_rig_sessions.py
 
 from __future__ import annotations
 
+import argparse
 import numpy as np
 from experiment_scripts import load_experiment
 
@@ -67,4 +68,6 @@ def main():
 
 
 if __name__ == "__main__":
+    # no options: --help says what the script writes before it overwrites anything
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     raise SystemExit(main())
