@@ -464,8 +464,7 @@ def test_no_function_takes_more_than_ten_parameters():
     "path", sorted([*(ROOT / "experiments").glob("*.py"), *(ROOT / "tools").glob("*.py")]), ids=lambda p: p.name
 )
 def test_every_runnable_script_parses_its_arguments(path):
-    # `python tools/x.py --help` must print help, not run: a tool without a parser regenerated (and on
-    # a failure deleted) the bundled data when asked for help
+    # `python tools/x.py --help` must print help, not run the script: several overwrite bundled data
     source = path.read_text()
     if "__main__" in source:
         assert "ArgumentParser(" in source, f"{path.name}: parse the command line with argparse (at least --help)"

@@ -232,7 +232,7 @@ def _fit_rig_model(base, study, rig: Rig, model, quantities, method: str, draws:
         rig_prior=(model.parameters, model.mean, model.covariance) if model.parameters else None,
     )
     if not fit.converged:
-        # stacklevel 3: the warning points at the caller of estimate_with_rig, as before the split
+        # stacklevel 3: the warning points at the caller of estimate_with_rig, not at this helper
         warnings.warn(
             f"{source}: the fit under rig model {'+'.join(model.terms) or 'ideal'} failed "
             f"({fit.message}); the other models carry its weight",
