@@ -142,11 +142,12 @@ def segment_triangle_closest(ax, ay, az, bx, by, bz, p0x, p0y, p0z, p1x, p1y, p1
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _face_push(x, f0, f1, f2, collider, s, w0, w1, w2):
-    """(unit direction of the force on the shell, its penetration δ [m]) at the closest points
-    (s on the collider's axis, (w0, w1, w2) on the face): along the gap from the axis outwards,
-    δ = r − d; where the axis is behind the face (its closest point inside the face, on the
-    inner side of the face's outward normal), the other way round, δ = r + d, so that the face
-    passes the collider back to the outside. δ ≤ 0: no contact."""
+    """(unit direction of the force on the shell, its penetration δ [m]) at the closest points d [m]
+    apart (s on the collider's axis, (w0, w1, w2) on the face). Closest at an edge or a vertex:
+    along the gap from the axis, δ = r − d. Closest inside the face (or the axis through it): along
+    the face's inward normal −n, δ = r − h with h [m] the height over the face's plane of the axis's
+    lower end (h = d in front of the face; h < 0 when the axis crosses the face or lies behind it,
+    within r), so that a deep axis is pushed back out, harder the deeper it is. δ ≤ 0: none."""
     r = collider[6]
     sx = collider[0] + s * (collider[3] - collider[0])
     sy = collider[1] + s * (collider[4] - collider[1])
@@ -154,19 +155,24 @@ def _face_push(x, f0, f1, f2, collider, s, w0, w1, w2):
     gx = w0 * x[f0, 0] + w1 * x[f1, 0] + w2 * x[f2, 0] - sx
     gy = w0 * x[f0, 1] + w1 * x[f1, 1] + w2 * x[f2, 1] - sy
     gz = w0 * x[f0, 2] + w1 * x[f1, 2] + w2 * x[f2, 2] - sz
-    e1 = (x[f1, 0] - x[f0, 0], x[f1, 1] - x[f0, 1], x[f1, 2] - x[f0, 2])
-    e2 = (x[f2, 0] - x[f0, 0], x[f2, 1] - x[f0, 1], x[f2, 2] - x[f0, 2])
-    nx, ny, nz = e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]
     d = math.sqrt(gx * gx + gy * gy + gz * gz)
-    behind = w0 > 0.0 and w1 > 0.0 and w2 > 0.0 and gx * nx + gy * ny + gz * nz > 0.0
-    if d == 0.0 or (behind and d < r):  # the axis on or just behind the face: along −n
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nn == 0.0:
-            return 0.0, 0.0, 0.0, 0.0
-        return -nx / nn, -ny / nn, -nz / nn, r + d
-    if behind:
+    if d >= r:
         return 0.0, 0.0, 0.0, 0.0
-    return gx / d, gy / d, gz / d, r - d
+    if not (d == 0.0 or (w0 > 0.0 and w1 > 0.0 and w2 > 0.0)):
+        return gx / d, gy / d, gz / d, r - d
+    e1x, e1y, e1z = x[f1, 0] - x[f0, 0], x[f1, 1] - x[f0, 1], x[f1, 2] - x[f0, 2]
+    e2x, e2y, e2z = x[f2, 0] - x[f0, 0], x[f2, 1] - x[f0, 1], x[f2, 2] - x[f0, 2]
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    nx, ny, nz = nx / nn, ny / nn, nz / nn
+    h = math.inf
+    for e in (0, 3):  # the axis's ends' heights over the face's plane
+        h = min(
+            h, (collider[e] - x[f0, 0]) * nx + (collider[e + 1] - x[f0, 1]) * ny + (collider[e + 2] - x[f0, 2]) * nz
+        )
+    return -nx, -ny, -nz, r - min(h, d)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -178,11 +184,14 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
     ``contact.collider`` (11,): a, b (segment ends [m]; equal: a sphere), radius r [m], velocity (3)
     [m/s], μ [-]. For each face near the axis (its bounding sphere within r of the axis), the
     closest points d [m] apart (``segment_triangle_closest``); at penetration δ > 0 (see
-    ``_face_push``) a spring k_f δ, k_f = Σ w_j k_j [N/m] (the face's vertices' ``contact.stiffness``
-    by the closest point's barycentric weights w), and the planes' friction against the slip of
+    ``_face_push``) a spring k_f δ, k_f = Σ w_j k_j / Σ w_j² n_j [N/m] (the face's vertices'
+    ``contact.stiffness`` k_j by the closest point's barycentric weights w, n_j = ``contact.valence``:
+    the faces around vertex j), so that a vertex's stiffness from all its faces' contacts,
+    Σ_f w_j² k_f ≤ k_j, stays within what the stable Δt allows (Σ w_j k_j alone put n_j k_j on a
+    pressed vertex and blew up), and the planes' friction against the slip of
     the face's point relative to the collider (v_ε = ``COLLIDER_SLIP_VELOCITY``); the force goes
     to the vertices by w, so the shell gets exactly −(the collider's reaction)."""
-    collider, faces, k_contact = contact.collider, geometry.faces, contact.stiffness
+    collider, faces, k_contact, valence = contact.collider, geometry.faces, contact.stiffness, contact.valence
     mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
     collider_force[:] = 0.0
     r, mu = collider[6], collider[10]
@@ -222,7 +231,8 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
         if delta <= 0.0:
             continue
         depth[slot] = max(depth[slot], delta)
-        k = w0 * k_contact[f0] + w1 * k_contact[f1] + w2 * k_contact[f2]
+        share = w0 * w0 * valence[f0] + w1 * w1 * valence[f1] + w2 * w2 * valence[f2]
+        k = (w0 * k_contact[f0] + w1 * k_contact[f1] + w2 * k_contact[f2]) / share
         fn = k * delta
         energy += 0.5 * k * delta * delta
         wx = w0 * v[f0, 0] + w1 * v[f1, 0] + w2 * v[f2, 0] - collider[7]

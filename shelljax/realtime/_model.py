@@ -209,6 +209,7 @@ class RealtimeShell:
             stiffness=k_contact,
             damping=2.0 * zeta * np.sqrt(k_contact * masses),
             collider=np.zeros(11),  # radius 0: none
+            valence=np.bincount(self.geometry.faces.ravel(), minlength=masses.shape[0]).astype(float),
             tunnel_depth=tunnel,
         )
 
