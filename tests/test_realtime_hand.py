@@ -88,7 +88,7 @@ def test_segment_triangle_closest_points_match_a_dense_sampling():
         if case % 10 == 1:  # a segment parallel to the triangle's plane
             n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
             b = b - (b - a) @ n / (n @ n) * n
-        s, w0, w1, w2 = _hand.segment_triangle_closest(*a, *b, *tri[0], *tri[1], *tri[2])
+        s, w0, w1, w2 = _hand.segment_triangle_closest(tuple(a), tuple(b), tuple(tri[0]), tuple(tri[1]), tuple(tri[2]))
         assert 0.0 <= s <= 1.0 and min(w0, w1, w2) >= 0.0 and abs(w0 + w1 + w2 - 1.0) < 1e-12
         kernel = float(np.linalg.norm(a + s * (b - a) - (w0 * tri[0] + w1 * tri[1] + w2 * tri[2])))
         sampled, bound = _dense_least_distance(a, b, tri)

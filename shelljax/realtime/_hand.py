@@ -21,9 +21,14 @@ def _clamp01(t):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _point_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Barycentric weights (w_a, w_b, w_c) [-] of the triangle's point closest to p [m] (Ericson,
-    *Real-Time Collision Detection* §5.1.5: by Voronoi region, so a degenerate triangle is safe)."""
+def _point_triangle(p, a, b, c):
+    """Barycentric weights (w_a, w_b, w_c) [-] of the point of the triangle a b c closest to p (each
+    (3,) [m]) (Ericson, *Real-Time Collision Detection* §5.1.5: by Voronoi region, so a degenerate
+    triangle is safe)."""
+    px, py, pz = p
+    ax, ay, az = a
+    bx, by, bz = b
+    cx, cy, cz = c
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
     apx, apy, apz = px - ax, py - ay, pz - az
@@ -60,9 +65,13 @@ def _point_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _segment_segment(p1x, p1y, p1z, q1x, q1y, q1z, p2x, p2y, p2z, q2x, q2y, q2z):
-    """Parameters (s, t) ∈ [0, 1]² [-] of the closest points of segments p1–q1 and p2–q2 [m]
-    (Ericson §5.1.9, with its parallel and degenerate cases)."""
+def _segment_segment(p1, q1, p2, q2):
+    """Parameters (s, t) ∈ [0, 1]² [-] of the closest points of segments p1–q1 and p2–q2 (each end
+    (3,) [m]) (Ericson §5.1.9, with its parallel and degenerate cases)."""
+    p1x, p1y, p1z = p1
+    q1x, q1y, q1z = q1
+    p2x, p2y, p2z = p2
+    q2x, q2y, q2z = q2
     d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
     d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
     rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
@@ -98,26 +107,27 @@ def _gap2(s, w0, w1, w2, a, d, p0, p1, p2):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def segment_triangle_closest(ax, ay, az, bx, by, bz, p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z):
-    """The closest points of the segment a–b and the triangle p0 p1 p2 [m]: (s, w0, w1, w2) [-], the
+def segment_triangle_closest(a, b, p0, p1, p2):
+    """The closest points of the segment a–b and the triangle p0 p1 p2 (each (3,) [m]): (s, w0, w1, w2) [-], the
     point a + s (b − a) and the point w0 p0 + w1 p1 + w2 p2. The least distance is reached at an end
     of the segment (point–triangle), on an edge of the triangle (segment–segment), or, where the
     segment crosses the triangle, at the crossing (distance 0); the best of the candidates."""
-    a = (ax, ay, az)
+    ax, ay, az = a
+    bx, by, bz = b
+    p0x, p0y, p0z = p0
+    p1x, p1y, p1z = p1
+    p2x, p2y, p2z = p2
     d = (bx - ax, by - ay, bz - az)
-    p0, p1, p2 = (p0x, p0y, p0z), (p1x, p1y, p1z), (p2x, p2y, p2z)
     best = (0.0, 1.0, 0.0, 0.0)
     best_g = math.inf
     for s in (0.0, 1.0):
-        w0, w1, w2 = _point_triangle(
-            ax + s * d[0], ay + s * d[1], az + s * d[2], p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z
-        )
+        w0, w1, w2 = _point_triangle((ax + s * d[0], ay + s * d[1], az + s * d[2]), p0, p1, p2)
         g = _gap2(s, w0, w1, w2, a, d, p0, p1, p2)
         if g < best_g:
             best_g, best = g, (s, w0, w1, w2)
     for k in range(3):
         u, v = (p0, p1, p2)[k], (p1, p2, p0)[k]
-        s, t = _segment_segment(ax, ay, az, bx, by, bz, u[0], u[1], u[2], v[0], v[1], v[2])
+        s, t = _segment_segment(a, b, u, v)
         w = (1.0 - t, t, 0.0) if k == 0 else ((0.0, 1.0 - t, t) if k == 1 else (t, 0.0, 1.0 - t))
         g = _gap2(s, w[0], w[1], w[2], a, d, p0, p1, p2)
         if g < best_g:
@@ -211,21 +221,11 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
         if (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2 >= reach * reach:
             continue
         s, w0, w1, w2 = segment_triangle_closest(
-            collider[0],
-            collider[1],
-            collider[2],
-            collider[3],
-            collider[4],
-            collider[5],
-            x[f0, 0],
-            x[f0, 1],
-            x[f0, 2],
-            x[f1, 0],
-            x[f1, 1],
-            x[f1, 2],
-            x[f2, 0],
-            x[f2, 1],
-            x[f2, 2],
+            (collider[0], collider[1], collider[2]),
+            (collider[3], collider[4], collider[5]),
+            (x[f0, 0], x[f0, 1], x[f0, 2]),
+            (x[f1, 0], x[f1, 1], x[f1, 2]),
+            (x[f2, 0], x[f2, 1], x[f2, 2]),
         )
         nx, ny, nz, delta = _face_push(x, f0, f1, f2, collider, s, w0, w1, w2)
         if delta <= 0.0:
