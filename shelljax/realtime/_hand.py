@@ -197,10 +197,11 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
     ``_face_push``) a spring k_f δ, k_f = Σ w_j k_j / Σ w_j² n_j [N/m] (the face's vertices'
     ``contact.stiffness`` k_j by the closest point's barycentric weights w, n_j = ``contact.valence``:
     the faces around vertex j), so that a vertex's stiffness from all its faces' contacts,
-    Σ_f w_j² k_f ≤ k_j, stays within what the stable Δt allows (Σ w_j k_j alone put n_j k_j on a
-    pressed vertex and blew up), and the planes' friction against the slip of
-    the face's point relative to the collider (v_ε = ``COLLIDER_SLIP_VELOCITY``); the force goes
-    to the vertices by w, so the shell gets exactly −(the collider's reaction)."""
+    Σ_f w_j² k_f, stays below the largest k of their vertices (about k_j, which the stable Δt
+    allows; Σ w_j k_j alone put n_j k_j on a pressed vertex and tripped the energy guard), and the
+    planes' friction against the slip of the face's point relative to the collider (v_ε =
+    ``COLLIDER_SLIP_VELOCITY``); the force goes to the vertices by w, so the shell gets exactly
+    −(the collider's reaction)."""
     collider, faces, k_contact, valence = contact.collider, geometry.faces, contact.stiffness, contact.valence
     mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
     collider_force[:] = 0.0
