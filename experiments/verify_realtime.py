@@ -307,9 +307,9 @@ def poke(
     ``depth`` below the touching point (the realtime's former reading) squeezes the realtime ball
     by about ĝ = 0.4 mm more: +2.5 % of the force. The same indenter height compares one
     configuration, different only in the contacts (barrier at vertices: ≈ 0.04 mm standoff;
-    penalty at vertices, edge midpoints and centroids: ``stiffness_factor`` × the dynamic default
-    spring). As the engine, the ground is frictionless and the shell held under the sphere; the
-    reading is taken once settled (the force changes by < ``tolerance`` per five relaxations)."""
+    penalty on the triangles: ``stiffness_factor`` × the dynamic default spring). As the engine,
+    the ground is frictionless and the shell held under the sphere; the reading is taken once
+    settled (the force changes by < ``tolerance`` per five relaxations)."""
     from shelljax import shell3d as s3
 
     shell = Shell(mesh=ShellMesh.sphere(RADIUS, faces, pole_refinement=1.0), thickness=PEZZI["thickness"])

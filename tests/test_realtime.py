@@ -364,7 +364,7 @@ def test_a_hand_pressing_for_many_frames_is_not_a_blow_up():
     top = ball.x[:, 2].max()
     centre = np.array([0.0, 0.0, top + 0.04])
     speed = 0.6  # m/s down, 12 frames: 0.12 m of travel, 0.08 m into the ball
-    # (a fist: a capsule thinner than the 300-face mesh's spacing slips between its contact points)
+    # (a fist; tests/test_realtime_hand.py presses a 2 cm finger)
     ball.set_collider(
         rt.Collider(a=tuple(centre), b=tuple(centre + [0.0, 0.0, 0.05]), radius=0.04, velocity=(0.0, 0.0, -speed))
     )
@@ -514,8 +514,8 @@ def test_static_poke_matches_the_quasi_static_engine():
     """An 8 mm sphere 20 mm into the 478-face ball on the ground (no gravity, isothermal gas):
     the realtime ball relaxed under the collider at the engine's solved indenter height carries
     the force of shell3d.Indentation's quasi-static solve within the issue's 2 % (the same mesh,
-    rest shape and gas; what differs is the contact: penalty at vertices, edge midpoints and
-    centroids against the engine's barrier at vertices)."""
+    rest shape and gas; what differs is the contact: penalty on the triangles against the
+    engine's barrier at vertices)."""
     from _scripts import load_script
 
     verify = load_script("experiments", "verify_realtime")

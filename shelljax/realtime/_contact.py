@@ -1,8 +1,8 @@
 """Compiled (Numba) penalty contact of the real-time runtime (float64, SI units): the planes
 (the reference's barrier or a spring, dampers, regularised Coulomb friction and the centre-of-mass
-dashpot) and the moving sphere/capsule collider felt at barycentric contact points.
-``contact_forces`` is the entry point (:mod:`._kernels` calls it once per force evaluation);
-``plane_clamps`` sets up the plane law per vertex."""
+dashpot) and the friction law they share with the collider (:mod:`._hand`). ``contact_forces`` is
+the planes' entry point (:mod:`._kernels` calls it once per force evaluation); ``plane_clamps``
+sets up the plane law per vertex."""
 
 from __future__ import annotations
 
@@ -10,17 +10,6 @@ import math
 
 import numpy as np
 from numba import njit
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _closest_on_segment(px, py, pz, ax, ay, az, bx, by, bz):
-    dx, dy, dz = bx - ax, by - ay, bz - az
-    ll = dx * dx + dy * dy + dz * dz
-    t = 0.0
-    if ll > 0.0:
-        t = ((px - ax) * dx + (py - ay) * dy + (pz - az) * dz) / ll
-        t = min(1.0, max(0.0, t))
-    return ax + t * dx, ay + t * dy, az + t * dz
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -176,70 +165,10 @@ def mass_sum(masses):
     return masses.sum()
 
 
-#: The collider's slip velocity v_ε [m/s] of its regularised Coulomb friction.
-COLLIDER_SLIP_VELOCITY = 1e-2
-
-
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _collider_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
-    """The moving capsule's springs and friction at the contact points (see ``contact_forces``),
-    added to ``buffers.force`` and ``buffers.collider_force``; ``depth[slot]`` ← the deepest
-    penetration [m]. Returns ``energy`` [J] plus its springs' energy."""
-    mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
-    collider, sample_idx, sample_w, sample_k = contact.collider, contact.sample_idx, contact.sample_w, contact.sample_k
-    veps = COLLIDER_SLIP_VELOCITY
-    radius = collider[6]
-    mu = collider[10]
-    # Contact points: the vertices, the edge midpoints and the face centroids (barycentric
-    # samples, so that a collider smaller than the mesh spacing cannot pass between vertices);
-    # each point's force goes to its vertices by its weights.
-    for q in range(sample_idx.shape[0]):
-        j0, j1, j2 = sample_idx[q, 0], sample_idx[q, 1], sample_idx[q, 2]
-        w0, w1, w2 = sample_w[q, 0], sample_w[q, 1], sample_w[q, 2]
-        px = w0 * x[j0, 0] + w1 * x[j1, 0] + w2 * x[j2, 0]
-        py = w0 * x[j0, 1] + w1 * x[j1, 1] + w2 * x[j2, 1]
-        pz = w0 * x[j0, 2] + w1 * x[j1, 2] + w2 * x[j2, 2]
-        cx, cy, cz = _closest_on_segment(
-            px, py, pz, collider[0], collider[1], collider[2], collider[3], collider[4], collider[5]
-        )
-        rx, ry, rz = px - cx, py - cy, pz - cz
-        dist = math.sqrt(rx * rx + ry * ry + rz * rz)
-        d = radius - dist
-        if d <= 0.0 or dist == 0.0:
-            continue
-        if d > depth[slot]:
-            depth[slot] = d
-        nx, ny, nz = rx / dist, ry / dist, rz / dist
-        wx = w0 * v[j0, 0] + w1 * v[j1, 0] + w2 * v[j2, 0] - collider[7]
-        wy = w0 * v[j0, 1] + w1 * v[j1, 1] + w2 * v[j2, 1] - collider[8]
-        wz = w0 * v[j0, 2] + w1 * v[j1, 2] + w2 * v[j2, 2] - collider[9]
-        vn = wx * nx + wy * ny + wz * nz
-        k = sample_k[q]
-        fn = k * d
-        energy += 0.5 * k * d * d
-        gx, gy, gz = _friction(
-            wx - vn * nx, wy - vn * ny, wz - vn * nz, fn, mu, veps, min(mass[j0], min(mass[j1], mass[j2])), dt
-        )
-        fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
-        force[j0, 0] += w0 * fx
-        force[j0, 1] += w0 * fy
-        force[j0, 2] += w0 * fz
-        force[j1, 0] += w1 * fx
-        force[j1, 1] += w1 * fy
-        force[j1, 2] += w1 * fz
-        force[j2, 0] += w2 * fx
-        force[j2, 1] += w2 * fy
-        force[j2, 2] += w2 * fz
-        collider_force[0] += fx
-        collider_force[1] += fy
-        collider_force[2] += fz
-    return energy
-
-
 @njit(cache=True, fastmath=False, error_model="numpy")
 def contact_forces(x, v, dt, body, geometry, contact, buffers):
-    """Add contact forces [N] to ``buffers.force``; return (energy [J], deepest penetration [m] per
-    plane, then the collider's).
+    """Add the planes' contact forces [N] to ``buffers.force``; return (energy [J], deepest
+    penetration [m] per plane, then a 0 for the collider's (:func:`._hand.collider_contact` fills it)).
 
     ``contact.planes`` (:class:`._parts.Planes`): point [m], unit normal, μ [-], slip velocity v_ε
     [m/s], body damping c [N·s/m], barrier reach ĝ [m] and stiffness κ [J/m²] (0, 0: a spring
@@ -250,20 +179,13 @@ def contact_forces(x, v, dt, body, geometry, contact, buffers):
     Coulomb friction −μ f_n v_t / √(|v_t|² + v_ε²), capped so that one substep of it cannot reverse
     v_t. The plane's c is the centre-of-mass dashpot of :mod:`shelljax.dynamics._shell`:
     −c W (v_com·n) spread over the vertices by mass, W = min(1, Σ_j w_j A_j / Ā),
-    w_j = (1 − g_j/ĝ)² within the barrier's reach, 1 behind the plane. ``contact.collider`` (11,):
-    a, b (segment ends [m]; equal: a sphere), radius [m], velocity (3) [m/s], μ [-]: a moving
-    capsule, felt at the contact points ``sample_idx`` (S, 3) int with barycentric weights
-    ``sample_w`` (S, 3) (vertices, edge midpoints, face centroids) through springs ``sample_k``
-    (S,) [N/m] and the same friction (v_ε = ``COLLIDER_SLIP_VELOCITY``).
-    ``buffers.plane_force`` (P, 3) and ``buffers.collider_force`` (3,) ← the forces on the shell [N].
+    w_j = (1 − g_j/ĝ)² within the barrier's reach, 1 behind the plane. ``buffers.plane_force``
+    (P, 3) ← the forces on the shell [N].
     """
     n_planes = contact.planes.point.shape[0]
     energy = 0.0
     depth = np.zeros(n_planes + 1)
     buffers.plane_force[:, :] = 0.0
-    buffers.collider_force[:] = 0.0
     for p in range(n_planes):
         energy = _plane_contact(x, v, dt, p, body, geometry, contact, buffers, depth, energy)
-    if contact.collider[6] > 0.0:
-        energy = _collider_contact(x, v, dt, body, contact, buffers, depth, n_planes, energy)
     return energy, depth

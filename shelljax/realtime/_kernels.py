@@ -5,7 +5,7 @@ V = Σ_f x₀·(x₁ × x₂)/6 [m³] and its gradient; the gauge pressure P(V) 
 (prescribed, isothermal, adiabatic), and the pressure force on the vertices is P ∂V/∂x [N].
 
 ``advance`` runs n velocity-Verlet substeps (kick Δt/2, drift Δt, force, kick Δt/2) in one
-compiled call, with penalty contact against planes and a moving sphere/capsule (:mod:`._contact`),
+compiled call, with penalty contact against planes (:mod:`._contact`) and a moving sphere/capsule (:mod:`._hand`),
 and stops at the first substep that fails the blow-up guard (NaN/inf, or a vertex deeper than the
 tunnelling depth behind a plane), returning a status code for the Python layer to raise. The
 kernels take the named structures of :mod:`._parts` (geometry, body, material, contact, buffers).
@@ -21,6 +21,7 @@ from numba import njit
 from ..physics import AdiabaticGas, IsothermalGas, PrescribedGas
 from ._contact import contact_forces
 from ._elastic import elastic_forces_parallel, elastic_forces_serial
+from ._hand import collider_contact
 
 # Status codes of ``advance``.
 OK = 0
@@ -110,6 +111,7 @@ def _total_force(x, v, dt, body, geometry, material, contact, buffers):
             finite = False
     e_con, depth = contact_forces(x, v, dt, body, geometry, contact, buffers)
     n_planes = contact.planes.point.shape[0]
+    e_con = collider_contact(x, v, dt, body, geometry, contact, buffers, depth, n_planes, e_con)
     dmax = 0.0
     for p in range(n_planes):
         dmax = max(dmax, depth[p])

@@ -107,21 +107,6 @@ def _body(positions, masses, gravity) -> tuple[np.ndarray, Body]:
     return x, Body(masses=masses, gravity=g, total_mass=float(mass_sum(masses)))
 
 
-def _collider_samples(faces, n_vertices, k_contact):
-    """The collider's contact points: vertices, edge midpoints and face centroids (barycentric
-    indices (S, 3) and weights (S, 3)), each with a spring of a third of its vertices' mean k
-    [N/m], so that a vertex's springs from all the points around it sum to about its own k."""
-    n, f = n_vertices, faces
-    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
-    idx = np.concatenate([np.stack([np.arange(n)] * 3, axis=1), np.column_stack([edges, edges[:, 0]]), f])
-    w = np.concatenate(
-        [np.tile([1.0, 0.0, 0.0], (n, 1)), np.tile([0.5, 0.5, 0.0], (len(edges), 1)), np.full((len(f), 3), 1.0 / 3.0)]
-    )
-    idx = np.ascontiguousarray(idx, dtype=np.int64)
-    w = np.ascontiguousarray(w)
-    return idx, w, np.ascontiguousarray((w * k_contact[idx]).sum(axis=1) / 3.0)
-
-
 class RealtimeShell:
     """A shell stepped explicitly in real time; see the module docstring.
 
@@ -217,7 +202,6 @@ class RealtimeShell:
         else:
             k_contact = np.full(self.x.shape[0], _check("contact_stiffness [N/m]", o.contact_stiffness))
         zeta = _check("contact_damping_ratio [-]", o.contact_damping_ratio, positive=False)
-        sample_idx, sample_w, sample_k = _collider_samples(self.geometry.faces, self.x.shape[0], k_contact)
         tunnel = 0.5 * self.mean_edge if o.tunnel_depth is None else _check("tunnel_depth [m]", o.tunnel_depth)
         return Contact(
             planes=planes,
@@ -225,9 +209,7 @@ class RealtimeShell:
             stiffness=k_contact,
             damping=2.0 * zeta * np.sqrt(k_contact * masses),
             collider=np.zeros(11),  # radius 0: none
-            sample_idx=sample_idx,
-            sample_w=sample_w,
-            sample_k=sample_k,
+            valence=np.bincount(self.geometry.faces.ravel(), minlength=masses.shape[0]).astype(float),
             tunnel_depth=tunnel,
         )
 

@@ -82,18 +82,16 @@ class Contact(NamedTuple):
     """The contacts: the :class:`Planes`, their ``clamps`` (P, V, 3) (``_contact.plane_clamps``), the
     per-vertex spring ``stiffness`` k (V,) [N/m] and normal ``damping`` c (V,) [N·s/m], the
     ``collider`` (11,) (segment ends a, b [m], radius [m] (0: none), velocity (3) [m/s], μ [-];
-    moved in place as it travels), its contact points ``sample_idx`` (S, 3) int with barycentric
-    ``sample_w`` (S, 3) and springs ``sample_k`` (S,) [N/m], and the ``tunnel_depth`` [m] past which
-    a vertex behind a plane is a blow-up."""
+    moved in place as it travels; felt by the shell's triangles, :mod:`._hand`), the ``valence``
+    (V,) [-] (faces around each vertex, which share its spring in the collider's contact), and the
+    ``tunnel_depth`` [m] past which a vertex behind a plane is a blow-up."""
 
     planes: Planes
     clamps: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
     collider: np.ndarray
-    sample_idx: np.ndarray
-    sample_w: np.ndarray
-    sample_k: np.ndarray
+    valence: np.ndarray
     tunnel_depth: float
 
 
