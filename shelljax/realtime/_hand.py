@@ -14,6 +14,11 @@ from ._contact import _friction
 #: The collider's slip velocity v_ε [m/s] of its regularised Coulomb friction.
 COLLIDER_SLIP_VELOCITY = 1e-2
 
+#: The triangles' backstop engages past this fraction of the collider's radius [-] of a face's
+#: penetration: an ordinary press stays on the vertices' springs (the reference's indenter), a
+#: collider slipping between vertices meets the face before its axis does.
+BACKSTOP_DEPTH = 0.5
+
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _clamp01(t):
@@ -185,29 +190,84 @@ def _face_push(x, f0, f1, f2, collider, s, w0, w1, w2):
     return -nx, -ny, -nz, r - min(h, d)
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _press(v, dt, body, buffers, collider, corners, push):
+    """Add the spring ``push`` = (unit direction of the force on the shell, magnitude f_n [N]) with
+    the collider's friction on the slip of the point Σ w_j x_j (``corners``: (j, w_j) × 3) to
+    ``buffers.force`` (by w) and ``buffers.collider_force``."""
+    nx, ny, nz, fn = push
+    (f0, w0), (f1, w1), (f2, w2) = corners
+    mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
+    wx = w0 * v[f0, 0] + w1 * v[f1, 0] + w2 * v[f2, 0] - collider[7]
+    wy = w0 * v[f0, 1] + w1 * v[f1, 1] + w2 * v[f2, 1] - collider[8]
+    wz = w0 * v[f0, 2] + w1 * v[f1, 2] + w2 * v[f2, 2] - collider[9]
+    vn = wx * nx + wy * ny + wz * nz
+    least = min(mass[f0], min(mass[f1], mass[f2]))
+    tx, ty, tz = wx - vn * nx, wy - vn * ny, wz - vn * nz
+    gx, gy, gz = _friction(tx, ty, tz, fn, collider[10], COLLIDER_SLIP_VELOCITY, least, dt)
+    fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
+    for j, w in corners:
+        force[j, 0] += w * fx
+        force[j, 1] += w * fy
+        force[j, 2] += w * fz
+    collider_force[0] += fx
+    collider_force[1] += fy
+    collider_force[2] += fz
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
+    """The vertices' springs: a vertex d [m] from the axis, d < r, is pushed along the gap from the
+    axis by k_j (r − d) (``contact.stiffness``), as the reference's indenter presses vertices."""
+    collider, k_contact = contact.collider, contact.stiffness
+    r = collider[6]
+    for j in range(x.shape[0]):
+        qx, qy, qz = _on_axis(x[j, 0], x[j, 1], x[j, 2], collider)
+        gx, gy, gz = x[j, 0] - qx, x[j, 1] - qy, x[j, 2] - qz
+        d2 = gx * gx + gy * gy + gz * gz
+        if d2 >= r * r or d2 == 0.0:
+            continue
+        d = math.sqrt(d2)
+        delta = r - d
+        depth[slot] = max(depth[slot], delta)
+        energy += 0.5 * k_contact[j] * delta * delta
+        _press(
+            v,
+            dt,
+            body,
+            buffers,
+            collider,
+            ((j, 1.0), (j, 0.0), (j, 0.0)),
+            (gx / d, gy / d, gz / d, k_contact[j] * delta),
+        )
+    return energy
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, energy):
-    """The moving capsule's contact with the shell's triangles, added to ``buffers.force``;
+    """The moving capsule's contact with the shell, added to ``buffers.force``;
     ``buffers.collider_force`` (3,) ← the force on the shell [N]; ``depth[slot]`` ← the deepest
     penetration [m]. Returns ``energy`` [J] plus the contact's.
 
     ``contact.collider`` (11,): a, b (segment ends [m]; equal: a sphere), radius r [m], velocity (3)
-    [m/s], μ [-]. For each face near the axis (its bounding sphere within r of the axis), the
-    closest points d [m] apart (``segment_triangle_closest``); at penetration δ > 0 (see
-    ``_face_push``) a spring k_f δ, k_f = Σ w_j k_j / Σ w_j² n_j [N/m] (the face's vertices'
+    [m/s], μ [-]. Two layers: the vertices' springs (``_vertex_contact``), which carry an ordinary
+    press as the reference's indenter does, and the triangles' backstop, for a collider thinner
+    than the mesh that its vertices would let through. For each face near the axis (its bounding
+    sphere within r of the axis), the closest points d [m] apart (``segment_triangle_closest``) and
+    the face's penetration δ (``_face_push``); past ``BACKSTOP_DEPTH`` × r a spring k_f (δ − δ_b),
+    δ_b = ``BACKSTOP_DEPTH`` r, k_f = Σ w_j k_j / Σ w_j² n_j [N/m] (the face's vertices'
     ``contact.stiffness`` k_j by the closest point's barycentric weights w, n_j = ``contact.valence``:
-    the faces around vertex j), so that a vertex's stiffness from all its faces' contacts,
-    Σ_f w_j² k_f, stays below the largest k of their vertices (about k_j, which the stable Δt
-    allows; Σ w_j k_j alone put n_j k_j on a pressed vertex and tripped the energy guard), and the
-    planes' friction against the slip of the face's point relative to the collider (v_ε =
-    ``COLLIDER_SLIP_VELOCITY``); the force goes to the vertices by w, so the shell gets exactly
-    −(the collider's reaction)."""
+    the faces around vertex j), so that a vertex's stiffness from all its faces, Σ_f w_j² k_f, stays
+    below the largest k of their vertices. Both with the planes' friction against the slip of the
+    pressed point relative to the collider (v_ε = ``COLLIDER_SLIP_VELOCITY``); a face's force goes to
+    its vertices by w, so the shell gets exactly −(the collider's reaction)."""
     collider, faces, k_contact, valence = contact.collider, geometry.faces, contact.stiffness, contact.valence
-    mass, force, collider_force = body.masses, buffers.force, buffers.collider_force
-    collider_force[:] = 0.0
-    r, mu = collider[6], collider[10]
+    buffers.collider_force[:] = 0.0
+    r = collider[6]
     if r <= 0.0:
         return energy
+    energy = _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy)
+    allowance = BACKSTOP_DEPTH * r
     for f in range(faces.shape[0]):
         f0, f1, f2 = faces[f, 0], faces[f, 1], faces[f, 2]
         # cheap reject: the face's bounding sphere (centroid, farthest vertex) farther than r from the axis
@@ -218,7 +278,7 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
         for j in (f0, f1, f2):
             bound = max(bound, (x[j, 0] - cx) ** 2 + (x[j, 1] - cy) ** 2 + (x[j, 2] - cz) ** 2)
         qx, qy, qz = _on_axis(cx, cy, cz, collider)
-        reach = math.sqrt(bound) + r
+        reach = math.sqrt(bound) + r - allowance
         if (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2 >= reach * reach:
             continue
         s, w0, w1, w2 = segment_triangle_closest(
@@ -229,27 +289,13 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
             (x[f2, 0], x[f2, 1], x[f2, 2]),
         )
         nx, ny, nz, delta = _face_push(x, f0, f1, f2, collider, s, w0, w1, w2)
-        if delta <= 0.0:
+        if delta <= allowance:
             continue
         depth[slot] = max(depth[slot], delta)
         share = w0 * w0 * valence[f0] + w1 * w1 * valence[f1] + w2 * w2 * valence[f2]
         k = (w0 * k_contact[f0] + w1 * k_contact[f1] + w2 * k_contact[f2]) / share
-        fn = k * delta
-        energy += 0.5 * k * delta * delta
-        wx = w0 * v[f0, 0] + w1 * v[f1, 0] + w2 * v[f2, 0] - collider[7]
-        wy = w0 * v[f0, 1] + w1 * v[f1, 1] + w2 * v[f2, 1] - collider[8]
-        wz = w0 * v[f0, 2] + w1 * v[f1, 2] + w2 * v[f2, 2] - collider[9]
-        vn = wx * nx + wy * ny + wz * nz
-        least = min(mass[f0], min(mass[f1], mass[f2]))
-        gx, gy, gz = _friction(wx - vn * nx, wy - vn * ny, wz - vn * nz, fn, mu, COLLIDER_SLIP_VELOCITY, least, dt)
-        fx, fy, fz = fn * nx + gx, fn * ny + gy, fn * nz + gz
-        for j, w in ((f0, w0), (f1, w1), (f2, w2)):
-            force[j, 0] += w * fx
-            force[j, 1] += w * fy
-            force[j, 2] += w * fz
-        collider_force[0] += fx
-        collider_force[1] += fy
-        collider_force[2] += fz
+        energy += 0.5 * k * (delta - allowance) ** 2
+        _press(v, dt, body, buffers, collider, ((f0, w0), (f1, w1), (f2, w2)), (nx, ny, nz, k * (delta - allowance)))
     return energy
 
 
