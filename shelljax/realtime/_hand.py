@@ -17,7 +17,7 @@ COLLIDER_SLIP_VELOCITY = 1e-2
 #: The triangles' backstop engages past this fraction of the collider's radius [-] of a face's
 #: penetration: an ordinary press stays on the vertices' springs (the reference's indenter), a
 #: collider slipping between vertices meets the face before its axis does.
-BACKSTOP_DEPTH = 0.5
+BACKSTOP_DEPTH = 0.25
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -215,31 +215,60 @@ def _press(v, dt, body, buffers, collider, corners, push):
     collider_force[2] += fz
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _far_root(qa, qb, qc):
+    """The larger root of qa t² + 2 qb t + qc = 0 (qa > 0), −inf where there is none."""
+    disc = qb * qb - qa * qc
+    if qa <= 0.0 or disc < 0.0:
+        return -math.inf
+    return (-qb + math.sqrt(disc)) / qa
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def exit_distance(p, u, collider):
+    """How far [m] the point p (3,) [m] inside the capsule ``collider`` goes along the unit vector u
+    to leave it: the capsule is convex, the union of its two end spheres and its cylinder, so the
+    exit is the farthest of their far crossings (the cylinder's only within the segment)."""
+    r = collider[6]
+    far = -math.inf
+    for e in (0, 3):
+        cx, cy, cz = p[0] - collider[e], p[1] - collider[e + 1], p[2] - collider[e + 2]
+        far = max(far, _far_root(1.0, cx * u[0] + cy * u[1] + cz * u[2], cx * cx + cy * cy + cz * cz - r * r))
+    dx, dy, dz = collider[3] - collider[0], collider[4] - collider[1], collider[5] - collider[2]
+    ll = dx * dx + dy * dy + dz * dz
+    if ll > 0.0:
+        cx, cy, cz = p[0] - collider[0], p[1] - collider[1], p[2] - collider[2]
+        cd, ud = (cx * dx + cy * dy + cz * dz) / ll, (u[0] * dx + u[1] * dy + u[2] * dz) / ll
+        # the components across the axis: c⊥ = c − (c·d̂) d̂, u⊥ likewise
+        px, py, pz = cx - cd * dx, cy - cd * dy, cz - cd * dz
+        qx, qy, qz = u[0] - ud * dx, u[1] - ud * dy, u[2] - ud * dz
+        t = _far_root(qx * qx + qy * qy + qz * qz, px * qx + py * qy + pz * qz, px * px + py * py + pz * pz - r * r)
+        if math.isfinite(t) and 0.0 <= cd + t * ud <= 1.0:
+            far = max(far, t)
+    return max(far, 0.0)
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
-    """The vertices' springs: a vertex d [m] from the axis, d < r, is pushed along the gap from the
-    axis by k_j (r − d) (``contact.stiffness``), as the reference's indenter presses vertices."""
-    collider, k_contact = contact.collider, contact.stiffness
+    """The vertices' springs: a vertex inside the capsule (closer than r to the axis) is pushed
+    into the shell, along −n_j (n_j = ∂V/∂x_j / |∂V/∂x_j|, its outward area-weighted normal, in
+    ``buffers.volume_gradient``), by k_j δ_j (``contact.stiffness``), δ_j [m] the distance it has to
+    go that way to leave the capsule (``exit_distance``): r − d under the axis, as the reference's
+    indenter pushes a vertex, and growing past r, never losing its direction, as the vertex gets
+    behind the axis (a vertex pushed along the gap from the axis would slip round it)."""
+    collider, k_contact, normal = contact.collider, contact.stiffness, buffers.volume_gradient
     r = collider[6]
     for j in range(x.shape[0]):
         qx, qy, qz = _on_axis(x[j, 0], x[j, 1], x[j, 2], collider)
         gx, gy, gz = x[j, 0] - qx, x[j, 1] - qy, x[j, 2] - qz
-        d2 = gx * gx + gy * gy + gz * gz
-        if d2 >= r * r or d2 == 0.0:
+        nn = math.sqrt(normal[j, 0] ** 2 + normal[j, 1] ** 2 + normal[j, 2] ** 2)
+        if gx * gx + gy * gy + gz * gz >= r * r or nn == 0.0:
             continue
-        d = math.sqrt(d2)
-        delta = r - d
+        nx, ny, nz = -normal[j, 0] / nn, -normal[j, 1] / nn, -normal[j, 2] / nn
+        delta = exit_distance((x[j, 0], x[j, 1], x[j, 2]), (nx, ny, nz), collider)
         depth[slot] = max(depth[slot], delta)
         energy += 0.5 * k_contact[j] * delta * delta
-        _press(
-            v,
-            dt,
-            body,
-            buffers,
-            collider,
-            ((j, 1.0), (j, 0.0), (j, 0.0)),
-            (gx / d, gy / d, gz / d, k_contact[j] * delta),
-        )
+        _press(v, dt, body, buffers, collider, ((j, 1.0), (j, 0.0), (j, 0.0)), (nx, ny, nz, k_contact[j] * delta))
     return energy
 
 
