@@ -307,7 +307,8 @@ def poke(
     ``depth`` below the touching point (the realtime's former reading) squeezes the realtime ball
     by about ĝ = 0.4 mm more: +2.5 % of the force. The same indenter height compares one
     configuration, different only in the contacts (barrier at vertices: ≈ 0.04 mm standoff;
-    penalty on the triangles: ``stiffness_factor`` × the dynamic default spring). As the engine,
+    penalty at vertices, ``stiffness_factor`` × the dynamic default spring; the hand's triangle
+    backstop is not engaged by this sphere). As the engine,
     the ground is frictionless and the shell held under the sphere; the reading is taken once
     settled (the force changes by < ``tolerance`` per five relaxations)."""
     from shelljax import shell3d as s3

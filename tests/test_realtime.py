@@ -514,8 +514,8 @@ def test_static_poke_matches_the_quasi_static_engine():
     """An 8 mm sphere 20 mm into the 478-face ball on the ground (no gravity, isothermal gas):
     the realtime ball relaxed under the collider at the engine's solved indenter height carries
     the force of shell3d.Indentation's quasi-static solve within the issue's 2 % (the same mesh,
-    rest shape and gas; what differs is the contact: penalty on the triangles against the
-    engine's barrier at vertices)."""
+    rest shape and gas; what differs is the contact law: penalty against the engine's barrier,
+    both at the vertices)."""
     from _scripts import load_script
 
     verify = load_script("experiments", "verify_realtime")

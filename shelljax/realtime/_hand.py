@@ -1,7 +1,7 @@
-"""Compiled (Numba) closest-point contact of the real-time runtime's moving capsule collider (the
-user's hand) with the shell's triangles (float64, SI units). ``collider_contact`` is the entry
-point (:mod:`._kernels` calls it once per force evaluation, after the planes');
-``segment_triangle_closest`` gives the closest points between a segment and a triangle."""
+"""Compiled (Numba) contact of the real-time runtime's moving capsule collider (the user's hand)
+with the shell (float64, SI units): the vertices' springs along their normals (``exit_distance``)
+and the triangles' closest-point backstop (``segment_triangle_closest``). ``collider_contact`` is
+the entry point (:mod:`._kernels` calls it once per force evaluation, after the planes')."""
 
 from __future__ import annotations
 
@@ -307,7 +307,7 @@ def collider_contact(x, v, dt, body, geometry, contact, buffers, depth, slot, en
         for j in (f0, f1, f2):
             bound = max(bound, (x[j, 0] - cx) ** 2 + (x[j, 1] - cy) ** 2 + (x[j, 2] - cz) ** 2)
         qx, qy, qz = _on_axis(cx, cy, cz, collider)
-        reach = math.sqrt(bound) + r - allowance
+        reach = math.sqrt(bound) + r
         if (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2 >= reach * reach:
             continue
         s, w0, w1, w2 = segment_triangle_closest(

@@ -82,7 +82,7 @@ class Contact(NamedTuple):
     """The contacts: the :class:`Planes`, their ``clamps`` (P, V, 3) (``_contact.plane_clamps``), the
     per-vertex spring ``stiffness`` k (V,) [N/m] and normal ``damping`` c (V,) [N·s/m], the
     ``collider`` (11,) (segment ends a, b [m], radius [m] (0: none), velocity (3) [m/s], μ [-];
-    moved in place as it travels; felt by the shell's triangles, :mod:`._hand`), the ``valence``
+    moved in place as it travels; felt by the vertices and, as a backstop, the triangles, :mod:`._hand`), the ``valence``
     (V,) [-] (faces around each vertex, which share its spring in the collider's contact), and the
     ``tunnel_depth`` [m] past which a vertex behind a plane is a blow-up."""
 
