@@ -105,10 +105,19 @@ def test_a_hand_behind_the_surface_is_expelled_and_the_shell_gets_its_impulse():
     np.testing.assert_allclose(ball.total_mass * (v1 - v0), impulse, rtol=1e-9, atol=1e-12)
 
 
+def _gap_to_capsule(q, a, b, radius):
+    """Distance [m] from q to the capsule a–b of ``radius`` (negative inside)."""
+    d = b - a
+    w = np.clip((q - a) @ d / (d @ d), 0.0, 1.0) if d @ d > 0.0 else 0.0
+    return np.linalg.norm(q - a - w * d) - radius
+
+
 def test_the_exit_distance_matches_a_bisection():
     """``exit_distance`` (closed form: the far crossings of the end spheres and the cylinder) against
-    a bisection on the distance to the segment along the ray (convex in t), to 1e-12 m."""
+    a bisection on the distance to the capsule along the ray (convex in t, so it crosses 0 once),
+    to 1e-12 m."""
     rng = np.random.default_rng(7)
+    checked = 0
     for _ in range(200):
         a, b = rng.standard_normal(3), rng.standard_normal(3)
         if rng.random() < 0.2:
@@ -117,21 +126,16 @@ def test_the_exit_distance_matches_a_bisection():
         p = a + rng.random() * (b - a) + 0.5 * radius * rng.standard_normal(3) / np.sqrt(3.0)
         u = rng.standard_normal(3)
         u /= np.linalg.norm(u)
-        collider = np.concatenate([a, b, [radius], np.zeros(4)])
-        t = _hand.exit_distance(tuple(p), tuple(u), collider)
-
-        def gap(s):
-            q = p + s * u
-            d = b - a
-            w = np.clip((q - a) @ d / (d @ d), 0.0, 1.0) if d @ d > 0.0 else 0.0
-            return np.linalg.norm(q - a - w * d) - radius
-
-        if gap(0.0) >= 0.0:
+        if _gap_to_capsule(p, a, b, radius) >= 0.0:
             continue  # outside: not a contact
-        lo, hi = 0.0, 10.0
+        t = _hand.exit_distance(tuple(p), tuple(u), np.concatenate([a, b, [radius], np.zeros(4)]))
+        lo, hi = 0.0, 10.0  # 10 m along the ray is outside these unit-size capsules
         for _ in range(200):
-            lo, hi = ((lo + hi) / 2, hi) if gap((lo + hi) / 2) < 0.0 else (lo, (lo + hi) / 2)
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _gap_to_capsule(p + mid * u, a, b, radius) < 0.0 else (lo, mid)
         assert abs(t - lo) < 1e-12, (t, lo)
+        checked += 1
+    assert checked > 100  # most random points fall inside
 
 
 def _dense_least_distance(a, b, tri, n_segment=400, n_triangle=60):
