@@ -255,7 +255,7 @@ def _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
     ``buffers.volume_gradient``), by k_j δ_j (``contact.stiffness``), δ_j [m] the distance it has to
     go that way to leave the capsule (``exit_distance``): r − d under the axis, as the reference's
     indenter pushes a vertex, and growing past r, never losing its direction, as the vertex gets
-    behind the axis (a vertex pushed along the gap from the axis would slip round it)."""
+    behind the axis (a vertex pushed along the gap from the axis would slip round it), up to 2r."""
     collider, k_contact, normal = contact.collider, contact.stiffness, buffers.volume_gradient
     r = collider[6]
     for j in range(x.shape[0]):
@@ -265,7 +265,8 @@ def _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
         if gx * gx + gy * gy + gz * gz >= r * r or nn == 0.0:
             continue
         nx, ny, nz = -normal[j, 0] / nn, -normal[j, 1] / nn, -normal[j, 2] / nn
-        delta = exit_distance((x[j, 0], x[j, 1], x[j, 2]), (nx, ny, nz), collider)
+        # at most the capsule's width: a vertex deep in a long capsule, its normal along the axis, is not flung
+        delta = min(exit_distance((x[j, 0], x[j, 1], x[j, 2]), (nx, ny, nz), collider), 2.0 * r)
         depth[slot] = max(depth[slot], delta)
         energy += 0.5 * k_contact[j] * delta * delta
         _press(v, dt, body, buffers, collider, ((j, 1.0), (j, 0.0), (j, 0.0)), (nx, ny, nz, k_contact[j] * delta))
