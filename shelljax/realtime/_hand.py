@@ -265,11 +265,12 @@ def _vertex_contact(x, v, dt, body, contact, buffers, depth, slot, energy):
         if gx * gx + gy * gy + gz * gz >= r * r or nn == 0.0:
             continue
         nx, ny, nz = -normal[j, 0] / nn, -normal[j, 1] / nn, -normal[j, 2] / nn
-        # at most the capsule's width: a vertex deep in a long capsule, its normal along the axis, is not flung
-        delta = min(exit_distance((x[j, 0], x[j, 1], x[j, 2]), (nx, ny, nz), collider), 2.0 * r)
+        delta = exit_distance((x[j, 0], x[j, 1], x[j, 2]), (nx, ny, nz), collider)
         depth[slot] = max(depth[slot], delta)
-        energy += 0.5 * k_contact[j] * delta * delta
-        _press(v, dt, body, buffers, collider, ((j, 1.0), (j, 0.0), (j, 0.0)), (nx, ny, nz, k_contact[j] * delta))
+        # at most the capsule's width: a vertex deep in a long capsule, its normal along the axis, is not flung
+        pushed = min(delta, 2.0 * r)
+        energy += k_contact[j] * pushed * (delta - 0.5 * pushed)  # ∫ k min(δ, 2r) dδ
+        _press(v, dt, body, buffers, collider, ((j, 1.0), (j, 0.0), (j, 0.0)), (nx, ny, nz, k_contact[j] * pushed))
     return energy
 
 
