@@ -121,4 +121,4 @@ def stage(
         stages.append({"stage": name, "wall_seconds": wall, **where, **log.to_dict()})
     if verbose:
         on = "" if device is None else f" on {where['device']}"
-        tqdm.write(f"{name}{on}: {wall:.1f} s; {log.summary()}", file=sys.stderr)
+        tqdm.write(f"{name}: {wall:.1f} s{on}; {log.summary()}", file=sys.stderr)
