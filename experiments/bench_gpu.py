@@ -218,10 +218,12 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--rows",
         nargs="+",
-        choices=["main", "axisym", "solve"],
+        choices=["main", "axisym", "solve", "cpu-check"],
         default=["main", "axisym", "solve"],
-        help="what to run",
+        help="what to run; cpu-check: the main job on the CPU, this tree against --against",
     )
+    ap.add_argument("--against", default=None, help="cpu-check: another checkout of shelljax (e.g. the commit before)")
+    ap.add_argument("--repeats", type=int, default=3, help="cpu-check: alternating runs of each tree")
     args = ap.parse_args(argv)
     args.curves = args.curves or (256 if args.quick else 100_000)
     device = _device()

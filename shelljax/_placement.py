@@ -80,6 +80,17 @@ def current_device() -> jax.Device:
     return jax.devices(chosen)[0] if isinstance(chosen, str) else chosen
 
 
+def export_platform() -> str:
+    """``jax.export``'s name of the current device's platform (``cpu``, ``cuda``, ``rocm``, ``tpu``):
+    a program traced for a stage is exported for the device the stage runs on, which need not be
+    JAX's default backend (``jax.export.default_export_platform``)."""
+    platform = current_device().platform
+    if platform not in _ACCELERATOR_PLATFORMS:
+        return platform
+    default = jax.export.default_export_platform()
+    return default if default in ("cuda", "rocm") else "cuda"
+
+
 def on_current_device(fn: Callable) -> Callable:
     """``fn`` wrapped to run under this thread's current device, for another thread to call:
     ``jax.default_device`` is thread-local, and a stage's helper threads (batches over host

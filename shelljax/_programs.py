@@ -38,6 +38,8 @@ import jax
 import jaxlib
 import numpy as np
 
+from ._placement import export_platform
+
 # every source of the package shapes the key, and the shipped programs
 # are the package's data (pyproject's package-data)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -77,7 +79,7 @@ def program_key(name: str, args: tuple, static: dict) -> str:
     leaves, treedef = jax.tree_util.tree_flatten(args)
     with np.printoptions(threshold=sys.maxsize):  # a static array's repr in full, never "..."
         structure = str(treedef)
-    versions = [source_fingerprint(), jax.__version__, jaxlib.__version__, jax.export.default_export_platform()]
+    versions = [source_fingerprint(), jax.__version__, jaxlib.__version__, export_platform()]
     parts = [
         name,
         *versions,
@@ -137,8 +139,9 @@ def persistent_jit(fn: Callable, *, cpu_compiler_options: dict | None = None) ->
             with _lock(key):
                 program = _LOADED.get(key)
                 if program is None:
-                    # the backend is asked only now: importing shelljax does not start JAX
-                    on_cpu = jax.export.default_export_platform() == "cpu"
+                    # the device is asked only now: importing shelljax does not start JAX; a
+                    # stage's program is exported for its device (shelljax.Placement), not the default
+                    on_cpu = export_platform() == "cpu"
                     options = _known_options(cpu_compiler_options or {}) if on_cpu else {}
                     program = _load_or_export(fn, key, args, static, options)
                     program.lower(*leaves).compile()  # kept by jit for the calls to come
@@ -182,9 +185,9 @@ def _load_or_export(fn: Callable, key: str, args: tuple, static: dict, options: 
 
         try:
             unchecked = [jax.export.DisabledSafetyCheck.custom_call(kernel) for kernel in _LAPACK_KERNELS]
-            exported = jax.export.export(
-                jax.jit(flat), platforms=[jax.export.default_export_platform()], disabled_checks=unchecked
-            )(*leaves)
+            exported = jax.export.export(jax.jit(flat), platforms=[export_platform()], disabled_checks=unchecked)(
+                *leaves
+            )
         except Exception:  # not exportable: the plain trace raises the function's own errors
             return jax.jit(flat, compiler_options=options)
         _write(key, exported)
