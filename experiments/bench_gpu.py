@@ -172,6 +172,12 @@ def _solve_rows(args, workdir: Path, has_gpu: bool) -> list[dict]:
     return rows
 
 
+def _commit(tree: Path) -> str | None:
+    """The checked-out commit of ``tree`` (None outside git)."""
+    proc = subprocess.run(["git", "-C", str(tree), "rev-parse", "HEAD"], check=False, capture_output=True, text=True)
+    return proc.stdout.strip() or None
+
+
 def _cpu_check_row(args, workdir: Path) -> dict:
     """The main job on the CPU, this tree against ``--against`` (another checkout), warm, run
     alternately ``--repeats`` times after one run each to fill their caches; medians [s]."""
@@ -192,6 +198,7 @@ def _cpu_check_row(args, workdir: Path) -> dict:
     this, base = statistics.median(seconds["this"]), statistics.median(seconds["base"])
     row = _row(f"main job warm, CPU: this tree (as GPU) vs {trees['base'].name}", this, base, NO_SLOWER)
     row["note"] = f"medians of {args.repeats}, alternating; this tree: {seconds['this']}, base: {seconds['base']}"
+    row["commits"] = {name: _commit(tree) for name, tree in trees.items()}
     return row
 
 

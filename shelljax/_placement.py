@@ -194,8 +194,9 @@ def requested_placement(request: str) -> Placement:
 
 
 def to_device(tree: Any, device: jax.Device) -> Any:
-    """A stage's inputs, its arrays put on ``device`` (the stage's entry)."""
-    return jax.device_put(tree, device)
+    """A stage's inputs, their JAX arrays put on ``device`` (the stage's entry); NumPy arrays and
+    other leaves stay as they are (host data a stage reads on the host, e.g. a sparsity pattern)."""
+    return jax.tree.map(lambda leaf: jax.device_put(leaf, device) if isinstance(leaf, jax.Array) else leaf, tree)
 
 
 def to_host(tree: Any) -> Any:

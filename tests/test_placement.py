@@ -42,7 +42,8 @@ _RULE_SCRIPT = textwrap.dedent(
     p = Placement("auto")
     with p.stage(StageKind.BATCHED) as device:
         made = jax.numpy.ones(3) * 2.0                       # created in the stage
-        moved = to_device(np.arange(3.0), device)            # an input put on entry
+        entry = to_device({"on_host": jax.device_put(np.arange(3.0), host), "pattern": np.arange(2)}, device)
+        moved = entry["on_host"]                             # an input put on entry; NumPy stays NumPy
         summed = jax.jit(lambda x: x + made)(moved)          # computed in the stage
         # helper threads of a batch compute on the stage's device too
         threads = map_batch(lambda rows: rows + jax.numpy.zeros(1) + current_device().id, np.zeros((4, 1)), workers=2)
@@ -50,7 +51,7 @@ _RULE_SCRIPT = textwrap.dedent(
     with p.stage(StageKind.LATENCY):
         latency_made = jax.numpy.ones(2)
     print("STAGE", device.id, [list(a.devices())[0].id for a in (made, moved, summed, latency_made)],
-          type(back["summed"]).__name__, back["label"], threads.ravel().tolist())
+          type(back["summed"]).__name__, back["label"], threads.ravel().tolist(), type(entry["pattern"]).__name__)
     """
 )
 
@@ -68,8 +69,9 @@ def test_the_rule_per_stage_kind_on_virtual_devices():
         "gpu": [1, 1, 1, 1, True, True],
     }
     # a batched stage's arrays (made there, put there, computed there) live on its device; a
-    # latency stage's on the host; results come back as NumPy; the batch's threads ran on device 1
-    assert lines["STAGE"] == "1 [1, 1, 1, 0] ndarray x [1.0, 1.0, 1.0, 1.0]"
+    # latency stage's on the host; results come back as NumPy; the batch's threads ran on device 1;
+    # host data (NumPy) entering a stage stays on the host
+    assert lines["STAGE"] == "1 [1, 1, 1, 0] ndarray x [1.0, 1.0, 1.0, 1.0] ndarray"
 
 
 def test_gpu_without_one_is_refused_naming_the_devices_and_the_extra():

@@ -15,7 +15,7 @@ from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from .._files import atomic_write_text, check_output_dir
-from .._placement import Placement, StageKind, requested_placement
+from .._placement import Placement, StageKind, requested_placement, to_device
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
@@ -352,12 +352,12 @@ def run_scenario(
     """
     out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
     placement = requested_placement(scenario.device)  # 'gpu' without one is refused before any work
-    with placement.stage(StageKind.LATENCY):  # the object's estimate: one session's fit
+    with placement.stage(StageKind.LATENCY):  # the object's estimate (one session's fit) and its shell, on the host
         obj = resolve_object(scenario, session)
-    system = build_system(scenario, obj)
-    if scenario.prescribed is not None:
-        system = hold(scenario, system)
-    _check_time_step(scenario, system)
+        system = build_system(scenario, obj)
+        if scenario.prescribed is not None:
+            system = hold(scenario, system)
+        _check_time_step(scenario, system)
     out.mkdir(parents=True, exist_ok=True)  # only once the config is accepted: a refused one leaves nothing
     calibration, stages = None, []
     damping = scenario.contact_damping or 0.0
@@ -366,7 +366,7 @@ def run_scenario(
             placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
             stage("calibration", verbose, stages, device),
         ):
-            damping, calibration = _calibrate(scenario, system, progress)
+            damping, calibration = _calibrate(scenario, to_device(system, device), progress)
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])
     runs, digests = _run_all(scenario, system, out, progress, (verbose, stages), placement)
     with stage("scenario figures", verbose, stages):
@@ -401,8 +401,9 @@ def _run_all(
                 placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
                 stage(label, verbose, stages, device),
             ):
+                on_device = to_device(system, device)  # the shell enters its stage's device once
                 trajectory = _simulate(
-                    scenario, system, initial_state(scenario, system, h), scenario.duration, progress
+                    scenario, on_device, initial_state(scenario, on_device, h), scenario.duration, progress
                 )
                 run_dir = out / f"h{h:.2f}m"
                 d.write_results(
@@ -429,7 +430,7 @@ def _run_all(
                 placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
                 stage("swing", verbose, stages, device),
             ):
-                runs.append(_swing(scenario, system, out, progress))
+                runs.append(_swing(scenario, to_device(system, device), out, progress))
             bar.update(1)
     return runs, digests
 
