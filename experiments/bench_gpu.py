@@ -153,7 +153,7 @@ def _solve_rows(args, workdir: Path, has_gpu: bool) -> list[dict]:
         return [_row(n, None, None, TARGETS.get(n), "experiments/bench_device_solve.py is absent") for n in names]
     out = workdir / "device-solve.json"
     command = [sys.executable, str(script), "--faces", *map(str, faces), "--rows", "curve", "drop", "--out", str(out)]
-    command += ["--repeats", "1" if args.quick else "3"]
+    command += ["--repeats", str(args.solve_repeats)]
     seconds, tail = _timed(command, _env(), args.timeout)
     if seconds is None or not out.exists():
         return [_row(n, None, None, TARGETS.get(n), f"bench_device_solve.py failed: {tail[-200:]}") for n in names]
@@ -228,6 +228,9 @@ def main(argv=None) -> int:
         choices=["main", "axisym", "solve", "cpu-check"],
         default=["main", "axisym", "solve"],
         help="what to run; cpu-check: the main job on the CPU, this tree against --against",
+    )
+    ap.add_argument(
+        "--solve-repeats", type=int, default=1, help="bench_device_solve.py's --repeats (1 keeps the check in 8 min)"
     )
     ap.add_argument("--against", default=None, help="cpu-check: another checkout of shelljax (e.g. the commit before)")
     ap.add_argument("--repeats", type=int, default=3, help="cpu-check: alternating runs of each tree")
