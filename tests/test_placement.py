@@ -124,3 +124,40 @@ def test_device_option_is_one_line_errors(capsys):
     assert "--device: invalid choice: 'tpu'" in capsys.readouterr().err
     assert main(["estimate", session, "--method", "closed-form", "--device", "auto", "--json"]) == 0
     assert '"gauge_pressure"' in capsys.readouterr().out
+
+
+def _fresh_python(script: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    env.pop("JAX_PLATFORMS", None)
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, env=env)
+
+
+def test_importing_shelljax_starts_no_backend_so_device_cpu_is_in_time():
+    # jax_platforms is read when JAX first starts a backend: a platform this machine lacks, set
+    # after every import, must then fail the first computation, which shows none had started
+    proc = _fresh_python(
+        """
+        import jax
+        import shelljax, shelljax.cli, shelljax.runner, shelljax.scenario, shelljax.estimate
+        import shelljax.axisym, shelljax.shell3d, shelljax.dynamics, shelljax.diagnose, shelljax.rig
+        jax.config.update("jax_platforms", "tpu")
+        try:
+            jax.devices()
+        except RuntimeError:
+            print("NOT STARTED")
+        """
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "NOT STARTED"
+    # and --device cpu, in a fresh process, restricts JAX to its CPU before it starts
+    proc = _fresh_python(
+        f"""
+        import jax
+        from shelljax.cli import main
+        assert main(["estimate", {str(bundled_data_dir() / "sessions" / "pezzi.toml")!r}, "--method", "closed-form",
+                     "--device", "cpu", "--json"]) == 0
+        print("PLATFORMS", jax.config.jax_platforms, [d.platform for d in jax.devices()])
+        """
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "PLATFORMS cpu ['cpu']"
