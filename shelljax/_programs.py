@@ -10,7 +10,8 @@ itself, keyed by everything that shapes it:
 * the versions of jax and jaxlib (an exported program may call jaxlib's LAPACK kernels, whose
   interface is stable only within a version);
 * the arguments' tree structure, including every static field of an ``eqx.Module``, and each
-  array leaf's shape and dtype; the values of the static arguments; the backend.
+  array leaf's shape and dtype; the values of the static arguments; the platform of the device
+  the calling stage runs on (``shelljax.Placement``), which need not be JAX's default backend.
 
 A program is looked for in memory, then in ``programs/`` under JAX's persistent-cache directory
 (see :mod:`shelljax`; off with ``SHELLJAX_NO_COMPILATION_CACHE=1``), then among the programs the

@@ -59,7 +59,9 @@ _RULE_SCRIPT = textwrap.dedent(
 def test_the_rule_per_stage_kind_on_virtual_devices():
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
-    proc = subprocess.run([sys.executable, "-c", _RULE_SCRIPT], capture_output=True, text=True, env=env, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", _RULE_SCRIPT], check=False, capture_output=True, text=True, env=env, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
     lines = {line.split(" ", 1)[0]: line.split(" ", 1)[1] for line in proc.stdout.splitlines() if " " in line}
     # device ids per request: latency, batched, small sparse, large sparse; then sparse_on_accelerator
@@ -129,7 +131,9 @@ def test_device_option_is_one_line_errors(capsys):
 def _fresh_python(script: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
     env.pop("JAX_PLATFORMS", None)
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, env=env)
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(script)], check=False, capture_output=True, text=True, env=env
+    )
 
 
 def test_importing_shelljax_starts_no_backend_so_device_cpu_is_in_time():
