@@ -33,6 +33,7 @@ if not _os.environ.get("SHELLJAX_NO_COMPILATION_CACHE") and _jax.config.jax_comp
     _jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 from ._errors import DeviceError, InvalidInputError, NoConvergenceError, ShelljaxError
+from ._placement import Placement, StageKind
 from ._solution import RESULTS, Solution
 from .physics import ShellProperties
 

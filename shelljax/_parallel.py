@@ -2,8 +2,8 @@
 
 XLA on CPU runs a computation made of small operations (a vmapped Newton loop on ~200 unknowns)
 on one core, and two computations dispatched one after the other run one after the other.
-Dispatched from separate threads they run at once (docs/axisym.md, *Benchmark*). On a GPU the
-batch is left whole. Public as ``shelljax.axisym.cpu_workers`` and ``shelljax.axisym.map_batch``.
+Dispatched from separate threads they run at once (docs/axisym.md, *Benchmark*), each on the
+caller's device. On a GPU the batch is left whole. Public as ``shelljax.axisym.cpu_workers`` and ``shelljax.axisym.map_batch``.
 """
 
 from __future__ import annotations
@@ -15,10 +15,13 @@ from typing import Callable
 import jax
 import numpy as np
 
+from ._placement import current_device, on_current_device
+
 
 def cpu_workers() -> int:
-    """Threads worth using for a batch: the usable CPU cores on the CPU backend, else 1."""
-    if jax.default_backend() != "cpu":
+    """Threads worth using for a batch: the usable CPU cores when it computes on the CPU (the
+    current device: ``shelljax.Placement``'s stage), else 1."""
+    if current_device().platform != "cpu":
         return 1
     try:
         return len(os.sched_getaffinity(0))
@@ -47,7 +50,8 @@ def map_batch(fn: Callable, batch, workers: int | None = None, rows_per_call: in
         parts = [fn(slices[0])]
     else:
         with ThreadPoolExecutor(min(workers, calls)) as pool:
-            parts = list(pool.map(lambda s: jax.block_until_ready(fn(s)), slices))
+            # each thread computes on the caller's device (jax.default_device is thread-local)
+            parts = list(pool.map(on_current_device(lambda s: jax.block_until_ready(fn(s))), slices))
     return jax.tree_util.tree_map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:size], *parts)
 
 

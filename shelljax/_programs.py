@@ -10,7 +10,8 @@ itself, keyed by everything that shapes it:
 * the versions of jax and jaxlib (an exported program may call jaxlib's LAPACK kernels, whose
   interface is stable only within a version);
 * the arguments' tree structure, including every static field of an ``eqx.Module``, and each
-  array leaf's shape and dtype; the values of the static arguments; the backend.
+  array leaf's shape and dtype; the values of the static arguments; the platform of the device
+  the calling stage runs on (``shelljax.Placement``), which need not be JAX's default backend.
 
 A program is looked for in memory, then in ``programs/`` under JAX's persistent-cache directory
 (see :mod:`shelljax`; off with ``SHELLJAX_NO_COMPILATION_CACHE=1``), then among the programs the
@@ -37,6 +38,8 @@ from pathlib import Path
 import jax
 import jaxlib
 import numpy as np
+
+from ._placement import export_platform
 
 # every source of the package shapes the key, and the shipped programs
 # are the package's data (pyproject's package-data)
@@ -77,7 +80,7 @@ def program_key(name: str, args: tuple, static: dict) -> str:
     leaves, treedef = jax.tree_util.tree_flatten(args)
     with np.printoptions(threshold=sys.maxsize):  # a static array's repr in full, never "..."
         structure = str(treedef)
-    versions = [source_fingerprint(), jax.__version__, jaxlib.__version__, jax.export.default_export_platform()]
+    versions = [source_fingerprint(), jax.__version__, jaxlib.__version__, export_platform()]
     parts = [
         name,
         *versions,
@@ -137,8 +140,9 @@ def persistent_jit(fn: Callable, *, cpu_compiler_options: dict | None = None) ->
             with _lock(key):
                 program = _LOADED.get(key)
                 if program is None:
-                    # the backend is asked only now: importing shelljax does not start JAX
-                    on_cpu = jax.export.default_export_platform() == "cpu"
+                    # the device is asked only now: importing shelljax does not start JAX; a
+                    # stage's program is exported for its device (shelljax.Placement), not the default
+                    on_cpu = export_platform() == "cpu"
                     options = _known_options(cpu_compiler_options or {}) if on_cpu else {}
                     program = _load_or_export(fn, key, args, static, options)
                     program.lower(*leaves).compile()  # kept by jit for the calls to come
@@ -182,9 +186,9 @@ def _load_or_export(fn: Callable, key: str, args: tuple, static: dict, options: 
 
         try:
             unchecked = [jax.export.DisabledSafetyCheck.custom_call(kernel) for kernel in _LAPACK_KERNELS]
-            exported = jax.export.export(
-                jax.jit(flat), platforms=[jax.export.default_export_platform()], disabled_checks=unchecked
-            )(*leaves)
+            exported = jax.export.export(jax.jit(flat), platforms=[export_platform()], disabled_checks=unchecked)(
+                *leaves
+            )
         except Exception:  # not exportable: the plain trace raises the function's own errors
             return jax.jit(flat, compiler_options=options)
         _write(key, exported)

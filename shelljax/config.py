@@ -23,6 +23,7 @@ from ._options import (
     WRINKLE_LAWS,
     EstimatorOptions,
 )
+from ._placement import DEVICE_REQUESTS
 from ._toml import TomlReader, read_toml
 from .executor import ExecutorOptions
 from .paper import PAPER_KS
@@ -38,6 +39,7 @@ _TOP_KEYS = {
     "outputs",
     "rig",
     "executor",
+    "compute",
 }
 ESTIMATOR_KEYS = {
     "methods",
@@ -56,6 +58,7 @@ _SESSION_KEYS = {"paths"}
 _OUTPUT_KEYS = {"figures"}
 _RIG_KEYS = {"path"}
 _EXECUTOR_KEYS = {"workers", "cluster", "cache_dir"}
+COMPUTE_KEYS = {"device"}
 _DOC = "docs/configs.md"
 
 
@@ -74,7 +77,8 @@ class ExperimentConfig:
     [estimators] table and the config's ``seed`` as :class:`shelljax.estimate.EstimatorOptions`
     (its ``k_s`` is None: the runner sets the one it calibrates or is given); ``rig``: a rig file
     (``shelljax rig calibrate``) that fit and bayes estimate through, or None; ``executor``: where
-    the sessions run (the [executor] table, docs/cluster.md; in-process without one).
+    the sessions run (the [executor] table, docs/cluster.md; in-process without one); ``device``:
+    the [compute] table's device request, ``auto``, ``cpu`` or ``gpu`` (docs/gpu.md).
     """
 
     source: Path
@@ -90,6 +94,7 @@ class ExperimentConfig:
     figures: bool
     rig: Path | None = None
     executor: ExecutorOptions = dataclasses.field(default_factory=ExecutorOptions)
+    device: str = "auto"
 
 
 def resolve_paths(path: Path, field: str, patterns) -> tuple[Path, ...]:
@@ -150,7 +155,15 @@ def load_config(path: str | Path) -> ExperimentConfig:
         **calibration,
         rig=None if rig is None else rig[0],
         executor=executor_settings(path, reader.table(data, "executor", _EXECUTOR_KEYS) or {}),
+        device=compute_device(path, reader.table(data, "compute", COMPUTE_KEYS) or {}),
     )
+
+
+def compute_device(path: Path, table: dict) -> str:
+    """The device request of a [compute] table (experiment and scenario configs; docs/gpu.md):
+    ``auto`` (the default), ``cpu`` or ``gpu``."""
+    reader = TomlReader(path, doc="docs/gpu.md")
+    return reader.choice(table, "device", "compute.", DEVICE_REQUESTS, "auto", what="device request")
 
 
 def executor_settings(path: Path, table: dict) -> ExecutorOptions:

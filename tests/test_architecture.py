@@ -33,6 +33,7 @@ LAYERS = {  # rank: a module may import ranks ≤ its own
     "geometry": 1,
     "sensing": 1,
     "executor": 1,
+    "_placement": 1,
     "axisym": 2,
     "shell3d": 2,
     "_parallel": 2,

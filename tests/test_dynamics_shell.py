@@ -281,7 +281,7 @@ preview_gif = true
 def test_cli_simulate_tiny_config(tmp_path, capsys):
     config = tmp_path / "tiny.toml"
     config.write_text(TINY)
-    assert main(["simulate", str(config), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert main(["simulate", str(config), "--out", str(tmp_path / "out"), "--quiet", "--device", "cpu"]) == 0
     run = tmp_path / "out" / "h0.00m"
     results = json.loads((run / "results.json").read_text())
     # Backward Euler at 2 ms damps a 2 mm drop to rest: the check is that it lands and everything is written.
@@ -298,6 +298,11 @@ def test_cli_simulate_tiny_config(tmp_path, capsys):
     summary = json.loads((tmp_path / "out" / "scenario.json").read_text())
     assert summary["parameters"]["mesh_faces"] == 210  # the remesher's nearest to 200
     assert "results:" in capsys.readouterr().out
+    # where it ran: the request, and each stage's device (the drop: a sparse stage, on the CPU here)
+    assert summary["placement"]["request"] == "cpu"
+    assert [(s["stage"], s["device"]) for s in summary["compilation"]["stages"] if "device" in s] == [
+        ("drop 0.00 m", "cpu:0")
+    ]
 
 
 def test_scenario_calibrates_the_cor_even_past_critical_damping(tmp_path):

@@ -63,6 +63,7 @@ PARSED_ONLY = {
     "shelljax validate my_session.toml": "the reader's own file",
     "shelljax run configs/paper.toml --out runs/": "the main job, about 2 minutes",
     "shelljax run configs/paper.toml --workers 2": "the main job on Dask workers",
+    "shelljax run configs/paper.toml --device cpu": "the main job, every stage on the CPU",
     "shelljax simulate configs/drop.toml --out runs/drop": "about 2.5 minutes",
     "shelljax simulate configs/bounce.toml --out runs/bounce": "about 2 minutes",
     "shelljax simulate configs/hammer.toml --out runs/hammer": "about 40 s",

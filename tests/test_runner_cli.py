@@ -251,5 +251,15 @@ def test_the_main_job_prints_compile_logs_only_when_asked(tmp_path, capsys):
     assert main(["run", str(config), "--out", str(tmp_path / "quiet"), "--quiet"]) == 0
     captured = capsys.readouterr()
     assert "programs compiled" not in captured.out + captured.err and "P_g fit" in captured.out
-    assert main(["run", str(config), "--out", str(tmp_path / "verbose"), "--quiet", "--verbose"]) == 0
-    assert "heldout_pezzi_1100Pa.toml: fit:" in capsys.readouterr().err
+    assert (
+        main(["run", str(config), "--out", str(tmp_path / "verbose"), "--quiet", "--verbose", "--device", "cpu"]) == 0
+    )
+    assert re.search(r"heldout_pezzi_1100Pa.toml: fit: [\d.]+ s on cpu:0;", capsys.readouterr().err)
+    # results.json says where each stage ran, and what the request resolved to (no GPU here: the CPU)
+    for run, request in (("quiet", "auto"), ("verbose", "cpu")):
+        (results_path,) = (tmp_path / run).glob("*/results.json")
+        results = json.loads(results_path.read_text())
+        assert results["placement"]["request"] == request
+        assert set(results["placement"]["resolved"].values()) == {"cpu:0"}
+        (fit_stage,) = results["compilation"]["stages"]
+        assert (fit_stage["device"], fit_stage["device_kind"]) == ("cpu:0", "cpu")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -17,7 +18,7 @@ from ..physics import GAS_LAWS, gas_law
 from ..replica import MESH_FACES
 from ..report import summary_text
 from . import _diagnose, _rig
-from ._common import resumed_out
+from ._common import add_device_argument, command_placement, resumed_out
 
 __all__ = ["build_parser", "main", "summary_text"]  # summary_text: the diagnosis's summary, for notebooks
 
@@ -35,6 +36,7 @@ def _cmd_run(args) -> int:
             verbose=args.verbose,
             executor=executor_options(args) if given else None,
             resume=args.resume,
+            device=args.device,
         )
     except KeyboardInterrupt:
         return 130  # the runner said how to resume
@@ -158,6 +160,8 @@ def _cmd_simulate(args) -> int:
     from ..scenario import load_scenario, run_scenario
 
     scenario = load_scenario(args.config)
+    if args.device is not None:
+        scenario = dataclasses.replace(scenario, device=args.device)
     if scenario.sweep is not None:
         return _simulate_sweep(scenario, args, executor_options(args))
     if args.workers is not None or args.cluster is not None or args.resume is not None:
@@ -306,6 +310,7 @@ def _register_play(sub) -> None:
     )
     play.add_argument("--host", default="127.0.0.1", help="address the live viewer listens on")
     play.add_argument("--port", type=whole(1, 65535), default=8080, help="TCP port of the live viewer")
+    add_device_argument(play)
     play.set_defaults(func=_cmd_play)
 
 
@@ -326,6 +331,7 @@ def _register_run(sub) -> None:
     run.add_argument("--quiet", action="store_true", help="no progress bars")
     run.add_argument("--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it")
     add_executor_arguments(run)
+    add_device_argument(run, whole=None)
     run.set_defaults(func=_cmd_run)
 
 
@@ -400,6 +406,7 @@ def _register_estimate(sub) -> None:
     est.add_argument(
         "--verbose", action="store_true", help="print each stage's wall time and what JAX compiled in it (on stderr)"
     )
+    add_device_argument(est)
     est.set_defaults(func=_cmd_estimate)
 
 
@@ -420,6 +427,7 @@ def _register_simulate(sub) -> None:
     add_executor_arguments(
         sim
     )  # the values of a [sweep] table (docs/cluster.md); --resume: the --out of an interrupted one
+    add_device_argument(sim, whole=None)
     sim.set_defaults(func=_cmd_simulate)
 
 
@@ -458,6 +466,7 @@ def _register_replica(sub) -> None:
     rep.add_argument(
         "--rig", default=None, help="rig file from `shelljax rig calibrate`: estimate through it (fit, bayes)"
     )
+    add_device_argument(rep)
     rep.set_defaults(func=_cmd_replica)
 
 
@@ -494,7 +503,8 @@ def main(argv: list[str] | None = None) -> int:
     stderr naming the option or field and a fix, for every input it refuses."""
     try:
         args = build_parser().parse_args(argv)
-        return args.func(args)
+        with command_placement(args):
+            return args.func(args)
     except ShelljaxError as err:
         print(f"shelljax: error: {_one_line(err)}", file=sys.stderr)
         return 2

@@ -10,7 +10,7 @@ from .._files import check_output_dir
 from .._options import DEFAULT_OPTIONS, WRINKLE_LAWS
 from ..physics import GAS_LAWS
 from ..report import summary_text
-from ._common import resumed_out
+from ._common import add_device_argument, resumed_out
 
 
 def _cmd_diagnose(args) -> int:
@@ -154,4 +154,5 @@ def register(sub) -> None:
     from ..executor import add_executor_arguments
 
     add_executor_arguments(diag)  # the studies of --study (docs/cluster.md); --resume: the --out of an interrupted one
+    add_device_argument(diag)
     diag.set_defaults(func=_cmd_diagnose)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from .._arguments import real
 from .._files import check_output_file
 from .._options import DEFAULT_OPTIONS, ESTIMATOR_GASES, WRINKLE_LAWS
+from ._common import add_device_argument
 
 
 def _cmd_rig_calibrate(args) -> int:
@@ -85,4 +86,5 @@ def register(sub) -> None:
         help="the manometer readings' relative standard deviation [-] (0.02: 2 %%)",
     )
     cal.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_device_argument(cal)
     cal.set_defaults(func=_cmd_rig_calibrate)

@@ -31,6 +31,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._errors import InvalidInputError
+from .._placement import on_current_device
 from ._ensemble import stretch_block
 from ._fit import FitResult
 from ._forward import AxisymForwardModel
@@ -465,6 +466,7 @@ def compile_posterior_ahead(
         except Exception:  # noqa: BLE001 (the caller's thread runs the same programs and raises)
             pass
 
-    thread = threading.Thread(target=compile_programs, name="shelljax-compile-ahead", daemon=True)
+    # compiled for the device the caller's stage runs on (jax.default_device is thread-local)
+    thread = threading.Thread(target=on_current_device(compile_programs), name="shelljax-compile-ahead", daemon=True)
     thread.start()
     return thread

@@ -33,7 +33,7 @@ from .._errors import InvalidInputError
 from ._contact import Plane, barrier_energy, check_positive
 
 # 16-point Gauss–Legendre nodes and weights on [−1, 1]: the energy ∫₀^δ F of a smooth curve to ~1e-15.
-_GL_NODES, _GL_WEIGHTS = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(16))
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(16)  # NumPy: importing initialises no JAX backend
 
 
 class AbstractContactLaw(eqx.Module):

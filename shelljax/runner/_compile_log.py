@@ -19,6 +19,8 @@ from collections.abc import Iterator
 
 import jax
 
+from .._placement import device_label
+
 _TRACE = "/jax/core/compile/jaxpr_trace_duration"
 _LOWER = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 _BACKEND = "/jax/core/compile/backend_compile_duration"
@@ -100,17 +102,23 @@ def compile_log() -> Iterator[CompileLog]:
 
 
 @contextlib.contextmanager
-def stage(name: str, verbose: bool, stages: list[dict] | None = None) -> Iterator[CompileLog]:
+def stage(
+    name: str, verbose: bool, stages: list[dict] | None = None, device: jax.Device | None = None
+) -> Iterator[CompileLog]:
     """Time a stage of a command and what JAX compiled in it (the ``--verbose`` log of ``shelljax
     run``, ``simulate``, ``diagnose`` and ``estimate``): append its record to ``stages`` (if given)
-    and, with ``verbose``, write one line to stderr (above any progress bar)."""
+    and, with ``verbose``, write one line to stderr (above any progress bar). ``device``: where the
+    stage ran (``Placement.stage``'s device), recorded as ``"device"`` (``"cpu:0"``, ``"gpu:0"``)
+    and ``"device_kind"``."""
     from tqdm.auto import tqdm
 
     start = time.perf_counter()
     with compile_log() as log:
         yield log
     wall = time.perf_counter() - start
+    where = {} if device is None else {"device": device_label(device), "device_kind": device.device_kind}
     if stages is not None:
-        stages.append({"stage": name, "wall_seconds": wall, **log.to_dict()})
+        stages.append({"stage": name, "wall_seconds": wall, **where, **log.to_dict()})
     if verbose:
-        tqdm.write(f"{name}: {wall:.1f} s; {log.summary()}", file=sys.stderr)
+        on = "" if device is None else f" on {where['device']}"
+        tqdm.write(f"{name}: {wall:.1f} s{on}; {log.summary()}", file=sys.stderr)

@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 from .. import __version__
 from .._errors import InvalidInputError
 from .._files import atomic_write_text, check_output_dir
+from .._placement import StageKind, requested_placement
 from ..config import ExperimentConfig, load_config
 from ..estimate import Estimate, EstimatorOptions, calibrate_ks, paper_k_s
 from ..executor import ExecutorOptions, WorkItem, check_executor, read_item, run_items
@@ -159,12 +160,15 @@ def _write_results(
     sessions: list[Session],
     calibration_files: set[str],
     done: list,
-    executor: ExecutorOptions,
+    where: tuple,
     run_dir: Path,
 ) -> None:
-    """results.json, the run's figures and report.md from the sessions' item results, in config order."""
+    """results.json, the run's figures and report.md from the sessions' item results, in config
+    order; ``where``: (the executor's options, the device placement)."""
     results = _results_header(config, k_s)
+    executor, placement = where
     results["executor"] = executor.describe()
+    results["placement"] = placement.describe()
     if config.rig is not None:
         results["rig"] = {"path": str(config.rig), "sha256": file_sha256(config.rig)}
     summary_rows: list[dict] = []
@@ -215,6 +219,7 @@ def run_experiment(
     verbose: bool = False,
     executor: ExecutorOptions | None = None,
     resume: str | Path | None = None,
+    device: str | None = None,
 ) -> Path:
     """Run the experiment config at ``config_path``; return the run directory.
 
@@ -224,6 +229,8 @@ def run_experiment(
     one is recorded in the run directory, and ``resume`` (a run directory) finishes an interrupted
     run, skipping the sessions it finished. ``progress``: None shows a bar on a terminal only;
     ``verbose``: print each stage's wall time and what JAX compiled in it (results.json has it always).
+    ``device``: ``auto``, ``cpu`` or ``gpu`` (None: the config's [compute] device), where each stage
+    runs (``shelljax.Placement``, docs/gpu.md); the sessions' work items carry it to the workers.
 
     Raises:
         InvalidInputError: a bad config, session or option; a run directory that cannot be resumed.
@@ -234,6 +241,9 @@ def run_experiment(
     elif config_path is None:
         raise InvalidInputError("no experiment config given. Fix: shelljax run configs/paper.toml, or --resume RUN_DIR")
     config = load_config(config_path)
+    if device is not None:
+        config = dataclasses.replace(config, device=device)
+    placement = requested_placement(config.device)  # 'gpu' without one is refused before anything is written
     executor = executor or config.executor
     if resume is None:  # every output checked before any work; nothing is created until all are
         check_output_dir(
@@ -244,7 +254,8 @@ def run_experiment(
     disable = None if progress is None else not progress
     calibration_sessions = [load_session(p) for p in config.calibration_sessions]
     sessions = [load_session(p) for p in tqdm(config.sessions, desc="loading sessions", disable=disable)]
-    calibration, k_s = _calibration(config, calibration_sessions)
+    with placement.stage(StageKind.LATENCY):  # the closed form's k_s calibration: a few small regressions
+        calibration, k_s = _calibration(config, calibration_sessions)
     options = _estimator_options(config, k_s)
     if config.rig is not None:
         load_rig(config.rig)  # a bad rig file fails here, before anything is written
@@ -275,7 +286,7 @@ def run_experiment(
         )
         raise
 
-    _write_results(config, k_s, calibration, sessions, calibration_files, done, executor, run_dir)
+    _write_results(config, k_s, calibration, sessions, calibration_files, done, (executor, placement), run_dir)
     return run_dir
 
 

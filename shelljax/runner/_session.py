@@ -6,12 +6,14 @@ returns JSON only, so that a run on N workers gives the serial run's results.jso
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import ShelljaxError
+from .._placement import Placement, StageKind, requested_placement
 from ..config import ExperimentConfig
 from ..estimate import (
     ConvergenceWarning,
@@ -83,9 +85,12 @@ def _bayes_block(session: Session, options: EstimatorOptions, model, fit, run_di
     return block, post
 
 
-def _stage(name: str, stages: list[dict], verbose: bool):
-    """Time a stage of the run and what JAX compiled in it; append the record to ``stages``."""
-    return stage(name, verbose, stages)
+@contextlib.contextmanager
+def _stage(name: str, stages: list[dict], verbose: bool, placement: Placement):
+    """Run a stage of one session (latency-bound: one fit, one chain) where ``placement`` puts it;
+    time it and what JAX compiled in it, and append the record, with its device, to ``stages``."""
+    with placement.stage(StageKind.LATENCY) as device, stage(name, verbose, stages, device) as log:
+        yield log
 
 
 def _simulation_methods(
@@ -98,20 +103,22 @@ def _simulation_methods(
     rig=None,
 ):
     """Run ``fit`` and ``bayes`` (those in the config) on one session: per method, (results block,
-    result or None). bayes starts from the fit when it converged; each method is a timed stage.
-    With a ``rig`` (``shelljax.rig``), both go through it.
+    result or None). bayes starts from the fit when it converged; each method is a timed stage,
+    placed by the config's device request. With a ``rig`` (``shelljax.rig``), both go through it.
 
     A failure is recorded in the block (``error``) and reported, not raised: one bad session must
     not lose the others' results.
     """
     methods = [m for m in ("fit", "bayes") if m in config.methods]
+    placement = requested_placement(config.device)
     model = options_forward_model(session, options) if methods and rig is None else None
     if "bayes" in methods and model is not None and options.surrogate:
-        compile_posterior_ahead(session, model, n_walkers=options.walkers, nuisance=options.nuisance)
+        with placement.stage(StageKind.LATENCY):  # compiled for the device the chain runs on
+            compile_posterior_ahead(session, model, n_walkers=options.walkers, nuisance=options.nuisance)
     out, fit = {}, None
     for method in methods:
         try:
-            with _stage(f"{session.source.name}: {method}", stages, verbose):
+            with _stage(f"{session.source.name}: {method}", stages, verbose, placement):
                 if rig is not None:
                     result = estimate_with_rig(session, rig, method=method, seed=config.estimator_options.seed)
                     out[method] = (_block(result), result)
@@ -196,9 +203,10 @@ def estimate_session_item(
     rig = None if config.rig is None else load_rig(config.rig)
     held_out: list = []
     stages: list[dict] = []
-    entry, row = _estimate_session_entry(
-        session, config, options, Path(run_dir), used_in_calibration, held_out, stages, verbose, rig
-    )
+    with requested_placement(config.device).stage(StageKind.LATENCY):  # the closed form; fit and bayes place their own
+        entry, row = _estimate_session_entry(
+            session, config, options, Path(run_dir), used_in_calibration, held_out, stages, verbose, rig
+        )
     release_compiled_programs_if_crowded()  # bayes compiles programs per session; they accumulate
     row = {
         **row,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .._errors import InvalidInputError
 from .._toml import TomlReader, read_toml
-from ..config import ESTIMATOR_KEYS, bundled_data_dir, estimator_settings, rig_settings
+from ..config import COMPUTE_KEYS, ESTIMATOR_KEYS, bundled_data_dir, compute_device, estimator_settings, rig_settings
 from ..estimate import METHODS, EstimatorOptions
 from ..physics import GAS_LAWS, ShellProperties, gas_law
 
@@ -49,6 +49,7 @@ _TABLES = {
     "prescribed": {"select", "within_m", "axis_point_m", "axis_direction", "times_s", "angles_deg"},
     "estimators": ESTIMATOR_KEYS - {"methods"},  # object.estimate names the method
     "rig": {"path"},
+    "compute": COMPUTE_KEYS,
 }
 #: ``integrator.scheme`` values: ``shelljax.dynamics`` Newmark(), BackwardEuler(), TRBDF2() (docs/dynamics.md).
 SCHEMES = ("newmark", "backward-euler", "tr-bdf2")
@@ -151,6 +152,7 @@ class Scenario:
     prescribed: PrescribedSpec | None = None
     rig: Path | None = None  # fit and bayes estimate through this rig (shelljax.rig)
     sweep: SweepSpec | None = None  # one scenario per value (scenario._sweep); None: this one scenario
+    device: str = "auto"  # [compute] device: where its stages run (shelljax.Placement, docs/gpu.md)
 
 
 def _table(reader: TomlReader, data: dict, name: str) -> dict:
@@ -509,4 +511,5 @@ def _validated(path: Path, data: dict, r: TomlReader) -> Scenario:
         mesh_frames=r.choice(outs, "mesh_frames", "outputs.", ("ply", "glb"), "ply"),
         max_frames=int(r.number(outs, "max_frames", "outputs.", default=60, nonnegative=True)),
         preview_gif=bool(outs.get("preview_gif", True)),
+        device=compute_device(path, _table(r, data, "compute")),
     )

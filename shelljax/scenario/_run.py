@@ -15,6 +15,7 @@ from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from .._files import atomic_write_text, check_output_dir
+from .._placement import Placement, StageKind, requested_placement, to_device
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
@@ -350,30 +351,44 @@ def run_scenario(
     ``verbose``: each stage's wall time and what JAX compiled in it, on stderr.
     """
     out = check_output_dir(out_dir if out_dir is not None else scenario.output_dir / scenario.name, "--out")
-    obj = resolve_object(scenario, session)
-    system = build_system(scenario, obj)
-    if scenario.prescribed is not None:
-        system = hold(scenario, system)
-    _check_time_step(scenario, system)
+    placement = requested_placement(scenario.device)  # 'gpu' without one is refused before any work
+    with placement.stage(StageKind.LATENCY):  # the object's estimate (one session's fit) and its shell, on the host
+        obj = resolve_object(scenario, session)
+        system = build_system(scenario, obj)
+        if scenario.prescribed is not None:
+            system = hold(scenario, system)
+        _check_time_step(scenario, system)
     out.mkdir(parents=True, exist_ok=True)  # only once the config is accepted: a refused one leaves nothing
     calibration, stages = None, []
     damping = scenario.contact_damping or 0.0
     if scenario.cor is not None:
-        with stage("calibration", verbose, stages):
-            damping, calibration = _calibrate(scenario, system, progress)
+        with (
+            placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
+            stage("calibration", verbose, stages, device),
+        ):
+            damping, calibration = _calibrate(scenario, to_device(system, device), progress)
     system = system.with_planes([eqx_replace_damping(p, damping) for p in system.planes])
-    runs, digests = _run_all(scenario, system, out, progress, (verbose, stages))
+    runs, digests = _run_all(scenario, system, out, progress, (verbose, stages), placement)
     with stage("scenario figures", verbose, stages):
         figures = _scenario_figures(scenario, out, digests)
     summary = _summary(scenario, obj, system, {"damping": damping, "calibration": calibration}, runs, figures, stages)
+    summary["placement"] = placement.describe()
     atomic_write_text(out / "scenario.json", json.dumps(summary, indent=1))
     write_scenario_report(summary, out)
     return summary
 
 
-def _run_all(scenario: Scenario, system, out: Path, progress: bool, log: tuple[bool, list]) -> tuple[list, list]:
+def sparse_dofs(system) -> int:
+    """Unknowns [count] of a dynamic system's Newton solves (3 per node): its sparse stage's size."""
+    return 3 * int(np.asarray(system.node_masses).shape[0])
+
+
+def _run_all(
+    scenario: Scenario, system, out: Path, progress: bool, log: tuple[bool, list], placement: Placement
+) -> tuple[list, list]:
     """Every drop (and the swing of a held object) into ``out``: the runs' records and the drops'
-    digests for the scenario figures; ``log``: (verbose, the stages' list to append to)."""
+    digests for the scenario figures; ``log``: (verbose, the stages' list to append to); each run a
+    sparse stage where ``placement`` puts it."""
     from tqdm.auto import tqdm
 
     verbose, stages = log
@@ -382,9 +397,13 @@ def _run_all(scenario: Scenario, system, out: Path, progress: bool, log: tuple[b
     with tqdm(total=len(labels), desc=f"simulating {scenario.name}", unit="run", disable=not progress) as bar:
         for h, label in zip(scenario.drop_heights, labels):
             bar.set_postfix_str(label)
-            with stage(label, verbose, stages):
+            with (
+                placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
+                stage(label, verbose, stages, device),
+            ):
+                on_device = to_device(system, device)  # the shell enters its stage's device once
                 trajectory = _simulate(
-                    scenario, system, initial_state(scenario, system, h), scenario.duration, progress
+                    scenario, on_device, initial_state(scenario, on_device, h), scenario.duration, progress
                 )
                 run_dir = out / f"h{h:.2f}m"
                 d.write_results(
@@ -407,8 +426,11 @@ def _run_all(scenario: Scenario, system, out: Path, progress: bool, log: tuple[b
             bar.update(1)
         if scenario.prescribed is not None:
             bar.set_postfix_str("swing")
-            with stage("swing", verbose, stages):
-                runs.append(_swing(scenario, system, out, progress))
+            with (
+                placement.stage(StageKind.SPARSE, sparse_dofs(system)) as device,
+                stage("swing", verbose, stages, device),
+            ):
+                runs.append(_swing(scenario, to_device(system, device), out, progress))
             bar.update(1)
     return runs, digests
 

@@ -9,6 +9,7 @@ it runs, so ``--workers N`` gives the serial sweep's values.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -33,10 +34,14 @@ def value_directory(parameter: str, value: float) -> str:
     return f"{parameter.split('.')[1]}_{value:g}"
 
 
-def simulate_sweep_value(config: str, value: float, out_dir: str, session: str | None = None) -> dict:
+def simulate_sweep_value(
+    config: str, value: float, out_dir: str, session: str | None = None, device: str = "auto"
+) -> dict:
     """The work item of one sweep value: the config's scenario with the parameter at ``value``,
-    run into ``out_dir``; returns the summary :func:`run_scenario` writes (JSON)."""
-    return run_scenario(load_scenario(config, value=value), out_dir, session=session, progress=False)
+    run into ``out_dir`` with the sweep's ``device`` request (it may differ from the config's:
+    ``--device``); returns the summary :func:`run_scenario` writes (JSON)."""
+    scenario = dataclasses.replace(load_scenario(config, value=value), device=device)
+    return run_scenario(scenario, out_dir, session=session, progress=False)
 
 
 def _row(value: float, result) -> dict:
@@ -97,6 +102,7 @@ def run_sweep(
                 v,
                 str(out / value_directory(sweep.parameter, v)),
                 None if session is None else str(session),
+                scenario.device,
             ),
         )
         for i, v in enumerate(sweep.values)
