@@ -36,6 +36,7 @@ from ._hessian import face_hessians, hessian_values
 from ._hessian import rank_one as gas_rank_one
 from ._implicit import implicit_equilibrium
 from ._indent import Indentation, IndentationState, Shell, ball, load
+from ._linear import AbstractLinearSolver, DirectSolver, KrylovSolver
 from ._mesh import ShellMesh
 from ._model import EquilibriumProblem, ShellModel, rigid_mode_pins
 from ._newton import AbstractEnergyProblem, newton

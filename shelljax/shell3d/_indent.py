@@ -41,6 +41,7 @@ from ..physics import ATMOSPHERIC_PRESSURE, AbstractGasLaw, Plane, PrescribedGas
 from ._config import ContactConfig, ModelConfig, check_config
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
+from ._linear import AbstractLinearSolver, DirectSolver
 from ._mesh import ShellMesh
 from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
@@ -233,6 +234,9 @@ class Indentation:
     the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
     contact sticks (default activation_distance / 100); ``friction_iterations``: at most this many
     re-solves per load step with updated lagged normal forces (default 2, see the module docstring).
+    ``linear_solver``: where Newton's steps and :meth:`force_function`'s implicit tangents solve:
+    :class:`DirectSolver` (default: host CHOLMOD) or :class:`KrylovSolver` (CG in JAX, on the
+    default JAX device; the rest-shape solve stays on the host).
     :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape.
     """
 
@@ -255,7 +259,13 @@ class Indentation:
         friction: float = 0.0,
         slip_tolerance: float | None = None,
         friction_iterations: int = 2,
+        linear_solver: AbstractLinearSolver = DirectSolver(),
     ):
+        if not isinstance(linear_solver, AbstractLinearSolver):
+            raise InvalidInputError(
+                f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
+            )
+        self.linear_solver = linear_solver
         young_modulus, poisson_ratio, gauge_pressure = _shell_properties(properties, shell)
         _check_arguments(
             young_modulus,
@@ -369,6 +379,7 @@ class Indentation:
             max_steps=self.max_newton_iterations,
             factorization=kept if kept_control == control else None,
             name=label,
+            linear_solver=self.linear_solver,
         )
         self._kept_factorization = (control, res.state)
         return res
@@ -546,7 +557,18 @@ class Indentation:
         def hessian_host(q, theta):
             return model.host_hessian(q, params_of(theta), project=False)
 
-        equilibrium = implicit_equilibrium(minimise_at, residual, hessian_host, model.free, model.n_dofs)
+        def hessian_device(q, theta):
+            return model.device_operator(q, params_of(theta))
+
+        equilibrium = implicit_equilibrium(
+            minimise_at,
+            residual,
+            hessian_host,
+            model.free,
+            model.n_dofs,
+            linear_solver=self.linear_solver,
+            hessian_device=hessian_device,
+        )
 
         def force(theta):
             q = equilibrium(theta)
