@@ -74,14 +74,15 @@ def krylov_layout(pattern: SparsityPattern) -> KrylovLayout:
     positions = np.searchsorted(keys, wanted)
     if np.any(keys[np.minimum(positions, keys.size - 1)] != wanted):
         raise ValueError("the sparsity pattern lacks a node's diagonal 3×3 block")
-    layout = KrylovLayout(
-        rows=jnp.asarray(rows, dtype=jnp.int32),
-        indices=jnp.asarray(pattern.indices, dtype=jnp.int32),
-        fixed_entries=jnp.asarray(pattern.fixed_entries, dtype=jnp.int32),
-        fixed_diagonal=jnp.asarray(pattern.fixed_diagonal, dtype=jnp.int32),
-        block_positions=jnp.asarray(positions, dtype=jnp.int32),
-        free=jnp.asarray(pattern.free, dtype=jnp.float64),
-    )
+    with jax.ensure_compile_time_eval():  # device arrays, also when first asked for inside a trace
+        layout = KrylovLayout(
+            rows=jnp.asarray(rows, dtype=jnp.int32),
+            indices=jnp.asarray(pattern.indices, dtype=jnp.int32),
+            fixed_entries=jnp.asarray(pattern.fixed_entries, dtype=jnp.int32),
+            fixed_diagonal=jnp.asarray(pattern.fixed_diagonal, dtype=jnp.int32),
+            block_positions=jnp.asarray(positions, dtype=jnp.int32),
+            free=jnp.asarray(pattern.free, dtype=jnp.float64),
+        )
     _LAYOUTS[pattern] = layout
     return layout
 
@@ -119,7 +120,7 @@ class SparseOperator(eqx.Module):
         blocks = self.values[self.block_positions]
         if self.blocks is not None:
             blocks = blocks + self.blocks
-        nodal = self.columns.reshape(self.columns.shape[0], -1, 3)
+        nodal = self.columns.reshape(self.columns.shape[0], self.free.shape[0] // 3, 3)
         blocks = blocks + jnp.einsum("k,kni,knj->nij", self.coeffs, nodal, nodal)
         mask = self.free.reshape(-1, 3)
         eye = jnp.eye(3)
