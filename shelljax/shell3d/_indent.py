@@ -103,7 +103,8 @@ class IndentationState:
     touched the ground (gap < activation distance), with or without friction. ``factorizations``:
     Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
     a factorization while it keeps converging fast); ``products``: the Hessian-vector products of
-    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`).
+    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`); ``krylov_iterations``: the CG
+    iterations of a :class:`KrylovSolver`'s solves in that load step (0 with the direct solver).
     """
 
     sim: "Indentation"
@@ -116,6 +117,7 @@ class IndentationState:
     ground_slip: np.ndarray | None = None
     factorizations: int = 0
     products: int = 0
+    krylov_iterations: int = 0
 
     @property
     def vertices(self) -> np.ndarray:
@@ -398,6 +400,7 @@ class Indentation:
         }
         res = self._step(model, q_guess, params.replace(**lagged), label, q_start)
         iterations, factorizations, products = res.iterations, res.stats["factorizations"], res.stats["products"]
+        krylov = res.stats["krylov_iterations"]
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.value)
             change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
@@ -409,7 +412,8 @@ class Indentation:
             iterations += res.iterations
             factorizations += res.stats["factorizations"]
             products += res.stats["products"]
-        stats = {**res.stats, "factorizations": factorizations, "products": products}
+            krylov += res.stats["krylov_iterations"]
+        stats = {**res.stats, "factorizations": factorizations, "products": products, "krylov_iterations": krylov}
         res = dataclasses.replace(res, iterations=iterations, stats=stats)
         return res, lagged, change
 
@@ -463,6 +467,7 @@ class Indentation:
                 slip[0],
                 res.stats["factorizations"],
                 res.stats["products"],
+                res.stats["krylov_iterations"],
             )
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
@@ -509,6 +514,7 @@ class Indentation:
                 slip[0],
                 res.stats["factorizations"],
                 res.stats["products"],
+                res.stats["krylov_iterations"],
             )
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
