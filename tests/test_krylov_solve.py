@@ -19,6 +19,8 @@ from shelljax import dynamics as d
 from shelljax.physics import IsothermalGas, ShellProperties
 from shelljax.shell3d.internal import krylov_layout, krylov_solve, sparse_operator
 
+pytestmark = pytest.mark.slow  # 3D solves and dynamics runs
+
 PEZZI = ShellProperties(gauge_pressure=1300.0, young_modulus=2.34e6, thickness=0.9e-3, poisson_ratio=0.4)
 DEPTHS = [0.006, 0.012]
 

@@ -16,8 +16,10 @@ Lower layers, for benchmarks and verification: :class:`ShellModel` (energy, grad
 Hessian, :meth:`ShellModel.equilibrium`), the free shell's rest shape and pressurized reference
 state (:func:`inflated_reference`), the Newton solver (:func:`newton` on an
 :class:`AbstractEnergyProblem`, returning a :class:`shelljax.Solution`), the sparse factorization
-(:class:`SparseSolver`, its caches freed by :func:`release_factorizations`) and implicit
-differentiation (:func:`implicit_equilibrium`).
+(:class:`SparseSolver`, its caches freed by :func:`release_factorizations`), the linear solvers
+that Newton and the implicit tangents take (:class:`DirectSolver`, the default, host CHOLMOD;
+:class:`KrylovSolver`, CG in JAX on the arrays' device) and implicit differentiation
+(:func:`implicit_equilibrium`).
 """
 
 from ._config import ContactConfig, ModelConfig

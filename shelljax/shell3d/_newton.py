@@ -31,6 +31,10 @@ a forcing tolerance of the gradient's norm). It is kept for as long as CG conver
 ``CG_MAX_ITERATIONS`` products, also across calls (``factorization=``: a load step starts from the
 previous step's last factorization), so the solver refactorizes only where the Hessian has moved.
 
+The linear solves are a ``linear_solver``'s (:class:`DirectSolver`, the host factorizations above,
+or :class:`KrylovSolver`, CG in JAX on the device, which assembles and solves afresh at every
+iteration: no lagged steps, no kept preconditioner).
+
 The loop runs with NumPy's BLAS limited to one thread: an idle OpenBLAS thread spinning after CG's
 dot products steals the core that XLA's products use (docs/shell3d.md, *Solver*).
 """
