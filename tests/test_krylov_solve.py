@@ -64,6 +64,11 @@ def test_operator_solve_matches_a_sparse_direct_solve_with_pins_and_the_gas_rank
     # A relative residual of 1e-12 bounds the relative error by cond(H) 1e-12; cond ≈ 1e5 on this mesh.
     assert np.max(np.abs(np.asarray(x) - expected)) <= 1e-6 * np.max(np.abs(expected))
     assert np.all(np.asarray(x)[~model.free] == 0.0)
+    # Newton's fallback: the PSD-projected Hessian moved to the device is the host's matrix.
+    projected, _ = model.host_hessian(q, params, project=True)
+    product = np.asarray(model.device_operator(q, params, project=True).mv(jnp.asarray(rhs)))
+    expected = projected @ rhs + c2 * u * (u @ rhs)
+    assert np.max(np.abs(product - expected)) <= 1e-12 * np.max(np.abs(dense)) * np.max(np.abs(rhs))
 
 
 def test_block_jacobi_takes_fewer_iterations_than_point_jacobi(sims):

@@ -189,8 +189,13 @@ def _check_arguments(
     rest_shape,
     friction_iterations,
     max_newton_iterations,
+    linear_solver,
 ) -> None:
     """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
+    if not isinstance(linear_solver, AbstractLinearSolver):
+        raise InvalidInputError(
+            f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
+        )
     if not young_modulus > 0:
         raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
     if not -1.0 < poisson_ratio < 0.5:
@@ -263,11 +268,6 @@ class Indentation:
         friction_iterations: int = 2,
         linear_solver: AbstractLinearSolver = DirectSolver(),
     ):
-        if not isinstance(linear_solver, AbstractLinearSolver):
-            raise InvalidInputError(
-                f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
-            )
-        self.linear_solver = linear_solver
         young_modulus, poisson_ratio, gauge_pressure = _shell_properties(properties, shell)
         _check_arguments(
             young_modulus,
@@ -277,7 +277,9 @@ class Indentation:
             rest_shape,
             friction_iterations,
             max_newton_iterations,
+            linear_solver,
         )
+        self.linear_solver = linear_solver
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         check_config(ModelConfig(shell.mesh.n_vertices, gas=gas))
         self.max_newton_iterations = int(max_newton_iterations)

@@ -176,9 +176,7 @@ def newton(
     if not linear_solver.keeps_factorizations:
         reuse_factorization, factorization = False, None
     with threadpool_limits(limits=1, user_api="blas"):
-        run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name)
-        run.linear_solver = linear_solver
-        run.inexact = run.inexact and linear_solver.keeps_factorizations
+        run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name, linear_solver)
         solution = run.minimise(x0, max_steps)
     return raise_if_failed(solution, name, run.failure) if throw else solution
 
@@ -186,13 +184,14 @@ def newton(
 class _NewtonRun:
     """The state of one Newton minimisation: iterate, residual history, kept factorizations."""
 
-    def __init__(self, problem, atol, max_halvings, armijo, reuse_factorization, factorization, name):
+    def __init__(self, problem, atol, max_halvings, armijo, reuse_factorization, factorization, name, linear_solver):
         self.problem, self.atol, self.name = problem, atol, name
         self.max_halvings, self.armijo, self.reuse = max_halvings, armijo, reuse_factorization
         self.free = np.asarray(problem.free, dtype=bool)
-        self.inexact = problem.hessian_operator is not None
+        self.linear_solver = linear_solver
+        # CG preconditioned by a kept factorization needs a solver that keeps one.
+        self.inexact = problem.hessian_operator is not None and linear_solver.keeps_factorizations
         self.factorizations = self.products = self.krylov_iterations = 0
-        self.linear_solver = DirectSolver()
         self.solve_failure = ""  # the last linear solve's failure, for the report
         self.forcing = CG_FORCING_MAX
         # the last factorization, while lagged steps keep converging fast (or CG with it does)
