@@ -60,7 +60,7 @@ class KrylovNewton(AbstractMinimiser):
     max_halvings: int = eqx.field(static=True, default=40)
     reuse_matrix: bool = eqx.field(static=True, default=True)
     rtol: float = eqx.field(static=True, default=1e-10)
-    krylov_max_steps: int = eqx.field(static=True, default=2000)
+    krylov_max_steps: int = eqx.field(static=True, default=20_000)
 
     def __check_init__(self):
         if not 0.0 < self.rtol < 1.0:

@@ -80,7 +80,7 @@ class KrylovSolver(AbstractLinearSolver):
     """
 
     rtol: float = eqx.field(static=True, default=1e-10)
-    max_steps: int = eqx.field(static=True, default=2000)
+    max_steps: int = eqx.field(static=True, default=20_000)
 
     keeps_factorizations = False
 
