@@ -181,6 +181,13 @@ def _shell_properties(properties, shell: Shell) -> tuple[float, float, float]:
     return float(properties.young_modulus), float(properties.poisson_ratio), float(properties.gauge_pressure)
 
 
+def _check_linear_solver(linear_solver) -> None:
+    if not isinstance(linear_solver, AbstractLinearSolver):
+        raise InvalidInputError(
+            f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
+        )
+
+
 def _check_arguments(
     young_modulus,
     poisson_ratio,
@@ -192,10 +199,7 @@ def _check_arguments(
     linear_solver,
 ) -> None:
     """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
-    if not isinstance(linear_solver, AbstractLinearSolver):
-        raise InvalidInputError(
-            f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
-        )
+    _check_linear_solver(linear_solver)
     if not young_modulus > 0:
         raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
     if not -1.0 < poisson_ratio < 0.5:
@@ -244,7 +248,8 @@ class Indentation:
     ``linear_solver``: where Newton's steps and :meth:`force_function`'s implicit tangents solve:
     :class:`DirectSolver` (default: host CHOLMOD) or :class:`KrylovSolver` (CG in JAX, on the
     default JAX device; the rest-shape solve stays on the host).
-    :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape.
+    :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape,
+    :meth:`with_linear_solver` with another linear solver.
     """
 
     def __init__(
@@ -351,6 +356,15 @@ class Indentation:
         other.model = self.model.with_config(dataclasses.replace(self.model.config, contact=contact))
         other.friction = contact.friction
         other._force_model = None
+        other._kept_factorization = (None, None)
+        return other
+
+    def with_linear_solver(self, linear_solver: AbstractLinearSolver) -> "Indentation":
+        """The same simulation with another ``linear_solver`` (e.g. :class:`KrylovSolver` where the
+        arrays live on a GPU), without redoing the rest shape."""
+        _check_linear_solver(linear_solver)
+        other = copy.copy(self)
+        other.linear_solver = linear_solver
         other._kept_factorization = (None, None)
         return other
 
