@@ -137,8 +137,12 @@ def drop_row(repeats: int, duration: float | None, damping: float, config: Path)
                 f"{name}_newton_matrices": int(np.sum(trajectory["newton_matrices"])),
             }
         )
+        print(f"drop, {name}: cold {cold:.1f} s, warm {warm:.1f} s", flush=True)
     last = d.DynamicState(
-        jnp.asarray(positions["krylov"][-1]), jnp.zeros_like(state.velocity), jnp.zeros_like(state.acceleration)
+        state.time + duration,
+        jnp.asarray(positions["krylov"][-1]),
+        jnp.zeros_like(state.velocity),
+        jnp.zeros_like(state.acceleration),
     )
     potential = d.incremental_potential(system, integrator, last, scenario.dt, rayleigh)
     y = potential.free(last.position)

@@ -196,10 +196,8 @@ def _check_arguments(
     rest_shape,
     friction_iterations,
     max_newton_iterations,
-    linear_solver,
 ) -> None:
     """Raise InvalidInputError, naming the argument, for a value :class:`Indentation` rejects."""
-    _check_linear_solver(linear_solver)
     if not young_modulus > 0:
         raise InvalidInputError(f"young_modulus: must be > 0 Pa, got {young_modulus}.")
     if not -1.0 < poisson_ratio < 0.5:
@@ -245,11 +243,9 @@ class Indentation:
     the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
     contact sticks (default activation_distance / 100); ``friction_iterations``: at most this many
     re-solves per load step with updated lagged normal forces (default 2, see the module docstring).
-    ``linear_solver``: where Newton's steps and :meth:`force_function`'s implicit tangents solve:
-    :class:`DirectSolver` (default: host CHOLMOD) or :class:`KrylovSolver` (CG in JAX, on the
-    default JAX device; the rest-shape solve stays on the host).
-    :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape,
-    :meth:`with_linear_solver` with another linear solver.
+    ``linear_solver``: Newton's and the implicit tangents' solver, :class:`DirectSolver` (default:
+    host CHOLMOD) or :class:`KrylovSolver` (CG in JAX on the default device; rest shape on the host).
+    :meth:`with_friction` and :meth:`with_linear_solver` change μ or the solver, keeping the rest shape.
     """
 
     def __init__(
@@ -282,15 +278,13 @@ class Indentation:
             rest_shape,
             friction_iterations,
             max_newton_iterations,
-            linear_solver,
         )
-        self.linear_solver = linear_solver
+        _check_linear_solver(linear_solver)
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         check_config(ModelConfig(shell.mesh.n_vertices, gas=gas))
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
-        self.shell = shell
-        self.progress = progress
+        self.shell, self.progress, self.linear_solver = shell, progress, linear_solver
         scan = self._place_scan(shell.mesh, contact, activation_distance)
         self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
         self.max_step = max_step or 0.02 * self.size
