@@ -7,6 +7,8 @@ solve is block-Jacobi preconditioned conjugate gradients written in JAX (the 3D 
 ``shell3d.internal``): no ``pure_callback``, so a whole time step runs on the arrays' device. The
 dense terms are matvec terms, not Sherman–Morrison/Woodbury. The kept matrix is kept as its
 values, and its block-Jacobi preconditioner is rebuilt from them at each solve (3×3 inverses).
+The pattern's index arrays (:func:`krylov_layout`: 2 nnz integers) enter the step's program as
+constants, read from the system's static pattern.
 
 Newton's step retries a solve that fails (no convergence, non-positive curvature) with the matrix
 shifted by 1e-2, 1e-1, 1 times its mean free diagonal, as SparseNewton's factorisation does; a
