@@ -24,5 +24,6 @@ from ._reference import hertz_impact, pressurized_ball_contact_time, pressurized
 from ._run import StepRecord, Trajectory, drop_state, initial_state, rollout, simulate, step
 from ._system import AbstractDynamicSystem, DynamicState, PrescribedRotation
 from ._shell import ShellDynamicSystem, remeshed, shell_system
+from ._krylov import KrylovNewton
 from ._sparse import SparseNewton
 from ._systems import PointMassOnGround, SpringBalloon

@@ -171,6 +171,44 @@ def _host_solve(sparsity, shift, data, blocks, diag, c2, u, columns, coeffs, fre
     return np.asarray(apply(np.asarray(rhs)), dtype=np.float64)
 
 
+def rayleigh_values(potential):
+    """CSR values [N/m] of Rayleigh β's β K(xₙ)/Δt (None without Rayleigh): fixed over a step."""
+    if potential.rayleigh is None:
+        return None
+    return potential.rayleigh.stiffness_coefficient / potential.dt * potential.system.hessian_parts(potential.x_prev)[0]
+
+
+def newton_matrix(potential, y, rayleigh, minimiser: str = "SparseNewton"):
+    """Newton's matrix of a shell step at y [m] as its parts (data, blocks, diag, c2, u, columns,
+    coeffs): the shell's CSR values [N/m] (with Rayleigh β's ``rayleigh`` values added), the point
+    blocks (V, 3, 3) [N/m], the diagonal (3V,) [N/m], the gas's rank-one (c2, u) and the
+    dashpots' columns (P, 3V) with coefficients (P,) (module doc)."""
+    system = potential.system
+    if not isinstance(system, ShellDynamicSystem):
+        raise InvalidInputError(
+            f"{minimiser} needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems."
+        )
+    x = potential.full(y)
+    data, c2, u = system.hessian_parts(x)
+    diag = potential.inertia_weight
+    if potential.rayleigh is not None:
+        diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
+        data = data + rayleigh
+    blocks = potential.point_hessian_blocks(x)
+    share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
+    columns = (
+        jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes])
+        if system.planes
+        else jnp.zeros((0, x.shape[0]))
+    )
+    coeffs = (
+        jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt
+        if system.planes
+        else jnp.zeros((0,))
+    )
+    return data, blocks, diag, c2, u, columns, coeffs
+
+
 class SparseNewton(AbstractMinimiser):
     """Newton's method on a :class:`ShellDynamicSystem` step with the sparse Hessian (module doc).
 
@@ -187,45 +225,7 @@ class SparseNewton(AbstractMinimiser):
     reuse_matrix: bool = eqx.field(static=True, default=True)
 
     def linear_solve(self, potential, y, rhs):
-        return self._apply(potential, self._matrix(potential, y, self._rayleigh_values(potential)), rhs, False)
-
-    @staticmethod
-    def _rayleigh_values(potential):
-        """CSR values [N/m] of Rayleigh β's β K(xₙ)/Δt (None without Rayleigh): fixed over a step."""
-        if potential.rayleigh is None:
-            return None
-        return (
-            potential.rayleigh.stiffness_coefficient
-            / potential.dt
-            * potential.system.hessian_parts(potential.x_prev)[0]
-        )
-
-    def _matrix(self, potential, y, rayleigh_values):
-        """Newton's matrix at y [m] as the host solve's inputs (data, blocks, diag, c2, u, columns, coeffs)."""
-        system = potential.system
-        if not isinstance(system, ShellDynamicSystem):
-            raise InvalidInputError(
-                f"SparseNewton needs a ShellDynamicSystem; got {type(system).__name__}. Use DenseNewton for small systems."
-            )
-        x = potential.full(y)
-        data, c2, u = system.hessian_parts(x)
-        diag = potential.inertia_weight
-        if potential.rayleigh is not None:
-            diag = diag + potential.rayleigh.mass_coefficient * system.lumped_mass() / potential.dt
-            data = data + rayleigh_values
-        blocks = potential.point_hessian_blocks(x)
-        share = jnp.repeat(system.node_masses / jnp.sum(system.node_masses), 3)
-        columns = (
-            jnp.stack([share * jnp.tile(p.normal, system.node_masses.shape[0]) for p in system.planes])
-            if system.planes
-            else jnp.zeros((0, x.shape[0]))
-        )
-        coeffs = (
-            jnp.stack([p.damping for p in system.planes]) * potential.body_damping_prev / potential.dt
-            if system.planes
-            else jnp.zeros((0,))
-        )
-        return data, blocks, diag, c2, u, columns, coeffs
+        return self._apply(potential, newton_matrix(potential, y, rayleigh_values(potential)), rhs, False)
 
     def _apply(self, potential, matrix, rhs, shift: bool):
         out = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
@@ -244,15 +244,15 @@ class SparseNewton(AbstractMinimiser):
     def initial_memory(self, potential, y0):
         if not self.reuse_matrix:
             return None
-        shapes = jax.eval_shape(lambda y: self._matrix(potential, y, self._rayleigh_values(potential)), y0)
+        shapes = jax.eval_shape(lambda y: newton_matrix(potential, y, rayleigh_values(potential)), y0)
         return KeptMatrix(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes), jnp.asarray(True))
 
     def minimise(self, potential, y0, memory=None):
         # K(xₙ) of Rayleigh β is the same in every iteration of the step: assembled once, before the loop.
-        rayleigh_values = self._rayleigh_values(potential)
+        rayleigh = rayleigh_values(potential)
 
         def assemble(y):
-            return self._matrix(potential, y, rayleigh_values)
+            return newton_matrix(potential, y, rayleigh)
 
         if not self.reuse_matrix:
             return newton_loop(self, potential, y0, lambda y, g: self._direction(potential, assemble(y), g))

@@ -16,8 +16,10 @@ Lower layers, for benchmarks and verification: :class:`ShellModel` (energy, grad
 Hessian, :meth:`ShellModel.equilibrium`), the free shell's rest shape and pressurized reference
 state (:func:`inflated_reference`), the Newton solver (:func:`newton` on an
 :class:`AbstractEnergyProblem`, returning a :class:`shelljax.Solution`), the sparse factorization
-(:class:`SparseSolver`, its caches freed by :func:`release_factorizations`) and implicit
-differentiation (:func:`implicit_equilibrium`).
+(:class:`SparseSolver`, its caches freed by :func:`release_factorizations`), the linear solvers
+that Newton and the implicit tangents take (:class:`DirectSolver`, the default, host CHOLMOD;
+:class:`KrylovSolver`, CG in JAX on the arrays' device) and implicit differentiation
+(:func:`implicit_equilibrium`).
 """
 
 from ._config import ContactConfig, ModelConfig
@@ -36,6 +38,7 @@ from ._hessian import face_hessians, hessian_values
 from ._hessian import rank_one as gas_rank_one
 from ._implicit import implicit_equilibrium
 from ._indent import Indentation, IndentationState, Shell, ball, load
+from ._linear import AbstractLinearSolver, DirectSolver, KrylovSolver
 from ._mesh import ShellMesh
 from ._model import EquilibriumProblem, ShellModel, rigid_mode_pins
 from ._newton import AbstractEnergyProblem, newton

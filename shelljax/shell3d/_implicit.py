@@ -19,19 +19,29 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._solution import implicit_tangent
-from ._sparse import SparseSolver
+from ._linear import AbstractLinearSolver, DirectSolver
 
 
 def implicit_equilibrium(
-    minimise_host: Callable, residual: Callable, hessian_host: Callable, free, n_dofs: int
+    minimise_host: Callable,
+    residual: Callable,
+    hessian_host: Callable,
+    free,
+    n_dofs: int,
+    *,
+    linear_solver: AbstractLinearSolver | None = None,
+    hessian_device: Callable | None = None,
 ) -> Callable:
     """Build ``theta -> x*`` (custom JVP) from a host solver and a JAX residual.
 
     ``minimise_host(theta) -> (n,)`` runs on numpy values of the parameter pytree ``theta``;
     ``residual(x, theta) -> (n,)`` is the JAX energy gradient; ``hessian_host(x, theta)`` returns
     ``(csr_matrix with fixed dofs folded in, rank_one | None)`` for the exact Hessian; ``free`` is
-    the (n,) bool mask of free dofs (the fixed ones do not move with θ).
+    the (n,) bool mask of free dofs (the fixed ones do not move with θ). ``linear_solver``: the
+    tangent solve's (:class:`DirectSolver` by default); a :class:`KrylovSolver` needs
+    ``hessian_device(x, theta) -> SparseOperator``, the same Hessian as a JAX operator.
     """
+    linear_solver = DirectSolver() if linear_solver is None else linear_solver
     mask = jnp.asarray(np.asarray(free, dtype=np.float64))
     out_shape = jax.ShapeDtypeStruct((n_dofs,), jnp.float64)
 
@@ -47,15 +57,7 @@ def implicit_equilibrium(
     def _equilibrium_jvp(primals, tangents):
         (theta,), (dtheta,) = primals, tangents
         x = equilibrium(theta)
-
-        def host(x_, theta_, b_):
-            theta_np = jax.tree_util.tree_map(np.asarray, theta_)
-            mat, rank_one = hessian_host(np.asarray(x_), theta_np)
-            return SparseSolver(mat, rank_one, symmetric=True).apply_inverse(np.asarray(b_))
-
-        def solve(b):
-            return jax.pure_callback(host, out_shape, x, theta, b)
-
+        solve = linear_solver.tangent_solve(hessian_host, hessian_device, x, theta)
         return x, implicit_tangent(residual, x, theta, dtheta, mask, solve)
 
     return equilibrium

@@ -41,6 +41,7 @@ from ..physics import ATMOSPHERIC_PRESSURE, AbstractGasLaw, Plane, PrescribedGas
 from ._config import ContactConfig, ModelConfig, check_config
 from ._continuation import continuation
 from ._implicit import implicit_equilibrium
+from ._linear import AbstractLinearSolver, DirectSolver
 from ._mesh import ShellMesh
 from ._model import ShellModel, rigid_mode_pins
 from ._observables import observables as _observables
@@ -102,7 +103,8 @@ class IndentationState:
     touched the ground (gap < activation distance), with or without friction. ``factorizations``:
     Hessian factorizations of the last load step's Newton solves (≤ ``iterations``: Newton reuses
     a factorization while it keeps converging fast); ``products``: the Hessian-vector products of
-    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`).
+    its conjugate-gradient steps (:func:`shelljax.shell3d.newton`); ``krylov_iterations``: the CG
+    iterations of a :class:`KrylovSolver`'s solves in that load step (0 with the direct solver).
     """
 
     sim: "Indentation"
@@ -115,6 +117,7 @@ class IndentationState:
     ground_slip: np.ndarray | None = None
     factorizations: int = 0
     products: int = 0
+    krylov_iterations: int = 0
 
     @property
     def vertices(self) -> np.ndarray:
@@ -178,6 +181,13 @@ def _shell_properties(properties, shell: Shell) -> tuple[float, float, float]:
     return float(properties.young_modulus), float(properties.poisson_ratio), float(properties.gauge_pressure)
 
 
+def _check_linear_solver(linear_solver) -> None:
+    if not isinstance(linear_solver, AbstractLinearSolver):
+        raise InvalidInputError(
+            f"linear_solver: expected shell3d.DirectSolver() or shell3d.KrylovSolver(...), got {linear_solver!r}."
+        )
+
+
 def _check_arguments(
     young_modulus,
     poisson_ratio,
@@ -233,7 +243,9 @@ class Indentation:
     the indenter is always frictionless); ``slip_tolerance`` ε [m] > 0: slip below which a ground
     contact sticks (default activation_distance / 100); ``friction_iterations``: at most this many
     re-solves per load step with updated lagged normal forces (default 2, see the module docstring).
-    :meth:`with_friction` gives the same simulation with another μ without redoing the rest shape.
+    ``linear_solver``: Newton's and the implicit tangents' solver, :class:`DirectSolver` (default:
+    host CHOLMOD) or :class:`KrylovSolver` (CG in JAX on the default device; rest shape on the host).
+    :meth:`with_friction` and :meth:`with_linear_solver` change μ or the solver, keeping the rest shape.
     """
 
     def __init__(
@@ -255,6 +267,7 @@ class Indentation:
         friction: float = 0.0,
         slip_tolerance: float | None = None,
         friction_iterations: int = 2,
+        linear_solver: AbstractLinearSolver = DirectSolver(),
     ):
         young_modulus, poisson_ratio, gauge_pressure = _shell_properties(properties, shell)
         _check_arguments(
@@ -266,12 +279,12 @@ class Indentation:
             friction_iterations,
             max_newton_iterations,
         )
+        _check_linear_solver(linear_solver)
         ContactConfig(friction=friction, slip_tolerance=slip_tolerance)  # validate before the rest solve
         check_config(ModelConfig(shell.mesh.n_vertices, gas=gas))
         self.max_newton_iterations = int(max_newton_iterations)
         self.friction_iterations = int(friction_iterations)
-        self.shell = shell
-        self.progress = progress
+        self.shell, self.progress, self.linear_solver = shell, progress, linear_solver
         scan = self._place_scan(shell.mesh, contact, activation_distance)
         self.atol = force_tolerance or 1e-8 * young_modulus * shell.thickness * self.size
         self.max_step = max_step or 0.02 * self.size
@@ -340,6 +353,15 @@ class Indentation:
         other._kept_factorization = (None, None)
         return other
 
+    def with_linear_solver(self, linear_solver: AbstractLinearSolver) -> "Indentation":
+        """The same simulation with another ``linear_solver`` (e.g. :class:`KrylovSolver` where the
+        arrays live on a GPU), without redoing the rest shape."""
+        _check_linear_solver(linear_solver)
+        other = copy.copy(self)
+        other.linear_solver = linear_solver
+        other._kept_factorization = (None, None)
+        return other
+
     @property
     def force_model(self) -> ShellModel:
         """The force-control model (built on first use): the indenter height is an unknown."""
@@ -369,6 +391,7 @@ class Indentation:
             max_steps=self.max_newton_iterations,
             factorization=kept if kept_control == control else None,
             name=label,
+            linear_solver=self.linear_solver,
         )
         self._kept_factorization = (control, res.state)
         return res
@@ -387,6 +410,7 @@ class Indentation:
         }
         res = self._step(model, q_guess, params.replace(**lagged), label, q_start)
         iterations, factorizations, products = res.iterations, res.stats["factorizations"], res.stats["products"]
+        krylov = res.stats["krylov_iterations"]
         for k in range(self.friction_iterations + 1):
             current = model.plane_normal_forces(res.value)
             change = float(np.max(np.abs(current - lagged["friction_normal_force"])))
@@ -398,7 +422,8 @@ class Indentation:
             iterations += res.iterations
             factorizations += res.stats["factorizations"]
             products += res.stats["products"]
-        stats = {**res.stats, "factorizations": factorizations, "products": products}
+            krylov += res.stats["krylov_iterations"]
+        stats = {**res.stats, "factorizations": factorizations, "products": products, "krylov_iterations": krylov}
         res = dataclasses.replace(res, iterations=iterations, stats=stats)
         return res, lagged, change
 
@@ -452,6 +477,7 @@ class Indentation:
                 slip[0],
                 res.stats["factorizations"],
                 res.stats["products"],
+                res.stats["krylov_iterations"],
             )
 
         return continuation(depths, step, progress=self.progress, desc="indentation")
@@ -498,6 +524,7 @@ class Indentation:
                 slip[0],
                 res.stats["factorizations"],
                 res.stats["products"],
+                res.stats["krylov_iterations"],
             )
 
         return continuation(forces, step, progress=self.progress, desc="indentation (force)")
@@ -546,7 +573,18 @@ class Indentation:
         def hessian_host(q, theta):
             return model.host_hessian(q, params_of(theta), project=False)
 
-        equilibrium = implicit_equilibrium(minimise_at, residual, hessian_host, model.free, model.n_dofs)
+        def hessian_device(q, theta):
+            return model.device_operator(q, params_of(theta))
+
+        equilibrium = implicit_equilibrium(
+            minimise_at,
+            residual,
+            hessian_host,
+            model.free,
+            model.n_dofs,
+            linear_solver=self.linear_solver,
+            hessian_device=hessian_device,
+        )
 
         def force(theta):
             q = equilibrium(theta)

@@ -44,6 +44,8 @@ from ._hessian import (
     rank_one,
     softens,
 )
+from ._krylov import SparseOperator, krylov_layout, sparse_operator
+from ._linear import AbstractLinearSolver
 from ._mesh import ShellMesh
 from .._solution import Solution
 from ._newton import AbstractEnergyProblem, newton
@@ -218,6 +220,25 @@ class ShellModel(eqx.Module):
             rank = (float(c2), np.where(self.free, np.asarray(u), 0.0))
         return mat, rank
 
+    def device_operator(self, q, params, project: bool = False, gradient=None) -> SparseOperator:
+        """:meth:`host_hessian` as a JAX :class:`SparseOperator` (pins and the sealed gas's
+        rank-one term included), for a :class:`KrylovSolver`; traceable unless ``project`` (the
+        PSD projection's eigenvalue clamp runs on the host, then the values move to the device)."""
+        q, params = jnp.asarray(q), self.host_params(params)
+        gradient = None if gradient is None else jnp.asarray(gradient)
+        if project:
+            data = projected_hessian_values(q, params, self.geometry, self.jit_config, self.pattern, gradient)
+            data = jnp.asarray(data)
+        else:
+            data = hessian_values(
+                q, params, self.geometry, self.jit_config, self.pattern.maps, self.pattern.nnz, gradient
+            )
+        layout = krylov_layout(self.pattern)
+        if not self.config.gas.sealed:
+            return sparse_operator(layout, data)
+        c2, u = rank_one(q, params, self.geometry, self.jit_config)
+        return sparse_operator(layout, data, columns=u[None, :], coeffs=jnp.reshape(c2, (1,)))
+
     def equilibrium(
         self,
         q0,
@@ -228,6 +249,7 @@ class ShellModel(eqx.Module):
         factorization=None,
         name: str = "shell Newton",
         barrier_aids: bool = True,
+        linear_solver: AbstractLinearSolver | None = None,
     ) -> Solution:
         """Newton equilibrium from ``q0`` with max |free force| ≤ ``atol`` [N]: a
         :class:`shelljax.Solution` (raises NoConvergenceError where Newton fails).
@@ -238,9 +260,18 @@ class ShellModel(eqx.Module):
         ``barrier_aids``, Newton's matrix is the Hessian with the planes' barriers softened where
         they press harder than the load (:func:`barrier_softening`; it equals the Hessian at
         equilibrium), and the line search keeps the vertices out of the bodies
-        (:meth:`EquilibriumProblem.feasible_trial`)."""
+        (:meth:`EquilibriumProblem.feasible_trial`). ``linear_solver``: where Newton's steps solve
+        (:class:`DirectSolver` by default, or :class:`KrylovSolver`)."""
         problem = EquilibriumProblem(self, self.host_params(params), barrier_aids)
-        return newton(problem, q0, atol=atol, max_steps=max_steps, factorization=factorization, name=name)
+        return newton(
+            problem,
+            q0,
+            atol=atol,
+            max_steps=max_steps,
+            factorization=factorization,
+            name=name,
+            linear_solver=linear_solver,
+        )
 
     def linear_response(self, q, params, load) -> np.ndarray:
         """Displacement [m] solving H u = load [N] at state q (exact Hessian; pins held)."""
@@ -277,6 +308,10 @@ class EquilibriumProblem(AbstractEnergyProblem):
 
     def hessian(self, x, gradient, project: bool):
         return self.model.host_hessian(x, self.params, project, gradient[0] if self.barrier_aids else None)
+
+    def device_operator(self, x, gradient, project: bool) -> SparseOperator:
+        """Newton's matrix at x as a JAX operator (:meth:`ShellModel.device_operator`)."""
+        return self.model.device_operator(x, self.params, project, gradient[0] if self.barrier_aids else None)
 
     def hessian_operator(self, x, gradient):
         """v ↦ Newton's matrix times v [N] at x, from the linearization kept with ``gradient``."""

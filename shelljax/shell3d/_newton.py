@@ -31,6 +31,10 @@ a forcing tolerance of the gradient's norm). It is kept for as long as CG conver
 ``CG_MAX_ITERATIONS`` products, also across calls (``factorization=``: a load step starts from the
 previous step's last factorization), so the solver refactorizes only where the Hessian has moved.
 
+The linear solves are a ``linear_solver``'s (:class:`DirectSolver`, the host factorizations above,
+or :class:`KrylovSolver`, CG in JAX on the device, which assembles and solves afresh at every
+iteration: no lagged steps, no kept preconditioner).
+
 The loop runs with NumPy's BLAS limited to one thread: an idle OpenBLAS thread spinning after CG's
 dot products steals the core that XLA's products use (docs/shell3d.md, *Solver*).
 """
@@ -42,12 +46,11 @@ from typing import Any
 
 import equinox as eqx
 import numpy as np
-import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from .._errors import NoConvergenceError
 from .._solution import RESULTS, Solution, raise_if_failed
-from ._sparse import SparseSolver
+from ._linear import AbstractLinearSolver, DirectSolver
 
 
 #: A step with a reused factorization must cut the largest free force by at least this factor
@@ -84,6 +87,9 @@ class AbstractEnergyProblem(eqx.Module):
 
     hessian_operator = None
     feasible_trial = None
+    #: ``device_operator(x, gradient, project) -> SparseOperator``: Newton's matrix as a JAX
+    #: operator, for a :class:`KrylovSolver` (None: host matrices only).
+    device_operator = None
     #: Whether ``hessian`` is symmetric: Newton then factorizes it by Cholesky and falls back to the
     #: PSD-projected and shifted Hessians; otherwise (a root problem) by LU, without fallback.
     symmetric = True
@@ -151,6 +157,7 @@ def newton(
     factorization=None,
     name: str = "Newton",
     throw: bool = True,
+    linear_solver: AbstractLinearSolver | None = None,
 ) -> Solution:
     """Minimise ``problem``'s energy from ``x0`` to max |∇E| ≤ ``atol`` [N] over its free dofs.
 
@@ -159,12 +166,17 @@ def newton(
     ``factorization``: a kept factorization to start with. Returns a :class:`shelljax.Solution`
     (``value`` x [m]; ``history`` [N] from the start's residual on; ``stats``: ``energy`` [J],
     ``factorizations`` (≤ iterations: see factorization reuse), ``products`` (CG's
-    Hessian-vector products); ``state``: the last factorization, a SparseSolver or None, to
-    precondition a nearby minimisation with). With ``throw``, a failure raises
-    NoConvergenceError with the history instead.
+    Hessian-vector products), ``krylov_iterations`` (a KrylovSolver's CG iterations);
+    ``state``: the last factorization, a SparseSolver or None, to precondition a nearby
+    minimisation with). ``linear_solver``: :class:`DirectSolver` (default) or
+    :class:`KrylovSolver`, which assembles and solves afresh at every iteration (no reuse). With
+    ``throw``, a failure raises NoConvergenceError with the history instead.
     """
+    linear_solver = DirectSolver() if linear_solver is None else linear_solver
+    if not linear_solver.keeps_factorizations:
+        reuse_factorization, factorization = False, None
     with threadpool_limits(limits=1, user_api="blas"):
-        run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name)
+        run = _NewtonRun(problem, atol, max_halvings, armijo, reuse_factorization, factorization, name, linear_solver)
         solution = run.minimise(x0, max_steps)
     return raise_if_failed(solution, name, run.failure) if throw else solution
 
@@ -172,12 +184,15 @@ def newton(
 class _NewtonRun:
     """The state of one Newton minimisation: iterate, residual history, kept factorizations."""
 
-    def __init__(self, problem, atol, max_halvings, armijo, reuse_factorization, factorization, name):
+    def __init__(self, problem, atol, max_halvings, armijo, reuse_factorization, factorization, name, linear_solver):
         self.problem, self.atol, self.name = problem, atol, name
         self.max_halvings, self.armijo, self.reuse = max_halvings, armijo, reuse_factorization
         self.free = np.asarray(problem.free, dtype=bool)
-        self.inexact = problem.hessian_operator is not None
-        self.factorizations = self.products = 0
+        self.linear_solver = linear_solver
+        # CG preconditioned by a kept factorization needs a solver that keeps one.
+        self.inexact = problem.hessian_operator is not None and linear_solver.keeps_factorizations
+        self.factorizations = self.products = self.krylov_iterations = 0
+        self.solve_failure = ""  # the last linear solve's failure, for the report
         self.forcing = CG_FORCING_MAX
         # the last factorization, while lagged steps keep converging fast (or CG with it does)
         self.reusable = self.solver = factorization if reuse_factorization else None
@@ -221,7 +236,12 @@ class _NewtonRun:
         return self._result(max_steps, RESULTS.max_steps_reached)
 
     def _result(self, iterations: int, result) -> Solution:
-        stats = {"energy": self.e, "factorizations": self.factorizations, "products": self.products}
+        stats = {
+            "energy": self.e,
+            "factorizations": self.factorizations,
+            "products": self.products,
+            "krylov_iterations": self.krylov_iterations,
+        }
         return Solution(self.x, result, iterations, self.history, stats, self.solver)
 
     def _evaluate_gradient(self) -> None:
@@ -242,8 +262,9 @@ class _NewtonRun:
             if np.all(np.isfinite(d)) and slope < 0.0:
                 return d, slope, False
         self.failure = (
-            f"no descent direction at iteration {it} (Hessian singular or indefinite even after projection and shift)."
-        )
+            f"no descent direction at iteration {it} (Hessian singular or indefinite even after projection and "
+            f"shift). {self.solve_failure}"
+        ).strip()
         return None, None, False
 
     def _reused_direction(self):
@@ -267,15 +288,14 @@ class _NewtonRun:
         """Newton step through a fresh factorization of the ``mode`` Hessian, or None if it is
         not positive definite."""
         try:
-            mat, rank_one = self.problem.hessian(self.x, self.current, mode != "exact")
-            if mode == "shifted":
-                diag = np.abs(mat.diagonal())
-                mat = mat + 1e-3 * np.mean(diag) * sp.identity(mat.shape[0], format="csr")
-            symmetric = self.problem.symmetric
-            self.solver = SparseSolver(mat, rank_one, symmetric=symmetric, definite=symmetric)
+            self.solver = self.linear_solver.newton_inverse(self.problem, self.x, self.current, mode)
             self.factorizations += 1
-            d = -self.solver.apply_inverse(self.g)
-        except NoConvergenceError:
+            try:
+                d = -self.solver.apply_inverse(self.g)
+            finally:
+                self.krylov_iterations += getattr(self.solver, "iterations", 0)
+        except NoConvergenceError as err:
+            self.solve_failure = str(err)
             return None
         return np.where(self.free, d, 0.0)
 
