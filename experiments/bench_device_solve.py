@@ -4,7 +4,9 @@ Usage: python experiments/bench_device_solve.py [--faces 20000 ...] [--repeats 3
        [--rows curve drop kernels] [--out results/bench_device_solve.json]
        [--drop-duration S] [--drop-damping C]
 
-Rows (each on the default JAX device, whose platform and kind the JSON records):
+Rows: the host path (``DirectSolver``, ``SparseNewton``) runs on the CPU device, the Krylov path on
+the default JAX device (a GPU when JAX sees one), whose platform and kind the JSON records; each row
+also gives ``cpu_path_s`` (the host path) and ``device_path_s`` (the Krylov path), warm:
 
 - ``curve``: one 7-level indentation curve (depths 2/7 … 2 cm) of a ball of ``--faces`` N faces
   (R = 0.13 m, h = 0.9 mm, E = 2.34 MPa, ν = 0.4, P_g = 1300 Pa, sealed isothermal gas, indenter
@@ -34,6 +36,16 @@ from pathlib import Path
 
 DEPTHS = [0.02 * (i + 1) / 7 for i in range(7)]
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def _place(name: str):
+    """The device context of a solver path: the host's CPU for the direct path, JAX's default device
+    (the GPU when there is one) for the Krylov path."""
+    import contextlib
+
+    import jax
+
+    return contextlib.nullcontext() if name == "krylov" else jax.default_device(jax.devices("cpu")[0])
 
 
 def _timed(fn, repeats: int):
@@ -73,8 +85,9 @@ def curve_row(n_faces: int, repeats: int, tolerance_scale: float) -> dict:
 
     row, forces = {"row": "curve", "faces": n_faces, "force_tolerance_scale": tolerance_scale}, {}
     for name, solver in (("direct", s3.DirectSolver()), ("krylov", s3.KrylovSolver())):
-        sim = _indentation(n_faces, solver, tolerance_scale)
-        _, cold, warm, states = _timed(lambda sim=sim: sim.curve(DEPTHS), repeats)
+        with _place(name):
+            sim = _indentation(n_faces, solver, tolerance_scale)
+            _, cold, warm, states = _timed(lambda sim=sim: sim.curve(DEPTHS), repeats)
         forces[name] = [s.observables()["force"] for s in states]
         row.update(
             {
@@ -88,6 +101,7 @@ def curve_row(n_faces: int, repeats: int, tolerance_scale: float) -> dict:
     row["dofs"] = 3 * sim.model.mesh.n_vertices + 3
     row["max_force_rel_diff"] = max(abs(a - b) / abs(a) for a, b in zip(forces["direct"], forces["krylov"]))
     row["speedup_warm"] = row["direct_warm_s"] / row["krylov_warm_s"]
+    row["cpu_path_s"], row["device_path_s"] = row["direct_warm_s"], row["krylov_warm_s"]
     return row
 
 
@@ -127,7 +141,8 @@ def drop_row(repeats: int, duration: float | None, damping: float, config: Path)
                 progress=False,
             )
 
-        _, cold, warm, trajectory = _timed(run, repeats)
+        with _place(name):
+            _, cold, warm, trajectory = _timed(run, repeats)
         positions[name] = trajectory["position_m"]
         row.update(
             {
@@ -151,6 +166,7 @@ def drop_row(repeats: int, duration: float | None, damping: float, config: Path)
     travel = float(np.max(np.abs(positions["sparse"] - positions["sparse"][0])))
     row["max_position_rel_diff"] = float(np.max(np.abs(positions["sparse"] - positions["krylov"]))) / travel
     row["speedup_warm"] = row["sparse_warm_s"] / row["krylov_warm_s"]
+    row["cpu_path_s"], row["device_path_s"] = row["sparse_warm_s"], row["krylov_warm_s"]
     return row
 
 

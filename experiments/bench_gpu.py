@@ -11,8 +11,8 @@ speed-up), the target and pass/fail:
   and with ``JAX_PLATFORMS=cpu`` (every core); its ``1e5 curves`` row.
 * ``3D curve 20k faces``, ``3D curve 80k faces``, ``drop 1 m``: from
   ``experiments/bench_device_solve.py --faces 20000 80000 --rows curve drop --out FILE``, read from
-  its JSON (a ``rows`` list whose entries carry a ``row`` name, ``faces`` for curves, and keys
-  ending ``gpu_s`` / ``cpu_s``); where that script is absent or fails, the rows say so. Targets
+  its JSON (a ``rows`` list whose entries carry a ``row`` name, ``faces`` for curves, the host path's
+  ``cpu_path_s`` and the Krylov path's ``device_path_s``); where that script is absent or fails, the rows say so. Targets
   ≥ 2×, ≥ 5×, ≥ 2×.
 
 ``--rows cpu-check --against OTHER_CHECKOUT`` is the CPU half of the issue's "never slower": the
@@ -166,8 +166,7 @@ def _solve_rows(args, workdir: Path, has_gpu: bool) -> list[dict]:
             rows.append(_row(name, None, None, TARGETS.get(name), "no such row in bench_device_solve.py's JSON"))
             continue
         entry = match[0]
-        gpu = next((v for k, v in entry.items() if k.endswith("gpu_s")), None)
-        cpu = next((v for k, v in entry.items() if k.endswith("cpu_s")), None)
+        gpu, cpu = (entry["device_path_s"] if has_gpu else None), entry["cpu_path_s"]
         rows.append(_row(name, gpu, cpu, TARGETS.get(name), "" if has_gpu else "no GPU"))
     return rows
 

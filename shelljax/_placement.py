@@ -56,9 +56,14 @@ def device_label(device: jax.Device) -> str:
     return f"{platform}:{device.id}"
 
 
+def is_accelerator(device: jax.Device) -> bool:
+    """Whether ``device`` is a GPU (the sparse stages then take the device-side Krylov solve)."""
+    return device.platform in _ACCELERATOR_PLATFORMS
+
+
 def _accelerators() -> list[jax.Device]:
     try:
-        return [d for d in jax.devices() if d.platform in _ACCELERATOR_PLATFORMS]
+        return [d for d in jax.devices() if is_accelerator(d)]
     except RuntimeError:  # a platform JAX was told to use failed to start: there is no accelerator
         return []
 

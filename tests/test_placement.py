@@ -165,3 +165,18 @@ def test_importing_shelljax_starts_no_backend_so_device_cpu_is_in_time():
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "PLATFORMS cpu ['cpu']"
+
+
+def test_a_sparse_stage_on_an_accelerator_takes_the_krylov_newton(monkeypatch):
+    """The scenario's Newton follows its stage's device: the host factorisation on the CPU, the
+    device-side CG on a GPU (a stand-in device object: no GPU here)."""
+    from types import SimpleNamespace
+
+    from shelljax import dynamics as d
+    from shelljax.scenario import _run
+
+    scenario = SimpleNamespace(step_tolerance=1e-9)
+    assert type(_run._minimiser(scenario)) is d.SparseNewton
+    monkeypatch.setattr(_run, "current_device", lambda: SimpleNamespace(platform="gpu"))
+    chosen = _run._minimiser(scenario)
+    assert type(chosen) is d.KrylovNewton and chosen.step_tolerance == 1e-9

@@ -15,7 +15,7 @@ from .. import dynamics as d
 from .. import shell3d as s3
 from .._errors import InvalidInputError, NoConvergenceError
 from .._files import atomic_write_text, check_output_dir
-from .._placement import Placement, StageKind, requested_placement, to_device
+from .._placement import Placement, StageKind, current_device, is_accelerator, requested_placement, to_device
 from ..object_estimate import estimated_parameters
 from ..physics import ShellProperties, gas_law
 from ..report import write_scenario_report
@@ -129,6 +129,14 @@ def _rayleigh(scenario: Scenario):
 SCENARIO_CHUNK = 25
 
 
+def _minimiser(scenario: Scenario) -> d.AbstractMinimiser:
+    """The Newton minimiser of the stage's device: CG solves in JAX on an accelerator (no host
+    round trip per iteration), the host's sparse factorisation on the CPU."""
+    if is_accelerator(current_device()):
+        return d.KrylovNewton(step_tolerance=scenario.step_tolerance)
+    return d.SparseNewton(step_tolerance=scenario.step_tolerance)
+
+
 def _simulate(scenario: Scenario, system, state, duration: float, progress: bool):
     try:
         return d.simulate(
@@ -137,7 +145,7 @@ def _simulate(scenario: Scenario, system, state, duration: float, progress: bool
             scenario.dt,
             duration,
             integrator=_integrator(scenario),
-            minimiser=d.SparseNewton(step_tolerance=scenario.step_tolerance),
+            minimiser=_minimiser(scenario),
             rayleigh=_rayleigh(scenario),
             chunk=SCENARIO_CHUNK,
             progress=progress,
