@@ -86,7 +86,7 @@ WITHHELD = {
     ),
     "pad_two_thirds": (
         lambda r: {"pad_two_thirds": r.uniform(0.8e-3, 2.5e-3)},  # [m/N^(2/3)]: 6-18 mm at 20 N
-        ("finger_compliance", "depth_offset+finger_compliance"),
+        ("finger_compliance", "finger_compliance+depth_offset"),
     ),
     "gain_and_pad": (
         lambda r: {
@@ -301,11 +301,11 @@ def _robust_record(report: dict, effect: str, true_e: float) -> dict:
     """E inside the robust range, the truth among the models not excluded, the refits that failed."""
     robust = report["robust"]["young_modulus"]["range95"]
     kept = [k["effect"] for k in report["not_excluded"]]
-    truth_models = WITHHELD[effect][1] if effect in WITHHELD else (effect if effect != "none" else "baseline",)
+    truth_models = ("baseline",) if effect == "none" else WITHHELD[effect][1] if effect in WITHHELD else (effect,)
     return dict(
         modulus_covered=bool(robust[0] <= true_e <= robust[1]),
         robust_modulus_range=robust,
-        truth_not_excluded=any(m in kept for m in truth_models) or (effect == "none" and "baseline" in kept),
+        truth_not_excluded=any(set(m.split("+")) in [set(k.split("+")) for k in kept] for m in truth_models),
         failed_refits=[e["effect"] for e in report["ranking"] if e["status"] != "ok"],
         search=report.get("search"),
         warning=report["robust"].get("warning"),

@@ -57,6 +57,8 @@ def _image(path: str, caption: str) -> str:
 def summary_text(report: dict) -> str:
     """A few lines a person reads: verdict, ranking, gap before and after, misfit groups (``shelljax diagnose``)."""
     lines = [f"verdict: {report['verdict']}"]
+    if report.get("search"):
+        lines.append(f"search (each step beat the last by the margin): {' -> '.join(report['search'])}")
     lines.append(f"{'model':>26s} {'elpd_loo':>10s} {'± se':>7s} {'Δ vs baseline':>14s} {'± se':>7s}  parameters")
     for e in report["ranking"]:
         if e["status"] != "ok":

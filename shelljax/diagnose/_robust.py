@@ -63,7 +63,7 @@ def expansion_widening(
         shift = 100.0 * (value / own["value"] - 1.0)
         added = "+".join(e for e in name.split("+") if e not in chosen.split("+"))
         if structure:
-            reason = f"the chosen model still misfits ({', '.join(structure[:3])}); {added} may be what it lacks"
+            reason = f"the chosen model still misfits ({', '.join(structure[:3])}): the range covers what it may lack"
         elif not own["ci95"][0] <= value <= own["ci95"][1]:
             reason = f"adding {added} moves E by {shift:+.0f} %, beyond the chosen model's 95 % interval"
         elif decisive and rank == 0:
@@ -102,7 +102,11 @@ def robust_range(kept: list[dict], estimates: dict, chosen: str, widening: list[
     width = math.log(e["range95"][1] / e["range95"][0])
     own = math.log(e["chosen_ci95"][1] / e["chosen_ci95"][0])
     out["young_modulus"]["width_ratio"] = width / own if own > 0 else math.inf
-    warnings = [w["reason"] for w in widening if w["reason"]]
+    by_reason: dict[str, list[str]] = {}
+    for w in widening:
+        if w["reason"]:
+            by_reason.setdefault(w["reason"], []).append(w["effect"])
+    warnings = [reason if "moves E" in reason else f"{reason}, {', '.join(n)}" for reason, n in by_reason.items()]
     if width > SPREAD_WARNING * own:
         warnings.insert(
             0,
