@@ -235,8 +235,8 @@ def _which_panel(ax, report: dict, chosen: str) -> None:
         ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_ylim(-0.6, len(ranked) - 0.4)
     ax.set_xlabel(
-        "Δ elpd_loo vs baseline [nats]: how much better the model predicts trials it never saw\n"
-        "(log density, summed over trials; ± 2 SE; red tick: the margin a model must clear)",
+        "Δ elpd_loo vs baseline [nats]: how much better the model\npredicts trials it never saw "
+        "(± 2 SE; red tick: margin to clear)",
         fontsize=8,
     )
     ax.set_title(f"WHICH: verdict = {report['verdict']}", fontsize=9)
@@ -259,27 +259,27 @@ def _how_sure_panel(ax, report: dict, chosen: str) -> None:
         ax.plot(values, [y] * len(values), "k|", ms=12, label="models kept (point values)" if y == 0 else None)
     ax.axvline(0, color="k", lw=0.6)
     ax.set_yticks(range(len(rows)), [r[0] for r in rows], fontsize=7)
-    ax.invert_yaxis()
-    ax.set_xlabel(f"value relative to the chosen model ({chosen}) [%]")
-    ax.set_title("HOW SURE: what the models the data cannot exclude allow", fontsize=9)
-    ax.legend(fontsize=6, loc="lower right")
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    ax.set_xlabel("value relative to the chosen model's estimate [%]", fontsize=8)
+    ax.set_title("HOW SURE: E and P_g over the models the data cannot exclude", fontsize=9)
+    ax.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=3, frameon=False)
 
 
 def _separating_text(ax, report: dict) -> None:
     """Which extra measurement would tell the remaining models apart, and why the range is wide."""
     ax.axis("off")
-    lines = ["To narrow the range, measure:"]
+    lines = [f"Search: {' → '.join(report.get('search', []))}", "", "To narrow the range, measure:"]
     for item in report.get("separating", [])[:6]:
         lines.append(f"• {item['effect']}: {item['measurement']}")
-    if len(lines) == 1:
+    if len(lines) == 3:
         lines.append("• nothing: every other model is excluded")
     if report["robust"].get("warning"):
         lines += ["", "Warning:", report["robust"]["warning"]]
     import textwrap
 
-    text = "\n".join(textwrap.fill(line, 70, subsequent_indent="   ") for line in lines)
+    text = "\n".join(textwrap.fill(line, 80, subsequent_indent="   ") for line in lines)
     ax.text(0.0, 1.0, text, va="top", ha="left", fontsize=7, transform=ax.transAxes)
-    ax.set_title(f"search: {' → '.join(report.get('search', []))}", fontsize=9, loc="left")
+    ax.set_title("WHAT NEXT", fontsize=9)
 
 
 def plot_diagnosis(diagnosis, path: Path) -> Path:
@@ -296,7 +296,7 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     report, study = diagnosis.report, diagnosis.study
     before, after = diagnosis.points_before, diagnosis.points_after
     chosen = report["winner"]["effect"] if report["winner"] else "baseline"
-    fig, axes = plt.subplots(3, 2, figsize=(11, 11.5), dpi=110, height_ratios=(1, 1, 0.8))
+    fig, axes = plt.subplots(3, 2, figsize=(12, 12.5), dpi=110, height_ratios=(1, 1, 0.7))
     ax = axes[0, 0]
     depth = before["observable"] == "depth"
     for i, s in enumerate(study.sessions):
@@ -344,8 +344,8 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
         ax.hist(after["pit"], bins=bins, histtype="step", color="C0", lw=1.5, label=chosen, density=True)
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set_xlabel(
-        "LOO-PIT [-]: where each held-out datum falls in the model's predictive distribution\n"
-        "(flat at 1 when the model predicts unseen trials well; U-shaped: too confident)",
+        "LOO-PIT [-]: where each held-out datum falls in its predictive\ndistribution "
+        "(flat at 1: unseen trials predicted well; U: too confident)",
         fontsize=8,
     )
     ax.set_ylabel("density")

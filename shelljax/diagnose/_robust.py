@@ -119,6 +119,15 @@ def robust_range(kept: list[dict], estimates: dict, chosen: str, widening: list[
     return out
 
 
+def _measurement_of(model: str, chosen: str) -> str:
+    """What separates ``model`` from ``chosen``: the measurements of the effects one holds and the other
+    does not (a combination is told apart by what it adds)."""
+    effects = lambda name: [] if name == "baseline" else name.split("+")  # noqa: E731
+    ours, theirs = effects(chosen), effects(model)
+    differ = [e for e in theirs if e not in ours] or [e for e in ours if e not in theirs] or ["baseline"]
+    return "; ".join(SEPARATING_MEASUREMENT.get(e, "a measurement it moves") for e in differ)
+
+
 def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
     """For each kept model besides the chosen: the measurement that separates it, and the factor E's
     95 % interval would shrink by once the study could exclude every model but the chosen one."""
@@ -126,7 +135,7 @@ def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
     return [
         {
             "effect": k["effect"],
-            "measurement": SEPARATING_MEASUREMENT.get(k["effect"], "a measurement it moves"),
+            "measurement": _measurement_of(k["effect"], chosen),
             "young_modulus_interval_shrink": ratio,
         }
         for k in kept
