@@ -277,7 +277,7 @@ def _separating_text(ax, report: dict) -> None:
         lines += ["", "Warning:", report["robust"]["warning"]]
     import textwrap
 
-    text = "\n".join(textwrap.fill(line, 80, subsequent_indent="   ") for line in lines)
+    text = "\n".join(textwrap.fill(line, 62, subsequent_indent="   ") for line in lines)
     ax.text(0.0, 1.0, text, va="top", ha="left", fontsize=7, transform=ax.transAxes)
     ax.set_title("WHAT NEXT", fontsize=9)
 
