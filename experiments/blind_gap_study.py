@@ -436,13 +436,13 @@ def _rows(done, names) -> list[dict]:
 
 def write_results(results: list[dict], out: Path) -> None:
     """Print one line per study and the summary table; write the JSON to ``out``."""
-    names = results  # one line per study: "[i/n]"
+    n = len(results)
     for row in results:
         if row["verdict"] == "failed":
-            print(f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> FAILED: {row['error'][:120]}", flush=True)
+            print(f"[{row['study'] + 1}/{n}] {row['effect']:>26s} -> FAILED: {row['error'][:120]}", flush=True)
         else:
             print(
-                f"[{row['study'] + 1}/{len(names)}] {row['effect']:>26s} -> {row['verdict']:<26s} "
+                f"[{row['study'] + 1}/{n}] {row['effect']:>26s} -> {row['verdict']:<26s} "
                 f"shrink {row['shrink']:.2f}  {row['seconds']:.0f} s",
                 flush=True,
             )
