@@ -234,8 +234,52 @@ def _which_panel(ax, report: dict, chosen: str) -> None:
         ax.set_xscale("symlog", linthresh=5)
         ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_ylim(-0.6, len(ranked) - 0.4)
-    ax.set_xlabel("Δ elpd_loo vs baseline [nats] (± 2 SE; red tick: margin to win)")
+    ax.set_xlabel(
+        "Δ elpd_loo vs baseline [nats]: how much better the model\npredicts trials it never saw "
+        "(± 2 SE; red tick: margin to clear)",
+        fontsize=8,
+    )
     ax.set_title(f"WHICH: verdict = {report['verdict']}", fontsize=9)
+
+
+def _how_sure_panel(ax, report: dict, chosen: str) -> None:
+    """The robust 95 % ranges of E and every session's P_g (grey) against the chosen model's own
+    intervals (colour), in % of the chosen model's value, with the kept models' point values."""
+    robust = report["robust"]
+    rows = [("E", robust["young_modulus"])] + [(f"P_g[{i}]", g) for i, g in enumerate(robust["gauge_pressure"])]
+    chosen_values = [report["winner"]["estimates_after"] if report["winner"] else report["baseline"]["estimates"]]
+    centers = [chosen_values[0]["young_modulus"]["value"]] + [g["value"] for g in chosen_values[0]["gauge_pressure"]]
+    for y, ((label, r), center) in enumerate(zip(rows, centers)):
+        pct = lambda v: 100.0 * (v / center - 1.0)  # noqa: E731
+        lo, hi = pct(r["range95"][0]), pct(r["range95"][1])
+        ax.plot([lo, hi], [y, y], color="0.6", lw=9, solid_capstyle="butt", label="robust range" if y == 0 else None)
+        own = [pct(v) for v in r["chosen_ci95"]]
+        ax.plot(own, [y, y], color="C2", lw=3, label=f"{chosen} 95 %" if y == 0 else None)
+        values = [pct(v) for v in r["values"].values()]
+        ax.plot(values, [y] * len(values), "k|", ms=12, label="models kept (point values)" if y == 0 else None)
+    ax.axvline(0, color="k", lw=0.6)
+    ax.set_yticks(range(len(rows)), [r[0] for r in rows], fontsize=7)
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    ax.set_xlabel("value relative to the chosen model's estimate [%]", fontsize=8)
+    ax.set_title("HOW SURE: E and P_g over the models the data cannot exclude", fontsize=9)
+    ax.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=3, frameon=False)
+
+
+def _separating_text(ax, report: dict) -> None:
+    """Which extra measurement would tell the remaining models apart, and why the range is wide."""
+    ax.axis("off")
+    lines = [f"Search: {' → '.join(report.get('search', []))}", "", "To narrow the range, measure:"]
+    for item in report.get("separating", [])[:6]:
+        lines.append(f"• {item['effect']}: {item['measurement']}")
+    if len(lines) == 3:
+        lines.append("• nothing: every other model is excluded")
+    if report["robust"].get("warning"):
+        lines += ["", "Warning:", report["robust"]["warning"]]
+    import textwrap
+
+    text = "\n".join(textwrap.fill(line, 62, subsequent_indent="   ") for line in lines)
+    ax.text(0.0, 1.0, text, va="top", ha="left", fontsize=7, transform=ax.transAxes)
+    ax.set_title("WHAT NEXT", fontsize=9)
 
 
 def plot_diagnosis(diagnosis, path: Path) -> Path:
@@ -244,13 +288,15 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     Top left: held-out standardized depth residuals against force, per session, under the baseline
     (filled) and the chosen model (open). Top right: held-out RMS of standardized residuals per
     observable, regime and session, before and after, with misfit groups marked. Bottom left: each
-    candidate's elpd difference to the baseline ± 2 SE and its decision margin max(4 nats, 2 SE). Bottom right:
-    LOO-PIT histograms (uniform when the model predicts held-out trials well).
+    candidate's elpd difference to the baseline ± 2 SE and its decision margin max(4 nats, 2 SE). Middle right:
+    LOO-PIT histograms (uniform when the model predicts held-out trials well). Bottom: the robust
+    ranges of E and P_g against the chosen model's intervals, and the measurements that would separate
+    the models kept.
     """
     report, study = diagnosis.report, diagnosis.study
     before, after = diagnosis.points_before, diagnosis.points_after
     chosen = report["winner"]["effect"] if report["winner"] else "baseline"
-    fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
+    fig, axes = plt.subplots(3, 2, figsize=(12, 12.5), dpi=110, height_ratios=(1, 1, 0.7))
     ax = axes[0, 0]
     depth = before["observable"] == "depth"
     for i, s in enumerate(study.sessions):
@@ -297,7 +343,11 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
     if chosen != "baseline":
         ax.hist(after["pit"], bins=bins, histtype="step", color="C0", lw=1.5, label=chosen, density=True)
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
-    ax.set_xlabel("LOO-PIT [-]")
+    ax.set_xlabel(
+        "LOO-PIT [-]: where each held-out datum falls in its predictive\ndistribution "
+        "(flat at 1: unseen trials predicted well; U: too confident)",
+        fontsize=8,
+    )
     ax.set_ylabel("density")
     ax.set_title(
         f"HOW FAR: gap {report['gap_before']['rms_standardized']:.2f} → "
@@ -305,6 +355,8 @@ def plot_diagnosis(diagnosis, path: Path) -> Path:
         fontsize=9,
     )
     ax.legend(fontsize=7)
+    _how_sure_panel(axes[2, 0], report, chosen)
+    _separating_text(axes[2, 1], report)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

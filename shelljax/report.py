@@ -57,17 +57,20 @@ def _image(path: str, caption: str) -> str:
 def summary_text(report: dict) -> str:
     """A few lines a person reads: verdict, ranking, gap before and after, misfit groups (``shelljax diagnose``)."""
     lines = [f"verdict: {report['verdict']}"]
-    lines.append(f"{'model':>26s} {'elpd_loo':>10s} {'± se':>7s} {'Δ vs baseline':>14s} {'± se':>7s}  parameters")
+    if report.get("search"):
+        lines.append(f"search (each step beat the last by the margin): {' -> '.join(report['search'])}")
+    width = max([26] + [len(e["effect"]) for e in report["ranking"]])  # a combination's name is long
+    lines.append(f"{'model':>{width}s} {'elpd_loo':>10s} {'± se':>7s} {'Δ vs baseline':>14s} {'± se':>7s}  parameters")
     for e in report["ranking"]:
         if e["status"] != "ok":
-            lines.append(f"{e['effect']:>26s}  FAILED: {e['message']}")
+            lines.append(f"{e['effect']:>{width}s}  FAILED: {e['message']}")
             continue
         params = ", ".join(
             f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
             for k, v in e.get("parameters", {}).items()
         )
         lines.append(
-            f"{e['effect']:>26s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
+            f"{e['effect']:>{width}s} {e['score']:10.2f} {e['score_se']:7.2f} {e['delta']:14.2f} "
             f"{e['delta_se']:7.2f}  {params}"
         )
     lines.append(

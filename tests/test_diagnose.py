@@ -58,15 +58,17 @@ def _write(directory, depths, counts, name="ball"):
     return paths
 
 
-def _study(directory, offset: float, seed: int):
-    """Sessions whose depths are the joint model's at P_g = manometer, E = 2.34 MPa, plus noise."""
+def _study(directory, planted: dict[str, float], seed: int):
+    """Sessions whose depths are the joint model's at P_g = manometer, E = 2.34 MPa and the
+    ``planted`` parameters (scaled values u by name), plus noise."""
     template = _write(directory, [np.full(3 * LEVELS.size, 0.02)] * 4, [[7, 7, 7]] * 4)
     study = build_study([load_session(p) for p in template])
     data = study_arrays(study)
     n_s = len(PRESSURES)
     u = np.zeros(data.free.shape[0])
     u[n_s + GLOBAL_PARAMETERS.index("young_modulus")] = np.log(2.34e6 / float(data.start_modulus))
-    u[n_s + GLOBAL_PARAMETERS.index("depth_offset")] = offset / 1e-3
+    for name, value in planted.items():
+        u[n_s + GLOBAL_PARAMETERS.index(name)] = value
     # The joint model's prediction at u, through the diagnosis's own compiled fit with every entry
     # fixed at u (free mask all False, u_base = u): Levenberg-Marquardt has nothing to move and
     # returns the prediction at u, the same arithmetic as JointProblem.residuals_and_prediction(u)
@@ -84,8 +86,8 @@ def _study(directory, offset: float, seed: int):
 
 @pytest.fixture(scope="module")
 def studies(tmp_path_factory):
-    planted = _study(tmp_path_factory.mktemp("offset"), OFFSET, seed=3)
-    clean = _study(tmp_path_factory.mktemp("clean"), 0.0, seed=4)
+    planted = _study(tmp_path_factory.mktemp("offset"), {"depth_offset": OFFSET / 1e-3}, seed=3)
+    clean = _study(tmp_path_factory.mktemp("clean"), {}, seed=4)
     return (
         planted,
         diagnose(planted, effects=EFFECTS, progress=False),
@@ -97,9 +99,9 @@ def studies(tmp_path_factory):
 def test_a_planted_depth_offset_is_found_and_measured(studies):
     _, found, _, _ = studies
     report = found.report
-    assert report["verdict"] == "depth_offset"
-    best = report["ranking"][0]
-    assert best["effect"] == "depth_offset" and best["delta"] >= max(4.0, 2 * best["delta_se"])
+    assert report["verdict"] == "depth_offset" and report["search"] == ["baseline", "depth_offset"]
+    best = next(e for e in report["ranking"] if e["effect"] == "depth_offset")
+    assert best["delta"] >= max(4.0, 2 * best["delta_se"])
     interval = best["parameters"]["depth_offset"]["ci95"]
     assert interval[0] <= OFFSET <= interval[1]
     # the baseline misfits the depths (an offset weighs most at the lowest force, where the depth is
@@ -169,6 +171,27 @@ def test_cli_writes_the_diagnosis_and_refuses_bad_input(studies, tmp_path, capsy
     assert not (tmp_path / "bad").exists() and not (tmp_path / "mixed").exists()
 
 
+def test_the_winner_is_expanded_and_its_range_never_contradicts_its_best_expansion(studies):
+    _, found, _, clean = studies
+    report = found.report
+    ranked = {e["effect"]: e for e in report["ranking"]}
+    # the search fitted the winner's pairs, named in library order, and neither beat it by the margin
+    pairs = {"finger_compliance+depth_offset", "depth_offset+gas"}
+    assert pairs <= set(ranked) and all(ranked[p]["status"] == "ok" for p in pairs)
+    offset_elpd = found.scores["depth_offset"].elpd
+    for p in pairs:
+        diff = found.scores[p].elpd - offset_elpd
+        assert not (diff.sum() >= 4.0 and diff.sum() >= 2 * np.sqrt(diff.size * np.var(diff)))
+    # the best pair (the verdict's next-best expansion) is covered by the robust E range
+    best_pair = max(pairs, key=lambda p: ranked[p]["score"])
+    e = report["robust"]["young_modulus"]
+    assert best_pair in e["values"] and e["range95"][0] <= e["values"][best_pair] <= e["range95"][1]
+    assert best_pair in {w["effect"] for w in report["robust"]["widened_by"]}
+    # the kept models' pseudo-BMA+ weights sum to one; an effect-free study is not expanded at all
+    assert sum(k["weight"] for k in report["not_excluded"]) == pytest.approx(1.0)
+    assert clean.report["search"] == ["baseline"] and not any("+" in e["effect"] for e in clean.report["ranking"])
+
+
 def test_what_the_study_cannot_exclude(studies):
     _, found, _, clean = studies
     # with the offset planted, the models that ignore it are excluded: the offset is in, the baseline out
@@ -187,3 +210,21 @@ def test_what_the_study_cannot_exclude(studies):
     assert set(separating) == kept - {"baseline"}
     if "depth_offset" in separating:
         assert "rigid-surface press" in separating["depth_offset"]
+
+
+def test_two_sensor_effects_at_once_are_found_as_a_combination(tmp_path):
+    # a sensor whose gain and exponent are both off (a power law about another reference force):
+    # gain 1.35 and exponent 1.25 move the force by +35 % at F_ref and by 35 % more across 5-20 N
+    planted = {"force_gain": np.log(1.35), "force_exponent": 2.5}
+    found = diagnose(
+        _study(tmp_path, planted, seed=5),
+        effects=("force_sensor_gain", "force_sensor_nonlinearity", "depth_offset"),
+        progress=False,
+    ).report
+    assert found["verdict"] == "force_sensor_gain+force_sensor_nonlinearity"
+    assert found["search"][0] == "baseline" and found["search"][-1] == found["verdict"]
+    gain = found["winner"]["parameters"]["force_gain"]
+    assert found["winner"]["effects"] == ["force_sensor_gain", "force_sensor_nonlinearity"]
+    assert gain["ci95"][0] <= 1.35 <= gain["ci95"][1]
+    e = found["robust"]["young_modulus"]["range95"]
+    assert e[0] <= 2.34e6 <= e[1]

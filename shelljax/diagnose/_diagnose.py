@@ -10,9 +10,12 @@ Decision rule (documented in docs/sim-to-real.md):
   or two trials. A 4-SE margin would miss real effects: the SE comes from 9–16 trials whose gains
   differ by pressure (an effect grows with the force or the pressure), so it is large even when
   every trial gains (docs/sim-to-real.md);
-* the verdict is the best such candidate, or ``none``; it becomes ``unexplained`` when the chosen
-  model (the winner, or the baseline) still misfits: its held-out whitened residuals fail a χ²
-  test at p < ``MISFIT_P``.
+* the winner is then expanded by the forward search the rig uses (``_search``): every pair of it
+  with another candidate is fitted, and the best pair that beats the winner by the same margin
+  becomes the model, expanded to triples in turn (``MAX_EFFECTS``);
+* the verdict is the chosen model (one effect, or a combination ``a+b``), or ``none``; it becomes
+  ``unexplained`` when the chosen model (or the baseline) still misfits: its held-out whitened
+  residuals fail a χ² test at p < ``MISFIT_P``.
 """
 
 from __future__ import annotations
@@ -32,16 +35,28 @@ from ..estimate import DEFAULT_OPTIONS
 from .._options import WRINKLE_LAWS
 from ..physics import gas_law
 from ..session import Session, load_session
-from ._effects import EFFECTS, FREE_THICKNESS_STD, GLOBAL_PARAMETERS, UNITS, check_effect_names, free_mask
+from ._effects import (
+    EFFECTS,
+    FREE_THICKNESS_STD,
+    GLOBAL_PARAMETERS,
+    UNITS,
+    check_effect_names,
+    combination_name,
+    effect_parameters,
+    effects_of,
+    free_mask,
+)
 from ._loo import CandidateFit, LooScore, fit_candidate, laplace_interval, loo_score
 from ._measurement import MeasurementPrior, measured_baseline
 from ._model import StudyArrays, physical, study_arrays
-from ._robust import not_excluded, robust_range, separating
+from ._robust import expansion_widening, not_excluded, robust_range, separating
+from ._search import Margin, forward_search, pseudo_bma_plus
 from ._study import SHAPE_OBSERVABLES, Study, build_study, object_unknowns
 
 WIN_SE = 2.0
 WIN_NATS = 4.0
 MISFIT_P = 1e-3
+MAX_EFFECTS = 3  # the search stops at triples: a fourth effect at once is beyond what 2-4 pressures separate
 BASELINES = {"estimator": "isothermal", "paper": "prescribed"}  # name → gas law
 OBSERVABLES = ("depth", "wrinkle_count") + SHAPE_OBSERVABLES
 
@@ -245,7 +260,7 @@ def candidate_data(base: StudyArrays, effect: str | None, baseline_free: tuple[s
     baseline frees the global parameters ``baseline_free``."""
     n_sessions = int(base.radius.shape[0])
     data = eqx.tree_at(lambda d: d.free, base, jnp.asarray(free_mask(n_sessions, baseline_free, effect)))
-    if effect == "wall_thickness":
+    if effect is not None and "wall_thickness" in effects_of(effect):
         index = n_sessions + GLOBAL_PARAMETERS.index("thickness")
         data = eqx.tree_at(lambda d: d.prior_std, data, data.prior_std.at[index].set(FREE_THICKNESS_STD))
     return data
@@ -263,16 +278,19 @@ def _checked_options(effects, baseline: str, gas: str | None, wrinkle_law: str) 
     return effects, gas
 
 
-def _fit_candidate_restarted(data: StudyArrays, wrinkle_law: str, u_start: np.ndarray, effect: str) -> CandidateFit:
-    """A candidate's fit from the baseline's optimum; where it stops short, again with its parameters
-    started one prior unit either side (an indenter or a gain far from nominal is a long way from 0)."""
+def _fit_candidate_restarted(
+    data: StudyArrays, wrinkle_law: str, u_start: np.ndarray, parameters: tuple[str, ...]
+) -> CandidateFit:
+    """A candidate's fit from its parent's optimum; where it stops short, again with its new
+    ``parameters`` started one prior unit either side (an indenter or a gain far from nominal is a
+    long way from 0)."""
     fit = fit_candidate(data, wrinkle_law, u_start)
     n_sessions = int(data.radius.shape[0])
     for sign in (1.0, -1.0):
         if fit.converged:
             break
         u = np.asarray(u_start, float).copy()
-        for name in EFFECTS[effect].parameters:
+        for name in parameters:
             u[n_sessions + GLOBAL_PARAMETERS.index(name)] = sign
         retry = fit_candidate(data, wrinkle_law, u)
         if retry.converged or retry.chi2 < fit.chi2:
@@ -280,9 +298,9 @@ def _fit_candidate_restarted(data: StudyArrays, wrinkle_law: str, u_start: np.nd
     return fit
 
 
-def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessions, report_progress):
-    """Fit the baseline, then every candidate from the baseline's optimum: (fits, scores) by name."""
-    fits, scores = {}, {}
+def _search_effects(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessions, report_progress):
+    """Fit the baseline, every candidate from the baseline's optimum, then the forward search's
+    combinations of the winner: (fits and scores by model name, the search's result)."""
     report_progress("baseline")
     fit = fit_candidate(candidate_data(base, None, baseline_free), wrinkle_law, np.zeros(base.free.shape[0]))
     if not fit.converged:
@@ -290,28 +308,45 @@ def _fit_all(base: StudyArrays, effects, baseline_free, wrinkle_law: str, sessio
             f"the baseline fit of {len(sessions)} session(s) of '{sessions[0].object_name}' failed: "
             f"{fit.message}. Fix: check the sessions with `shelljax validate`"
         )
-    fits["baseline"], scores["baseline"] = fit, loo_score(fit)
-    for effect in effects:
-        report_progress(effect)
-        fit = _fit_candidate_restarted(
-            candidate_data(base, effect, baseline_free), wrinkle_law, fits["baseline"].u, effect
+    fits, scores = {"baseline": fit}, {"baseline": loo_score(fit)}
+
+    def children(current):
+        used = set(effect_parameters(combination_name(current))) if current else set()
+        return [
+            tuple(effects_of(combination_name(current + (e,))))
+            for e in effects
+            if e not in current and not used & set(EFFECTS[e].parameters)
+        ]
+
+    def fit_child(child, parent):
+        name, parent_name = combination_name(child), combination_name(parent) or "baseline"
+        report_progress(name)
+        new = tuple(
+            p for p in effect_parameters(name) if parent_name == "baseline" or p not in effect_parameters(parent_name)
         )
-        fits[effect] = fit
-        if fit.converged:
-            scores[effect] = loo_score(fit)
+        fits[name] = _fit_candidate_restarted(
+            candidate_data(base, name, baseline_free), wrinkle_law, fits[parent_name].u, new
+        )
+        if not fits[name].converged:
+            return fits[name].message
+        scores[name] = loo_score(fits[name])
+        return scores[name]
+
+    result = forward_search(
+        (), scores["baseline"], children, fit_child, lambda sc: sc.elpd, Margin(WIN_NATS, WIN_SE), MAX_EFFECTS
+    )
     report_progress(None)
-    return fits, scores
+    return fits, scores, result
 
 
-def _ranking(fits: dict, scores: dict, effects) -> tuple[list[dict], str]:
-    """(every model's entry, best score first and failures last; the chosen model's name)."""
+def _ranking(fits: dict, scores: dict) -> list[dict]:
+    """Every fitted model's entry (single effects and combinations), best score first and failures last."""
     base_score = scores["baseline"]
     ranking = []
-    for name in ("baseline",) + effects:
-        fit = fits[name]
+    for name, fit in fits.items():
         entry = {"effect": name, "status": "ok" if name in scores else "failed"}
         if name != "baseline":
-            entry["parameters"] = _parameter_report(fit, EFFECTS[name].parameters) if fit.converged else {}
+            entry["parameters"] = _parameter_report(fit, effect_parameters(name)) if fit.converged else {}
         if name not in scores:
             entry.update(score=None, score_se=None, delta=None, delta_se=None, message=fit.message)
         else:
@@ -328,16 +363,7 @@ def _ranking(fits: dict, scores: dict, effects) -> tuple[list[dict], str]:
             )
         ranking.append(entry)
     ok = [e for e in ranking if e["status"] == "ok"]
-    ranking = sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
-    winners = [
-        e
-        for e in ranking
-        if e["status"] == "ok"
-        and e["effect"] != "baseline"
-        and e["delta"] >= WIN_NATS
-        and e["delta"] >= WIN_SE * e["delta_se"]
-    ]
-    return ranking, winners[0]["effect"] if winners else "baseline"
+    return sorted(ok, key=lambda e: -e["score"]) + [e for e in ranking if e["status"] != "ok"]
 
 
 def _winner_record(chosen: str, fits: dict, before_est: dict, after_est: dict) -> dict | None:
@@ -345,9 +371,10 @@ def _winner_record(chosen: str, fits: dict, before_est: dict, after_est: dict) -
         return None
     return {
         "effect": chosen,
-        "description": EFFECTS[chosen].description,
-        "layer": EFFECTS[chosen].layer,
-        "parameters": _parameter_report(fits[chosen], EFFECTS[chosen].parameters),
+        "effects": list(effects_of(chosen)),
+        "description": "; ".join(EFFECTS[e].description for e in effects_of(chosen)),
+        "layer": "+".join(dict.fromkeys(EFFECTS[e].layer for e in effects_of(chosen))),
+        "parameters": _parameter_report(fits[chosen], effect_parameters(chosen)),
         "estimates_before": before_est,
         "estimates_after": after_est,
         "gauge_pressure_shift_percent": [
@@ -439,9 +466,9 @@ def diagnose(
     base = study_arrays(study, gas=gas_law(gas), force_ref=None if measurement is None else measurement.force_ref)
     base = measured_baseline(base, measurement)
     effects, baseline_free, in_baseline = _candidates_beside_measurement(effects, object_unknowns(study), measurement)
-    report_progress = _progress_reporter(progress, 1 + len(effects))
-    fits, scores = _fit_all(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
-    ranking, chosen = _ranking(fits, scores, effects)
+    report_progress = _progress_reporter(progress)
+    fits, scores, search = _search_effects(base, effects, baseline_free, wrinkle_law, sessions, report_progress)
+    ranking, chosen = _ranking(fits, scores), combination_name(search.chosen) or "baseline"
 
     regime = fits["baseline"].prediction["wrinkled"]
     points_before = _points(study, scores["baseline"], regime)
@@ -450,10 +477,8 @@ def diagnose(
     misfit_p = float(stats.chi2.sf(np.sum(points_after["whitened"] ** 2), points_after["whitened"].size))
     verdict = "unexplained" if misfit_p < MISFIT_P else ("none" if chosen == "baseline" else chosen)
     before_est, after_est = _session_estimates(fits["baseline"]), _session_estimates(fits[chosen])
-    kept = not_excluded(ranking, scores, WIN_NATS, WIN_SE)
-    robust = robust_range(
-        kept, {name: _session_estimates(fits[name]) for name in {k["effect"] for k in kept} | {chosen}}, chosen
-    )
+    where_chosen = _where(study, points_after)
+    kept, robust = _robust_report(ranking, fits, scores, search, chosen, misfit_p, where_chosen["misfit_groups"])
     report = {
         "verdict": verdict,
         "ranking": ranking,
@@ -461,12 +486,13 @@ def diagnose(
         "gap_after": gap_after,
         "shrink": gap_before["rms_standardized"] / gap_after["rms_standardized"],
         "where": _where(study, points_before),
-        "where_after": _where(study, points_after) if chosen != "baseline" else None,
+        "where_after": where_chosen if chosen != "baseline" else None,
         "not_excluded": kept,
         "robust": robust,
         "separating": separating(kept, chosen, robust),
         "winner": _winner_record(chosen, fits, before_est, after_est),
         "misfit_p_value": misfit_p,
+        "search": [combination_name(step) or "baseline" for step in search.path],
         "decision": {
             "win_se": WIN_SE,
             "win_nats": WIN_NATS,
@@ -485,7 +511,24 @@ def diagnose(
     )
 
 
-def _progress_reporter(progress, total: int):
+def _robust_report(ranking, fits, scores, search, chosen: str, misfit_p: float, misfit_groups: list[str]):
+    """(the models not excluded, with their pseudo-BMA+ weights; the robust range over them and the
+    chosen model's expansions it must cover)."""
+    kept = not_excluded(ranking, scores, WIN_NATS, WIN_SE)
+    weights = pseudo_bma_plus(np.stack([scores[k["effect"]].elpd for k in kept]))
+    for k, w in zip(kept, weights):
+        k["weight"] = float(w)
+    structure = ([f"chi2 p = {misfit_p:.1g}"] if misfit_p < MISFIT_P else []) + list(misfit_groups)
+    expansions = sorted(
+        (combination_name(c) for c in search.children if combination_name(c) in scores),
+        key=lambda name: -scores[name].total,
+    )
+    estimates = {name: _session_estimates(fits[name]) for name in {k["effect"] for k in kept} | {chosen, *expansions}}
+    widening = expansion_widening(expansions, estimates, chosen, structure, chosen != "baseline")
+    return kept, robust_range(kept, estimates, chosen, widening)
+
+
+def _progress_reporter(progress):
     """A callable taking the stage's name (None: done): a tqdm bar, the caller's callable, or nothing."""
     if callable(progress):
         return progress
@@ -493,7 +536,7 @@ def _progress_reporter(progress, total: int):
         return lambda stage: None
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=total, desc="diagnose", unit="model")
+    bar = tqdm(desc="diagnose", unit="model")  # the search decides how many models it fits
     state = {"started": False}
 
     def update(stage):

@@ -211,7 +211,25 @@ def parameter_names(n_sessions: int) -> tuple[str, ...]:
     return tuple(f"gauge_pressure[{i}]" for i in range(n_sessions)) + GLOBAL_PARAMETERS
 
 
+def combination_name(effects) -> str:
+    """The name of a model with several ``effects``: their names in :data:`EFFECTS` order, joined by
+    "+" (``force_sensor_gain+force_sensor_nonlinearity``)."""
+    order = list(EFFECTS)
+    return "+".join(sorted(effects, key=order.index))
+
+
+def effects_of(name: str) -> tuple[str, ...]:
+    """The effects a model's ``name`` (one effect, or a :func:`combination_name`) holds."""
+    return tuple(name.split("+"))
+
+
+def effect_parameters(name: str) -> tuple[str, ...]:
+    """The global unknowns a model's ``name`` (one effect or a combination) frees, in order."""
+    return tuple(p for e in effects_of(name) for p in EFFECTS[e].parameters)
+
+
 def free_mask(n_sessions: int, baseline_free: tuple[str, ...], effect: str | None) -> np.ndarray:
-    """Which entries of u a fit frees: P_g of every session, the baseline's and the effect's."""
-    free = set(baseline_free) | (set(EFFECTS[effect].parameters) if effect else set())
+    """Which entries of u a fit frees: P_g of every session, the baseline's and the effect's (one
+    effect or a combination)."""
+    free = set(baseline_free) | (set(effect_parameters(effect)) if effect else set())
     return np.array([True] * n_sessions + [name in free for name in GLOBAL_PARAMETERS])

@@ -4,7 +4,11 @@ over them, and which extra measurement would tell them apart.
 A candidate is excluded when the best model beats it by the decision margin (Δ elpd ≥ 4 nats and
 ≥ 2 SE, as a winner must beat the baseline). Over the rest (``not_excluded``), ``robust`` spans
 every one's 95 % interval of P_g (per session) and E; a verdict — `none` included — is only as sure
-as that range. ``separating`` names, for each candidate not excluded besides the chosen model, the
+as that range. The range also covers the chosen model's expansions (the search's next models, one
+effect more) that the margin did not let in (``expansion_widening``): all of them when the chosen
+model's held-out residuals still show structure (its χ² p-value or a misfit group of its
+where-table), and any one that moves E beyond the chosen model's 95 % interval; a decisive
+verdict's best expansion is always covered, so the range never contradicts it. ``separating`` names, for each candidate not excluded besides the chosen model, the
 measurement that would tell it from the chosen one, and the factor by which E's 95 % interval
 would shrink once it did (from the robust range to the chosen model's own interval).
 """
@@ -45,10 +49,36 @@ def not_excluded(ranking: list[dict], scores: dict, win_nats: float, win_se: flo
     return out
 
 
-def robust_range(kept: list[dict], estimates: dict, chosen: str) -> dict:
-    """Range of P_g [Pa] (per session) and E [Pa] over the kept models' 95 % intervals, with the spread of
-    their point values [%] and the chosen model's own interval for comparison."""
-    names = [k["effect"] for k in kept]
+def expansion_widening(
+    expansions: list[str], estimates: dict, chosen: str, structure: list[str], decisive: bool
+) -> list[dict]:
+    """The chosen model's ``expansions`` (best score first) the robust range must cover, each
+    {effect, reason, young_modulus_shift_percent}: all when ``structure`` (why the chosen model's
+    residuals still misfit) is not empty; else those whose E lies outside the chosen model's 95 %
+    interval, and the best one of a ``decisive`` verdict (no reason then: it only may not be contradicted)."""
+    own = estimates[chosen]["young_modulus"]
+    out = []
+    for rank, name in enumerate(expansions):
+        value = estimates[name]["young_modulus"]["value"]
+        shift = 100.0 * (value / own["value"] - 1.0)
+        added = "+".join(e for e in name.split("+") if e not in chosen.split("+"))
+        if structure:
+            reason = f"the chosen model still misfits ({', '.join(structure[:3])}): the range covers what it may lack"
+        elif not own["ci95"][0] <= value <= own["ci95"][1]:
+            reason = f"adding {added} moves E by {shift:+.0f} %, beyond the chosen model's 95 % interval"
+        elif decisive and rank == 0:
+            reason = None
+        else:
+            continue
+        out.append({"effect": name, "reason": reason, "young_modulus_shift_percent": shift})
+    return out
+
+
+def robust_range(kept: list[dict], estimates: dict, chosen: str, widening: list[dict] = ()) -> dict:
+    """Range of P_g [Pa] (per session) and E [Pa] over the 95 % intervals of the kept models and the
+    ``widening`` expansions (:func:`expansion_widening`), with the spread of their point values [%]
+    and the chosen model's own interval for comparison; ``widened_by`` and ``warning`` say why."""
+    names = list(dict.fromkeys([k["effect"] for k in kept] + [w["effect"] for w in widening]))
 
     def span(get):
         values = [get(estimates[n]) for n in names]
@@ -72,14 +102,30 @@ def robust_range(kept: list[dict], estimates: dict, chosen: str) -> dict:
     width = math.log(e["range95"][1] / e["range95"][0])
     own = math.log(e["chosen_ci95"][1] / e["chosen_ci95"][0])
     out["young_modulus"]["width_ratio"] = width / own if own > 0 else math.inf
-    out["warning"] = (
-        f"E is not pinned down by this study: over the {len(names)} models it cannot exclude, E's 95 % range "
-        f"is {e['range95'][0]:.4g}-{e['range95'][1]:.4g} Pa ({width / own:.1f}x the chosen model's "
-        f"interval; point values spread {e['spread_percent']:.0f} %)"
-        if width > SPREAD_WARNING * own
-        else None
-    )
+    by_reason: dict[str, list[str]] = {}
+    for w in widening:
+        if w["reason"]:
+            by_reason.setdefault(w["reason"], []).append(w["effect"])
+    warnings = [reason if "moves E" in reason else f"{reason}, {', '.join(n)}" for reason, n in by_reason.items()]
+    if width > SPREAD_WARNING * own:
+        warnings.insert(
+            0,
+            f"E is not pinned down by this study: over the {len(names)} models it cannot exclude or must cover, "
+            f"E's 95 % range is {e['range95'][0]:.4g}-{e['range95'][1]:.4g} Pa ({width / own:.1f}x the chosen "
+            f"model's interval; point values spread {e['spread_percent']:.0f} %)",
+        )
+    out["widened_by"] = list(widening)
+    out["warning"] = "; ".join(warnings) if warnings else None
     return out
+
+
+def _measurement_of(model: str, chosen: str) -> str:
+    """What separates ``model`` from ``chosen``: the measurements of the effects one holds and the other
+    does not (a combination is told apart by what it adds)."""
+    effects = lambda name: [] if name == "baseline" else name.split("+")  # noqa: E731
+    ours, theirs = effects(chosen), effects(model)
+    differ = [e for e in theirs if e not in ours] or [e for e in ours if e not in theirs] or ["baseline"]
+    return "; ".join(SEPARATING_MEASUREMENT.get(e, "a measurement it moves") for e in differ)
 
 
 def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
@@ -89,7 +135,7 @@ def separating(kept: list[dict], chosen: str, robust: dict) -> list[dict]:
     return [
         {
             "effect": k["effect"],
-            "measurement": SEPARATING_MEASUREMENT.get(k["effect"], "a measurement it moves"),
+            "measurement": _measurement_of(k["effect"], chosen),
             "young_modulus_interval_shrink": ratio,
         }
         for k in kept

@@ -42,7 +42,11 @@ from ..diagnose.internal import (
     PRIOR_STD,
     WIN_NATS,
     WIN_SE,
+    ANY_GAIN,
+    Margin,
+    forward_search,
     object_unknowns,
+    pseudo_bma_plus,
     physical,
     widened_grid,
     with_measurement,
@@ -55,9 +59,9 @@ from ._press import PressFit, fit_press, press_data
 from ._terms import RIG_TERMS, check_terms, fixed_values, freed_parameters
 
 CALIBRATION_GRID_SPAN = (0.5, 1.7)  # the engine's force grid covers [0.5 F_min, 1.7 F_max]: room for a sensor's gain
-BOOTSTRAP_DRAWS = 2000  # Bayesian-bootstrap draws of pseudo-BMA+
 MIN_WEIGHT = 1e-3  # a model below this weight is dropped from the rig (its weight goes to the others)
 PRECISE_RADIUS = 0.01  # [-] a calibration object's R stated less precisely than this is worth measuring again
+_MARGIN = Margin(WIN_NATS, WIN_SE)  # a model the best beats by the diagnosis's margin is excluded
 IDENTIFIED = 0.9  # a term is identified when the models holding it weigh ≥ 0.9, or ≤ 0.1
 
 
@@ -198,18 +202,9 @@ def _fit_everywhere(objects, terms, wrinkle_law, starts, presses) -> _Fitted | s
     return _Fitted(terms, fits, press, np.concatenate(elpd))
 
 
-def _beats(better: np.ndarray, worse: np.ndarray) -> tuple[bool, float, float]:
-    diff = better - worse
-    delta, se = float(diff.sum()), float(math.sqrt(diff.size * np.var(diff)))
-    return delta >= WIN_NATS and delta >= WIN_SE * se, delta, se
-
-
 def _search(objects, terms, wrinkle_law, report, presses) -> tuple[dict, list[dict]]:
-    """Forward search: (every fitted model by its terms, the models whose fit failed and why).
-
-    From the ideal rig, every term of a family not yet in the current model is added in turn; the
-    best child becomes the current model for as long as it predicts better than its parent (so a
-    pair of terms is reached where neither alone wins by the margin)."""
+    """Forward search from the ideal rig (``diagnose.internal.forward_search``, by any gain out of
+    sample): (every fitted model by its terms, the models whose fit failed and why)."""
     report("ideal rig")
     start = _fit_everywhere(objects, (), wrinkle_law, [np.zeros(b.free.shape[0]) for b, _ in objects], presses)
     if isinstance(start, str):
@@ -217,33 +212,21 @@ def _search(objects, terms, wrinkle_law, report, presses) -> tuple[dict, list[di
             f"the calibration fit with an ideal rig did not converge ({start}). Fix: check the "
             "sessions with `shelljax validate` and `shelljax diagnose`"
         )
-    fitted, failed, current = {(): start}, [], ()
-    while True:
+    searched = {(): start}  # the converged models so far: a child starts from its parent's optima
+
+    def children(current):
         used = {RIG_TERMS[t].family for t in current}
-        best = None
-        for candidate in [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]:
-            report("+".join(candidate))
-            result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in fitted[current].fits], presses)
-            if isinstance(result, str):
-                failed.append({"terms": list(candidate), "message": result})
-                continue
-            fitted[candidate] = result
-            if best is None or result.total > best.total:
-                best = result
-        if best is None or best.total <= fitted[current].total:
-            return fitted, failed
-        current = best.terms
+        return [check_terms(current + (t,)) for t in terms if RIG_TERMS[t].family not in used]
 
+    def fit(candidate, parent):
+        report("+".join(candidate))
+        result = _fit_everywhere(objects, candidate, wrinkle_law, [f.u for f in searched[parent].fits], presses)
+        if not isinstance(result, str):
+            searched[candidate] = result
+        return result
 
-def pseudo_bma_plus(elpd: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0) -> np.ndarray:
-    """Pseudo-BMA+ weights [-] of models from their pointwise elpd (models, units) (Yao et al. 2018)."""
-    rng = np.random.default_rng(seed)
-    n = elpd.shape[1]
-    alpha = rng.dirichlet(np.ones(n), size=draws)  # (draws, units)
-    z = n * alpha @ elpd.T  # (draws, models)
-    z -= z.max(axis=1, keepdims=True)
-    w = np.exp(z)
-    return (w / w.sum(axis=1, keepdims=True)).mean(axis=0)
+    result = forward_search((), start, children, fit, lambda r: r.elpd, ANY_GAIN)
+    return result.fitted, result.failed
 
 
 def _rig_posterior(result: _Fitted, objects) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
@@ -407,7 +390,7 @@ def _assemble(fitted, objects, sessions, presses, noise, gas, wrinkle_law, force
     best = max(fitted.values(), key=lambda r: r.total)
     kept, excluded = [], []
     for result in fitted.values():
-        beaten, delta, se = _beats(best.elpd, result.elpd) if result is not best else (False, 0.0, 0.0)
+        beaten, delta, se = _MARGIN.beats(best.elpd, result.elpd) if result is not best else (False, 0.0, 0.0)
         nested_better = any(
             other.total > result.total and _nests(result.terms, other.terms)
             for other in fitted.values()
